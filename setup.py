@@ -1,0 +1,36 @@
+"""ament_python build of softseq_ros (also installable with pip on machines without ROS)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'softseq_ros'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'bench', 'bench.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/config/segments', glob('config/segments/*.csv')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='softseq_ros maintainers',
+    maintainer_email='maintainers@softseq.dev',
+    description='Emulated rig of a soft actuator with a hardware-encoded inflation sequence.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'softseq = softseq_ros.cli:main',
+            'syringe_pump = softseq_ros.nodes.syringe_pump:main',
+            'actuator = softseq_ros.nodes.actuator:main',
+            'camera = softseq_ros.nodes.camera:main',
+            'recorder = softseq_ros.nodes.recorder:main',
+            'sim_clock = softseq_ros.nodes.sim_clock:main',
+        ],
+    },
+)

@@ -1,0 +1,1 @@
+"""Metrics and figures from bags and experiment files."""

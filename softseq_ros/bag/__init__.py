@@ -1,0 +1,1 @@
+"""MCAP bags in the rosbag2 layout: writing, reading, playback."""

@@ -1,0 +1,1 @@
+"""ROS 2 nodes: thin wrappers that turn parameters and messages into physics calls."""

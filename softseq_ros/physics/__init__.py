@@ -1,0 +1,1 @@
+"""Pure physics: segment models, equilibrium tracking, kinematics, scenes. No ROS imports here."""
