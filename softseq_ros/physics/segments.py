@@ -1,0 +1,401 @@
+"""
+Segment models: each gives pressure, stiffness, stored energy and curvature as functions of volume.
+
+A segment is one elastic inflatable actuator. Everything the equilibrium solver needs from it is
+here: ``pressure(v)`` (gauge, Pa), ``stiffness(v) = dp/dv`` (Pa/m^3), ``energy(v)`` (J, the
+integral of p dv from the rest volume) and ``curvature(v)`` (1/m), plus its split into monotone
+pieces (rising, falling or flat stretches of the pressure-volume curve), which the solver
+assembles.
+"""
+
+from abc import ABC, abstractmethod
+import csv
+from dataclasses import dataclass
+import math
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.interpolate import PchipInterpolator
+from scipy.optimize import brentq
+
+from softseq_ros.physics.materials import Material
+
+FloatArray = NDArray[np.float64]
+
+TABLE_COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m')
+
+
+class TableError(ValueError):
+    """A segment table that cannot be used; the message starts with the file name."""
+
+
+@dataclass(frozen=True)
+class Piece:
+    """A stretch [v_lo, v_hi] of a PV curve: pressure rises (+1), falls (-1) or is flat (0)."""
+
+    v_lo: float
+    v_hi: float
+    direction: int
+    p_at_lo: float
+    p_at_hi: float
+
+    @property
+    def p_min(self) -> float:
+        """Lowest pressure on the piece."""
+        return min(self.p_at_lo, self.p_at_hi)
+
+    @property
+    def p_max(self) -> float:
+        """Highest pressure on the piece."""
+        return max(self.p_at_lo, self.p_at_hi)
+
+
+class Segment(ABC):
+    """One inflatable segment: its PV curve, stored energy and curvature."""
+
+    def __init__(self, name: str, length: float, rest_volume: float, max_volume: float) -> None:
+        """Check the geometry every model shares."""
+        if not name:
+            raise ValueError('a segment needs a name')
+        if not (math.isfinite(length) and length > 0.0):
+            raise ValueError(f'segment {name!r}: length must be > 0 m, got {length}')
+        if not (math.isfinite(rest_volume) and rest_volume >= 0.0):
+            raise ValueError(f'segment {name!r}: rest volume must be >= 0 m^3, got {rest_volume}')
+        if not (math.isfinite(max_volume) and max_volume > rest_volume):
+            raise ValueError(f'segment {name!r}: max volume ({max_volume} m^3) must exceed the '
+                             f'rest volume ({rest_volume} m^3)')
+        self.name = name
+        self.length = float(length)
+        self.rest_volume = float(rest_volume)
+        self.max_volume = float(max_volume)
+        self._pieces: list[Piece] | None = None
+
+    @abstractmethod
+    def pressure(self, v: ArrayLike) -> FloatArray:
+        """Gauge pressure at volume v, in Pa."""
+
+    @abstractmethod
+    def stiffness(self, v: ArrayLike) -> FloatArray:
+        """Derivative dp/dv at volume v, in Pa/m^3."""
+
+    @abstractmethod
+    def energy(self, v: ArrayLike) -> FloatArray:
+        """Stored energy, integral of p dv from the rest volume to v, in J."""
+
+    @abstractmethod
+    def curvature(self, v: ArrayLike) -> FloatArray:
+        """Backbone curvature at volume v, in 1/m."""
+
+    @abstractmethod
+    def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
+        """Volumes where the pressure changes direction, and the flat stretches."""
+
+    def monotone_pieces(self) -> list[Piece]:
+        """Split the PV curve into rising, falling and flat pieces, base to top."""
+        if self._pieces is None:
+            self._pieces = self._build_pieces()
+        return self._pieces
+
+    def _build_pieces(self) -> list[Piece]:
+        turns, flats = self._turning_volumes()
+        edges = sorted({self.rest_volume, self.max_volume, *turns,
+                        *(v for flat in flats for v in flat)})
+        pieces: list[Piece] = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            if hi <= lo:
+                continue
+            p_lo, p_hi = (float(x) for x in self.pressure([lo, hi]))
+            is_flat = any(f_lo <= lo and hi <= f_hi for f_lo, f_hi in flats)
+            direction = 0 if is_flat or p_hi == p_lo else (1 if p_hi > p_lo else -1)
+            if direction == 0:
+                p_hi = p_lo
+            if pieces and pieces[-1].direction == direction:
+                last = pieces.pop()
+                lo, p_lo = last.v_lo, last.p_at_lo
+            pieces.append(Piece(lo, hi, direction, p_lo, p_hi))
+        return pieces
+
+    def check_volume(self, v: ArrayLike) -> None:
+        """Raise ValueError when a volume lies outside what the model covers."""
+        arr = np.asarray(v, dtype=float)
+        if arr.size and (np.nanmin(arr) < self.rest_volume or np.nanmax(arr) > self.max_volume):
+            raise ValueError(f'segment {self.name!r}: volume outside its range '
+                             f'[{self.rest_volume:.6g}, {self.max_volume:.6g}] m^3')
+
+    def invert(self, piece: Piece, p: ArrayLike) -> FloatArray:
+        """
+        Volumes on a rising or falling ``piece`` where the pressure equals ``p``.
+
+        Bisection on the bracket the piece gives, vectorised: it cannot fail on a monotone piece
+        and reaches the round-off floor in at most 64 halvings. Pressures outside the piece's range
+        return the nearer end.
+        """
+        if piece.direction == 0:
+            raise ValueError('a flat piece has no inverse')
+        target = np.asarray(p, dtype=float)
+        lo = np.full(target.shape, piece.v_lo)
+        hi = np.full(target.shape, piece.v_hi)
+        sign = float(piece.direction)
+        for _ in range(64):
+            mid = 0.5 * (lo + hi)
+            above = sign * (self.pressure(mid) - target) > 0.0
+            hi = np.where(above, mid, hi)
+            lo = np.where(above, lo, mid)
+            if np.all(hi - lo <= 4.0 * np.spacing(np.maximum(np.abs(hi), 1e-300))):
+                break
+        # A pressure at a piece's end maps to that end exactly: near a peak the pressure is flat to
+        # round-off over a stretch of volume, and the junctions between pieces must agree.
+        middle = 0.5 * (lo + hi)
+        middle = np.where(target == piece.p_at_lo, piece.v_lo, middle)
+        return np.where(target == piece.p_at_hi, piece.v_hi, middle)
+
+    def _arclength(self, v: FloatArray) -> FloatArray:
+        """Cumulative length along the PV curve, volume and pressure scaled by their ranges."""
+        if not hasattr(self, '_p_range'):
+            probe = self.pressure(np.linspace(self.rest_volume, self.max_volume, 1025))
+            self._p_range = max(float(np.ptp(probe)), 1e-300)
+        step = np.hypot(np.diff(v) / (self.max_volume - self.rest_volume),
+                        np.diff(self.pressure(v)) / self._p_range)
+        return np.concatenate([[0.0], np.cumsum(step)])
+
+    def arclength_share(self, piece: Piece) -> float:
+        """Fraction of the whole PV curve's (scaled) length that lies on ``piece``."""
+        whole = self._arclength(np.linspace(self.rest_volume, self.max_volume, 8193))[-1]
+        part = self._arclength(np.linspace(piece.v_lo, piece.v_hi, 1025))[-1]
+        return float(part / whole) if whole > 0.0 else 1.0
+
+    def arclength_samples(self, piece: Piece, count: int) -> FloatArray:
+        """
+        ``count`` volumes on ``piece`` evenly spaced along its PV curve.
+
+        Distances are measured in volume and pressure scaled by the segment's own ranges, so a
+        sharp peak gets as many samples as a long flat stretch.
+        """
+        fine = np.linspace(piece.v_lo, piece.v_hi, 8 * count + 1)
+        arc = self._arclength(fine)
+        if arc[-1] <= 0.0:
+            return np.linspace(piece.v_lo, piece.v_hi, count)
+        return np.interp(np.linspace(0.0, arc[-1], count), arc, fine)
+
+
+def _read_table(path: Path) -> dict[str, FloatArray]:
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise TableError(f'{path}: cannot read the segment table ({err.strerror})') from None
+    rows = [line for line in text.splitlines()
+            if line.strip() and not line.lstrip().startswith('#')]
+    if not rows:
+        raise TableError(f'{path}: no header and no rows')
+    reader = csv.reader(rows)
+    header = [h.strip() for h in next(reader)]
+    missing = [c for c in TABLE_COLUMNS if c not in header]
+    if missing:
+        raise TableError(f'{path}: header lacks column(s) {", ".join(missing)} '
+                         f'(expected {",".join(TABLE_COLUMNS)})')
+    index = {c: header.index(c) for c in TABLE_COLUMNS}
+    columns: dict[str, list[float]] = {c: [] for c in TABLE_COLUMNS}
+    for line_no, row in enumerate(reader, start=2):
+        for column, i in index.items():
+            try:
+                value = float(row[i])
+            except (IndexError, ValueError):
+                cell = row[i] if i < len(row) else '<missing>'
+                raise TableError(f'{path}: data row {line_no - 1}, column {column}: '
+                                 f'not a number: {cell!r}') from None
+            if not math.isfinite(value):
+                raise TableError(f'{path}: data row {line_no - 1}, column {column}: '
+                                 f'must be finite, got {value}')
+            columns[column].append(value)
+    return {c: np.asarray(v, dtype=float) for c, v in columns.items()}
+
+
+class TabulatedSegment(Segment):
+    """
+    A segment given by a table of volume, pressure and curvature (from FEM or from the rig).
+
+    Pressure and curvature are interpolated with PCHIP: monotone wherever the data are, with
+    extrema only at table rows, so no wiggles are invented and the monotone pieces follow from the
+    data's own slopes. The energy is PCHIP's exact antiderivative.
+    """
+
+    def __init__(self, name: str, length: float, volume: ArrayLike, pressure: ArrayLike,
+                 curvature: ArrayLike, source: str = '') -> None:
+        """Build the interpolants; ``source`` names the file in error messages."""
+        where = source or f'segment {name!r}'
+        vol = np.asarray(volume, dtype=float)
+        prs = np.asarray(pressure, dtype=float)
+        cur = np.asarray(curvature, dtype=float)
+        if not (vol.ndim == prs.ndim == cur.ndim == 1 and vol.size == prs.size == cur.size):
+            raise TableError(f'{where}: volume, pressure and curvature need the same length')
+        if vol.size < 2:
+            raise TableError(f'{where}: needs at least 2 rows, got {vol.size}')
+        if not (np.all(np.isfinite(vol)) and np.all(np.isfinite(prs))
+                and np.all(np.isfinite(cur))):
+            raise TableError(f'{where}: values must be finite (no NaN or inf)')
+        steps = np.diff(vol)
+        if np.any(steps <= 0.0):
+            row = int(np.argmax(steps <= 0.0)) + 2
+            raise TableError(f'{where}: volume_m3 must increase strictly; row {row} '
+                             f'({vol[row - 1]:.6g}) does not exceed row {row - 1} '
+                             f'({vol[row - 2]:.6g})')
+        if vol[0] < 0.0:
+            raise TableError(f'{where}: volume_m3 must be >= 0, got {vol[0]:.6g} in row 1')
+        super().__init__(name, length, float(vol[0]), float(vol[-1]))
+        self.source = source
+        self.volumes = vol
+        self.pressures = prs
+        self.curvatures = cur
+        self._p = PchipInterpolator(vol, prs, extrapolate=False)
+        self._dp = self._p.derivative()
+        self._e = self._p.antiderivative()
+        self._k = PchipInterpolator(vol, cur, extrapolate=False)
+
+    @classmethod
+    def from_csv(cls, path: str | Path, name: str | None = None,
+                 length: float | None = None) -> 'TabulatedSegment':
+        """Read a table with header volume_m3,pressure_pa,curvature_per_m."""
+        path = Path(path)
+        columns = _read_table(path)
+        if length is None:
+            raise TableError(f'{path}: the segment length must be given (m)')
+        return cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],
+                   columns['curvature_per_m'], source=str(path))
+
+    def _clip(self, v: ArrayLike) -> FloatArray:
+        return np.clip(np.asarray(v, dtype=float), self.rest_volume, self.max_volume)
+
+    def pressure(self, v: ArrayLike) -> FloatArray:
+        """Gauge pressure at volume v, in Pa (clamped to the table's range)."""
+        return self._p(self._clip(v))
+
+    def stiffness(self, v: ArrayLike) -> FloatArray:
+        """Derivative dp/dv, in Pa/m^3."""
+        return self._dp(self._clip(v))
+
+    def energy(self, v: ArrayLike) -> FloatArray:
+        """Integral of p dv from the first row, in J."""
+        return self._e(self._clip(v))
+
+    def curvature(self, v: ArrayLike) -> FloatArray:
+        """Curvature, in 1/m."""
+        return self._k(self._clip(v))
+
+    def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
+        secant = np.sign(np.diff(self.pressures))
+        turns = [float(self.volumes[i + 1]) for i in range(secant.size - 1)
+                 if secant[i] != secant[i + 1]]
+        flats = [(float(self.volumes[i]), float(self.volumes[i + 1]))
+                 for i in range(secant.size) if secant[i] == 0.0]
+        return turns, flats
+
+
+class _SmoothSegment(Segment):
+    """A segment with a smooth closed-form PV curve; turning points found by root finding."""
+
+    _samples = 4097
+
+    def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
+        grid = self._turn_search_grid()
+        slope = self.stiffness(grid)
+        turns = []
+        for i in np.flatnonzero(np.sign(slope[:-1]) * np.sign(slope[1:]) < 0.0):
+            turns.append(brentq(lambda x: float(self.stiffness(x)), grid[i], grid[i + 1],
+                                xtol=1e-15 * self.max_volume, rtol=4 * np.finfo(float).eps))
+        return turns, []
+
+    def _turn_search_grid(self) -> FloatArray:
+        return np.linspace(self.rest_volume, self.max_volume, self._samples)
+
+
+class LinearSegment(_SmoothSegment):
+    """p = stiffness (v - rest_volume): the 'no sequence' building block."""
+
+    def __init__(self, name: str, length: float, rest_volume: float, stiffness: float,
+                 max_volume: float, curvature_gain: float = 0.0) -> None:
+        """Stiffness in Pa/m^3; curvature_gain in (1/m) per m^3 of inflation."""
+        super().__init__(name, length, rest_volume, max_volume)
+        if not (math.isfinite(stiffness) and stiffness > 0.0):
+            raise ValueError(f'segment {name!r}: stiffness must be > 0 Pa/m^3, got {stiffness}')
+        self.k = float(stiffness)
+        self.curvature_gain = float(curvature_gain)
+
+    def pressure(self, v: ArrayLike) -> FloatArray:
+        """Gauge pressure, in Pa."""
+        return self.k * (np.asarray(v, dtype=float) - self.rest_volume)
+
+    def stiffness(self, v: ArrayLike) -> FloatArray:
+        """Constant dp/dv, in Pa/m^3."""
+        return np.full(np.shape(v), self.k)
+
+    def energy(self, v: ArrayLike) -> FloatArray:
+        """Stored energy, in J."""
+        return 0.5 * self.k * (np.asarray(v, dtype=float) - self.rest_volume) ** 2
+
+    def curvature(self, v: ArrayLike) -> FloatArray:
+        """Curvature, in 1/m."""
+        return self.curvature_gain * (np.asarray(v, dtype=float) - self.rest_volume)
+
+
+class BalloonSegment(_SmoothSegment):
+    """
+    A thin spherical membrane of reference radius R and thickness H.
+
+    With stretch lam = (v / v0)^(1/3): p = H / (R lam^2) dW/dlam, and the stored energy is the
+    membrane's material volume times W, 4 pi R^2 H W(lam) (exact, no quadrature).
+    """
+
+    def __init__(self, name: str, length: float, material: Material, radius: float,
+                 thickness: float, max_stretch: float, curvature_gain: float = 0.0) -> None:
+        """Radius and thickness in m; max_stretch bounds the model's range."""
+        if not (math.isfinite(radius) and radius > 0.0):
+            raise ValueError(f'segment {name!r}: radius must be > 0 m, got {radius}')
+        if not (math.isfinite(thickness) and thickness > 0.0):
+            raise ValueError(f'segment {name!r}: thickness must be > 0 m, got {thickness}')
+        if not (max_stretch > 1.0):
+            raise ValueError(f'segment {name!r}: max stretch must be > 1, got {max_stretch}')
+        if max_stretch >= material.max_stretch:
+            raise ValueError(f'segment {name!r}: max stretch {max_stretch} reaches the '
+                             f'material limit {material.max_stretch:.6g}')
+        rest = 4.0 / 3.0 * math.pi * radius**3
+        super().__init__(name, length, rest, rest * max_stretch**3)
+        self.material = material
+        self.radius = float(radius)
+        self.thickness = float(thickness)
+        self.curvature_gain = float(curvature_gain)
+
+    def stretch(self, v: ArrayLike) -> FloatArray:
+        """Equibiaxial stretch of the membrane at volume v."""
+        return np.cbrt(np.clip(np.asarray(v, dtype=float), self.rest_volume, self.max_volume)
+                       / self.rest_volume)
+
+    def pressure(self, v: ArrayLike) -> FloatArray:
+        """Gauge pressure, in Pa."""
+        lam = self.stretch(v)
+        return self.thickness / (self.radius * lam**2) * self.material.energy_derivative(lam)
+
+    def stiffness(self, v: ArrayLike) -> FloatArray:
+        """dp/dv by the chain rule through the stretch (central difference of dW/dlam)."""
+        lam = self.stretch(v)
+        h = 1e-6 * lam
+        dwl = self.material.energy_derivative(lam)
+        d2w = (self.material.energy_derivative(lam + h)
+               - self.material.energy_derivative(lam - h)) / (2.0 * h)
+        dp_dlam = self.thickness / self.radius * (d2w / lam**2 - 2.0 * dwl / lam**3)
+        return dp_dlam / (3.0 * self.rest_volume * lam**2)
+
+    def energy(self, v: ArrayLike) -> FloatArray:
+        """Stored energy, in J."""
+        lam = self.stretch(v)
+        return (4.0 * math.pi * self.radius**2 * self.thickness
+                * (self.material.energy(lam) - self.material.energy(1.0)))
+
+    def curvature(self, v: ArrayLike) -> FloatArray:
+        """Curvature, in 1/m."""
+        return self.curvature_gain * (np.asarray(v, dtype=float) - self.rest_volume)
+
+    def _turn_search_grid(self) -> FloatArray:
+        # Uniform in stretch: the balloon's features (peak near lam = 1.38) sit at small volumes.
+        lam = np.linspace(1.0, np.cbrt(self.max_volume / self.rest_volume), self._samples)
+        return np.clip(self.rest_volume * lam**3, self.rest_volume, self.max_volume)
