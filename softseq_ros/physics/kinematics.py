@@ -1,0 +1,159 @@
+"""
+Planar piecewise-constant-curvature (PCC) backbone of a segmented actuator.
+
+Frame: the base of the actuator sits at the origin and the unbent actuator points along +x.
+Bending happens in the x-z plane. A point of the backbone is ``(x, z)`` in metres and its tangent
+angle ``theta`` is measured from +x toward +z, so the unit tangent is ``(cos theta, sin theta)``.
+Positive curvature increases ``theta`` along the arc: the backbone turns toward +z, which is
+counter-clockwise when the plane is seen from the -y side (x to the right, z up). In 3-D this
+orientation is a rotation by ``-theta`` about +y (see ``orientation_quaternions``).
+
+Each segment is a circular arc of constant curvature ``k`` [1/m] and length ``L`` [m]. A point at
+arc length ``s`` from a segment start ``(x0, z0, theta0)`` is reached along the chord
+
+    dx = s cos(theta0 + k s / 2) sinc(k s / 2),  dz = s sin(theta0 + k s / 2) sinc(k s / 2)
+
+with sinc(u) = sin(u) / u, which is exact for every ``k`` and has no division by ``k``: a
+straight segment (k = 0) and a slightly bent one share one formula.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+DEFAULT_POINTS_PER_SEGMENT = 20
+
+
+@dataclass(frozen=True)
+class Backbone:
+    """
+    Sampled backbone of one actuator state.
+
+    ``points`` (M, 2) holds ``(x, z)`` [m] from the base to the tip, ``angles`` (M,) the tangent
+    angles [rad], ``arc_length`` (M,) the distance from the base along the backbone [m], and
+    ``segment_ends`` (N,) the index into ``points`` where each segment ends (the last one is the
+    tip, M - 1). Point 0 is the base.
+    """
+
+    points: NDArray[np.float64]
+    angles: NDArray[np.float64]
+    arc_length: NDArray[np.float64]
+    segment_ends: NDArray[np.intp]
+
+    @property
+    def tip(self) -> NDArray[np.float64]:
+        """Tip position ``(x, z)`` [m]."""
+        return self.points[-1]
+
+
+def _check_inputs(curvatures: NDArray[np.float64], lengths: NDArray[np.float64],
+                  points_per_segment: int) -> None:
+    if lengths.ndim != 1 or lengths.size == 0:
+        raise ValueError(f'lengths must be a non-empty 1-D array, got shape {lengths.shape}')
+    if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0.0):
+        raise ValueError(f'lengths must be finite and > 0, got {lengths.tolist()}')
+    if curvatures.ndim != 2 or curvatures.shape[1] != lengths.size:
+        raise ValueError(f'curvatures must have shape (n, {lengths.size}), '
+                         f'got {curvatures.shape}')
+    if not np.all(np.isfinite(curvatures)):
+        raise ValueError('curvatures must be finite')
+    if isinstance(points_per_segment, bool) or not isinstance(points_per_segment,
+                                                              (int, np.integer)):
+        raise ValueError(f'points_per_segment must be an integer, got {points_per_segment!r}')
+    if points_per_segment < 1:
+        raise ValueError(f'points_per_segment must be >= 1, got {points_per_segment}')
+
+
+def segment_end_indices(n_segments: int, points_per_segment: int) -> NDArray[np.intp]:
+    """Index of each segment end in a backbone sampled with ``points_per_segment`` per segment."""
+    return (np.arange(1, n_segments + 1) * points_per_segment).astype(np.intp)
+
+
+def backbone_batch(curvatures: ArrayLike, lengths: ArrayLike,
+                   points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT,
+                   base_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """
+    Backbones of many states at once.
+
+    ``curvatures`` (n, N) [1/m], one row per state, segments from base to tip; ``lengths`` (N,)
+    [m]. Each segment is sampled at ``points_per_segment`` points after its start, so every
+    backbone has M = 1 + N * points_per_segment points. ``base_pose`` is ``(x, z, theta)`` of the
+    base. Returns ``points`` (n, M, 2) [m] and ``angles`` (n, M) [rad].
+    """
+    kappa = np.asarray(curvatures, dtype=float)
+    if kappa.ndim == 1:
+        kappa = kappa[np.newaxis, :]
+    length = np.asarray(lengths, dtype=float)
+    _check_inputs(kappa, length, points_per_segment)
+    x0, z0, theta0 = (float(value) for value in base_pose)
+    n_states, n_segments = kappa.shape
+
+    # Arc length from each segment start to its samples: (P,) fractions times (N,) lengths.
+    fractions = np.arange(1, points_per_segment + 1, dtype=float) / points_per_segment
+    s = fractions[np.newaxis, :] * length[:, np.newaxis]                  # (N, P)
+    half_turn = 0.5 * kappa[:, :, np.newaxis] * s[np.newaxis, :, :]       # (n, N, P)
+
+    # Tangent angle at each segment start: the base angle plus every earlier segment's turn.
+    turns = kappa * length[np.newaxis, :]                                  # (n, N)
+    start_angle = theta0 + np.concatenate(
+        [np.zeros((n_states, 1)), np.cumsum(turns, axis=1)[:, :-1]], axis=1)
+
+    chord_angle = start_angle[:, :, np.newaxis] + half_turn
+    # np.sinc(u) = sin(pi u) / (pi u); the argument is rescaled to get sin(h) / h.
+    chord = s[np.newaxis, :, :] * np.sinc(half_turn / np.pi)
+    dx = chord * np.cos(chord_angle)
+    dz = chord * np.sin(chord_angle)
+
+    # Segment start positions: the base plus every earlier segment's full chord.
+    end_dx = np.concatenate([np.zeros((n_states, 1)), np.cumsum(dx[:, :, -1], axis=1)], axis=1)
+    end_dz = np.concatenate([np.zeros((n_states, 1)), np.cumsum(dz[:, :, -1], axis=1)], axis=1)
+    x = x0 + end_dx[:, :-1, np.newaxis] + dx
+    z = z0 + end_dz[:, :-1, np.newaxis] + dz
+    angle = start_angle[:, :, np.newaxis] + 2.0 * half_turn
+
+    n_points = 1 + n_segments * points_per_segment
+    points = np.empty((n_states, n_points, 2))
+    points[:, 0, 0] = x0
+    points[:, 0, 1] = z0
+    points[:, 1:, 0] = x.reshape(n_states, -1)
+    points[:, 1:, 1] = z.reshape(n_states, -1)
+    angles = np.empty((n_states, n_points))
+    angles[:, 0] = theta0
+    angles[:, 1:] = angle.reshape(n_states, -1)
+    return points, angles
+
+
+def backbone(curvatures: ArrayLike, lengths: ArrayLike,
+             points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT,
+             base_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Backbone:
+    """
+    Backbone of one state: ``curvatures`` (N,) [1/m] and ``lengths`` (N,) [m], base to tip.
+
+    See ``backbone_batch`` for the sampling and ``base_pose``.
+    """
+    kappa = np.asarray(curvatures, dtype=float)
+    if kappa.ndim != 1:
+        raise ValueError(f'curvatures must be 1-D for one state, got shape {kappa.shape}')
+    points, angles = backbone_batch(kappa[np.newaxis, :], lengths, points_per_segment, base_pose)
+    length = np.asarray(lengths, dtype=float)
+    fractions = np.arange(1, points_per_segment + 1, dtype=float) / points_per_segment
+    starts = np.concatenate([[0.0], np.cumsum(length)[:-1]])
+    arc = np.concatenate([[0.0], (starts[:, np.newaxis]
+                                  + fractions[np.newaxis, :] * length[:, np.newaxis]).ravel()])
+    return Backbone(points=points[0], angles=angles[0], arc_length=arc,
+                    segment_ends=segment_end_indices(length.size, points_per_segment))
+
+
+def orientation_quaternions(angles: ArrayLike) -> NDArray[np.float64]:
+    """
+    Quaternions ``(x, y, z, w)`` (shape (..., 4)) of the 3-D frames whose +x axis is the tangent.
+
+    A tangent angle ``theta`` (from +x toward +z) is a rotation by ``-theta`` about +y.
+    """
+    half = -0.5 * np.asarray(angles, dtype=float)
+    quaternions = np.zeros(half.shape + (4,))
+    quaternions[..., 1] = np.sin(half)
+    quaternions[..., 3] = np.cos(half)
+    return quaternions

@@ -1,0 +1,202 @@
+"""
+Syringe-pump programme: the injected volume as a function of time.
+
+The pump pushes (or withdraws) fluid at a constant flow rate, so a programme is a sequence of
+legs: inflate to a target injected volume, deflate to a target injected volume, or hold for a
+duration. The legs repeat ``cycles`` times. The injected volume is therefore piecewise linear in
+time and is evaluated exactly, never by integrating the flow.
+
+Units: m^3 for volumes, m^3/s for the flow rate, s for times. ``injected`` always means the
+total fluid volume minus the sum of the segments' rest volumes.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+ACTIONS = ('inflate', 'deflate', 'hold')
+
+# 0.05 mL/s, the flow rate of the paper's syringe pump.
+DEFAULT_FLOW_RATE = 5.0e-8
+
+
+def _finite(value: object, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ValueError(f'{what} must be a number, got {type(value).__name__} {value!r}')
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f'{what} must be finite, got {number}')
+    return number
+
+
+@dataclass(frozen=True)
+class Leg:
+    """
+    One step of a pump programme.
+
+    ``inflate`` and ``deflate`` move at the pump's flow rate to the injected volume ``to_m3``;
+    ``hold`` keeps the volume for ``duration_s`` seconds. Use the ``inflate``, ``deflate`` and
+    ``hold`` constructors rather than filling the fields by hand.
+    """
+
+    action: str
+    to_m3: float | None = None
+    duration_s: float | None = None
+
+    def __post_init__(self) -> None:
+        """Check that the leg names a known action and carries exactly the value it needs."""
+        if self.action not in ACTIONS:
+            raise ValueError(f'leg action must be one of {", ".join(ACTIONS)}, '
+                             f'got {self.action!r}')
+        if self.action == 'hold':
+            if self.to_m3 is not None:
+                raise ValueError('a hold leg takes duration_s, not to_m3')
+            if self.duration_s is None:
+                raise ValueError('a hold leg needs duration_s')
+            duration = _finite(self.duration_s, 'hold duration_s')
+            if duration <= 0.0:
+                raise ValueError(f'hold duration_s must be > 0, got {duration}')
+            object.__setattr__(self, 'duration_s', duration)
+        else:
+            if self.duration_s is not None:
+                raise ValueError(f'an {self.action} leg takes to_m3, not duration_s')
+            if self.to_m3 is None:
+                raise ValueError(f'an {self.action} leg needs to_m3')
+            target = _finite(self.to_m3, f'{self.action} to_m3')
+            if target < 0.0:
+                # Below zero injected the segments would be sucked under their rest volume,
+                # which no segment model covers.
+                raise ValueError(f'{self.action} to_m3 must be >= 0, got {target}')
+            object.__setattr__(self, 'to_m3', target)
+
+    @classmethod
+    def inflate(cls, to_m3: float) -> 'Leg':
+        """Inflate to the injected volume ``to_m3`` [m^3]."""
+        return cls('inflate', to_m3=to_m3)
+
+    @classmethod
+    def deflate(cls, to_m3: float) -> 'Leg':
+        """Deflate to the injected volume ``to_m3`` [m^3]."""
+        return cls('deflate', to_m3=to_m3)
+
+    @classmethod
+    def hold(cls, duration_s: float) -> 'Leg':
+        """Keep the injected volume for ``duration_s`` [s]."""
+        return cls('hold', duration_s=duration_s)
+
+
+@dataclass(frozen=True)
+class PumpProfile:
+    """
+    A pump programme: ``legs`` repeated ``cycles`` times at ``flow_rate`` [m^3/s].
+
+    Time 0 is the start of the first leg, where the injected volume is ``start_injected``.
+    Raises ValueError when a leg cannot be run from the volume it starts at (an inflate target
+    not above it, a deflate target not below it), naming the cycle and leg.
+    """
+
+    legs: tuple[Leg, ...]
+    flow_rate: float = DEFAULT_FLOW_RATE
+    cycles: int = 1
+    start_injected: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Validate the programme and precompute its breakpoints."""
+        legs = tuple(self.legs)
+        if not legs:
+            raise ValueError('a pump profile needs at least one leg')
+        for index, leg in enumerate(legs):
+            if not isinstance(leg, Leg):
+                raise ValueError(f'legs[{index}] must be a Leg, got {type(leg).__name__}')
+        object.__setattr__(self, 'legs', legs)
+        flow = _finite(self.flow_rate, 'flow_rate')
+        if flow <= 0.0:
+            raise ValueError(f'flow_rate must be > 0, got {flow}')
+        object.__setattr__(self, 'flow_rate', flow)
+        if isinstance(self.cycles, bool) or not isinstance(self.cycles, (int, np.integer)):
+            raise ValueError(f'cycles must be an integer, got {self.cycles!r}')
+        if self.cycles < 1:
+            raise ValueError(f'cycles must be >= 1, got {self.cycles}')
+        start = _finite(self.start_injected, 'start_injected')
+        if start < 0.0:
+            raise ValueError(f'start_injected must be >= 0, got {start}')
+        object.__setattr__(self, 'start_injected', start)
+
+        times = [0.0]
+        volumes = [start]
+        for cycle in range(int(self.cycles)):
+            for index, leg in enumerate(legs):
+                where = f'cycle {cycle + 1}, legs[{index}]'
+                now = volumes[-1]
+                if leg.action == 'hold':
+                    times.append(times[-1] + leg.duration_s)
+                    volumes.append(now)
+                    continue
+                if leg.action == 'inflate' and not leg.to_m3 > now:
+                    raise ValueError(f'{where}: inflate target {leg.to_m3:g} m^3 is not above '
+                                     f'the injected volume {now:g} m^3 it starts from')
+                if leg.action == 'deflate' and not leg.to_m3 < now:
+                    raise ValueError(f'{where}: deflate target {leg.to_m3:g} m^3 is not below '
+                                     f'the injected volume {now:g} m^3 it starts from')
+                times.append(times[-1] + abs(leg.to_m3 - now) / flow)
+                volumes.append(leg.to_m3)
+        object.__setattr__(self, '_times', np.array(times))
+        object.__setattr__(self, '_volumes', np.array(volumes))
+
+    def duration(self) -> float:
+        """Total run time of all cycles [s]."""
+        return float(self._times[-1])
+
+    def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Times [s] and injected volumes [m^3] at the start and at the end of every leg."""
+        return self._times.copy(), self._volumes.copy()
+
+    def max_injected(self) -> float:
+        """Largest injected volume the programme reaches [m^3]."""
+        return float(self._volumes.max())
+
+    def injected_at(self, t: ArrayLike) -> NDArray[np.float64]:
+        """
+        Injected volume [m^3] at times ``t`` [s] (any shape).
+
+        Before 0 it is ``start_injected``; after the end it stays at the final volume.
+        """
+        return np.asarray(np.interp(np.asarray(t, dtype=float), self._times, self._volumes),
+                          dtype=float)
+
+    def flow_at(self, t: ArrayLike) -> NDArray[np.float64]:
+        """
+        Signed flow [m^3/s] at times ``t`` [s]: positive while inflating, 0 outside the programme.
+
+        At a breakpoint the flow of the leg that starts there is returned.
+        """
+        times = np.asarray(t, dtype=float)
+        leg_index = np.searchsorted(self._times, times, side='right') - 1
+        n_legs = self._times.size - 1
+        inside = (leg_index >= 0) & (leg_index < n_legs)
+        safe = np.clip(leg_index, 0, n_legs - 1)
+        direction = np.sign(self._volumes[safe + 1] - self._volumes[safe])
+        return np.where(inside, direction * self.flow_rate, 0.0)
+
+    def sample(self, rate_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """
+        Times at ``rate_hz`` from 0 to the end, the exact end time included, and the volumes there.
+
+        Returns ``(t, injected)``; the last interval is shorter when the duration is not a
+        multiple of the period.
+        """
+        rate = _finite(rate_hz, 'rate_hz')
+        if rate <= 0.0:
+            raise ValueError(f'rate_hz must be > 0, got {rate}')
+        end = self.duration()
+        # Round so that a duration that is a multiple of the period up to rounding does not
+        # produce a sliver of an interval at the end.
+        whole = int(math.floor(end * rate + 1e-9))
+        t = np.arange(whole + 1, dtype=float) / rate
+        if end - t[-1] > 1e-9 / rate:
+            t = np.append(t, end)
+        else:
+            t[-1] = end
+        return t, self.injected_at(t)
