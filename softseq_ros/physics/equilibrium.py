@@ -370,21 +370,27 @@ class EquilibriumMap:
             step = 1 if upward else -2
             best = max(candidates, key=lambda j: tuple(self.branches[j].volumes[step]))
             return _End('continue', best)
-        at_limit = (np.any(v_end >= self.max_volumes - self._tol_v) if upward
-                    else np.any(v_end <= self.rest_volumes + self._tol_v))
-        if at_limit:
+        # A segment at the edge of its model's range ends the domain: going on would take it
+        # outside its table (any continuation inside the range was found above).
+        if self._at_edge(v_end):
             return _End('limit')
-        target, landed = self._snap(index, upward)
-        return _End('snap', target, landed)
+        snap = self._snap(index, upward)
+        if snap is None:
+            return _End('limit')
+        return _End('snap', *snap)
 
-    def _snap(self, index: int, upward: bool) -> tuple[int, FloatArray]:
+    def _at_edge(self, volumes: FloatArray) -> bool:
+        return bool(np.any(volumes >= self.max_volumes - self._tol_v)
+                    or np.any(volumes <= self.rest_volumes + self._tol_v))
+
+    def _snap(self, index: int, upward: bool) -> tuple[int, FloatArray] | None:
         """
         Where the fold at a branch end snaps to, at the same total volume.
 
         The fluid redistributes along the gradient flow of the stored energy on sum v = V with
         equal conductances, dv_i/dt = -(p_i - mean p): the state rolls downhill from the fold to
         the stable equilibrium whose basin it is in. The flow starts a small step off the fold,
-        on the side the flow itself points to.
+        on the side the flow itself points to. None when the flow leaves a segment's range.
         """
         branch = self.branches[index]
         end = -1 if upward else 0
@@ -401,6 +407,8 @@ class EquilibriumMap:
         direction = math.copysign(1.0, drift(v_fold + eps * null) + drift(v_fold - eps * null))
         start = v_fold + direction * eps * null
         landed = self._flow(start)
+        if self._at_edge(landed):
+            return None
         target = self._nearest_branch(total, landed, exclude=index)
         return target, self.lookup(target, np.array([total]))[0][0]
 
