@@ -428,9 +428,14 @@ class EquilibriumMap:
             sol = solve_ivp(rhs, (t, horizon), y, method='LSODA', rtol=1e-10,
                             atol=1e-14 * max(1.0, float(np.max(np.abs(y)))))
             y, t = sol.y[:, -1], horizon
-            if np.max(np.abs(rhs(t, y))) < 1e-11:
+            # At rest means balanced pressures at a stable state: a fold is balanced too.
+            if np.max(np.abs(rhs(t, y))) < 1e-11 and self._is_stable(y * scale_v):
                 break
         return np.clip(y * scale_v, lo, hi)
+
+    def _is_stable(self, volumes: FloatArray) -> bool:
+        k = np.array([s.stiffness(x) for s, x in zip(self.segments, volumes)]) / self._k_scale
+        return bool(np.sum(k < 0.0) <= 1 and _cofactor_sum(k) > 1e-6)
 
     def _nearest_branch(self, total: float, volumes: FloatArray, exclude: int) -> int:
         best, best_distance = -1, math.inf
