@@ -1,0 +1,275 @@
+"""
+A slow, simple reference for quasi-static volume sharing between inflatable segments.
+
+It shares no code with softseq_ros.physics.equilibrium and asks the segments for nothing but
+``pressure(v)``, ``rest_volume`` and ``max_volume``: stored energies come from its own Simpson
+tables of the pressure, and the state follows the history by discrete steepest descent of the
+total energy E(v) = sum_i E_i(v_i) on the plane sum_i v_i = V, starting from the previous state.
+
+How a snap-through is recognised: a commanded step whose descent moves the volumes by more than
+``jump_fraction`` of the volume scale is bisected; if the move stays that large when the step has
+shrunk to ``min_step_fraction`` of the scale, the old energy well has vanished (a fold) and the
+move is recorded as a snap. A continuous but steep change (a pitchfork, the approach to a fold)
+shrinks with the step and is not recorded.
+
+Accuracy: the stable state is polished to round-off (brentq on p1 - p2 for two segments, a
+root solve for more); the volume at which a snap is recorded is within about
+``(step_fraction)**2`` of the scale of the fold (the lattice can see over a well narrower than
+one lattice step) plus ``min_step_fraction`` of the scale.
+"""
+
+from dataclasses import dataclass
+from itertools import permutations
+
+import numpy as np
+from scipy.optimize import brentq, root
+
+
+@dataclass
+class ReferenceSnap:
+    """A snap-through seen by the reference: where (injected volume) and between which states."""
+
+    injected: float
+    from_volumes: np.ndarray
+    to_volumes: np.ndarray
+
+
+@dataclass
+class ReferencePath:
+    """States of the reference along a commanded history."""
+
+    injected: np.ndarray
+    volumes: np.ndarray
+    pressure: np.ndarray
+    events: list
+
+
+class EnergyTable:
+    """E(v) = integral of p from the rest volume, by composite Simpson on a fine table."""
+
+    def __init__(self, segment, points: int = 20001) -> None:
+        self.segment = segment
+        self.rest = float(segment.rest_volume)
+        self.top = float(segment.max_volume)
+        self.v = np.linspace(self.rest, self.top, points)
+        self.h = self.v[1] - self.v[0]
+        p = np.asarray(segment.pressure(self.v), dtype=float)
+        p_mid = np.asarray(segment.pressure(self.v[:-1] + 0.5 * self.h), dtype=float)
+        pieces = self.h / 6.0 * (p[:-1] + 4.0 * p_mid + p[1:])
+        self.e = np.concatenate([[0.0], np.cumsum(pieces)])
+
+    def __call__(self, v) -> np.ndarray:
+        """Energy at volumes v: the table up to the node below, then one Simpson panel."""
+        v = np.asarray(v, dtype=float)
+        j = np.clip(((v - self.rest) / self.h).astype(int), 0, len(self.v) - 2)
+        vj = self.v[j]
+        seg = self.segment
+        panel = (v - vj) / 6.0 * (seg.pressure(vj) + 4.0 * seg.pressure(0.5 * (vj + v))
+                                  + seg.pressure(v))
+        return self.e[j] + panel
+
+
+class ReferenceTracker:
+    """History-following equilibrium of N segments sharing one incompressible fluid volume."""
+
+    def __init__(self, segments, step_fraction: float = 1e-4, jump_fraction: float = 1e-2,
+                 min_step_fraction: float = 1e-11, table_points: int = 20001) -> None:
+        self.segments = list(segments)
+        self.n = len(self.segments)
+        if self.n < 2:
+            raise ValueError('the reference needs at least two segments')
+        self.rest = np.array([s.rest_volume for s in self.segments], dtype=float)
+        self.top = np.array([s.max_volume for s in self.segments], dtype=float)
+        self.tables = [EnergyTable(s, table_points) for s in self.segments]
+        span = self.top - self.rest
+        self.scale = float(span.sum())
+        self.lattice_step = step_fraction * float(span.min())
+        self.jump_tolerance = jump_fraction * float(span.min())
+        self.min_step = min_step_fraction * self.scale
+        self.directions = []
+        for i, j in permutations(range(self.n), 2):
+            d = np.zeros(self.n)
+            d[i], d[j] = 1.0, -1.0
+            self.directions.append(d)
+        self.directions = np.array(self.directions)
+        self.volumes = self.rest.copy()
+        self.injected = 0.0
+        self.events: list[ReferenceSnap] = []
+
+    @property
+    def injected_range(self) -> tuple[float, float]:
+        """Smallest and largest injected volume the segments can hold, in m^3."""
+        return 0.0, float((self.top - self.rest).sum())
+
+    def energy(self, volumes) -> np.ndarray:
+        """Total stored energy of states (..., N), from the reference's own tables."""
+        volumes = np.asarray(volumes, dtype=float)
+        return sum(t(volumes[..., i]) for i, t in enumerate(self.tables))
+
+    def pressures(self, volumes) -> np.ndarray:
+        """Pressure of every segment at the given volumes (N,)."""
+        return np.array([float(s.pressure(v)) for s, v in zip(self.segments, volumes)])
+
+    # --- one commanded step --------------------------------------------------------------
+
+    def _project(self, x: np.ndarray, total: float) -> np.ndarray:
+        """Put x into the box [rest, top] with sum(x) = total, moving free entries equally."""
+        x = np.clip(x, self.rest, self.top)
+        for _ in range(4 * self.n):
+            residual = total - x.sum()
+            if abs(residual) <= 1e-15 * self.scale:
+                break
+            free = (x < self.top) if residual > 0 else (x > self.rest)
+            x = np.clip(x + residual * free / max(free.sum(), 1), self.rest, self.top)
+        return x
+
+    def _descend(self, x: np.ndarray, total: float) -> tuple[np.ndarray, float]:
+        """Discrete steepest descent on the lattice x + h (e_i - e_j); returns (x, h)."""
+        slack = min(total - self.rest.sum(), self.top.sum() - total)
+        h = min(self.lattice_step, 0.25 * slack)
+        if h <= 1e-14 * self.scale:
+            return x, h
+        e0 = float(self.energy(x))
+        ray = np.arange(1, 65, dtype=float)[:, None]
+        while True:
+            cand = x + h * self.directions
+            ok = np.all((cand >= self.rest) & (cand <= self.top), axis=1)
+            if not ok.any():
+                return x, h
+            dirs = self.directions[ok]
+            e = self.energy(cand[ok])
+            k = int(np.argmin(e))
+            if not e[k] < e0:
+                return x, h
+            # Keep going along the steepest direction while the energy keeps falling: the first
+            # lattice minimum on that ray, exactly what repeated single moves would reach.
+            d = dirs[k]
+            while True:
+                pts = x + h * ray * d
+                inside = np.all((pts >= self.rest) & (pts <= self.top), axis=1)
+                n_in = int(np.argmin(inside)) if not inside.all() else len(pts)
+                if n_in == 0:
+                    break
+                e_ray = np.concatenate([[e0], self.energy(pts[:n_in])])
+                rising = np.nonzero(np.diff(e_ray) >= 0.0)[0]
+                stop = int(rising[0]) if len(rising) else n_in
+                if stop > 0:
+                    x, e0 = pts[stop - 1], float(e_ray[stop])
+                if len(rising) or n_in < len(pts):
+                    break
+
+    def _polish_two(self, x: np.ndarray, total: float, h: float) -> np.ndarray:
+        s1, s2 = self.segments
+        lo = max(self.rest[0], total - self.top[1])
+        hi = min(self.top[0], total - self.rest[1])
+
+        def gap(v1):
+            return s1.pressure(v1) - s2.pressure(total - v1)
+
+        def root_in(a: float, b: float) -> float:
+            ga, gb = float(gap(a)), float(gap(b))
+            if ga == 0.0 or gb == 0.0:
+                return a if ga == 0.0 else b
+            return brentq(lambda v: float(gap(v)), a, b, xtol=1e-15 * self.scale, maxiter=200)
+
+        x1 = float(np.clip(x[0], lo, hi))
+        a, b = max(lo, x1 - h), min(hi, x1 + h)
+        ga, gx, gb = (float(gap(v)) for v in (a, x1, b))
+        if ga <= 0.0 <= gx and a < x1:
+            v1 = root_in(a, x1)
+        elif gx <= 0.0 <= gb and x1 < b:
+            v1 = root_in(x1, b)
+        else:
+            # Near a fold the Simpson energies cannot resolve the last shallow slope; follow
+            # the exact gradient p1 - p2 downhill instead until it vanishes or a bound holds.
+            direction = -np.sign(gx)
+            v1 = x1
+            while direction != 0.0:
+                pts = np.clip(v1 + direction * h * np.arange(1, 257), lo, hi)
+                g = gap(pts)
+                flip = np.nonzero(np.sign(g) != np.sign(gx))[0]
+                if len(flip):
+                    k = int(flip[0])
+                    v1 = root_in(v1 if k == 0 else float(pts[k - 1]), float(pts[k]))
+                    break
+                v1 = float(pts[-1])
+                if v1 in (lo, hi):
+                    break
+        return np.array([v1, total - v1])
+
+    def _polish_many(self, x: np.ndarray, total: float, h: float) -> np.ndarray:
+        if h <= 1e-14 * self.scale:
+            return x
+
+        def gaps(y: np.ndarray) -> np.ndarray:
+            v = np.append(y, total - y.sum())
+            p = self.pressures(v)
+            return (p[:-1] - p[-1]) / max(abs(p).max(), 1.0)
+
+        sol = root(gaps, x[:-1], method='hybr', options={'xtol': 1e-14})
+        v = np.append(sol.x, total - sol.x.sum())
+        if sol.success and np.abs(v - x).max() <= 2.0 * h and np.all(v >= self.rest) \
+                and np.all(v <= self.top):
+            return v
+        raise RuntimeError(f'reference: polishing failed near {x} at V={total}')
+
+    def _relax(self, x_old: np.ndarray, total: float) -> np.ndarray:
+        start = self._project(x_old + (total - x_old.sum()) / self.n, total)
+        x, h = self._descend(start, total)
+        if self.n == 2:
+            return self._polish_two(x, total, h)
+        return self._polish_many(x, total, h)
+
+    def go_to(self, injected: float) -> list[ReferenceSnap]:
+        """Move the commanded injected volume to ``injected``; return the snaps on the way."""
+        lo, hi = self.injected_range
+        if not lo <= injected <= hi:
+            raise ValueError(f'injected volume {injected} outside [{lo}, {hi}]')
+        base = self.rest.sum()
+        new_events = []
+        pending = [float(injected)]
+        while pending:
+            target = pending[-1]
+            x = self._relax(self.volumes, base + target)
+            jump = float(np.abs(x - self.volumes).max())
+            if jump <= self.jump_tolerance or abs(target - self.injected) <= self.min_step:
+                if jump > self.jump_tolerance:
+                    new_events.append(ReferenceSnap(target, self.volumes.copy(), x.copy()))
+                self.volumes, self.injected = x, target
+                pending.pop()
+            else:
+                pending.append(0.5 * (self.injected + target))
+        self.events.extend(new_events)
+        return new_events
+
+    def sweep(self, injected) -> ReferencePath:
+        """Visit every commanded injected volume in order; states after each."""
+        injected = np.asarray(injected, dtype=float)
+        vols = np.empty((len(injected), self.n))
+        press = np.empty(len(injected))
+        events = []
+        for k, u in enumerate(injected):
+            events += self.go_to(float(u))
+            vols[k] = self.volumes
+            press[k] = float(self.segments[0].pressure(self.volumes[0]))
+        return ReferencePath(injected, vols, press, events)
+
+
+def two_segment_equilibria(segments, injected: float, points: int = 200001) -> list[tuple]:
+    """
+    Every equilibrium of two segments at one injected volume, by sign changes of p1 - p2.
+
+    Returns (v1, v2, stable) tuples; stable when p1 - p2 crosses zero upwards (an energy minimum).
+    """
+    s1, s2 = segments
+    total = s1.rest_volume + s2.rest_volume + injected
+    lo = max(s1.rest_volume, total - s2.max_volume)
+    hi = min(s1.max_volume, total - s2.rest_volume)
+    v1 = np.linspace(lo, hi, points)
+    gap = s1.pressure(v1) - s2.pressure(total - v1)
+    out = []
+    for k in np.nonzero(np.sign(gap[:-1]) != np.sign(gap[1:]))[0]:
+        r = brentq(lambda x: float(s1.pressure(x) - s2.pressure(total - x)), v1[k], v1[k + 1],
+                   xtol=1e-15 * total)
+        out.append((r, total - r, bool(gap[k + 1] > gap[k])))
+    return out
