@@ -26,6 +26,7 @@ rebuilds a complete bag from such a truncated file.
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 from importlib.metadata import PackageNotFoundError, version
 import io
 import os
@@ -71,10 +72,37 @@ def _library_name() -> str:
     return f'softseq_ros bag writer; mcap-python/{mcap_version}'
 
 
+def message_type_name(msg: Any) -> str:
+    """Return ``pkg/msg/Type`` of an rclpy message object."""
+    cls = type(msg)
+    package, namespace = cls.__module__.split('.')[:2]
+    return f'{package}/{namespace}/{cls.__name__}'
+
+
+@lru_cache(maxsize=None)
+def _cdr_decoder(type_name: str) -> Any:
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg(message_definition(type_name), type_name))
+    return store
+
+
 def serialize(msg: Any) -> bytes:
-    """Serialize an rclpy message object to CDR bytes (needs rclpy)."""
+    """
+    Serialize an rclpy message object to CDR bytes as they travel over DDS (needs rclpy).
+
+    rclpy's serialize_message (Fast DDS) returns a buffer of the estimated size, which can
+    end in bytes that belong to no field; strict readers (rosbags) refuse such messages, and
+    a subscriber never receives them. The buffer is cut where the last field ends.
+    """
     from rclpy.serialization import serialize_message
-    return serialize_message(msg)
+    raw = serialize_message(msg)
+    type_name = message_type_name(msg)
+    store = _cdr_decoder(type_name)
+    msgdef = store.get_msgdef(type_name)
+    decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
+    _, end = decode(raw[4:], 0, msgdef.cls, store)
+    return bytes(raw[:4 + end])
 
 
 class _IndentedDumper(yaml.SafeDumper):

@@ -1,0 +1,234 @@
+"""
+Recorder node: writes the rig's topics into an MCAP bag in the rosbag2 layout.
+
+It subscribes with ``raw=True`` (the CDR bytes are stored as received, never decoded) once
+a topic has a publisher, takes the type from the graph unless given, asks for reliable
+delivery (and transient_local when every publisher offers it, so latched state is not
+missed), and writes each message with log time = receive time (node clock) and publish
+time = the publisher's source timestamp. The bag writing itself lives in
+:mod:`softseq_ros.bag.writer` and needs no rclpy.
+"""
+
+from datetime import datetime, timezone
+from functools import partial
+import importlib
+from pathlib import Path
+import sys
+from typing import Any, Sequence
+
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+import rclpy
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
+from softseq_ros.bag.writer import BagWriter, BagWriterError, offered_qos_yaml, qos_profile_dict
+
+# The topics recorded when the `topics` parameter is not given. Kept in one place so the
+# rig's topic list can change without touching the node.
+RIG_TOPICS: tuple[str, ...] = (
+    '/clock',
+    '/pump/injected_volume',
+    '/pump/flow_rate',
+    '/actuator/pressure',
+    '/actuator/segment_volumes',
+    '/actuator/curvatures',
+    '/actuator/snap',
+    '/camera/backbone',
+)
+DISCOVERY_PERIOD_S = 0.5
+QUEUE_DEPTH = 1000
+
+
+def default_output_directory(now: datetime | None = None) -> Path:
+    """Return ``bags/rig_<UTC timestamp>`` (rosbag2's timestamp format) for a new bag."""
+    now = now or datetime.now(timezone.utc)
+    return Path('bags') / now.astimezone(timezone.utc).strftime('rig_%Y_%m_%d-%H_%M_%S')
+
+
+def _duration(duration: Any) -> dict[str, int]:
+    nanoseconds = int(duration.nanoseconds)
+    return {'sec': nanoseconds // 1_000_000_000, 'nsec': nanoseconds % 1_000_000_000}
+
+
+def offered_profile(qos: QoSProfile) -> dict[str, Any]:
+    """Convert a publisher's offered QoS to rosbag2's version-9 profile dictionary."""
+    return qos_profile_dict(
+        history=qos.history.name.lower(), depth=qos.depth,
+        reliability=qos.reliability.name.lower(), durability=qos.durability.name.lower(),
+        deadline=_duration(qos.deadline), lifespan=_duration(qos.lifespan),
+        liveliness=qos.liveliness.name.lower(),
+        liveliness_lease_duration=_duration(qos.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions)
+
+
+def request_for_offers(offers: Sequence[QoSProfile]) -> QoSProfile:
+    """
+    Choose the subscription QoS that receives from all publishers without losses.
+
+    Reliable when every publisher is reliable (a reliable subscription would not match a
+    best-effort one), transient_local when every publisher keeps its last messages for late
+    joiners, as rosbag2's recorder does.
+    """
+    reliable = all(o.reliability == ReliabilityPolicy.RELIABLE for o in offers)
+    transient = bool(offers) and all(
+        o.durability == DurabilityPolicy.TRANSIENT_LOCAL for o in offers)
+    return QoSProfile(
+        depth=QUEUE_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
+
+
+def message_class(type_name: str) -> type:
+    """Import the Python class of a ``pkg/msg/Type`` message type."""
+    package, namespace, name = canonical_type_name(type_name).split('/')
+    try:
+        return getattr(importlib.import_module(f'{package}.{namespace}'), name)
+    except (ImportError, AttributeError):
+        raise MessageDefinitionError(
+            f'message type {type_name}: its Python package is not installed') from None
+
+
+class Recorder(Node):
+    """Subscribe to a list of topics and write everything received into one bag."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        """Declare parameters, open the bag and start looking for the topics."""
+        super().__init__('recorder', **node_kwargs)
+        topics = self.declare_parameter(
+            'topics', list(RIG_TOPICS), ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
+                description='Topics to record (names are resolved in the node namespace).'),
+        ).value
+        self.declare_parameter(
+            'types', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
+                description='Message types (pkg/msg/Type), one per entry of topics; an empty '
+                            'entry or a missing list means: take the type from the graph.'))
+        output = self.declare_parameter(
+            'output', '', ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING, read_only=True,
+                description='Bag directory to create; empty: bags/rig_<UTC timestamp>.'),
+        ).value
+        compression = self.declare_parameter(
+            'compression', 'zstd', ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING, read_only=True,
+                description='MCAP chunk compression: zstd, lz4 or none.'),
+        ).value
+        try:
+            types = list(self.get_parameter('types').value)
+        except ParameterUninitializedException:
+            types = []
+        if types and len(types) != len(topics):
+            raise BagWriterError(
+                f'parameter types: {len(types)} entries for {len(topics)} topics; give one type '
+                'per topic (an empty string to discover it)')
+        self._wanted: dict[str, str] = {}
+        for index, topic in enumerate(topics):
+            given = types[index] if types else ''
+            self._wanted[self.resolve_topic_name(topic)] = (
+                canonical_type_name(given) if given else '')
+        self._output = Path(output) if output else default_output_directory()
+        self._bag = BagWriter(self._output,
+                              compression=None if compression == 'none' else compression)
+        self._subscriptions_by_topic: dict[str, Any] = {}
+        self._reported: set[str] = set()
+        self.get_logger().info(
+            f'recording {len(self._wanted)} topics into {self._output}')
+        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self._discover()
+
+    @property
+    def bag(self) -> BagWriter:
+        """The bag being written."""
+        return self._bag
+
+    @property
+    def recorded_topics(self) -> list[str]:
+        """Topics subscribed to so far."""
+        return list(self._subscriptions_by_topic)
+
+    def _discover(self) -> None:
+        if self._bag.closed:
+            return
+        graph = dict(self.get_topic_names_and_types())
+        for topic, given_type in self._wanted.items():
+            if topic in self._subscriptions_by_topic:
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue
+            type_name = given_type or self._type_from_graph(topic, graph.get(topic, []))
+            if not type_name:
+                continue
+            try:
+                self._subscribe(topic, type_name, [p.qos_profile for p in publishers
+                                                   if p.topic_type == type_name])
+            except (MessageDefinitionError, BagWriterError) as err:
+                if topic not in self._reported:
+                    self._reported.add(topic)
+                    self.get_logger().error(f'not recording {topic}: {err}')
+        if len(self._subscriptions_by_topic) == len(self._wanted):
+            self._discovery_timer.cancel()
+
+    def _type_from_graph(self, topic: str, types: list[str]) -> str:
+        if len(types) > 1 and topic not in self._reported:
+            self._reported.add(topic)
+            self.get_logger().warning(
+                f'{topic} has several types {types}; recording {types[0]} '
+                '(set parameter types to choose)')
+        return types[0] if types else ''
+
+    def _subscribe(self, topic: str, type_name: str, offers: list[QoSProfile]) -> None:
+        msg_type = message_class(type_name)
+        self._bag.add_topic(topic, type_name,
+                            offered_qos_yaml([offered_profile(o) for o in offers]))
+        qos = request_for_offers(offers)
+        self._subscriptions_by_topic[topic] = self.create_subscription(
+            msg_type, topic, partial(self._on_message, topic), qos, raw=True)
+        self.get_logger().info(
+            f'recording {topic} [{type_name}] {qos.reliability.name.lower()}/'
+            f'{qos.durability.name.lower()}')
+
+    def _on_message(self, topic: str, cdr_bytes: bytes, info: dict[str, int]) -> None:
+        if self._bag.closed:
+            return
+        received_ns = self.get_clock().now().nanoseconds
+        self._bag.write(topic, cdr_bytes, received_ns,
+                        int(info.get('source_timestamp') or received_ns))
+
+    def close_bag(self) -> None:
+        """Finish the bag (summary, metadata.yaml); safe to call more than once."""
+        if not self._bag.closed:
+            self._bag.close()
+            self.get_logger().info(
+                f'closed {self._output} with {self._bag.message_count} messages')
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the recorder until SIGINT/SIGTERM, then close the bag completely."""
+    rclpy.init(args=args)
+    node = None
+    exit_code = 0
+    try:
+        node = Recorder()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (BagWriterError, MessageDefinitionError) as err:
+        print(f'recorder: {err}', file=sys.stderr)
+        exit_code = 1
+    finally:
+        if node is not None:
+            node.close_bag()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if exit_code:
+        sys.exit(exit_code)
+
+
+if __name__ == '__main__':
+    main()

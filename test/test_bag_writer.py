@@ -1,0 +1,350 @@
+"""Bags written by BagWriter read back with two independent readers, and crash recovery."""
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+from geometry_msgs.msg import PoseStamped
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+import yaml
+
+from softseq_ros.bag.msgdefs import SEPARATOR, MessageDefinitionError, message_definition
+from softseq_ros.bag.reader import BagReadError, bag_summary, read_bag
+from softseq_ros.bag.writer import (
+    BagWriter,
+    BagWriterError,
+    offered_qos_yaml,
+    qos_profile_dict,
+    recover,
+    serialize,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+T0 = 1_700_000_000_000_000_000  # an arbitrary epoch time [ns]
+RELIABLE_LATCHED = qos_profile_dict(history='keep_last', depth=1, reliability='reliable',
+                                    durability='transient_local')
+
+
+def _pose(i: int) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.stamp.sec = 100 + i
+    msg.header.stamp.nanosec = 250 * i
+    msg.header.frame_id = 'actuator_base'
+    msg.pose.position.x = 0.001 * i
+    msg.pose.position.z = -0.222
+    msg.pose.orientation.w = 1.0
+    return msg
+
+
+def _joints(i: int) -> JointState:
+    msg = JointState()
+    msg.header.frame_id = 'rig'
+    msg.name = ['bottom', 'top']
+    msg.position = [0.1 * i, -0.2 * i]
+    msg.effort = [1.5e3, 2.5e3]
+    return msg
+
+
+# topic -> (type, list of (log_time_ns, publish_time_ns, message))
+SAMPLE = {
+    '/pump/injected_volume': ('std_msgs/msg/Float64', [
+        (T0 + 10_000_000 * i, T0 + 10_000_000 * i - 1000, Float64(data=5e-7 * i))
+        for i in range(25)]),
+    '/rig/phase': ('std_msgs/msg/String', [
+        (T0 + 5, T0 + 4, String(data='inflating')), (T0 + 200_000_000, T0 + 199_000_000,
+                                                     String(data='deflating'))]),
+    '/camera/tip_pose': ('geometry_msgs/msg/PoseStamped', [
+        (T0 + 33_000_000 * i + 7, T0 + 33_000_000 * i, _pose(i)) for i in range(6)]),
+    '/actuator/joints': ('sensor_msgs/msg/JointState', [
+        (T0 + 50_000_000 * i + 3, T0 + 50_000_000 * i + 1, _joints(i)) for i in range(4)]),
+}
+
+
+def _write_sample(directory: Path, compression: str | None = 'zstd') -> Path:
+    with BagWriter(directory, compression=compression) as bag:
+        for topic, (type_name, _) in SAMPLE.items():
+            qos = offered_qos_yaml([RELIABLE_LATCHED]) if topic == '/rig/phase' else ''
+            bag.add_topic(topic, type_name, qos)
+        rows = sorted((log, pub, topic, msg) for topic, (_, entries) in SAMPLE.items()
+                      for log, pub, msg in entries)
+        for log, pub, topic, msg in rows:
+            bag.write(topic, serialize(msg), log, pub)
+    return directory
+
+
+def _expected_fields(topic: str, msg: object) -> tuple:
+    """Reduce a message to comparable plain values (works for rclpy, rosbags and mcap_ros2)."""
+    if topic == '/pump/injected_volume' or topic == '/rig/phase':
+        return (msg.data,)
+    if topic == '/camera/tip_pose':
+        return (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id,
+                msg.pose.position.x, msg.pose.position.z, msg.pose.orientation.w)
+    return (msg.header.frame_id, list(msg.name), [float(x) for x in msg.position],
+            [float(x) for x in msg.effort], list(msg.velocity))
+
+
+def _expected_rows() -> list[tuple]:
+    return sorted((log, topic, type_name, _expected_fields(topic, msg))
+                  for topic, (type_name, entries) in SAMPLE.items() for log, _, msg in entries)
+
+
+@pytest.mark.parametrize('compression', ['zstd', None])
+def test_round_trip_with_rosbags_reader_and_jazzy_typestore(tmp_path, compression):
+    bag = _write_sample(tmp_path / 'bag', compression)
+    # The typestore comes with rosbags (Jazzy's definitions), independent of the bag's schemas.
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(bag) as reader:
+        assert reader.message_count == sum(len(e) for _, e in SAMPLE.values())
+        assert {t: (i.msgtype, i.msgcount) for t, i in reader.topics.items()} == {
+            t: (type_name, len(entries)) for t, (type_name, entries) in SAMPLE.items()}
+        all_logs = [log for _, entries in SAMPLE.values() for log, _, _ in entries]
+        assert reader.start_time == min(all_logs)
+        for connection in reader.connections:
+            # The stored RIHS01 hash equals the one rosbags computes from Jazzy's definitions.
+            assert connection.digest == typestore.hash_rihs01(connection.msgtype)
+            assert connection.ext.serialization_format == 'cdr'
+        phase = next(c for c in reader.connections if c.topic == '/rig/phase')
+        assert len(phase.ext.offered_qos_profiles) == 1
+        assert phase.ext.offered_qos_profiles[0].durability.name == 'TRANSIENT_LOCAL'
+        rows = sorted(
+            (log, c.topic, c.msgtype,
+             _expected_fields(c.topic, typestore.deserialize_cdr(raw, c.msgtype)))
+            for c, log, raw in reader.messages())
+    assert rows == _expected_rows()
+
+
+def test_round_trip_with_mcap_ros2_reader(tmp_path):
+    bag = _write_sample(tmp_path / 'bag')
+    mcap_file = bag / 'bag_0.mcap'
+    publish_times = {(topic, log): pub for topic, (_, entries) in SAMPLE.items()
+                     for log, pub, _ in entries}
+    rows = []
+    with open(mcap_file, 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            assert channel.message_encoding == 'cdr'
+            assert schema.encoding == 'ros2msg'
+            assert message.publish_time == publish_times[(channel.topic, message.log_time)]
+            rows.append((message.log_time, channel.topic, schema.name,
+                         _expected_fields(channel.topic, decoded)))
+    assert sorted(rows) == _expected_rows()
+
+
+def test_any_reader_accepts_schemas_and_hashes_and_read_bag_decodes(tmp_path):
+    bag = _write_sample(tmp_path / 'bag')
+    # AnyReader builds its types from the stored schema text and rejects the bag when their
+    # RIHS01 hash differs from the stored one: a check of the dependency blocks.
+    with AnyReader([bag]) as reader:
+        assert len(reader.connections) == len(SAMPLE)
+    rows = sorted((log, topic, type_name, _expected_fields(topic, msg))
+                  for topic, type_name, log, msg in read_bag(bag))
+    assert rows == _expected_rows()
+    only = list(read_bag(bag, topics=['/rig/phase']))
+    assert [m.msg.data for m in only] == ['inflating', 'deflating']
+    with pytest.raises(BagReadError, match='/nope'):
+        list(read_bag(bag, topics=['/nope']))
+
+
+def test_schema_text_holds_each_dependency_once_depth_first_sorted():
+    text = message_definition('geometry_msgs/msg/PoseStamped')
+    blocks = text.split('\n' + SEPARATOR + '\n')
+    installed = Path(sys.prefix) / 'share' / 'geometry_msgs' / 'msg' / 'PoseStamped.msg'
+    assert blocks[0] == installed.read_text()
+    assert 'std_msgs/Header header' in blocks[0]
+    # PoseStamped -> Pose -> (Point, Quaternion), then Header -> Time: depth first, sorted.
+    assert [b.split('\n', 1)[0] for b in blocks[1:]] == [
+        'MSG: geometry_msgs/Pose', 'MSG: geometry_msgs/Point', 'MSG: geometry_msgs/Quaternion',
+        'MSG: std_msgs/Header', 'MSG: builtin_interfaces/Time']
+    joint_text = message_definition('sensor_msgs/msg/JointState')
+    assert joint_text.count('MSG: ') == 2
+    assert joint_text.count('\nMSG: std_msgs/Header\n') == 1
+    assert 'string[] name' in joint_text
+
+
+def test_file_layout_matches_rosbag2(tmp_path):
+    bag = _write_sample(tmp_path / 'bag')
+    assert sorted(p.name for p in bag.iterdir()) == ['bag_0.mcap', 'metadata.yaml']
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert list(info) == [
+        'version', 'storage_identifier', 'duration', 'starting_time', 'message_count',
+        'topics_with_message_count', 'compression_format', 'compression_mode',
+        'relative_file_paths', 'files', 'custom_data', 'ros_distro']
+    assert info['version'] == 9 and info['storage_identifier'] == 'mcap'
+    assert info['relative_file_paths'] == ['bag_0.mcap']
+    all_logs = [log for _, entries in SAMPLE.values() for log, _, _ in entries]
+    assert info['duration']['nanoseconds'] == max(all_logs) - min(all_logs)
+    assert info['files'][0]['message_count'] == len(all_logs)
+    phase = next(t for t in info['topics_with_message_count']
+                 if t['topic_metadata']['name'] == '/rig/phase')
+    assert phase['topic_metadata']['offered_qos_profiles'][0]['durability'] == 'transient_local'
+    with open(bag / 'bag_0.mcap', 'rb') as stream:
+        reader = make_reader(stream)
+        assert reader.get_header().profile == 'ros2'
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == len(all_logs)
+        channel = next(c for c in summary.channels.values() if c.topic == '/rig/phase')
+        assert yaml.safe_load(channel.metadata['offered_qos_profiles']) == [RELIABLE_LATCHED]
+        assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
+        records = list(reader.iter_metadata())
+    assert [r.name for r in records] == ['rosbag2']
+    stored = yaml.safe_load(records[0].metadata['serialized_metadata'])
+    assert stored == info
+
+
+def test_bad_input_is_reported_with_names(tmp_path):
+    occupied = tmp_path / 'occupied'
+    occupied.mkdir()
+    (occupied / 'x').write_text('')
+    with pytest.raises(BagWriterError, match='occupied'):
+        BagWriter(occupied)
+    with BagWriter(tmp_path / 'bag') as bag:
+        with pytest.raises(MessageDefinitionError, match='no_such_msgs'):
+            bag.add_topic('/a', 'no_such_msgs/msg/Thing')
+        with pytest.raises(MessageDefinitionError, match='pkg/msg/Type'):
+            bag.add_topic('/a', 'Float64')
+        with pytest.raises(BagWriterError, match='/b.*add_topic'):
+            bag.write('/b', b'\x00\x01\x00\x00', 1)
+        bag.add_topic('/a', 'std_msgs/msg/Float64')
+        with pytest.raises(BagWriterError, match='/a.*std_msgs/msg/Float64'):
+            bag.add_topic('/a', 'std_msgs/msg/String')
+        with pytest.raises(BagWriterError, match='offered_qos_profiles'):
+            bag.add_topic('/c', 'std_msgs/msg/String', 'history: [')
+    with pytest.raises(BagWriterError, match='closed'):
+        bag.write('/a', serialize(Float64(data=1.0)), 1)
+
+
+def _messages_on_disk(mcap_file: Path) -> int:
+    count = 0
+    with open(mcap_file, 'rb') as stream:
+        try:
+            for record in StreamReader(stream).records:
+                count += type(record).__name__ == 'Message'
+        except Exception:  # noqa: S110 - the unfinished tail ends the scan
+            pass
+    return count
+
+
+def test_flush_puts_written_messages_on_disk_before_close(tmp_path):
+    with BagWriter(tmp_path / 'bag', flush_period_s=None) as bag:
+        bag.add_topic('/a', 'std_msgs/msg/Float64')
+        for i in range(7):
+            bag.write('/a', serialize(Float64(data=float(i))), T0 + i)
+        bag.flush()
+        assert _messages_on_disk(bag.mcap_path) == 7
+        summary = bag_summary(bag.directory)
+        assert not summary.complete
+        assert summary.topics['/a'].message_count == 7
+
+
+def test_recover_truncated_file_keeps_every_complete_chunk(tmp_path):
+    directory = tmp_path / 'bag'
+    with BagWriter(directory, flush_period_s=None) as bag:
+        bag.add_topic('/a', 'std_msgs/msg/Float64')
+        for i in range(50):
+            bag.write('/a', serialize(Float64(data=float(i))), T0 + 1000 * i)
+            if i % 10 == 9:
+                bag.flush()
+    whole = (directory / 'bag_0.mcap').read_bytes()
+    with open(directory / 'bag_0.mcap', 'rb') as stream:
+        chunk_indexes = sorted(make_reader(stream).get_summary().chunk_indexes,
+                               key=lambda index: index.chunk_start_offset)
+    assert len(chunk_indexes) == 5
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    for number, index in enumerate(chunk_indexes, start=1):
+        chunk_end = index.chunk_start_offset + index.chunk_length
+        # Cut inside chunk `number`, right after it, and a few bytes into what follows it.
+        for cut, complete_chunks in ((chunk_end - 1, number - 1), (chunk_end, number),
+                                     (chunk_end + 3, number)):
+            case = tmp_path / f'cut_{cut}'
+            case.mkdir()
+            (case / 'bag_0.mcap').write_bytes(whole[:cut])
+            result = recover(case)
+            assert not result.was_complete
+            assert result.message_count == 10 * complete_chunks
+            with Reader(case) as reader:
+                values = [typestore.deserialize_cdr(raw, c.msgtype).data
+                          for c, _, raw in reader.messages()]
+                assert reader.message_count == 10 * complete_chunks
+                # The channel record travels in the first chunk, so it is lost with it.
+                assert list(reader.topics) == (['/a'] if complete_chunks else [])
+            assert values == [float(i) for i in range(10 * complete_chunks)]
+            assert bag_summary(case).message_count == 10 * complete_chunks
+            assert (case / 'bag_0.mcap.truncated').stat().st_size == cut
+
+
+def test_recover_complete_file_only_rewrites_metadata(tmp_path):
+    bag = _write_sample(tmp_path / 'bag')
+    original = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    (bag / 'metadata.yaml').unlink()
+    result = recover(bag)
+    assert result.was_complete and result.damaged_copy is None
+    assert yaml.safe_load((bag / 'metadata.yaml').read_text()) == original
+
+
+CHILD = textwrap.dedent("""
+    import sys, time
+    from std_msgs.msg import Float64
+    from softseq_ros.bag.writer import BagWriter, serialize
+    bag = BagWriter(sys.argv[1])
+    bag.add_topic('/pump/injected_volume', 'std_msgs/msg/Float64')
+    progress = open(sys.argv[2], 'w', buffering=1)
+    i = 0
+    while True:
+        bag.write('/pump/injected_volume', serialize(Float64(data=float(i))), time.time_ns())
+        progress.write(f'{i} {time.time()}\\n')
+        i += 1
+        time.sleep(0.002)
+""")
+
+
+def test_sigkill_loses_at_most_the_last_second(tmp_path):
+    directory = tmp_path / 'killed'
+    progress = tmp_path / 'progress.txt'
+    script = tmp_path / 'child.py'
+    script.write_text(CHILD)
+    env = dict(os.environ)
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(REPO), env.get('PYTHONPATH')]))
+    child = subprocess.Popen([sys.executable, str(script), str(directory), str(progress)],
+                             env=env)
+    try:
+        deadline = time.monotonic() + 60
+        started = None
+        while time.monotonic() < deadline and child.poll() is None:
+            lines = progress.read_text().splitlines() if progress.exists() else []
+            if lines:
+                started = started or float(lines[0].split()[1])
+                if float(lines[-1].split()[1]) - started >= 3.0:
+                    break
+            time.sleep(0.05)
+        assert child.poll() is None, 'the writing child died before it was killed'
+        killed_at = time.time()
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=30)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    written = [line.split() for line in progress.read_text().splitlines() if line.count(' ') == 1]
+    must_survive = [int(i) for i, t in written if float(t) < killed_at - 1.0]
+    assert must_survive, 'the child wrote nothing older than one second'
+    result = recover(directory)
+    assert not result.was_complete
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(directory) as reader:
+        values = [typestore.deserialize_cdr(raw, c.msgtype).data
+                  for c, _, raw in reader.messages()]
+        assert reader.message_count == len(values)
+    # Every message up to the last one that must survive is there, in order, without gaps.
+    assert values[:max(must_survive) + 1] == [float(i) for i in range(max(must_survive) + 1)]
+    assert values == [float(i) for i in range(len(values))]
