@@ -1,0 +1,267 @@
+"""
+Camera node: the actuator's backbone as a side camera sees it.
+
+It keeps the latest /actuator/curvatures and, at ``rate_hz``, publishes the backbone poses on
+/camera/backbone (geometry_msgs/PoseArray, frame ``softseq_base``) and one LINE_STRIP marker per
+segment on /camera/markers. Pose convention (as softseq_ros.physics.kinematics): the base is the
+origin, the unbent actuator points along +x and bends in the x-z plane (y = 0). Each pose's
+position is a backbone point; its orientation is the frame whose +x axis is the backbone tangent
+(cos theta, 0, sin theta), where theta is the tangent angle from +x toward +z: a rotation by
+-theta about +y, quaternion (x, y, z, w) = (0, -sin(theta/2), 0, cos(theta/2)). Positive
+curvature turns the backbone toward +z.
+
+``noise_std_m`` adds Gaussian noise [m] to the x and z of every published point (a pose
+extraction error; fresh at every frame, from a generator seeded by ``seed``, so a run is
+reproducible). Orientations and the rendered image are noise free.
+
+Snapshots: /actuator/volumes gives the injected volume (sum of volumes minus the rest volumes).
+Each time it crosses a value of ``trigger_injected_m3`` (either direction), one PoseArray of the
+state at the first command past the trigger goes to /camera/snapshots (transient_local). The
+actuator stamps volumes and curvatures of one command alike, so the snapshot waits for the
+curvatures carrying that stamp.
+
+/camera/image (rgb8 side view, softseq_ros.physics.render) is rendered only while someone
+subscribes (or, in batch mode, when the outputs list ``image``).
+"""
+
+from typing import Any
+
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import Point, Pose, PoseArray
+import numpy as np
+from rclpy.node import Parameter
+from sensor_msgs.msg import Image, JointState
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from softseq_ros.nodes.common import (
+    FRAME_ID,
+    OUTPUT_TOPICS,
+    RigNode,
+    run_node,
+    set_timer_rate,
+    stamp_header,
+    stamp_ns,
+)
+from softseq_ros.physics.kinematics import (
+    backbone_batch,
+    orientation_quaternions,
+    segment_end_indices,
+)
+from softseq_ros.physics.render import SEGMENT_RGB, SideViewRenderer
+from softseq_ros.physics.scene import OUTPUT_NAMES
+
+CAMERA_OUTPUTS = ('poses', 'markers', 'image')
+MARKER_WIDTH_M = 0.015  # the paper's 15 x 15 mm section
+
+
+def _outputs_reason(value: list[str]) -> str | None:
+    unknown = [name for name in value if name not in OUTPUT_NAMES]
+    if unknown:
+        return (f'unknown output(s) {", ".join(unknown)}; expected some of '
+                f'{", ".join(OUTPUT_NAMES)}')
+    return None
+
+
+def _increasing_reason(value: list[float]) -> str | None:
+    if any(not b > a for a, b in zip(value, value[1:])):
+        return 'must be increasing'
+    if any(v < 0.0 for v in value):
+        return 'must be >= 0'
+    return None
+
+
+class CameraNode(RigNode):
+    """Publishes backbone poses, markers, snapshots and (on demand) a side-view image."""
+
+    NODE_NAME = 'camera'
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Declare parameters (defaults from the scene) and set up the outputs."""
+        super().__init__(self.NODE_NAME, **kwargs)
+        scene = self.declare_scene()
+        cam = scene.camera
+        self.rate_hz = self.declare_number('rate_hz', cam.rate_hz, 'Frame rate [Hz].',
+                                           minimum=0.0, open_minimum=True, maximum=1000.0)
+        self.noise_std_m = self.declare_number(
+            'noise_std_m', cam.noise_std_m, 'Gaussian noise on every point [m].', minimum=0.0)
+        seed = self.declare_integer('seed', cam.seed, 'Noise generator seed.', minimum=0,
+                                    read_only=True)
+        self.points_per_segment = self.declare_integer(
+            'points_per_segment', cam.points_per_segment, 'Backbone points per segment.',
+            minimum=1, maximum=10000, read_only=True)
+        self.triggers = self.declare_numbers(
+            'trigger_injected_m3', cam.trigger_injected_m3,
+            'Injected volumes [m^3] at which a snapshot is taken (increasing).',
+            read_only=True, check=_increasing_reason)
+        width = self.declare_integer('width', cam.image_width_px, 'Image width [px].',
+                                     minimum=16, maximum=8192, read_only=True)
+        height = self.declare_integer('height', cam.image_height_px, 'Image height [px].',
+                                      minimum=16, maximum=8192, read_only=True)
+        outputs = self.declare_texts(
+            'outputs', sorted(scene.outputs), 'Outputs to publish (scene output names); the '
+            'camera serves poses, markers and image.', read_only=True, check=_outputs_reason)
+        self.outputs = frozenset(name for name in outputs if name in CAMERA_OUTPUTS)
+        for name in sorted(self.outputs):
+            for topic in OUTPUT_TOPICS[name]:
+                self._make_publisher(topic)
+
+        self.lengths = np.array(scene.lengths)
+        self.rest_total = float(sum(s.rest_volume for s in scene.segments))
+        n = len(scene.segments)
+        self.segment_ends = segment_end_indices(n, self.points_per_segment)
+        self.n_points = 1 + n * self.points_per_segment
+        self._rng = np.random.default_rng(seed)
+        self._renderer = SideViewRenderer(width, height,
+                                          half_extent_m=1.05 * float(self.lengths.sum()))
+
+        self._curvatures: np.ndarray | None = None
+        self._curvature_stamp = -1
+        self._points = np.zeros((self.n_points, 2))
+        self._quaternions = np.zeros((self.n_points, 4))
+        self._injected: float | None = None
+        self._pending_stamp: int | None = None
+        self._pending_count = 0
+        self.images_rendered = 0
+
+        self._backbone = self._pose_array()
+        self._snapshot = self._pose_array()
+        self._markers = MarkerArray(markers=[
+            Marker(ns='backbone', id=i, type=Marker.LINE_STRIP, action=Marker.ADD,
+                   lifetime=Duration(), frame_locked=False,
+                   points=[Point() for _ in range(self.points_per_segment + 1)],
+                   color=ColorRGBA(r=rgb[0] / 255.0, g=rgb[1] / 255.0, b=rgb[2] / 255.0,
+                                   a=1.0))
+            for i, rgb in ((i, SEGMENT_RGB[i % len(SEGMENT_RGB)]) for i in range(n))])
+        for marker in self._markers.markers:
+            marker.header.frame_id = FRAME_ID
+            marker.pose.orientation.w = 1.0
+            marker.scale.x = MARKER_WIDTH_M
+        self._image = Image(height=height, width=width, encoding='rgb8', is_bigendian=0,
+                            step=3 * width)
+        self._image.header.frame_id = FRAME_ID
+
+        self._subscribe('/actuator/curvatures', self.on_curvatures)
+        self._subscribe('/actuator/volumes', self.on_volumes)
+        self._timer = self._make_timer(self.rate_hz, self.tick)
+        self.configured = True
+
+    def _pose_array(self) -> PoseArray:
+        msg = PoseArray(poses=[Pose() for _ in range(self.n_points)])
+        msg.header.frame_id = FRAME_ID
+        return msg
+
+    # ---------------------------------------------------------------- inputs
+
+    def on_curvatures(self, msg: JointState) -> None:
+        """Keep the latest curvatures; complete a pending snapshot of this command."""
+        if len(msg.position) != self.lengths.size or not np.all(np.isfinite(msg.position)):
+            self.warn_throttled('curvatures', f'ignoring /actuator/curvatures with '
+                                              f'{len(msg.position)} values (expected '
+                                              f'{self.lengths.size} finite)')
+            return
+        curvatures = np.asarray(msg.position, dtype=float)
+        if self._curvatures is None or not np.array_equal(curvatures, self._curvatures):
+            self._curvatures = curvatures
+            points, angles = backbone_batch(curvatures[None, :], self.lengths,
+                                            self.points_per_segment)
+            self._points = points[0]
+            self._quaternions = orientation_quaternions(angles[0])
+        self._curvature_stamp = stamp_ns(msg.header)
+        if self._pending_stamp is not None and self._curvature_stamp >= self._pending_stamp:
+            self._take_snapshots()
+
+    def on_volumes(self, msg: JointState) -> None:
+        """Detect trigger crossings of the injected volume."""
+        if len(msg.position) != self.lengths.size or not np.all(np.isfinite(msg.position)):
+            self.warn_throttled('volumes', 'ignoring /actuator/volumes of the wrong size')
+            return
+        injected = float(sum(msg.position)) - self.rest_total
+        previous, self._injected = self._injected, injected
+        if previous is None or not self.triggers or 'poses' not in self.outputs:
+            return
+        crossed = sum(1 for t in self.triggers
+                      if previous < t <= injected or injected < t <= previous)
+        if not crossed:
+            return
+        self._pending_count += crossed
+        stamp = stamp_ns(msg.header)
+        if self._pending_stamp is None or stamp > self._pending_stamp:
+            self._pending_stamp = stamp
+        if self._curvatures is not None and self._curvature_stamp >= self._pending_stamp:
+            self._take_snapshots()
+
+    def _take_snapshots(self) -> None:
+        self._fill_poses(self._snapshot, self._noisy_points(), self.now_ns())
+        for _ in range(self._pending_count):
+            self._publish('/camera/snapshots', self._snapshot)
+        self._pending_stamp = None
+        self._pending_count = 0
+
+    # ---------------------------------------------------------------- outputs
+
+    def _noisy_points(self) -> np.ndarray:
+        if self.noise_std_m > 0.0:
+            return self._points + self._rng.normal(0.0, self.noise_std_m, self._points.shape)
+        return self._points
+
+    def _fill_poses(self, msg: PoseArray, points: np.ndarray, now: int) -> None:
+        stamp_header(msg.header, now)
+        xs, zs = points[:, 0].tolist(), points[:, 1].tolist()
+        qy, qw = self._quaternions[:, 1].tolist(), self._quaternions[:, 3].tolist()
+        for pose, x, z, y_part, w_part in zip(msg.poses, xs, zs, qy, qw):
+            pose.position.x = x
+            pose.position.z = z
+            pose.orientation.y = y_part
+            pose.orientation.w = w_part
+
+    def image_wanted(self) -> bool:
+        """True when the image must be rendered this frame."""
+        if 'image' not in self.outputs:
+            return False
+        if self.batch_mode:
+            return True
+        return self._rig_publishers['/camera/image'].get_subscription_count() > 0
+
+    def tick(self) -> None:
+        """Publish the latest backbone, markers and (when wanted) the image."""
+        if self._curvatures is None:
+            return
+        now = self.now_ns()
+        points = self._noisy_points()
+        if 'poses' in self.outputs:
+            self._fill_poses(self._backbone, points, now)
+            self._publish('/camera/backbone', self._backbone)
+        if 'markers' in self.outputs:
+            xs, zs = points[:, 0].tolist(), points[:, 1].tolist()
+            start = 0
+            for marker, end in zip(self._markers.markers, self.segment_ends.tolist()):
+                stamp_header(marker.header, now)
+                for point, x, z in zip(marker.points, xs[start:end + 1], zs[start:end + 1]):
+                    point.x = x
+                    point.z = z
+                start = end
+            self._publish('/camera/markers', self._markers)
+        if self.image_wanted():
+            pixels = self._renderer.render(self._points, self.segment_ends)
+            self.images_rendered += 1
+            stamp_header(self._image.header, now)
+            self._image.data = pixels.tobytes()
+            self._publish('/camera/image', self._image)
+
+    def _parameters_changed(self, parameters: list[Parameter]) -> None:
+        for parameter in parameters:
+            if parameter.name == 'rate_hz':
+                self.rate_hz = float(parameter.value)
+                set_timer_rate(self._timer, self.rate_hz)
+            elif parameter.name == 'noise_std_m':
+                self.noise_std_m = float(parameter.value)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the camera node."""
+    run_node(CameraNode, args)
+
+
+if __name__ == '__main__':
+    main()
