@@ -80,6 +80,11 @@ if [[ ! -x "$venv/bin/python" ]]; then
     [[ -e "$venv" ]] && fail "$venv exists but has no bin/python; delete it and run again"
     create_venv
 fi
+# A venv holds absolute paths in its scripts' first lines; after the repository moved, every
+# console script (pytest, ruff, colcon) would fail with a puzzling "No such file".
+if [[ -f "$venv/bin/pip" && "$(head -n 1 "$venv/bin/pip")" != "#!$venv/bin/python"* ]]; then
+    fail "$venv was created at another path (the repository moved); delete it and run again"
+fi
 
 # Two scripts bootstrapping at once (test and demo) must not run pip side by side.
 exec 9>"$venv/.bootstrap.lock"
