@@ -44,7 +44,7 @@ class SimClockNode(RigNode):
         self._origin_wall = self._wall_ns()
         self._origin_sim = int(round(start_s * 1e9))
         self.sim_ns = self._origin_sim
-        self._clock = Clock()
+        self._clock_msg = Clock()
         self._make_publisher('/clock')
         self._timer = self._make_timer(self.rate_hz, self.tick)
         self.configured = True
@@ -56,8 +56,9 @@ class SimClockNode(RigNode):
         else:
             elapsed = self._wall_ns() - self._origin_wall
             self.sim_ns = self._origin_sim + int(elapsed * self.speedup)
-        self._clock.clock.sec, self._clock.clock.nanosec = divmod(self.sim_ns, 1_000_000_000)
-        self._publish('/clock', self._clock)
+        stamp = self._clock_msg.clock
+        stamp.sec, stamp.nanosec = divmod(self.sim_ns, 1_000_000_000)
+        self._publish('/clock', self._clock_msg)
 
     def _parameters_changed(self, parameters: list[Parameter]) -> None:
         for parameter in parameters:
