@@ -100,9 +100,9 @@ def spinning(context, *nodes):
     try:
         yield executor
     finally:
-        # Order matters: a node destroyed while the executor thread still waits on it can
-        # abort the process.
-        rclpy.try_shutdown(context=context)
+        # Order matters: a node destroyed (or a context shut down) while the executor thread
+        # still waits on it can abort the process. Stop the executor, join, then destroy.
+        executor.shutdown(timeout_sec=10.0)
         thread.join(timeout=10.0)
         for node in nodes:
             node.destroy_node()
@@ -587,3 +587,32 @@ def test_side_view_draws_each_segment_where_the_backbone_is():
     # Nothing is drawn below the base line on the right, where the backbone never goes.
     below = renderer.to_pixels([[0.05, -0.05]])[0]
     assert tuple(image[int(below[1]), int(below[0])]) == (236, 240, 244)
+
+
+def test_actuator_resumes_from_the_latched_volumes_of_a_live_publisher(context):
+    # Somebody still holds the last /actuator/volumes (transient_local): an actuator that
+    # starts now continues on that branch. fig1_asymmetric, inside its hysteresis loop.
+    scene = load_scene('fig1_asymmetric')
+    emap = EquilibriumMap(scene.segments)
+    grid = np.linspace(0.0, 0.98 * emap.injected_range[1], 1001)
+    inflating = Tracker(emap).sweep(grid)
+    deflating = Tracker(emap, injected=grid[-1], volumes=inflating.volumes[-1]).sweep(
+        grid[::-1])
+    gap = np.max(np.abs(deflating.volumes[::-1] - inflating.volumes), axis=1)
+    row = int(np.argmax(gap))
+    assert gap[row] > 1e-3 * emap.v_scale
+    held_volumes = deflating.volumes[::-1][row]
+    keeper = Node('keeper', context=context)
+    spec = TOPICS['/actuator/volumes']
+    latched = keeper.create_publisher(spec.msg_type, '/actuator/volumes', spec.qos)
+    latched.publish(JointState(name=['bottom', 'top'], position=list(held_volumes)))
+    actuator = ActuatorNode(context=context, parameter_overrides=[
+        Parameter('scene', value='fig1_asymmetric'), Parameter('resume_timeout_s', value=10.0)])
+    with spinning(context, keeper, actuator):
+        wait_for(lambda: not actuator._resuming, 'the resume')
+        resumed = actuator.tracker.state
+    assert resumed.injected == pytest.approx(grid[row], rel=1e-9)
+    np.testing.assert_allclose(resumed.volumes, held_volumes, rtol=1e-9,
+                               atol=1e-9 * emap.v_scale)
+    # Not where a fresh start would have put it.
+    assert np.max(np.abs(resumed.volumes - inflating.volumes[row])) > 1e-3 * emap.v_scale

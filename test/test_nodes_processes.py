@@ -1,0 +1,189 @@
+"""
+The rig's nodes as separate processes, started the way a user starts them (console scripts).
+
+Each node runs from the venv's bin/ with ``--ros-args -p ...`` and the whole environment of this
+test (the ROS wheels need it, and it carries this run's ROS_DOMAIN_ID). The test subscribes over
+DDS and checks the outputs against the equilibrium solver run on the commands it received.
+"""
+
+from contextlib import contextmanager
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rclpy
+from test_nodes import (
+    Collector,
+    call_trigger,
+    check_against_solver,
+    check_poses,
+    spinning,
+    wait_for,
+    write_scene,
+)
+import yaml
+
+from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.physics.scene import config_dir, load_scene
+
+pytestmark = pytest.mark.ros
+
+
+@contextmanager
+def node_processes(env, log_dir: Path):
+    """Start console-script nodes with start(name, script, **params); kill them all at the end."""
+    started = []
+
+    def start(name: str, script: str, **params) -> subprocess.Popen:
+        args = [os.path.join(sys.prefix, 'bin', script), '--ros-args']
+        for key, value in params.items():
+            args += ['-p', f'{key}:={value}']
+        log = open(log_dir / f'{name}.log', 'ab')
+        process = subprocess.Popen(args, env=env, stdout=log, stderr=subprocess.STDOUT)
+        log.close()
+        started.append(process)
+        return process
+
+    try:
+        yield start
+    finally:
+        for process in started:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        for process in started:
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+def test_console_script_nodes_match_the_solver(context, ros_env, tmp_path):
+    scene_path = write_scene(tmp_path)
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    topics = ['/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
+              '/actuator/curvatures', '/camera/backbone']
+    collector = Collector(topics, context)
+    got = collector.received
+    with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
+        start('actuator', 'actuator', scene=scene_path, resume_timeout_s=0.2)
+        start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false')
+        start('camera', 'camera', scene=scene_path, rate_hz=20)
+        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched')
+        wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
+                 'the actuator on /pump/command')
+        assert call_trigger(collector, '/syringe_pump/start').success
+        wait_for(lambda: any(m.data == 'finished' for m in got['/pump/status']),
+                 'the programme to finish')
+        n_commands = len(got['/pump/command'])
+        wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
+                 'the actuator outputs of every command')
+        check_against_solver(emap, list(got['/pump/command']), got['/actuator/pressure'],
+                             got['/actuator/volumes'], got['/actuator/curvatures'])
+        poses = list(got['/camera/backbone'])
+        assert len(poses) >= 10
+        check_poses(poses, [list(m.position) for m in got['/actuator/curvatures']],
+                    np.array(scene.lengths), scene.camera.points_per_segment)
+
+
+def _hysteresis_scene(tmp_path):
+    """fig1_asymmetric with a fast programme that ends held inside the hysteresis loop."""
+    shipped = config_dir() / 'fig1_asymmetric.yaml'
+    scene = load_scene(shipped)
+    try:
+        emap = EquilibriumMap(scene.segments)
+    except (RuntimeError, ValueError) as err:
+        pytest.skip(f'{shipped.name}: the equilibrium map cannot be assembled ({err})')
+    lo, hi = emap.injected_range
+    grid = np.linspace(lo, 0.98 * hi, 2001)
+    inflation = Tracker(emap).sweep(grid)
+    deflation = Tracker(emap, injected=grid[-1], volumes=inflation.volumes[-1]).sweep(
+        grid[::-1])
+    gap = np.max(np.abs(inflation.volumes - deflation.volumes[::-1]), axis=1)
+    middle = float(grid[int(np.argmax(gap))])
+    assert gap.max() > 1e-3 * emap.v_scale, 'fig1_asymmetric shows no hysteresis'
+    top = float(grid[-1])
+    data = yaml.safe_load(shipped.read_text(encoding='utf-8'))
+    # Up and back down to the middle of the loop in about 3 s, then a long hold.
+    flow = (2.0 * top - middle) / 3.0
+    data['pump'] = {'flow_rate_m3_per_s': flow, 'rate_hz': 100,
+                    'legs': [{'inflate_to_m3': top}, {'deflate_to_m3': middle},
+                             {'hold_s': 600.0}]}
+    path = tmp_path / 'hysteresis.yaml'
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return str(path), emap, middle
+
+
+def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
+    scene_path, emap, middle = _hysteresis_scene(tmp_path)
+    state_file = tmp_path / 'actuator_state.json'
+    actuator_params = {'scene': scene_path, 'resume_timeout_s': 0.5,
+                       'state_file': str(state_file)}
+    topics = ['/pump/command', '/pump/status', '/actuator/volumes', '/actuator/events']
+    collector = Collector(topics, context)
+    got = collector.received
+    rest = emap.total_rest_volume
+
+    def at_middle(msg) -> bool:
+        return abs(sum(msg.position) - rest - middle) < 1e-9 * emap.v_scale
+
+    with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
+        actuator = start('actuator', 'actuator', **actuator_params)
+        start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false')
+        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched')
+        wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
+                 'the actuator on /pump/command')
+        assert call_trigger(collector, '/syringe_pump/start').success
+        wait_for(lambda: any(at_middle(m) for m in got['/actuator/volumes']),
+                 'the actuator to reach the hold inside the loop')
+        actuator.send_signal(signal.SIGKILL)
+        actuator.wait(timeout=10)
+        before = len(got['/actuator/volumes'])
+        history = np.array([m.position[0] for m in got['/pump/command']])
+        events = [json.loads(m.data) for m in got['/actuator/events']]
+        start('actuator_restarted', 'actuator', **actuator_params)
+        wait_for(lambda: len(got['/actuator/volumes']) > before, 'the restarted actuator')
+        first = np.array(got['/actuator/volumes'][before].position)
+
+    # The snap-throughs before the kill were reported as the solver has them.
+    expected = Tracker(emap).sweep(history).events
+    assert len(expected) >= 2 and len(events) == len(expected)
+    for event, snap in zip(events, expected):
+        assert event['injected_m3'] == pytest.approx(snap.injected, rel=1e-9)
+        np.testing.assert_allclose(event['to_volumes_m3'], snap.to_volumes, rtol=1e-9)
+        assert event['from_pressure_pa'] == pytest.approx(snap.from_pressure, rel=1e-9)
+    commands = np.array([m.position[0] for m in got['/pump/command']])
+    continuation = Tracker(emap).sweep(commands).volumes[-1]
+    fresh = Tracker(emap).step(middle).volumes
+    assert commands[-1] == pytest.approx(middle, rel=1e-12)
+    np.testing.assert_allclose(first, continuation, rtol=1e-9, atol=1e-9 * emap.v_scale)
+    # The history matters here: a fresh start would sit on the other branch.
+    assert np.max(np.abs(fresh - continuation)) > 1e-3 * emap.v_scale
+
+
+def test_a_bad_parameter_on_the_command_line_is_one_line(ros_env, tmp_path):
+    script = os.path.join(sys.prefix, 'bin', 'camera')
+    for params, expected in ((['scene:=no_such_scene'], 'no_such_scene'),
+                             (['scene:=fig1_none', 'noise_std_m:=-1.0'], 'noise_std_m')):
+        args = [script, '--ros-args'] + [a for p in params for a in ('-p', p)]
+        result = subprocess.run(args, env=ros_env, capture_output=True, text=True, timeout=30)
+        assert result.returncode == 2, result.stderr
+        assert 'Traceback' not in result.stderr
+        errors = [line for line in result.stderr.splitlines() if line.startswith('camera: ')]
+        assert len(errors) == 1 and expected in errors[0], result.stderr
