@@ -374,6 +374,11 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
         pass
     except (SceneError, NodeConfigError, ParameterException) as err:
         error = ' '.join(str(err).split())
+    except Exception:
+        # SIGINT shuts the context down under a running callback, whose publish then fails
+        # (RCLError: context invalid). After a shutdown that is the end of the run, not a bug.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
