@@ -33,6 +33,10 @@ from softseq_ros.physics.scene import config_dir, load_scene
 
 pytestmark = pytest.mark.ros
 
+# Starting a node imports rclpy, numpy and scipy and assembles the equilibrium map: seconds,
+# and more on a loaded machine.
+STARTUP_TIMEOUT_S = 60.0
+
 
 @contextmanager
 def node_processes(env, log_dir: Path):
@@ -85,7 +89,8 @@ def test_console_script_nodes_match_the_solver(context, ros_env, tmp_path):
         start('actuator', 'actuator', scene=scene_path, resume_timeout_s=0.2)
         start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false')
         start('camera', 'camera', scene=scene_path, rate_hz=20)
-        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched')
+        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched',
+                 timeout=STARTUP_TIMEOUT_S)
         wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
                  'the actuator on /pump/command')
         assert call_trigger(collector, '/syringe_pump/start').success
@@ -146,7 +151,8 @@ def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
     with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
         actuator = start('actuator', 'actuator', **actuator_params)
         start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false')
-        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched')
+        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched',
+                 timeout=STARTUP_TIMEOUT_S)
         wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
                  'the actuator on /pump/command')
         assert call_trigger(collector, '/syringe_pump/start').success
@@ -158,7 +164,8 @@ def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
         history = np.array([m.position[0] for m in got['/pump/command']])
         events = [json.loads(m.data) for m in got['/actuator/events']]
         start('actuator_restarted', 'actuator', **actuator_params)
-        wait_for(lambda: len(got['/actuator/volumes']) > before, 'the restarted actuator')
+        wait_for(lambda: len(got['/actuator/volumes']) > before, 'the restarted actuator',
+                 timeout=STARTUP_TIMEOUT_S)
         first = np.array(got['/actuator/volumes'][before].position)
 
     # The snap-throughs before the kill were reported as the solver has them.
