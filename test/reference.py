@@ -32,6 +32,7 @@ class ReferenceSnap:
     injected: float
     from_volumes: np.ndarray
     to_volumes: np.ndarray
+    row: int = -1
 
 
 @dataclass
@@ -63,16 +64,20 @@ class EnergyTable:
         v = np.asarray(v, dtype=float)
         j = np.clip(((v - self.rest) / self.h).astype(int), 0, len(self.v) - 2)
         vj = self.v[j]
-        seg = self.segment
-        panel = (v - vj) / 6.0 * (seg.pressure(vj) + 4.0 * seg.pressure(0.5 * (vj + v))
-                                  + seg.pressure(v))
-        return self.e[j] + panel
+        # One call for the three Simpson nodes of every panel: the segment's per-call cost
+        # dominates the reference's run time.
+        flat_vj, flat_v = np.ravel(vj), np.ravel(v)
+        p = np.asarray(self.segment.pressure(
+            np.concatenate([flat_vj, 0.5 * (flat_vj + flat_v), flat_v])), dtype=float)
+        p_j, p_mid, p_v = p.reshape(3, -1)
+        panel = (flat_v - flat_vj) / 6.0 * (p_j + 4.0 * p_mid + p_v)
+        return (np.ravel(self.e[j]) + panel).reshape(v.shape)
 
 
 class ReferenceTracker:
     """History-following equilibrium of N segments sharing one incompressible fluid volume."""
 
-    def __init__(self, segments, step_fraction: float = 1e-4, jump_fraction: float = 1e-2,
+    def __init__(self, segments, step_fraction: float = 1e-4, jump_fraction: float = 5e-2,
                  min_step_fraction: float = 1e-11, table_points: int = 20001) -> None:
         self.segments = list(segments)
         self.n = len(self.segments)
@@ -94,6 +99,7 @@ class ReferenceTracker:
         self.directions = np.array(self.directions)
         self.volumes = self.rest.copy()
         self.injected = 0.0
+        self._step = self.scale
         self.events: list[ReferenceSnap] = []
 
     @property
@@ -123,24 +129,32 @@ class ReferenceTracker:
             x = np.clip(x + residual * free / max(free.sum(), 1), self.rest, self.top)
         return x
 
-    def _descend(self, x: np.ndarray, total: float) -> tuple[np.ndarray, float]:
-        """Discrete steepest descent on the lattice x + h (e_i - e_j); returns (x, h)."""
+    def _descend(self, x: np.ndarray, total: float,
+                 limit: float = np.inf) -> tuple[np.ndarray, float, bool]:
+        """
+        Discrete steepest descent on the lattice x + h (e_i - e_j); returns (x, h, finished).
+
+        Gives up (finished False) once the walk has gone further than ``limit`` from its start.
+        """
+        origin = x
         slack = min(total - self.rest.sum(), self.top.sum() - total)
         h = min(self.lattice_step, 0.25 * slack)
         if h <= 1e-14 * self.scale:
-            return x, h
+            return x, h, True
         e0 = float(self.energy(x))
         ray = np.arange(1, 65, dtype=float)[:, None]
         while True:
             cand = x + h * self.directions
             ok = np.all((cand >= self.rest) & (cand <= self.top), axis=1)
             if not ok.any():
-                return x, h
+                return x, h, True
             dirs = self.directions[ok]
             e = self.energy(cand[ok])
             k = int(np.argmin(e))
             if not e[k] < e0:
-                return x, h
+                return x, h, True
+            if np.abs(x - origin).max() > limit:
+                return x, h, False
             # Keep going along the steepest direction while the energy keeps falling: the first
             # lattice minimum on that ray, exactly what repeated single moves would reach.
             d = dirs[k]
@@ -213,12 +227,30 @@ class ReferenceTracker:
             return v
         raise RuntimeError(f'reference: polishing failed near {x} at V={total}')
 
-    def _relax(self, x_old: np.ndarray, total: float) -> np.ndarray:
+    def _relax(self, x_old: np.ndarray, total: float, limit: float = np.inf) -> np.ndarray:
         start = self._project(x_old + (total - x_old.sum()) / self.n, total)
-        x, h = self._descend(start, total)
-        if self.n == 2:
-            return self._polish_two(x, total, h)
-        return self._polish_many(x, total, h)
+        x, h, finished = self._descend(start, total, limit)
+        if not finished:
+            return x
+        if self.n != 2:
+            return self._polish_many(x, total, h)
+        x = self._polish_two(x, total, h)
+        if np.abs(x - x_old).max() > self.jump_tolerance and h > 0.0:
+            # Before calling it a snap, look for a well narrower than one lattice step next to
+            # the start (the last moments of a branch before its fold): p1 - p2 crossing zero
+            # upwards, resolved to a thousandth of a lattice step.
+            s1, s2 = self.segments
+            lo = max(self.rest[0], total - self.top[1])
+            hi = min(self.top[0], total - self.rest[1])
+            pts = np.clip(start[0] + np.linspace(-2.0 * h, 2.0 * h, 4001), lo, hi)
+            g = s1.pressure(pts) - s2.pressure(total - pts)
+            up = np.nonzero((g[:-1] < 0.0) & (g[1:] >= 0.0))[0]
+            if len(up):
+                k = int(up[np.argmin(np.abs(pts[up] - start[0]))])
+                v1 = brentq(lambda v: float(s1.pressure(v) - s2.pressure(total - v)),
+                            pts[k], pts[k + 1], xtol=1e-15 * self.scale)
+                x = np.array([v1, total - v1])
+        return x
 
     def go_to(self, injected: float) -> list[ReferenceSnap]:
         """Move the commanded injected volume to ``injected``; return the snaps on the way."""
@@ -227,18 +259,29 @@ class ReferenceTracker:
             raise ValueError(f'injected volume {injected} outside [{lo}, {hi}]')
         base = self.rest.sum()
         new_events = []
-        pending = [float(injected)]
-        while pending:
-            target = pending[-1]
-            x = self._relax(self.volumes, base + target)
+        step = max(self._step, self.min_step)
+        while self.injected != injected:
+            remaining = injected - self.injected
+            if abs(remaining) <= step:
+                target = injected
+            else:
+                target = self.injected + np.sign(remaining) * step
+            # Walks longer than a snap would be are cut short unless the step is already at
+            # its floor: they only say that the step must be halved.
+            final = abs(target - self.injected) <= self.min_step
+            x = self._relax(self.volumes, base + target,
+                            np.inf if final else 2.0 * self.jump_tolerance)
             jump = float(np.abs(x - self.volumes).max())
-            if jump <= self.jump_tolerance or abs(target - self.injected) <= self.min_step:
+            if jump <= self.jump_tolerance or final:
                 if jump > self.jump_tolerance:
                     new_events.append(ReferenceSnap(target, self.volumes.copy(), x.copy()))
                 self.volumes, self.injected = x, target
-                pending.pop()
+                step = min(2.0 * step, self.scale)
             else:
-                pending.append(0.5 * (self.injected + target))
+                # Too large a move for one step: halve it until the move shrinks with the step
+                # (a steep but continuous branch) or the step is negligible (a snap-through).
+                step = 0.5 * abs(target - self.injected)
+        self._step = step
         self.events.extend(new_events)
         return new_events
 
@@ -249,7 +292,9 @@ class ReferenceTracker:
         press = np.empty(len(injected))
         events = []
         for k, u in enumerate(injected):
-            events += self.go_to(float(u))
+            for event in self.go_to(float(u)):
+                event.row = k
+                events.append(event)
             vols[k] = self.volumes
             press[k] = float(self.segments[0].pressure(self.volumes[0]))
         return ReferencePath(injected, vols, press, events)
