@@ -133,6 +133,8 @@ class _Rule:
         """Why ``parameter`` is refused, or None when it is fine."""
         value = parameter.value
         kind = parameter.type_
+        if kind == Parameter.Type.NOT_SET:
+            return None  # declared without a value (an empty list): nothing to check
         if self.kind == 'float':
             if kind not in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER):
                 return f'must be a number (integer or double), got {kind.name.lower()} {value!r}'
@@ -302,11 +304,10 @@ class RigNode(Node):
     def declare_numbers(self, name: str, default: Sequence[float], description: str, *,
                         read_only: bool = False,
                         check: Callable[[Any], str | None] | None = None) -> list[float]:
-        """Declare a number-array parameter (doubles or integers); return it as floats."""
+        """Declare a double-array parameter; return it as floats ([] when unset)."""
         descriptor = ParameterDescriptor(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                                         description=description, read_only=read_only,
-                                         dynamic_typing=True)
-        # An empty list has no element type; rclpy needs a typed default to declare it.
+                                         description=description, read_only=read_only)
+        # An empty list has no element type; rclpy declares it from the type alone (unset).
         value = self._declare(name, [float(x) for x in default] or Parameter.Type.DOUBLE_ARRAY,
                               descriptor, _Rule('float_array', check=check))
         return [float(x) for x in (value or [])]
