@@ -573,9 +573,14 @@ class Tracker:
             self._walk(float(injected) + emap.total_rest_volume)
 
     def _walk(self, total: float) -> list[SnapEvent]:
-        """Move to ``total``, applying branch-end rules; return the snaps on the way."""
+        """
+        Move to ``total``, applying branch-end rules; return the snaps on the way.
+
+        A command beyond the domain raises DomainError and leaves the state as it was.
+        """
         emap = self.emap
         events: list[SnapEvent] = []
+        before = self.branch, self.total
         for _ in range(4 * len(emap.branches) + 4):
             branch = emap.branches[self.branch]
             if branch.lo <= total <= branch.hi:
@@ -585,7 +590,7 @@ class Tracker:
             end = branch.upper if upward else branch.lower
             edge = branch.hi if upward else branch.lo
             if end.kind == 'limit':
-                self.total = edge
+                self.branch, self.total = before
                 raise DomainError(
                     f'injected volume {total - emap.total_rest_volume:.6g} m^3 is beyond what '
                     f'the segment models cover on this branch (it ends at '
