@@ -19,7 +19,7 @@ from typing import Any, Sequence
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -138,7 +138,7 @@ class Recorder(Node):
         self._reported: set[str] = set()
         self.get_logger().info(
             f'recording {len(self._wanted)} topics into {self._output}')
-        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self._discover()
 
     @property
@@ -152,7 +152,9 @@ class Recorder(Node):
         return list(self._subscriptions_by_topic)
 
     def _discover(self) -> None:
-        if self._bag.closed:
+        # The timer keeps running even when every topic is found: with rclpy 7.1.6 a node
+        # whose timer was cancelled sometimes ignores SIGTERM inside spin().
+        if self._bag.closed or len(self._subscriptions_by_topic) == len(self._wanted):
             return
         graph = dict(self.get_topic_names_and_types())
         for topic, given_type in self._wanted.items():
@@ -171,8 +173,6 @@ class Recorder(Node):
                 if topic not in self._reported:
                     self._reported.add(topic)
                     self.get_logger().error(f'not recording {topic}: {err}')
-        if len(self._subscriptions_by_topic) == len(self._wanted):
-            self._discovery_timer.cancel()
 
     def _type_from_graph(self, topic: str, types: list[str]) -> str:
         if len(types) > 1 and topic not in self._reported:
@@ -214,13 +214,20 @@ def main(args: list[str] | None = None) -> None:
     node = None
     exit_code = 0
     try:
+        executor = SingleThreadedExecutor()
         node = Recorder()
-        rclpy.spin(node)
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (BagWriterError, MessageDefinitionError) as err:
         print(f'recorder: {err}', file=sys.stderr)
         exit_code = 1
+    except Exception:
+        # A signal during start-up shuts the context down under the feet of whatever rclpy
+        # call runs then; that is a normal stop, anything else is a bug to show.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.close_bag()
