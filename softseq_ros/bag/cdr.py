@@ -1,0 +1,185 @@
+"""
+Fast CDR encoding of the rig's message types, byte for byte what DDS carries.
+
+rclpy's ``serialize_message`` first converts the whole Python message into its C struct, which
+costs about 300 us for a 41-pose PoseArray, and Fast DDS then pads some buffers with bytes that
+belong to no field (which strict readers refuse, so they must be cut by decoding the message
+again). A batch run serialises hundreds of thousands of messages, so the rig's own types are
+encoded here directly (little-endian CDR, XCDR1 plain encapsulation); the tests check every
+encoder against rclpy's serialisation. Other types fall back to the general path.
+"""
+
+import struct
+from typing import Any, Callable
+
+_ENCAPSULATION = b'\x00\x01\x00\x00'
+_U32 = struct.Struct('<I')
+_I32 = struct.Struct('<i')
+_STAMP = struct.Struct('<iI')
+_F64 = struct.Struct('<d')
+_F64X2 = struct.Struct('<dd')
+_F64X3 = struct.Struct('<ddd')
+_F64X7 = struct.Struct('<7d')
+_F32X4 = struct.Struct('<4f')
+
+
+class _Buffer:
+    """A growing CDR buffer; offsets for alignment count from after the encapsulation."""
+
+    __slots__ = ('data',)
+
+    def __init__(self) -> None:
+        self.data = bytearray(_ENCAPSULATION)
+
+    def align(self, size: int) -> None:
+        pad = -(len(self.data) - 4) % size
+        if pad:
+            self.data += b'\x00' * pad
+
+    def u32(self, value: int) -> None:
+        self.align(4)
+        self.data += _U32.pack(value)
+
+    def i32(self, value: int) -> None:
+        self.align(4)
+        self.data += _I32.pack(value)
+
+    def u8(self, value: int) -> None:
+        self.data.append(value & 0xFF)
+
+    def string(self, text: str) -> None:
+        encoded = text.encode()
+        self.u32(len(encoded) + 1)
+        self.data += encoded
+        self.data.append(0)
+
+    def strings(self, texts: Any) -> None:
+        self.u32(len(texts))
+        for text in texts:
+            self.string(text)
+
+    def doubles(self, values: Any) -> None:
+        count = len(values)
+        self.u32(count)
+        if count:
+            self.align(8)
+            self.data += struct.pack(f'<{count}d', *values)
+
+    def octets(self, values: Any) -> None:
+        self.u32(len(values))
+        self.data += bytes(values)
+
+    def header(self, header: Any) -> None:
+        stamp = header.stamp
+        self.align(4)
+        self.data += _STAMP.pack(stamp.sec, stamp.nanosec)
+        self.string(header.frame_id)
+
+    def point(self, point: Any) -> None:
+        self.align(8)
+        self.data += _F64X3.pack(point.x, point.y, point.z)
+
+    def pose(self, pose: Any) -> None:
+        self.align(8)
+        position, orientation = pose.position, pose.orientation
+        self.data += _F64X7.pack(position.x, position.y, position.z, orientation.x,
+                                 orientation.y, orientation.z, orientation.w)
+
+    def color(self, color: Any) -> None:
+        self.align(4)
+        self.data += _F32X4.pack(color.r, color.g, color.b, color.a)
+
+
+def _joint_state(msg: Any, out: _Buffer) -> None:
+    out.header(msg.header)
+    out.strings(msg.name)
+    out.doubles(msg.position)
+    out.doubles(msg.velocity)
+    out.doubles(msg.effort)
+
+
+def _fluid_pressure(msg: Any, out: _Buffer) -> None:
+    out.header(msg.header)
+    out.align(8)
+    out.data += _F64X2.pack(msg.fluid_pressure, msg.variance)
+
+
+def _pose_array(msg: Any, out: _Buffer) -> None:
+    out.header(msg.header)
+    out.u32(len(msg.poses))
+    for pose in msg.poses:
+        out.pose(pose)
+
+
+def _string(msg: Any, out: _Buffer) -> None:
+    out.string(msg.data)
+
+
+def _image(msg: Any, out: _Buffer) -> None:
+    out.header(msg.header)
+    out.u32(msg.height)
+    out.u32(msg.width)
+    out.string(msg.encoding)
+    out.u8(msg.is_bigendian)
+    out.u32(msg.step)
+    out.octets(msg.data)
+
+
+def _marker(marker: Any, out: _Buffer) -> None:
+    out.header(marker.header)
+    out.string(marker.ns)
+    out.i32(marker.id)
+    out.i32(marker.type)
+    out.i32(marker.action)
+    out.pose(marker.pose)
+    out.point(marker.scale)
+    out.color(marker.color)
+    out.align(4)
+    out.data += _STAMP.pack(marker.lifetime.sec, marker.lifetime.nanosec)
+    out.u8(marker.frame_locked)
+    out.u32(len(marker.points))
+    for point in marker.points:
+        out.point(point)
+    out.u32(len(marker.colors))
+    for color in marker.colors:
+        out.color(color)
+    out.string(marker.texture_resource)
+    texture = marker.texture
+    out.header(texture.header)
+    out.string(texture.format)
+    out.octets(texture.data)
+    out.u32(len(marker.uv_coordinates))
+    for uv in marker.uv_coordinates:
+        out.align(4)
+        out.data += struct.pack('<ff', uv.u, uv.v)
+    out.string(marker.text)
+    out.string(marker.mesh_resource)
+    out.string(marker.mesh_file.filename)
+    out.octets(marker.mesh_file.data)
+    out.u8(marker.mesh_use_embedded_materials)
+
+
+def _marker_array(msg: Any, out: _Buffer) -> None:
+    out.u32(len(msg.markers))
+    for marker in msg.markers:
+        _marker(marker, out)
+
+
+ENCODERS: dict[str, Callable[[Any, _Buffer], None]] = {
+    'sensor_msgs/msg/JointState': _joint_state,
+    'sensor_msgs/msg/FluidPressure': _fluid_pressure,
+    'sensor_msgs/msg/Image': _image,
+    'geometry_msgs/msg/PoseArray': _pose_array,
+    'std_msgs/msg/String': _string,
+    'visualization_msgs/msg/MarkerArray': _marker_array,
+}
+
+
+def encode(msg: Any, type_name: str) -> bytes | None:
+    """CDR bytes of ``msg`` (a message of ``type_name``), or None for a type not handled here."""
+    encoder = ENCODERS.get(type_name)
+    if encoder is None:
+        return None
+    out = _Buffer()
+    encoder(msg, out)
+    return bytes(out.data)
