@@ -1,1 +1,20 @@
 """MCAP bags in the rosbag2 layout: writing, reading, playback."""
+
+from .msgdefs import MessageDefinitionError, message_definition, type_description_hash
+from .reader import BagMessage, BagReadError, BagSummary, TopicSummary, bag_summary, read_bag
+from .writer import (
+    BagWriter,
+    BagWriterError,
+    RecoveryResult,
+    offered_qos_yaml,
+    qos_profile_dict,
+    recover,
+    serialize,
+)
+
+__all__ = [
+    'BagMessage', 'BagReadError', 'BagSummary', 'BagWriter', 'BagWriterError',
+    'MessageDefinitionError', 'RecoveryResult', 'TopicSummary', 'bag_summary',
+    'message_definition', 'offered_qos_yaml', 'qos_profile_dict', 'read_bag', 'recover',
+    'serialize', 'type_description_hash',
+]
