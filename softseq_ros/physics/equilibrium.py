@@ -21,6 +21,7 @@ volume in between lands: a dropped command cannot change the physics. Looking up
 binary search on the branch's samples and a Newton polish of the equilibrium equations.
 """
 
+from bisect import bisect_right
 from dataclasses import dataclass, field
 import math
 from typing import Sequence
@@ -101,7 +102,8 @@ class _Branch:
     volumes: FloatArray     # (n, N)
     pressure: FloatArray    # (n,)
     pieces: tuple[Piece, ...]
-    spline: PPoly | None = None      # (v_i, p) as piecewise cubics of V
+    spline: PPoly | None = None      # (v_i, p, k_i) as piecewise cubics of V
+    knots: list[float] | None = None  # total as a list, for scalar lookups
     rough: FloatArray | None = None  # (m, 2): V-intervals the cubic cannot follow (near folds)
     lower: _End = field(default_factory=lambda: _End('limit'))
     upper: _End = field(default_factory=lambda: _End('limit'))
@@ -230,7 +232,11 @@ class EquilibriumMap:
         grids = [np.array([p_lo, p_hi])]
         for seg, piece in zip(self.segments, config):
             count = max(32, int(math.ceil(self.resolution * seg.arclength_share(piece))))
-            p_samples = seg.pressure(seg.arclength_samples(piece, count))
+            # The model's own knots are samples too, so the cubics never straddle a kink.
+            knots = seg.knots()
+            knots = knots[(knots > piece.v_lo) & (knots < piece.v_hi)]
+            p_samples = seg.pressure(np.concatenate([seg.arclength_samples(piece, count),
+                                                     knots]))
             grids.append(p_samples[(p_samples > p_lo) & (p_samples < p_hi)])
         p = np.unique(np.concatenate(grids))
         volumes = self._volumes_at(config, p)
@@ -319,14 +325,20 @@ class EquilibriumMap:
             # dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D, both finite off folds.
             slopes = np.concatenate([_cofactors(k), np.prod(k, axis=1, keepdims=True)
                                      * self._k_scale], axis=1) / d[:, None]
+        n = volumes.shape[1]
         values = np.concatenate([volumes, pressure[:, None]], axis=1)
         h = np.diff(total)[:, None]
         secant = np.abs(np.diff(values, axis=0))
-        tolerance = np.concatenate([np.full(volumes.shape[1], self._tol_v),
-                                    [1e-9 * self.p_scale]])
+        tolerance = np.concatenate([np.full(n, self._tol_v), [1e-9 * self.p_scale]])
         reach = np.maximum(np.abs(slopes[:-1]), np.abs(slopes[1:])) * h
         rough = ~np.all(np.isfinite(slopes[:-1]) & np.isfinite(slopes[1:])
                         & (reach <= 4.0 * secant + tolerance), axis=1)
+        # Curvatures ride along: dk_i/dV = dk_i/dv_i dv_i/dV.
+        curvature = self.curvatures(volumes)
+        curvature_slope = np.stack([s.curvature_slope(volumes[:, j])
+                                    for j, s in enumerate(self.segments)], axis=1)
+        values = np.concatenate([values, curvature], axis=1)
+        slopes = np.concatenate([slopes, curvature_slope * slopes[:, :n]], axis=1)
         if any(pc.direction == 0 for pc in config):
             slopes = np.nan_to_num(slopes)
             rough[:] = False
@@ -343,7 +355,8 @@ class EquilibriumMap:
         coefficients /= h[None, :, :] ** np.arange(3, -1, -1)[:, None, None]
         spline = PPoly(coefficients, total, extrapolate=True)
         rough_intervals = np.stack([total[:-1][rough], total[1:][rough]], axis=1)
-        self.branches.append(_Branch(total, volumes, pressure, config, spline, rough_intervals))
+        self.branches.append(_Branch(total, volumes, pressure, config, spline, total.tolist(),
+                                     rough_intervals))
 
     # ------------------------------------------------------------------ connections
 
@@ -464,29 +477,51 @@ class EquilibriumMap:
     # ------------------------------------------------------------------ lookups
 
     def lookup(self, index: int, total: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Volumes (n, N) and pressures (n,) on branch ``index`` at total volumes ``total``."""
+        values = self.evaluate(index, total)
+        n = len(self.segments)
+        return values[:, :n], values[:, n]
+
+    def evaluate(self, index: int, total: FloatArray) -> FloatArray:
         """
-        Volumes (n, N) and pressures (n,) on branch ``index`` at total volumes ``total``.
+        States on branch ``index`` at total volumes ``total``: rows (v_1..v_N, p, k_1..k_N).
 
         Cubic Hermite interpolation between the branch's exact samples, with the exact slopes
-        dv_i/dV and dp/dV: no segment model is evaluated. Only intervals next to a fold, where
-        the state varies like a square root of the volume, are polished by Newton iterations.
+        dv_i/dV, dp/dV and dk_i/dV: no segment model is evaluated. Only intervals next to a
+        fold, where the state varies like a square root of the volume, are polished by Newton
+        iterations.
         """
         branch = self.branches[index]
         total = np.clip(np.asarray(total, dtype=float), branch.lo, branch.hi)
         values = branch.spline(total)
-        volumes, pressure = values[:, :-1], values[:, -1]
         if self.polish and branch.rough.size:
             rows = np.flatnonzero(np.any((total[:, None] >= branch.rough[:, 0])
                                          & (total[:, None] <= branch.rough[:, 1]), axis=1))
             if rows.size:
-                i = np.clip(np.searchsorted(branch.total, total[rows], side='right') - 1, 0,
-                            branch.total.size - 2)
-                bracket = (np.abs(branch.volumes[i + 1] - branch.volumes[i]) + self._tol_v)
-                polished = self._newton(volumes[rows], total[rows], bracket)
-                volumes[rows] = polished
-                pressure[rows] = np.mean([s.pressure(polished[:, j])
-                                          for j, s in enumerate(self.segments)], axis=0)
-        return volumes, pressure
+                values[rows] = self._polish(branch, total[rows], values[rows])
+        return values
+
+    def evaluate_one(self, index: int, total: float) -> FloatArray:
+        """One state (v_1..v_N, p, k_1..k_N) on branch ``index``: the per-command fast path."""
+        branch = self.branches[index]
+        total = min(max(total, branch.lo), branch.hi)
+        if branch.rough.size and np.any((branch.rough[:, 0] <= total)
+                                        & (total <= branch.rough[:, 1])):
+            return self.evaluate(index, np.array([total]))[0]
+        i = min(max(bisect_right(branch.knots, total) - 1, 0), len(branch.knots) - 2)
+        c = branch.spline.c[:, i, :]
+        dt = total - branch.knots[i]
+        return ((c[0] * dt + c[1]) * dt + c[2]) * dt + c[3]
+
+    def _polish(self, branch: _Branch, total: FloatArray, values: FloatArray) -> FloatArray:
+        n = len(self.segments)
+        i = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
+                    branch.total.size - 2)
+        bracket = np.abs(branch.volumes[i + 1] - branch.volumes[i]) + self._tol_v
+        volumes = self._newton(values[:, :n], total, bracket)
+        pressure = np.mean([s.pressure(volumes[:, j]) for j, s in enumerate(self.segments)],
+                           axis=0)
+        return np.concatenate([volumes, pressure[:, None], self.curvatures(volumes)], axis=1)
 
     def _newton(self, volumes: FloatArray, total: FloatArray, bracket: FloatArray) -> FloatArray:
         """
@@ -608,9 +643,10 @@ class Tracker:
     @property
     def state(self) -> State:
         """The current state."""
-        volumes, pressure = self.emap.lookup(self.branch, np.array([self.total]))
-        return State(self.total - self.emap.total_rest_volume, float(pressure[0]), volumes[0],
-                     self.emap.curvatures(volumes)[0], self.branch)
+        values = self.emap.evaluate_one(self.branch, self.total)
+        n = len(self.emap.segments)
+        return State(self.total - self.emap.total_rest_volume, float(values[n]), values[:n],
+                     values[n + 1:], self.branch)
 
     def step(self, injected: float) -> State:
         """Go to a commanded injected volume; the state reports the snaps on the way."""
@@ -653,13 +689,17 @@ class Tracker:
             branch_ids[i + j] = self.branch
             i += j + 1
             window = 256
-        volumes = np.empty((n, len(emap.segments)))
-        pressure = np.empty(n)
-        for b in np.unique(branch_ids):
-            rows = np.flatnonzero(branch_ids == b)
-            volumes[rows], pressure[rows] = emap.lookup(int(b), totals[rows])
-        return Path(commands, pressure, volumes, emap.curvatures(volumes), branch_ids, snap,
-                    events)
+        segments = len(emap.segments)
+        if np.all(branch_ids == branch_ids[0]) if n else True:
+            values = (emap.evaluate(int(branch_ids[0]), totals) if n
+                      else np.empty((0, 2 * segments + 1)))
+        else:
+            values = np.empty((n, 2 * segments + 1))
+            for b in np.unique(branch_ids):
+                rows = np.flatnonzero(branch_ids == b)
+                values[rows] = emap.evaluate(int(b), totals[rows])
+        return Path(commands, values[:, segments], values[:, :segments],
+                    values[:, segments + 1:], branch_ids, snap, events)
 
 
 def classify(emap: EquilibriumMap, samples: int = 4001) -> str:

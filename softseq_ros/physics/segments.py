@@ -88,8 +88,16 @@ class Segment(ABC):
         """Backbone curvature at volume v, in 1/m."""
 
     @abstractmethod
+    def curvature_slope(self, v: ArrayLike) -> FloatArray:
+        """Derivative of the curvature with respect to volume, in 1/m per m^3."""
+
+    @abstractmethod
     def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
         """Volumes where the pressure changes direction, and the flat stretches."""
+
+    def knots(self) -> FloatArray:
+        """Volumes where the model is less smooth than elsewhere (a table's rows)."""
+        return np.empty(0)
 
     def monotone_pieces(self) -> list[Piece]:
         """Split the PV curve into rising, falling and flat pieces, base to top."""
@@ -251,6 +259,7 @@ class TabulatedSegment(Segment):
         self._dp = self._p.derivative()
         self._e = self._p.antiderivative()
         self._k = PchipInterpolator(vol, cur, extrapolate=False)
+        self._dk = self._k.derivative()
 
     @classmethod
     def from_csv(cls, path: str | Path, name: str | None = None,
@@ -262,6 +271,10 @@ class TabulatedSegment(Segment):
             raise TableError(f'{path}: the segment length must be given (m)')
         return cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],
                    columns['curvature_per_m'], source=str(path))
+
+    def knots(self) -> FloatArray:
+        """The table's volumes: PCHIP is only once differentiable there."""
+        return self.volumes
 
     def _clip(self, v: ArrayLike) -> FloatArray:
         return np.clip(np.asarray(v, dtype=float), self.rest_volume, self.max_volume)
@@ -281,6 +294,10 @@ class TabulatedSegment(Segment):
     def curvature(self, v: ArrayLike) -> FloatArray:
         """Curvature, in 1/m."""
         return self._k(self._clip(v))
+
+    def curvature_slope(self, v: ArrayLike) -> FloatArray:
+        """D(curvature)/dv, in 1/m per m^3."""
+        return self._dk(self._clip(v))
 
     def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
         secant = np.sign(np.diff(self.pressures))
@@ -336,6 +353,10 @@ class LinearSegment(_SmoothSegment):
     def curvature(self, v: ArrayLike) -> FloatArray:
         """Curvature, in 1/m."""
         return self.curvature_gain * (np.asarray(v, dtype=float) - self.rest_volume)
+
+    def curvature_slope(self, v: ArrayLike) -> FloatArray:
+        """Constant d(curvature)/dv, in 1/m per m^3."""
+        return np.full(np.shape(v), self.curvature_gain)
 
 
 class BalloonSegment(_SmoothSegment):
@@ -394,6 +415,10 @@ class BalloonSegment(_SmoothSegment):
     def curvature(self, v: ArrayLike) -> FloatArray:
         """Curvature, in 1/m."""
         return self.curvature_gain * (np.asarray(v, dtype=float) - self.rest_volume)
+
+    def curvature_slope(self, v: ArrayLike) -> FloatArray:
+        """Constant d(curvature)/dv, in 1/m per m^3."""
+        return np.full(np.shape(v), self.curvature_gain)
 
     def _turn_search_grid(self) -> FloatArray:
         # Uniform in stretch: the balloon's features (peak near lam = 1.38) sit at small volumes.
