@@ -20,7 +20,7 @@ import pytest
 from scipy.optimize import brentq
 
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker, classify
-from softseq_ros.physics.materials import Gent, NeoHookean
+from softseq_ros.physics.materials import Gent, NeoHookean, Ogden
 from softseq_ros.physics.scene import load_scene
 from softseq_ros.physics.segments import BalloonSegment, LinearSegment, TabulatedSegment
 
@@ -97,6 +97,7 @@ def test_reference_matches_neo_hookean_pair_closed_form():
         np.testing.assert_allclose(np.sort(path.volumes[k]), expected, rtol=0, atol=1e-9 * V0)
 
 
+@pytest.mark.slow
 def test_reference_snaps_leave_from_a_fold():
     # A snap starts where the stable branch ends: the restricted Hessian k1 + k2 vanishes there.
     segs = gent_pair()
@@ -154,6 +155,7 @@ def test_two_linear_segments_split_in_stiffness_ratio():
 
 # --- (b) peak-valley pairs: snaps on inflation, different ones on deflation -----------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize('make', [gent_pair, scene_pair], ids=['gent_pair', 'fig1_asymmetric'])
 def test_asymmetric_pair_follows_reference_with_hysteresis(make):
     segs = make()
@@ -197,8 +199,33 @@ def test_asymmetric_pair_follows_reference_with_hysteresis(make):
     assert np.nonzero(path.snap)[0].tolist() == sorted({e.row for e in ref.events})
 
 
+# --- three segments (the reference's N > 2 mode covers snap-free paths) -----------------------
+
+def ogden_three():
+    # Treloar's rubber (Ogden 1972), three balloons of different wall thickness.
+    return [BalloonSegment(f's{i}', 0.1, Ogden((6.3e5, 1.2e3, -1e4), (1.3, 5.0, -2.0)),
+                           R, H * f, 4.0) for i, f in enumerate((1.0, 1.1, 1.25))]
+
+
+def three_scene():
+    return list(load_scene(CONFIG / 'three_segments.yaml').segments)
+
+
+@pytest.mark.parametrize('make', [three_scene, ogden_three], ids=['three_segments', 'ogden'])
+def test_three_segments_follow_reference(make):
+    segs = make()
+    emap = EquilibriumMap(segs)
+    u = history(emap, n=200)
+    path = Tracker(emap).sweep(u)
+    ref = ReferenceTracker(segs).sweep(u)
+    assert ref.events == [] and path.events == []
+    np.testing.assert_allclose(path.volumes, ref.volumes, rtol=0,
+                               atol=VOLUME_TOL * span(segs))
+
+
 # --- (c) a jump equals the walk ---------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize('make', [gent_pair, scene_pair], ids=['gent_pair', 'fig1_asymmetric'])
 def test_jump_equals_walk(make):
     segs = make()
