@@ -81,13 +81,7 @@ def identical_balloons(count):
     return [BalloonSegment(f's{i}', 0.1, material, 0.01, 0.2e-3, 2.2) for i in range(count)]
 
 
-PITCHFORK_BUG = pytest.mark.xfail(
-    strict=True, reason='the split branches start ~1e-6 of the range off the shared peak (the '
-    'fold root in p maps to a square-root error in v), so the end rule does not see them as '
-    'continuations: the flow picks the tip, and a zero-size snap is reported')
-
-
-@pytest.mark.parametrize('count', [pytest.param(2, marks=PITCHFORK_BUG), 3])
+@pytest.mark.parametrize('count', [2, 3])
 def test_identical_segments_share_until_the_peak_then_the_base_takes_more(count):
     segments = identical_balloons(count)
     v0 = segments[0].rest_volume
@@ -123,7 +117,6 @@ def test_the_tie_break_is_the_same_every_time_and_on_the_way_back():
                                atol=1e-9 * first.emap.v_scale)
 
 
-@PITCHFORK_BUG
 def test_a_symmetric_bifurcation_is_not_a_snap():
     emap = EquilibriumMap(identical_balloons(2))
     hi = 0.9 * emap.injected_range[1]

@@ -210,7 +210,16 @@ class EquilibriumMap:
         """Scaled dp/dv, clipped to the sign its piece promises (exactly 0 on a flat piece)."""
         columns = []
         for i, (seg, piece) in enumerate(zip(self.segments, config)):
-            k = seg.stiffness(volumes[..., i]) / self._k_scale
+            v = volumes[..., i]
+            k = seg.stiffness(v) / self._k_scale
+            # A piece end inside the model's range is a peak or a valley: the slope there is
+            # zero by definition, not the round-off of a numerical derivative.
+            turning = np.zeros(np.shape(v), dtype=bool)
+            if piece.v_lo > seg.rest_volume:
+                turning |= v == piece.v_lo
+            if piece.v_hi < seg.max_volume:
+                turning |= v == piece.v_hi
+            k = np.where(turning, 0.0, k)
             if piece.direction > 0:
                 k = np.maximum(k, 0.0)
             elif piece.direction < 0:
