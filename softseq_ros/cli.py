@@ -37,6 +37,45 @@ def _classify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run(args: argparse.Namespace) -> int:
+    from softseq_ros.batch import run_scene
+
+    result = run_scene(args.scene, args.out, show_progress=not args.quiet)
+    print(f'{args.out}: {result.sim_duration_s:.1f} s of rig time in {result.wall_s:.1f} s '
+          f'({result.speedup:.0f}x real time), {sum(result.message_counts.values())} messages, '
+          f'pump {result.pump_state}')
+    if not args.no_report:
+        _write_report(args.out, args.scene, None, args.out / 'report')
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report')
+    return 0
+
+
+def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None,
+                  out: Path) -> None:
+    from softseq_ros.analysis.figures import summary, write_figures
+    from softseq_ros.analysis.recording import load_recording, read_experiment
+    from softseq_ros.bag.reader import bag_summary
+    from softseq_ros.physics.scene import load_scene
+    from softseq_ros.physics.solve import build_map
+
+    recording = load_recording(bag)
+    emap = None
+    if scene_name is not None:
+        scene = load_scene(scene_name)
+        emap = build_map(scene.segments, scene.solver.resolution)
+    experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
+    counts = {name: topic.message_count for name, topic in bag_summary(bag).topics.items()}
+    text = summary(recording, emap, counts)
+    figures = write_figures(recording, emap, out, experiment)
+    (out / 'summary.txt').write_text(text + '\n')
+    print(text)
+    print(f'figures: {", ".join(str(f) for f in figures)}')
+
+
 def _scenes(args: argparse.Namespace) -> int:
     from softseq_ros.physics.scene import config_dir, shipped_scenes
 
@@ -66,6 +105,28 @@ def build_parser() -> argparse.ArgumentParser:
                               description='Print none, partial, symmetric or asymmetric.')
     classify.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
     classify.set_defaults(handler=_classify)
+
+    run = sub.add_parser('run', help='run the rig in batch mode and record it to a bag',
+                         description='Run the pump, actuator and camera nodes in one process '
+                         'in lock-step simulated time, as fast as the machine allows, record '
+                         'every topic to an MCAP bag and write a summary with figures.')
+    run.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
+    run.add_argument('--out', type=Path, required=True,
+                     help='bag directory to create (for example bags/paper)')
+    run.add_argument('--quiet', action='store_true', help='no progress line')
+    run.add_argument('--no-report', action='store_true', help='skip the summary and figures')
+    run.set_defaults(handler=_run)
+
+    report = sub.add_parser('report', help='summary and figures of a recorded bag',
+                            description='Summarise a rig bag and draw the paper-style figures, '
+                            'optionally beside a measured PV curve.')
+    report.add_argument('bag', type=Path, help='bag directory (metadata.yaml and .mcap)')
+    report.add_argument('--scene', help='scene of the run: adds the segment curves and the '
+                        'equilibrium set to the figures')
+    report.add_argument('--experiment', type=Path, help='CSV with columns injected_m3 and '
+                        'pressure_pa measured on the rig')
+    report.add_argument('--out', type=Path, help='folder for the figures (default BAG/report)')
+    report.set_defaults(handler=_report)
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)

@@ -43,6 +43,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 import yaml
 
+from .cdr import encode
 from .msgdefs import canonical_type_name, message_definition, type_description_hash
 
 METADATA_FILE = 'metadata.yaml'
@@ -93,11 +94,15 @@ def serialize(msg: Any) -> bytes:
 
     rclpy's serialize_message (Fast DDS) returns a buffer of the estimated size, which can
     end in bytes that belong to no field; strict readers (rosbags) refuse such messages, and
-    a subscriber never receives them. The buffer is cut where the last field ends.
+    a subscriber never receives them. The buffer is cut where the last field ends. The rig's
+    own types skip all that through :mod:`softseq_ros.bag.cdr`.
     """
+    type_name = message_type_name(msg)
+    encoded = encode(msg, type_name)
+    if encoded is not None:
+        return encoded
     from rclpy.serialization import serialize_message
     raw = serialize_message(msg)
-    type_name = message_type_name(msg)
     store = _cdr_decoder(type_name)
     msgdef = store.get_msgdef(type_name)
     decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be

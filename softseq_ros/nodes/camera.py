@@ -160,7 +160,8 @@ class CameraNode(RigNode):
                                               f'{len(msg.position)} values (expected '
                                               f'{self.lengths.size} finite)')
             return
-        curvatures = np.asarray(msg.position, dtype=float)
+        # A copy: np.asarray would alias the message's buffer, which its sender may reuse.
+        curvatures = np.array(msg.position, dtype=float)
         if self._curvatures is None or not np.array_equal(curvatures, self._curvatures):
             self._curvatures = curvatures
             points, angles = backbone_batch(curvatures[None, :], self.lengths,

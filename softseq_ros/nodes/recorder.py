@@ -26,19 +26,11 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
 from softseq_ros.bag.writer import BagWriter, BagWriterError, offered_qos_yaml, qos_profile_dict
+from softseq_ros.nodes.common import TOPICS
 
-# The topics recorded when the `topics` parameter is not given. Kept in one place so the
-# rig's topic list can change without touching the node.
-RIG_TOPICS: tuple[str, ...] = (
-    '/clock',
-    '/pump/injected_volume',
-    '/pump/flow_rate',
-    '/actuator/pressure',
-    '/actuator/segment_volumes',
-    '/actuator/curvatures',
-    '/actuator/snap',
-    '/camera/backbone',
-)
+# The topics recorded when the `topics` parameter is not given: the whole rig except the
+# camera image, which the camera renders only while someone subscribes to it.
+RIG_TOPICS: tuple[str, ...] = tuple(topic for topic in TOPICS if topic != '/camera/image')
 DISCOVERY_PERIOD_S = 0.5
 QUEUE_DEPTH = 1000
 
