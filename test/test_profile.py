@@ -116,3 +116,15 @@ def test_sample_of_an_exact_multiple_has_no_sliver():
 def test_invalid_programmes_are_refused(build, message):
     with pytest.raises(ValueError, match=message.replace('(', r'\(').replace('[', r'\[')):
         build()
+
+
+def test_command_at_equals_the_vectorised_volume_and_flow():
+    profile = PumpProfile(legs=(Leg.inflate(6.5e-5), Leg.hold(10.0), Leg.deflate(1.0e-5)),
+                          flow_rate=5.0e-8, cycles=2, start_injected=0.0)
+    times, _ = profile.breakpoints()
+    probes = np.concatenate([[-1.0, 0.0, profile.duration() + 5.0], times,
+                             np.linspace(-3.0, profile.duration() + 3.0, 2001)])
+    for t in probes:
+        volume, flow = profile.command_at(float(t))
+        assert volume == pytest.approx(float(profile.injected_at(t)), rel=1e-14, abs=1e-20)
+        assert flow == float(profile.flow_at(t))

@@ -9,7 +9,10 @@ encoded here directly (little-endian CDR, XCDR1 plain encapsulation); the tests 
 encoder against rclpy's serialisation. Other types fall back to the general path.
 """
 
+from array import array
+from operator import attrgetter
 import struct
+import sys
 from typing import Any, Callable
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'
@@ -21,6 +24,12 @@ _F64X2 = struct.Struct('<dd')
 _F64X3 = struct.Struct('<ddd')
 _F64X7 = struct.Struct('<7d')
 _F32X4 = struct.Struct('<4f')
+_POSE_FIELDS = attrgetter('position.x', 'position.y', 'position.z', 'orientation.x',
+                          'orientation.y', 'orientation.z', 'orientation.w')
+_POINT_FIELDS = attrgetter('x', 'y', 'z')
+# rclpy keeps float64[] fields as array('d') in native order: on a little-endian machine its
+# bytes are already CDR's.
+_NATIVE_LITTLE = sys.byteorder == 'little'
 
 
 class _Buffer:
@@ -63,7 +72,10 @@ class _Buffer:
         self.u32(count)
         if count:
             self.align(8)
-            self.data += struct.pack(f'<{count}d', *values)
+            if _NATIVE_LITTLE and isinstance(values, array) and values.typecode == 'd':
+                self.data += values.tobytes()
+            else:
+                self.data += struct.pack(f'<{count}d', *values)
 
     def octets(self, values: Any) -> None:
         self.u32(len(values))
@@ -81,9 +93,22 @@ class _Buffer:
 
     def pose(self, pose: Any) -> None:
         self.align(8)
-        position, orientation = pose.position, pose.orientation
-        self.data += _F64X7.pack(position.x, position.y, position.z, orientation.x,
-                                 orientation.y, orientation.z, orientation.w)
+        self.data += _F64X7.pack(*_POSE_FIELDS(pose))
+
+    def poses(self, poses: Any) -> None:
+        self.u32(len(poses))
+        if poses:
+            # Every pose is 56 bytes of float64: aligned once, aligned for all.
+            self.align(8)
+            pack = _F64X7.pack
+            self.data += b''.join([pack(*_POSE_FIELDS(p)) for p in poses])
+
+    def points(self, points: Any) -> None:
+        self.u32(len(points))
+        if points:
+            self.align(8)
+            pack = _F64X3.pack
+            self.data += b''.join([pack(*_POINT_FIELDS(p)) for p in points])
 
     def color(self, color: Any) -> None:
         self.align(4)
@@ -106,9 +131,7 @@ def _fluid_pressure(msg: Any, out: _Buffer) -> None:
 
 def _pose_array(msg: Any, out: _Buffer) -> None:
     out.header(msg.header)
-    out.u32(len(msg.poses))
-    for pose in msg.poses:
-        out.pose(pose)
+    out.poses(msg.poses)
 
 
 def _string(msg: Any, out: _Buffer) -> None:
@@ -137,9 +160,7 @@ def _marker(marker: Any, out: _Buffer) -> None:
     out.align(4)
     out.data += _STAMP.pack(marker.lifetime.sec, marker.lifetime.nanosec)
     out.u8(marker.frame_locked)
-    out.u32(len(marker.points))
-    for point in marker.points:
-        out.point(point)
+    out.points(marker.points)
     out.u32(len(marker.colors))
     for color in marker.colors:
         out.color(color)

@@ -116,6 +116,7 @@ class CameraNode(RigNode):
                                           half_extent_m=1.05 * float(self.lengths.sum()))
 
         self._curvatures: np.ndarray | None = None
+        self._backbone_stale = False
         self._curvature_stamp = -1
         self._points = np.zeros((self.n_points, 2))
         self._quaternions = np.zeros((self.n_points, 4))
@@ -164,10 +165,9 @@ class CameraNode(RigNode):
         curvatures = np.array(msg.position, dtype=float)
         if self._curvatures is None or not np.array_equal(curvatures, self._curvatures):
             self._curvatures = curvatures
-            points, angles = backbone_batch(curvatures[None, :], self.lengths,
-                                            self.points_per_segment)
-            self._points = points[0]
-            self._quaternions = orientation_quaternions(angles[0])
+            # The backbone is computed when a frame or a snapshot needs it, not at the
+            # actuator's rate: most curvature messages are never drawn.
+            self._backbone_stale = True
         self._curvature_stamp = stamp_ns(msg.header)
         if self._pending_stamp is not None and self._curvature_stamp >= self._pending_stamp:
             self._take_snapshots()
@@ -192,7 +192,16 @@ class CameraNode(RigNode):
         if self._curvatures is not None and self._curvature_stamp >= self._pending_stamp:
             self._take_snapshots()
 
+    def _update_backbone(self) -> None:
+        if self._backbone_stale:
+            points, angles = backbone_batch(self._curvatures[None, :], self.lengths,
+                                            self.points_per_segment)
+            self._points = points[0]
+            self._quaternions = orientation_quaternions(angles[0])
+            self._backbone_stale = False
+
     def _take_snapshots(self) -> None:
+        self._update_backbone()
         self._fill_poses(self._snapshot, self._noisy_points(), self.now_ns())
         for _ in range(self._pending_count):
             self._publish('/camera/snapshots', self._snapshot)
@@ -228,6 +237,7 @@ class CameraNode(RigNode):
         """Publish the latest backbone, markers and (when wanted) the image."""
         if self._curvatures is None:
             return
+        self._update_backbone()
         now = self.now_ns()
         points = self._noisy_points()
         if 'poses' in self.outputs:

@@ -231,7 +231,7 @@ class SyringePumpNode(RigNode):
     def _volume_now(self, now_ns: int | None = None) -> float:
         if self._frozen_volume is not None:
             return self._frozen_volume
-        return float(self.profile.injected_at(self.run_time_s(now_ns)))
+        return self.profile.command_at(self.run_time_s(now_ns))[0]
 
     # ---------------------------------------------------------------- ROS entry points
 
@@ -251,7 +251,9 @@ class SyringePumpNode(RigNode):
         if self.autostart and not self._started and self.state == 'idle':
             self.start()
         run_time = self.run_time_s(now)
-        volume = self._volume_now(now)
+        volume, programme_flow = self.profile.command_at(run_time)
+        if self._frozen_volume is not None:
+            volume = self._frozen_volume
         flow = 0.0
         if self.state == 'running':
             if volume > self.max_injected_m3:
@@ -262,7 +264,7 @@ class SyringePumpNode(RigNode):
                 self._pause()
                 self._set_state('finished')
             else:
-                flow = float(self.profile.flow_at(run_time))
+                flow = programme_flow
         command = self._command
         stamp_header(command.header, now)
         command.position[0] = volume

@@ -10,6 +10,7 @@ Units: m^3 for volumes, m^3/s for the flow rate, s for times. ``injected`` alway
 total fluid volume minus the sum of the segments' rest volumes.
 """
 
+from bisect import bisect_right
 from dataclasses import dataclass
 import math
 
@@ -144,6 +145,8 @@ class PumpProfile:
                 volumes.append(leg.to_m3)
         object.__setattr__(self, '_times', np.array(times))
         object.__setattr__(self, '_volumes', np.array(volumes))
+        object.__setattr__(self, '_time_list', [float(x) for x in times])
+        object.__setattr__(self, '_volume_list', [float(x) for x in volumes])
 
     def duration(self) -> float:
         """Total run time of all cycles [s]."""
@@ -179,6 +182,24 @@ class PumpProfile:
         safe = np.clip(leg_index, 0, n_legs - 1)
         direction = np.sign(self._volumes[safe + 1] - self._volumes[safe])
         return np.where(inside, direction * self.flow_rate, 0.0)
+
+    def command_at(self, t: float) -> tuple[float, float]:
+        """
+        Injected volume [m^3] and signed flow [m^3/s] at one time ``t`` [s].
+
+        The same values as ``injected_at`` and ``flow_at``, for the pump's per-tick path, where
+        numpy's overhead on a single number dominates.
+        """
+        times, volumes = self._time_list, self._volume_list
+        leg = bisect_right(times, t) - 1
+        if leg < 0:
+            return volumes[0], 0.0
+        if leg >= len(times) - 1:
+            return volumes[-1], 0.0
+        t0, t1, v0, v1 = times[leg], times[leg + 1], volumes[leg], volumes[leg + 1]
+        volume = v0 + (v1 - v0) * (t - t0) / (t1 - t0) if t1 > t0 else v1
+        flow = self.flow_rate if v1 > v0 else (-self.flow_rate if v1 < v0 else 0.0)
+        return volume, flow
 
     def sample(self, rate_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """
