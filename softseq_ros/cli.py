@@ -76,6 +76,18 @@ def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None
     print(f'figures: {", ".join(str(f) for f in figures)}')
 
 
+def _recover(args: argparse.Namespace) -> int:
+    from softseq_ros.bag.writer import recover
+
+    result = recover(args.bag)
+    if result.was_complete:
+        print(f'{args.bag}: complete, {result.message_count} messages; metadata.yaml rewritten')
+    else:
+        print(f'{args.bag}: recovered {result.message_count} messages into {result.mcap_path}'
+              f' (damaged original kept as {result.damaged_copy})')
+    return 0
+
+
 def _scenes(args: argparse.Namespace) -> int:
     from softseq_ros.physics.scene import config_dir, shipped_scenes
 
@@ -127,6 +139,13 @@ def build_parser() -> argparse.ArgumentParser:
                         'pressure_pa measured on the rig')
     report.add_argument('--out', type=Path, help='folder for the figures (default BAG/report)')
     report.set_defaults(handler=_report)
+
+    recover = sub.add_parser('recover', help='make a killed recording readable again',
+                             description='Rebuild the index and metadata.yaml of a bag whose '
+                             'recorder was killed: every message written before the last '
+                             'flush (at most 0.5 s before the kill) is kept.')
+    recover.add_argument('bag', type=Path, help='bag directory')
+    recover.set_defaults(handler=_recover)
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)

@@ -145,3 +145,36 @@ def test_classify_prints_the_sequence_type_of_shipped_scenes():
     assert result.returncode == 0
     assert result.stdout.strip() == 'fig1_none: none'
 
+
+
+def test_recover_makes_a_truncated_recording_readable(tmp_path):
+    from softseq_ros.bag.reader import bag_summary
+    from softseq_ros.bag.writer import BagWriter
+
+    bag = tmp_path / 'killed'
+    writer = BagWriter(bag, chunk_size=4096, flush_period_s=None)
+    writer.add_topic('/pump/command', 'sensor_msgs/msg/JointState')
+    for i in range(2000):
+        writer.write('/pump/command', bytes(84), i * 1000, i * 1000)
+    writer.flush()
+    for i in range(2000, 2100):
+        writer.write('/pump/command', bytes(84), i * 1000, i * 1000)
+    # A recorder killed mid-write: what was flushed is on disk, followed by a torn record;
+    # no summary, no metadata.yaml.
+    mcap = bag / 'killed_0.mcap'
+    with mcap.open('ab') as handle:
+        handle.write(b'\x06' + bytes(40))
+    assert not (bag / 'metadata.yaml').exists()
+    result = run_softseq('recover', str(bag))
+    assert result.returncode == 0, result.stderr
+    assert 'recovered' in result.stdout
+    summary = bag_summary(bag)
+    assert summary.complete
+    assert summary.topics['/pump/command'].message_count == 2000
+
+
+def test_help_of_every_subcommand_works():
+    for name in build_parser()._subparsers._group_actions[0].choices:
+        result = run_softseq(name, '--help')
+        assert result.returncode == 0, (name, result.stderr)
+        assert 'usage: softseq' in result.stdout
