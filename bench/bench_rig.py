@@ -1,0 +1,860 @@
+"""
+Rig benchmarks: batch speed, hand-started processes on sim time, real-time latency.
+
+    python bench/bench_rig.py [--part batch|processes|latency|all] [--repeats N]
+                              [--out bench/rig_results.md]
+
+Benchmarks, not tests: nothing is asserted about time. Each part prints a markdown section and
+replaces its own section of the results file (the other parts' sections stay), so one part can
+be re-run alone. Every ratio is measured within one run of this script; times are the best of
+``--repeats`` where a run is repeated. The machine facts (cores, load average before and after
+each part, Python, rclpy) go into the file: on a shared machine the wall times move with the
+load, the CPU times (this process only) much less.
+
+Parts:
+  batch      softseq_ros.batch.BatchRun on the paper scene (0 -> 65 -> 0 mL, pump 50 Hz, camera
+             10 Hz, everything recorded); where the time goes (exclusive timers around each
+             component, and cProfile's top functions); the saving from skipping work (reduced
+             outputs, a 1 Hz camera, a pump hold answered from the actuator's cache).
+  processes  the console-script nodes as processes on sim time (sim_clock at several speed-ups,
+             recorder writing a bag): the highest speed-up at which no message is lost.
+  latency    real time, pump and camera at 100 Hz, nodes as processes, a probe node in this
+             process: latency from a pump command to its /actuator/volumes and to the first
+             /camera/backbone frame that shows it.
+"""
+
+import argparse
+from collections import Counter, defaultdict
+from contextlib import contextmanager
+import cProfile
+import importlib.metadata
+import json
+import math
+import os
+from pathlib import Path
+import platform
+import pstats
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+# Before the first rclpy import: DDS reads these when the first participant is created. Each
+# part passes its own domain id to rclpy.init and to its children, so runs never mix.
+BASE_DOMAIN_ID = 1 + os.getpid() % 80
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.pop('ROS_LOCALHOST_ONLY', None)
+_prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+if sys.prefix not in _prefixes:
+    os.environ['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *_prefixes])
+
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from softseq_ros.bag.reader import read_bag  # noqa: E402
+import softseq_ros.batch as batch_module  # noqa: E402
+from softseq_ros.batch import BatchRun  # noqa: E402
+from softseq_ros.nodes.actuator import ActuatorNode  # noqa: E402
+from softseq_ros.nodes.common import TOPICS  # noqa: E402
+from softseq_ros.physics.equilibrium import Tracker  # noqa: E402
+from softseq_ros.physics.kinematics import backbone_batch  # noqa: E402
+from softseq_ros.physics.scene import load_scene  # noqa: E402
+
+RESULTS = ROOT / 'bench' / 'rig_results.md'
+PARTS = ('batch', 'processes', 'latency')
+ML = 1.0e-6
+
+# A shortened paper programme (same scene, flow and rates): 0 -> 10 mL -> 0, 400 s of sim time.
+SHORT_LEGS = '[{inflate_to_m3: 1.0e-5}, {deflate_to_m3: 0.0}]'
+# Same 400 s and command count, but half of it a hold: 0 -> 5 mL, hold 200 s, -> 0.
+HOLD_LEGS = '[{inflate_to_m3: 5.0e-6}, {hold_s: 200}, {deflate_to_m3: 0.0}]'
+# For cProfile (about 4x slower under the profiler): 0 -> 2.5 mL -> 0, 100 s.
+PROFILE_LEGS = '[{inflate_to_m3: 2.5e-6}, {deflate_to_m3: 0.0}]'
+
+SPEEDUPS = (10, 30, 100, 300, 1000)
+RECORDED_TOPICS = ('/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
+                   '/actuator/curvatures', '/actuator/events', '/camera/backbone',
+                   '/camera/snapshots', '/camera/markers')
+STARTUP_TIMEOUT_S = 90.0
+LATENCY_RUN_S = 20.0
+LATENCY_WARMUP_S = 1.0
+
+
+# ------------------------------------------------------------------------------ machine facts
+
+def machine_facts() -> dict[str, str]:
+    try:
+        rclpy_version = importlib.metadata.version('ros-rclpy')
+    except importlib.metadata.PackageNotFoundError:
+        rclpy_version = 'unknown'
+    try:
+        model = next(line.split(':', 1)[1].strip()
+                     for line in Path('/proc/cpuinfo').read_text().splitlines()
+                     if line.startswith('model name'))
+    except (OSError, StopIteration):
+        model = platform.processor() or 'unknown'
+    return {
+        'cores (os.cpu_count)': str(os.cpu_count()),
+        'cores usable (sched_getaffinity)': str(len(os.sched_getaffinity(0))),
+        'cpu': model,
+        'python': platform.python_version(),
+        'rclpy (ros-rclpy wheel)': rclpy_version,
+        'rmw': os.environ.get('RMW_IMPLEMENTATION', 'default (rmw_fastrtps_cpp)'),
+        'platform': platform.platform(),
+    }
+
+
+def load_text() -> str:
+    one, five, fifteen = os.getloadavg()
+    return f'{one:.2f} / {five:.2f} / {fifteen:.2f}'
+
+
+def under_load_note(before: str, after: str) -> str:
+    peak = max(float(before.split('/')[0]), float(after.split('/')[0]))
+    cores = len(os.sched_getaffinity(0))
+    text = f'Load average (1/5/15 min) before: {before}; after: {after} ({cores} cores).'
+    if peak > 0.5 * cores:
+        text += (' **Measured under load from other work on this machine**: wall times and '
+                 'latencies are worse than on an idle machine; the CPU times of this process '
+                 'move much less.')
+    return text
+
+
+# ------------------------------------------------------------------------------ part 1: batch
+
+class _TimedBatch(BatchRun):
+    """A BatchRun that also measures CPU time and keeps its nodes for their counters."""
+
+    def run(self):  # noqa: ANN201
+        cpu = time.process_time()
+        result = super().run()
+        self.cpu_s = time.process_time() - cpu
+        return result
+
+
+class _InstrumentedBatch(_TimedBatch):
+    """Exclusive time per component: each wrapped call's time minus its wrapped callees'."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.exclusive = defaultdict(float)
+        self.calls = defaultdict(int)
+        self._stack: list[float] = []
+
+    def _timed(self, name, function):
+        stack, exclusive, calls, clock = self._stack, self.exclusive, self.calls, \
+            time.perf_counter
+
+        def wrapper(*args):
+            stack.append(0.0)
+            start = clock()
+            try:
+                return function(*args)
+            finally:
+                elapsed = clock() - start
+                inner = stack.pop()
+                exclusive[name] += elapsed - inner
+                calls[name] += 1
+                if stack:
+                    stack[-1] += elapsed
+        return wrapper
+
+    def _loop(self, pump, camera, wall_start) -> None:
+        actuator = self._nodes['actuator']
+        pump.tick = self._timed('pump: tick (programme, state, fill)', pump.tick)
+        pump.on_pressure = self._timed('pump: pressure check', pump.on_pressure)
+        actuator.on_pump_command = self._timed('actuator: command handling (no solve)',
+                                               actuator.on_pump_command)
+        actuator.tracker.step = self._timed('actuator: equilibrium solve (Tracker.step)',
+                                            actuator.tracker.step)
+        camera.on_volumes = self._timed('camera: input handlers', camera.on_volumes)
+        camera.on_curvatures = self._timed('camera: input handlers', camera.on_curvatures)
+        camera.tick = self._timed('camera: frame (poses, markers)', camera.tick)
+        camera._update_backbone = self._timed('camera: backbone kinematics',
+                                              camera._update_backbone)
+        self._writer.write = self._timed('bag writing (MCAP, zstd chunks)', self._writer.write)
+        original_serialize = batch_module.serialize
+        batch_module.serialize = self._timed('serialisation (CDR encode)', original_serialize)
+        try:
+            super()._loop(pump, camera, wall_start)
+        finally:
+            batch_module.serialize = original_serialize
+
+
+def _batch_parameters(legs=None, camera_rate=None, outputs=None):
+    parameters = defaultdict(list)
+    if legs is not None:
+        parameters['syringe_pump'].append(Parameter('legs', value=legs))
+    if camera_rate is not None:
+        parameters['camera'].append(Parameter('rate_hz', value=float(camera_rate)))
+    if outputs is not None:
+        for node in ('actuator', 'camera'):
+            parameters[node].append(Parameter('outputs', value=list(outputs)))
+    return dict(parameters)
+
+
+def run_batch(workdir: Path, label: str, repeats: int, cls=_TimedBatch, **options):
+    """Best of ``repeats`` (by wall time) of one batch configuration; returns (run, result)."""
+    best = None
+    for index in range(repeats):
+        out = workdir / f'{re.sub(r"[^a-z0-9]+", "_", label.lower())}_{index}'
+        run = cls('paper', out, parameters=_batch_parameters(**options))
+        result = run.run()
+        if best is None or result.wall_s < best[1].wall_s:
+            best = (run, result)
+        shutil.rmtree(out, ignore_errors=True)
+    return best
+
+
+def _messages(result) -> int:
+    return sum(result.message_counts.values())
+
+
+def actuator_micro(repeats: int) -> dict[str, float]:
+    """Microseconds per command: a moving volume (solve) against a repeated one (cache)."""
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[], domain_id=BASE_DOMAIN_ID)
+    sent = []
+    try:
+        node = ActuatorNode(context=context, emit=lambda topic, msg: sent.append(topic),
+                            now=lambda: 0, start_parameter_services=False,
+                            enable_rosout=False,
+                            parameter_overrides=[Parameter('scene', value='paper')])
+        from sensor_msgs.msg import JointState
+        count = 5000
+        volumes = np.linspace(0.0, 10.0 * ML, count).tolist()
+        command = JointState(name=['syringe'], position=[0.0], velocity=[0.0])
+
+        def feed(values) -> float:
+            start = time.perf_counter()
+            for value in values:
+                command.position[0] = value
+                node.on_pump_command(command)
+            return (time.perf_counter() - start) / len(values) * 1e6
+
+        moving = held = math.inf
+        for _ in range(repeats):
+            # Back to rest, so every repeat walks the same path.
+            node.tracker = Tracker(node.emap)
+            node._cached = False
+            solves = node.solves
+            moving = min(moving, feed(volumes))
+            moving_solves = node.solves - solves
+            solves = node.solves
+            held = min(held, feed([volumes[-1]] * count))
+            held_solves = node.solves - solves
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    return {'moving_us': moving, 'held_us': held, 'moving_solves': moving_solves,
+            'held_solves': held_solves, 'count': count}
+
+
+def cprofile_top(workdir: Path, rows: int = 14) -> str:
+    out = workdir / 'profiled'
+    run = BatchRun('paper', out, parameters=_batch_parameters(legs=PROFILE_LEGS))
+    profile = cProfile.Profile()
+    profile.enable()
+    run.run()
+    profile.disable()
+    shutil.rmtree(out, ignore_errors=True)
+    stats = pstats.Stats(profile)
+    total = stats.total_tt
+    entries = sorted(stats.stats.items(), key=lambda item: item[1][2], reverse=True)[:rows]
+    lines = ['| function | calls | own time [s] | share of profiled time |',
+             '|---|---:|---:|---:|']
+    for (file_name, line, function), (_, calls, own, _cumulative, _) in entries:
+        where = file_name
+        for marker in ('site-packages/', 'softseq_ros/'):
+            if marker in file_name:
+                where = file_name.split(marker, 1)[1]
+                where = ('softseq_ros/' + where) if marker == 'softseq_ros/' else where
+        name = f'`{where}:{line}({function})`' if line else f'`{function}`'
+        lines.append(f'| {name} | {calls} | {own:.2f} | {100.0 * own / total:.1f} % |')
+    return '\n'.join(lines) + f'\n\nProfiled total: {total:.1f} s (cProfile slows the run ' \
+        'about 4x, pure-Python call-heavy code the most).'
+
+
+def part_batch(repeats: int) -> str:
+    load_before = load_text()
+    scene = load_scene('paper')
+    lines = ['## 1. Batch run (`softseq_ros.batch.BatchRun`, one process, no DDS)', '']
+    with tempfile.TemporaryDirectory(prefix='bench_rig_') as tmp:
+        workdir = Path(tmp)
+        print('batch: full paper scene, everything recorded ...', flush=True)
+        full_run, full = run_batch(workdir, 'full', 1)
+        cpu_speedup = full.sim_duration_s / full_run.cpu_s
+        lines += [
+            f'Paper scene `config/paper.yaml`: 0 -> 65 -> 0 mL at 0.05 mL/s '
+            f'({full.sim_duration_s:.0f} s sim), pump {scene.pump.rate_hz:g} Hz, camera '
+            f'{scene.camera.rate_hz:g} Hz, outputs {", ".join(scene.outputs)}; every message '
+            'serialised and written to an MCAP bag (zstd chunks). One run (it is the longest).',
+            '',
+            '| wall [s] | CPU of this process [s] | speed-up (sim / wall) | speed-up (sim / CPU) '
+            '| messages | messages / wall s |',
+            '|---:|---:|---:|---:|---:|---:|',
+            f'| {full.wall_s:.1f} | {full_run.cpu_s:.1f} | **{full.speedup:.0f}x** | '
+            f'{cpu_speedup:.0f}x | {_messages(full)} | {_messages(full) / full.wall_s:,.0f} |',
+            '',
+            'Messages: ' + ', '.join(f'{t} {n}' for t, n in sorted(full.message_counts.items()))
+            + '.', '',
+            'Target in the issue: at least 300x on 2 cores. CPU-bound and single-threaded: the '
+            'second core only helps by keeping other work off this one, so sim / CPU is the '
+            'speed-up on an otherwise idle core.', '']
+
+        print('batch: where the time goes ...', flush=True)
+        instrumented, result = run_batch(workdir, 'instrumented', 1, cls=_InstrumentedBatch,
+                                         legs=SHORT_LEGS)
+        total = result.wall_s
+        rows = sorted(instrumented.exclusive.items(), key=lambda item: -item[1])
+        accounted = sum(instrumented.exclusive.values())
+        lines += [
+            '### Where the time goes', '',
+            f'Shortened programme 0 -> 10 -> 0 mL ({result.sim_duration_s:.0f} s sim, same '
+            'scene and rates), each component wrapped in a timer that counts its own time '
+            'without the wrapped calls inside it (a node handler that publishes does not '
+            f'count the serialisation and bag write of what it publishes). Run wall '
+            f'{total:.2f} s ({result.speedup:.0f}x; the timers themselves add a few %).', '',
+            '| component | calls | own time [s] | share | per call [us] |',
+            '|---|---:|---:|---:|---:|']
+        for name, seconds in rows:
+            calls = instrumented.calls[name]
+            lines.append(f'| {name} | {calls} | {seconds:.2f} | {100 * seconds / total:.0f} % '
+                         f'| {1e6 * seconds / max(calls, 1):.1f} |')
+        rest = total - accounted
+        lines += [f'| runner: routing, queue, loop, setup (the rest) | | {rest:.2f} | '
+                  f'{100 * rest / total:.0f} % | |', '']
+
+        print('batch: cProfile ...', flush=True)
+        lines += ['cProfile of a 0 -> 2.5 -> 0 mL run, functions by own time:', '',
+                  cprofile_top(workdir), '']
+
+        print('batch: skipping work ...', flush=True)
+        variants = [
+            ('everything recorded (scene outputs)', {}),
+            ('outputs [pressure, volumes] only (no curvature, poses, markers, events)',
+             {'outputs': ['pressure', 'volumes']}),
+            ('camera at 1 Hz (instead of 10 Hz)', {'camera_rate': 1.0}),
+            ('pump hold: 0 -> 5 mL, hold 200 s, -> 0 (same 400 s, same command count)',
+             {'legs': HOLD_LEGS}),
+        ]
+        lines += [
+            '### Skipping what a scene does not need', '',
+            f'Shortened programme 0 -> 10 -> 0 mL unless said otherwise, best of {repeats} '
+            'runs each (by wall time).', '',
+            '| variant | wall [s] | CPU [s] | speed-up | CPU vs everything | messages | '
+            'actuator solves / commands |', '|---|---:|---:|---:|---:|---:|---:|']
+        reference_cpu = None
+        for label, options in variants:
+            print(f'  {label}', flush=True)
+            options.setdefault('legs', SHORT_LEGS)
+            run, result = run_batch(workdir, label, repeats, **options)
+            actuator = run._nodes['actuator']
+            reference_cpu = reference_cpu or run.cpu_s
+            commands = result.message_counts.get('/pump/command', 0)
+            lines.append(
+                f'| {label} | {result.wall_s:.2f} | {run.cpu_s:.2f} | {result.speedup:.0f}x | '
+                f'{100 * run.cpu_s / reference_cpu:.0f} % | {_messages(result)} | '
+                f'{actuator.solves} / {commands} (rejected {actuator.rejected_commands}) |')
+        micro = actuator_micro(repeats)
+        lines += [
+            '', f'Actuator alone (batch mode, emit discarded), {micro["count"]} commands, best '
+            f'of {repeats}: a moving volume costs {micro["moving_us"]:.1f} us per command '
+            f'({micro["moving_solves"]} solves); the same volume repeated (a hold) '
+            f'{micro["held_us"]:.1f} us ({micro["held_solves"]} solves: the cached messages '
+            'go out with the new stamp).', '']
+    lines.append(under_load_note(load_before, load_text()))
+    return '\n'.join(lines)
+
+
+# ------------------------------------------------------------------------------ ROS plumbing
+
+def child_environment(domain_id: int) -> dict[str, str]:
+    """The whole environment (the ROS wheels need it) with this run's domain."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(domain_id)
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+@contextmanager
+def node_processes(env: dict[str, str], log_dir: Path):
+    """start(name, script, **params) starts a console script; all are stopped at the end."""
+    started: dict[str, subprocess.Popen] = {}
+
+    def start(name: str, script: str, **params) -> subprocess.Popen:
+        args = [os.path.join(sys.prefix, 'bin', script), '--ros-args']
+        for key, value in params.items():
+            args += ['-p', f'{key}:={value}']
+        with open(log_dir / f'{name}.log', 'ab') as log:
+            started[name] = subprocess.Popen(args, env=env, stdout=log,
+                                             stderr=subprocess.STDOUT)
+        return started[name]
+
+    start.processes = started
+    try:
+        yield start
+    finally:
+        for process in started.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        for process in started.values():
+            try:
+                process.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+def stop_process(process: subprocess.Popen, timeout: float = 20.0) -> None:
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+    try:
+        process.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+
+
+@contextmanager
+def spinning(context, node):
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+
+    def spin() -> None:
+        try:
+            executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    thread = threading.Thread(target=spin, daemon=True)
+    thread.start()
+    try:
+        yield executor
+    finally:
+        executor.shutdown(timeout_sec=10.0)
+        thread.join(timeout=10.0)
+        node.destroy_node()
+
+
+@contextmanager
+def ros_context(domain_id: int):
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[], domain_id=domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def wait_for(condition, what: str, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'timed out after {timeout:.0f} s waiting for {what}')
+        time.sleep(0.02)
+
+
+def call_start(node: Node) -> None:
+    client = node.create_client(Trigger, '/syringe_pump/start')
+    wait_for(client.service_is_ready, 'the pump service /syringe_pump/start', 30.0)
+    future = client.call_async(Trigger.Request())
+    wait_for(future.done, 'the answer of /syringe_pump/start', 30.0)
+    if not future.result().success:
+        raise RuntimeError(f'/syringe_pump/start refused: {future.result().message}')
+
+
+def rest_volume(scene_name: str) -> float:
+    return float(sum(segment.rest_volume for segment in load_scene(scene_name).segments))
+
+
+def volume_key(injected_m3: float) -> int:
+    # Commands 1e-9 m^3 apart (0.05 mL/s at 50 Hz) stay apart; the round-off of a sum of
+    # volumes (about 1e-20 m^3) does not.
+    return round(injected_m3 * 1e13)
+
+
+def _stamp(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+# ------------------------------------------------------------------------------ part 2: processes
+
+class Monitor(Node):
+    """Watches the pump status and sees the first command (the pump has the clock)."""
+
+    def __init__(self, context) -> None:
+        super().__init__('bench_monitor', context=context)
+        self.statuses: list[str] = []
+        spec = TOPICS['/pump/status']
+        self.create_subscription(spec.msg_type, '/pump/status',
+                                 lambda msg: self.statuses.append(msg.data), spec.qos)
+        self.commands_seen = 0
+        spec = TOPICS['/pump/command']
+        self._command_subscription = self.create_subscription(
+            spec.msg_type, '/pump/command', self._on_command, spec.qos)
+
+    def _on_command(self, _msg) -> None:
+        self.commands_seen += 1
+
+    def stop_watching_commands(self) -> None:
+        # One reader less for the pump while the benchmark runs.
+        self.destroy_subscription(self._command_subscription)
+
+    def recorder_on(self, topic: str) -> bool:
+        return any(info.node_name == 'recorder'
+                   for info in self.get_subscriptions_info_by_topic(topic))
+
+
+def run_sim_level(speedup: float, domain_id: int, workdir: Path) -> dict:
+    """One speed-up: start the nodes, run the short programme, read the bag back."""
+    env = child_environment(domain_id)
+    bag = workdir / f'bag_{speedup:g}x'
+    sim_params = {'scene': 'paper', 'use_sim_time': 'true'}
+    topics = '[' + ', '.join(f"'{t}'" for t in RECORDED_TOPICS) + ']'
+    outcome: dict = {'speedup': speedup}
+    with ros_context(domain_id) as context, node_processes(env, workdir) as start:
+        monitor = Monitor(context)
+        with spinning(context, monitor):
+            recorder = start('recorder', 'recorder', output=str(bag), topics=topics,
+                             use_sim_time='true')
+            start('actuator', 'actuator', resume_timeout_s=0.0, **sim_params)
+            start('camera', 'camera', **sim_params)
+            start('pump', 'syringe_pump', legs=f'"{SHORT_LEGS}"', autostart='false',
+                  **sim_params)
+            wait_for(lambda: all(monitor.recorder_on(t) for t in RECORDED_TOPICS),
+                     'the recorder on every topic', STARTUP_TIMEOUT_S)
+            wait_for(lambda: monitor.count_subscribers('/pump/command') >= 3
+                     and monitor.count_subscribers('/actuator/curvatures') >= 2,
+                     'the actuator and camera subscriptions', STARTUP_TIMEOUT_S)
+            # Time starts only now, so every command goes to a ready recorder.
+            clock = start('sim_clock', 'sim_clock', speedup=float(speedup))
+            wait_for(lambda: monitor.commands_seen > 0, 'the first command on sim time',
+                     STARTUP_TIMEOUT_S)
+            monitor.stop_watching_commands()
+            wall_start = time.monotonic()
+            call_start(monitor)
+            expected_wall = 400.0 / speedup
+            wait_for(lambda: any(s == 'finished' or s.startswith('stopped')
+                                 for s in monitor.statuses),
+                     'the programme to finish', 3.0 * expected_wall + 60.0)
+            outcome['wall_s'] = time.monotonic() - wall_start
+            outcome['final_status'] = monitor.statuses[-1]
+            # Stop time first: no new command, the queues drain, then the bag is closed.
+            stop_process(clock)
+            time.sleep(2.0)
+            stop_process(recorder, timeout=60.0)
+            outcome['load'] = load_text()
+    # The actuator stamps its outputs with its own clock when a command arrives, not with the
+    # command's stamp, so a command and its answer are paired by content: the injected volume
+    # the command asks for equals the segments' volumes minus their rest volumes.
+    rest = rest_volume('paper')
+    counts: dict[str, int] = defaultdict(int)
+    asked: Counter = Counter()
+    answered: Counter = Counter()
+    command_stamps = []
+    for item in read_bag(bag):
+        counts[item.topic] += 1
+        if item.topic == '/pump/command':
+            asked[volume_key(item.msg.position[0])] += 1
+            command_stamps.append(_stamp(item.msg))
+        elif item.topic == '/actuator/volumes':
+            answered[volume_key(sum(item.msg.position) - rest)] += 1
+    unanswered = sum((asked - answered).values())
+    unasked = sum((answered - asked).values())
+    outcome.update(counts=dict(counts), unanswered=unanswered, unasked=unasked,
+                   lossless=(counts['/pump/command'] == counts['/actuator/volumes']
+                             == counts['/actuator/pressure'] == counts['/actuator/curvatures']
+                             and unanswered == 0 and unasked == 0),
+                   sim_span_s=((max(command_stamps) - min(command_stamps)) * 1e-9
+                               if command_stamps else 0.0))
+    shutil.rmtree(bag, ignore_errors=True)
+    return outcome
+
+
+def part_processes(repeats: int) -> str:
+    del repeats  # one run per speed-up: a loss at any run is a loss
+    load_before = load_text()
+    lines = ['## 2. Hand-started processes on sim time', '',
+             'Console scripts started as a user starts them (`--ros-args -p ...`, '
+             '`use_sim_time:=true`), one process each: `syringe_pump` (paper scene, 50 Hz, '
+             'programme shortened with `legs` to 0 -> 10 -> 0 mL = 400 s sim), `actuator`, '
+             '`camera` (10 Hz), `recorder` (every rig topic except /clock) and `sim_clock` '
+             '(1000 ticks per wall second, the default). The recorder is subscribed to every '
+             'topic before `sim_clock` starts, and `sim_clock` is stopped before the recorder '
+             'when the programme ends, so every command the pump sent should be in the bag '
+             'with its answers. Lossless = the bag holds as many /actuator/volumes, '
+             '/actuator/pressure and /actuator/curvatures as /pump/command messages, and every '
+             'command has its /actuator/volumes: paired by content (the actuator stamps its '
+             'outputs with its own clock at receipt, not with the command stamp), the volumes '
+             'minus the rest volumes equal the commanded injected volume (to 1e-13 m^3), as a '
+             'multiset. Fresh processes and a fresh ROS domain per speed-up.', '',
+             '| speed-up | wall [s] | commands | commands / sim s | volumes | pressure | '
+             'curvatures | backbone | commands without volumes | lossless | load (1 min) |',
+             '|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|']
+    best = None
+    lost = []
+    with tempfile.TemporaryDirectory(prefix='bench_rig_sim_') as tmp:
+        for index, speedup in enumerate(SPEEDUPS):
+            print(f'processes: {speedup}x ...', flush=True)
+            domain = BASE_DOMAIN_ID + 1 + index
+            try:
+                outcome = run_sim_level(speedup, domain, Path(tmp))
+            except (TimeoutError, RuntimeError) as err:
+                lines.append(f'| {speedup}x | | | | | | | | | failed: {err} | '
+                             f'{load_text().split()[0]} |')
+                lost.append(speedup)
+                continue
+            counts = outcome['counts']
+            commands = counts.get('/pump/command', 0)
+            per_sim_s = commands / outcome['sim_span_s'] if outcome['sim_span_s'] else 0.0
+            lines.append(
+                f'| {speedup}x | {outcome["wall_s"]:.1f} | {commands} | {per_sim_s:.1f} | '
+                f'{counts.get("/actuator/volumes", 0)} | {counts.get("/actuator/pressure", 0)} '
+                f'| {counts.get("/actuator/curvatures", 0)} | '
+                f'{counts.get("/camera/backbone", 0)} | '
+                f'{outcome["unanswered"]} | '
+                f'{"yes" if outcome["lossless"] else "**no**"} | {outcome["load"].split()[0]} |')
+            print('  ' + json.dumps({k: v for k, v in outcome.items() if k != 'load'}),
+                  flush=True)
+            if outcome['lossless']:
+                best = speedup
+            else:
+                lost.append(speedup)
+    lines.append('')
+    if best is None:
+        lines.append('No speed-up ran without loss.')
+    else:
+        lines.append(f'**Highest speed-up without a lost message: {best}x.**')
+        below = [s for s in lost if s < best]
+        if below:
+            lines.append(f'(Losses at a lower speed-up too: {", ".join(map(str, below))}x.)')
+    lines += ['', "Commands per sim second below the pump's 50 Hz are not losses: a timer on "
+              'sim time fires at most once per /clock tick, so at speed-up S with 1000 clock '
+              'ticks per wall second the pump can tick at most 1000 / S times per sim second '
+              '(and less when a process falls behind).', '',
+              under_load_note(load_before, load_text())]
+    return '\n'.join(lines)
+
+
+# ------------------------------------------------------------------------------ part 3: latency
+
+class Probe(Node):
+    """Receipt wall time of every command, volumes, curvatures and backbone message."""
+
+    def __init__(self, context) -> None:
+        super().__init__('bench_probe', context=context)
+        self.received: dict[str, list] = {t: [] for t in (
+            '/pump/command', '/actuator/volumes', '/actuator/curvatures', '/camera/backbone')}
+        for topic, store in self.received.items():
+            spec = TOPICS[topic]
+            qos = QoSProfile(depth=1000, reliability=spec.qos.reliability,
+                             durability=spec.qos.durability)
+            self.create_subscription(
+                spec.msg_type, topic,
+                lambda msg, store=store: store.append((time.time_ns(), msg)), qos)
+
+    def matched(self) -> bool:
+        return all(self.count_publishers(t) > 0 for t in self.received)
+
+
+def percentiles(values_ms: list[float]) -> str:
+    data = np.array(values_ms)
+    if data.size == 0:
+        return '- | - | - | - | 0'
+    return (f'{np.median(data):.2f} | {np.percentile(data, 90):.2f} | '
+            f'{np.percentile(data, 99):.2f} | {data.max():.2f} | {data.size}')
+
+
+def part_latency(repeats: int) -> str:
+    del repeats
+    load_before = load_text()
+    scene = load_scene('paper')
+    lengths = np.array(scene.lengths)
+    points_per_segment = scene.camera.points_per_segment
+    domain = BASE_DOMAIN_ID + 1 + len(SPEEDUPS)
+    print(f'latency: {LATENCY_RUN_S:.0f} s at 100 Hz in real time ...', flush=True)
+    with tempfile.TemporaryDirectory(prefix='bench_rig_latency_') as tmp, \
+            ros_context(domain) as context, \
+            node_processes(child_environment(domain), Path(tmp)) as start:
+        probe = Probe(context)
+        with spinning(context, probe):
+            start('actuator', 'actuator', scene='paper', resume_timeout_s=0.0)
+            start('camera', 'camera', scene='paper', rate_hz=100)
+            start('pump', 'syringe_pump', scene='paper', rate_hz=100, autostart='false')
+            wait_for(probe.matched, 'the nodes', STARTUP_TIMEOUT_S)
+            wait_for(lambda: probe.count_subscribers('/pump/command') >= 1
+                     and probe.count_subscribers('/actuator/curvatures') >= 2,
+                     'the actuator and camera subscriptions', STARTUP_TIMEOUT_S)
+            call_start(probe)
+            started_ns = time.time_ns()
+            time.sleep(LATENCY_RUN_S)
+            load_during = load_text()
+        received = {topic: list(items) for topic, items in probe.received.items()}
+
+    warm = started_ns + int(LATENCY_WARMUP_S * 1e9)
+    rest = rest_volume('paper')
+    # The actuator stamps its outputs with its own clock when the command arrives (volumes and
+    # curvatures of one command alike), so the chain is paired by content: volumes -> command
+    # by the injected volume (distinct at every tick while the pump inflates), curvatures ->
+    # volumes by their common stamp, frame -> curvatures by the backbone's tip point.
+    command_stamp_of: dict[int, int] = {}
+    for _, msg in received['/pump/command']:
+        if _stamp(msg) >= warm:
+            command_stamp_of.setdefault(volume_key(msg.position[0]), _stamp(msg))
+    total_ms, to_actuator_ms, from_actuator_ms = [], [], []
+    command_of_actuator_stamp: dict[int, int] = {}
+    for received_ns, msg in received['/actuator/volumes']:
+        command = command_stamp_of.get(volume_key(sum(msg.position) - rest))
+        if command is None:
+            continue
+        answered = _stamp(msg)
+        command_of_actuator_stamp.setdefault(answered, command)
+        total_ms.append((received_ns - command) * 1e-6)
+        to_actuator_ms.append((answered - command) * 1e-6)
+        from_actuator_ms.append((received_ns - answered) * 1e-6)
+    curvatures = [(_stamp(m), list(m.position)) for _, m in received['/actuator/curvatures']
+                  if _stamp(m) in command_of_actuator_stamp]
+    # The camera draws the latest curvatures with the same kinematics, so a frame's tip point
+    # equals the tip computed here from the curvatures it shows, bit for bit.
+    tips: dict[tuple[float, float], int] = {}
+    if curvatures:
+        points, _ = backbone_batch(np.array([c for _, c in curvatures]), lengths,
+                                   points_per_segment)
+        for (stamp, _), tip in zip(curvatures, points[:, -1, :].tolist()):
+            tips.setdefault((tip[0], tip[1]), command_of_actuator_stamp[stamp])
+    shown: dict[int, tuple[int, int]] = {}
+    unmatched = frames = 0
+    for received_ns, msg in received['/camera/backbone']:
+        frame_stamp = _stamp(msg)
+        if frame_stamp < warm:
+            continue
+        frames += 1
+        tip = msg.poses[-1].position
+        command = tips.get((tip.x, tip.z))
+        if command is None:
+            unmatched += 1
+        elif command not in shown:
+            shown[command] = (received_ns, frame_stamp)
+    pose_ms = [(r - c) * 1e-6 for c, (r, _) in shown.items()]
+    wait_ms = [(f - c) * 1e-6 for c, (_, f) in shown.items()]
+    delivery_ms = [(r - f) * 1e-6 for _, (r, f) in shown.items()]
+    lines = [
+        '## 3. Real-time latency (pump and camera at 100 Hz)', '',
+        f'Paper scene in real time: `syringe_pump` (`rate_hz:=100`), `actuator`, `camera` '
+        f'(`rate_hz:=100`) as separate processes; a probe node in the benchmark process (a '
+        f'fourth process, SingleThreadedExecutor in a thread) subscribes to /pump/command, '
+        f'/actuator/volumes, /actuator/curvatures and /camera/backbone and notes the wall '
+        f'clock (`time.time_ns()`) when each callback runs. {LATENCY_RUN_S:.0f} s run, the '
+        f"first {LATENCY_WARMUP_S:.0f} s dropped. A command's time is its header stamp: the "
+        "pump's ROS clock (system time) read in its tick just before publishing. The actuator "
+        'stamps its outputs with its own clock when the command arrives (not with the '
+        "command stamp), so answers are paired with commands by content: the volumes' sum "
+        'minus the rest volumes is the commanded injected volume.', '',
+        '- command -> volumes: probe receipt of the /actuator/volumes answering a command '
+        'minus the command stamp (pump -> actuator -> probe: two DDS hops, the solve); split '
+        "at the actuator's stamp (its receipt of the command).",
+        '- command -> pose: for each command shown by a /camera/backbone frame, the receipt '
+        'of the first frame showing it minus the command stamp. A frame shows the command '
+        'whose curvatures give the same tip point (same kinematics, exact match). It '
+        "includes the wait for the camera's next frame (pump and camera timers run "
+        'unsynchronised: up to one 10 ms period), listed separately; commands superseded '
+        'before any frame are not counted.', '',
+        '| latency [ms] | median | p90 | p99 | max | samples |', '|---|---:|---:|---:|---:|---:|',
+        f'| **command -> /actuator/volumes received** | {percentiles(total_ms)} |',
+        f'| of which: pump -> actuator receipt (actuator stamp - command stamp) | '
+        f'{percentiles(to_actuator_ms)} |',
+        f'| of which: actuator receipt -> probe receipt (solve, publish, hop) | '
+        f'{percentiles(from_actuator_ms)} |',
+        f'| **command -> first /camera/backbone showing it, received** | '
+        f'{percentiles(pose_ms)} |',
+        f'| of which: until the frame (frame stamp - command stamp) | {percentiles(wait_ms)} |',
+        f'| of which: frame delivery (receipt - frame stamp) | {percentiles(delivery_ms)} |',
+        '',
+        f'After warm-up: {len(command_stamp_of)} commands, {len(total_ms)} answered; '
+        f'{frames} frames, '
+        f'{len(shown)} distinct commands shown, {unmatched} frames not matched to a command. '
+        f'Load average during the run: {load_during}.', '',
+        under_load_note(load_before, load_text())]
+    return '\n'.join(lines)
+
+
+# ------------------------------------------------------------------------------ results file
+
+def write_results(path: Path, sections: dict[str, str]) -> None:
+    """Replace this run's sections in the results file and keep the others."""
+    existing = path.read_text(encoding='utf-8') if path.is_file() else ''
+    kept = {}
+    for part in PARTS:
+        match = re.search(rf'<!-- part:{part} -->\n(.*?)<!-- /part:{part} -->', existing,
+                          re.S)
+        if match:
+            kept[part] = match.group(1).rstrip('\n')
+    kept.update(sections)
+    facts = machine_facts()
+    header = [
+        '# Rig benchmarks', '',
+        'Generated by `python bench/bench_rig.py` (see its docstring); a part re-run alone '
+        'replaces only its section. Benchmarks, not tests: no time is asserted.', '',
+        '| machine | |', '|---|---|', *[f'| {k} | {v} |' for k, v in facts.items()], '']
+    body = []
+    for part in PARTS:
+        if part in kept:
+            stamp = time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()) \
+                if part in sections else None
+            text = kept[part]
+            if stamp:
+                text = f'_Measured {stamp}._\n\n' + re.sub(r'^_Measured [^\n]*_\n\n', '', text)
+            body += [f'<!-- part:{part} -->', text, f'<!-- /part:{part} -->', '']
+    path.write_text('\n'.join(header + body), encoding='utf-8')
+
+
+def main() -> None:
+    global LATENCY_RUN_S
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--part', choices=(*PARTS, 'all'), default='all')
+    parser.add_argument('--repeats', type=int, default=3,
+                        help='repeats of the shortened batch runs (best is kept)')
+    parser.add_argument('--latency-seconds', type=float, default=LATENCY_RUN_S,
+                        help='length of the real-time latency run [s]')
+    parser.add_argument('--out', type=Path, default=RESULTS)
+    options = parser.parse_args()
+    if options.latency_seconds <= LATENCY_WARMUP_S:
+        parser.error(f'--latency-seconds: must be more than the {LATENCY_WARMUP_S:g} s warm-up')
+    LATENCY_RUN_S = options.latency_seconds
+    if options.repeats < 1:
+        parser.error('--repeats: must be at least 1')
+    runners = {'batch': part_batch, 'processes': part_processes, 'latency': part_latency}
+    chosen = PARTS if options.part == 'all' else (options.part,)
+    sections = {}
+    for part in chosen:
+        start = time.monotonic()
+        sections[part] = runners[part](options.repeats)
+        print(f'\n{sections[part]}\n\n({part}: {time.monotonic() - start:.0f} s)\n',
+              flush=True)
+        write_results(options.out, sections)
+    print(f'written {options.out}')
+
+
+def _interrupted(_signum, _frame) -> None:
+    raise KeyboardInterrupt
+
+
+if __name__ == '__main__':
+    signal.signal(signal.SIGTERM, _interrupted)
+    try:
+        main()
+    except KeyboardInterrupt:
+        sys.exit('bench_rig: interrupted')
