@@ -403,6 +403,8 @@ def main():
         report.append('')
         for row in rows:
             print(row, flush=True)
+        # Written after every scene, so an interrupted run still leaves its tables.
+        (out / 'benchmarks.md').write_text('\n'.join(report) + '\n')
     report += summarise(all_rows)
     report += ['## Scaling', '', *bench_scaling(args.quick), '']
     if not args.skip_noise:
