@@ -67,7 +67,7 @@ def plot_volume_split(recording: Recording, emap: EquilibriumMap | None, out: Pa
         ax.plot(dv[:, 0], dv[:, 1], 'k.', ms=1.5, label='recorded')
         ax.set_xlabel(f'{names[0]} [mL]')
         ax.set_ylabel(f'{names[1]} [mL]')
-        ax.set_aspect('equal', adjustable='datalim')
+        ax.set_aspect('equal', adjustable='box')
         limit = np.nanmax(dv) * 1.1
         ax.set_xlim(0, limit)
         ax.set_ylim(0, limit)

@@ -39,6 +39,7 @@ from softseq_ros.nodes.common import (
     RigNode,
     run_node,
     stamp_header,
+    stamp_ns,
 )
 from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, State, Tracker
 from softseq_ros.physics.scene import OUTPUT_NAMES
@@ -187,7 +188,9 @@ class ActuatorNode(RigNode):
         injected = self._check_command(msg)
         if injected is None:
             return
-        now = self.now_ns()
+        # The outputs describe the actuator at the commanded instant: they carry the command's
+        # stamp, so any listener pairs them exactly (an unstamped command gets the node time).
+        now = stamp_ns(msg.header) or self.now_ns()
         if self._cached and injected == self._last_command:
             self._send(now, ())
             return
