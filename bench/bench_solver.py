@@ -448,7 +448,7 @@ def figure(all_rows, path):
         for row in rows:
             if 'failed' in row:
                 continue
-            kind = row['method'].split()[0]
+            kind = row['method'].split()[0].split('.')[0]
             x = row['sweep'] / SWEEP_STEPS
             left.scatter(x, max(row['split'], 1e-17), marker=markers[kind], color=colour,
                          label=name if kind == 'ours' and row.get('resolution') == 250

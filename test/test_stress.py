@@ -390,13 +390,7 @@ def test_smoothing_refuses_what_it_cannot_smooth():
         smooth_table(v, np.where(v > 0.5, np.nan, v))
 
 
-TABLE_KNOTS = pytest.mark.xfail(
-    strict=True, reason='at the default resolution the branch cubics straddle table rows, where '
-    'PCHIP is only C1: equilibrium error 1.4e-5 of the volume range on this 100-row pair')
-
-
-@pytest.mark.parametrize('build', [pytest.param('peak_valley_pair', marks=TABLE_KNOTS),
-                                   'fig1_asymmetric', 'three_segments'])
+@pytest.mark.parametrize('build', ['peak_valley_pair', 'fig1_asymmetric', 'three_segments'])
 def test_snapping_scenes_hold_the_invariants_on_every_step(build):
     # Random tables seldom snap; these do, on both legs (the shipped scenes where present).
     if build == 'peak_valley_pair':
