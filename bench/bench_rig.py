@@ -24,7 +24,7 @@ Parts:
 """
 
 import argparse
-from collections import Counter, defaultdict
+from collections import defaultdict
 from contextlib import contextmanager
 import cProfile
 import importlib.metadata
@@ -90,6 +90,9 @@ RECORDED_TOPICS = ('/pump/command', '/pump/status', '/actuator/pressure', '/actu
 STARTUP_TIMEOUT_S = 90.0
 LATENCY_RUN_S = 20.0
 LATENCY_WARMUP_S = 1.0
+QUIET_S = 2.0
+# Commands and their answers agree to round-off; consecutive commands are >= 1e-10 m^3 apart.
+MATCH_TOLERANCE_M3 = 1.0e-12
 
 
 # ------------------------------------------------------------------------------ machine facts
@@ -481,9 +484,28 @@ def rest_volume(scene_name: str) -> float:
 
 
 def volume_key(injected_m3: float) -> int:
-    # Commands 1e-9 m^3 apart (0.05 mL/s at 50 Hz) stay apart; the round-off of a sum of
-    # volumes (about 1e-20 m^3) does not.
-    return round(injected_m3 * 1e13)
+    # Commands 5e-10 m^3 apart (0.05 mL/s at 100 Hz) stay apart.
+    return round(injected_m3 / MATCH_TOLERANCE_M3)
+
+
+def match_volumes(asked: list[float], answered: list[float]) -> tuple[int, int, float]:
+    """Pair volumes within the tolerance: unpaired asked, unpaired answered, worst gap."""
+    asked, answered = sorted(asked), sorted(answered)
+    i = j = unanswered = unasked = 0
+    worst = 0.0
+    while i < len(asked) and j < len(answered):
+        gap = answered[j] - asked[i]
+        if abs(gap) <= MATCH_TOLERANCE_M3:
+            worst = max(worst, abs(gap))
+            i += 1
+            j += 1
+        elif gap > 0.0:
+            unanswered += 1
+            i += 1
+        else:
+            unasked += 1
+            j += 1
+    return unanswered + len(asked) - i, unasked + len(answered) - j, worst
 
 
 def _stamp(msg) -> int:
@@ -513,6 +535,16 @@ class Monitor(Node):
         # One reader less for the pump while the benchmark runs.
         self.destroy_subscription(self._command_subscription)
 
+    def watch_answers(self) -> None:
+        self.last_answer = time.monotonic()
+        spec = TOPICS['/actuator/volumes']
+        self.create_subscription(spec.msg_type, '/actuator/volumes', self._on_answer,
+                                 QoSProfile(depth=1000, reliability=spec.qos.reliability,
+                                            durability=spec.qos.durability))
+
+    def _on_answer(self, _msg) -> None:
+        self.last_answer = time.monotonic()
+
     def recorder_on(self, topic: str) -> bool:
         return any(info.node_name == 'recorder'
                    for info in self.get_subscriptions_info_by_topic(topic))
@@ -528,8 +560,10 @@ def run_sim_level(speedup: float, domain_id: int, workdir: Path) -> dict:
     with ros_context(domain_id) as context, node_processes(env, workdir) as start:
         monitor = Monitor(context)
         with spinning(context, monitor):
-            recorder = start('recorder', 'recorder', output=str(bag), topics=topics,
-                             use_sim_time='true')
+            # The recorder stays on wall time: its discovery timer runs on the node clock, so
+            # with use_sim_time it would find no topic before /clock runs, and the clock starts
+            # only once everything is recorded (log times in the bag are wall times here).
+            recorder = start('recorder', 'recorder', output=str(bag), topics=topics)
             start('actuator', 'actuator', resume_timeout_s=0.0, **sim_params)
             start('camera', 'camera', **sim_params)
             start('pump', 'syringe_pump', legs=f'"{SHORT_LEGS}"', autostart='false',
@@ -552,29 +586,32 @@ def run_sim_level(speedup: float, domain_id: int, workdir: Path) -> dict:
                      'the programme to finish', 3.0 * expected_wall + 60.0)
             outcome['wall_s'] = time.monotonic() - wall_start
             outcome['final_status'] = monitor.statuses[-1]
-            # Stop time first: no new command, the queues drain, then the bag is closed.
+            # Stop time first: no new command; then wait until the actuator has answered its
+            # backlog (no /actuator/volumes for QUIET_S) and give the recorder as long again.
             stop_process(clock)
-            time.sleep(2.0)
+            monitor.watch_answers()
+            wait_for(lambda: time.monotonic() - monitor.last_answer > QUIET_S,
+                     'the actuator to go quiet', 120.0)
+            time.sleep(QUIET_S)
             stop_process(recorder, timeout=60.0)
             outcome['load'] = load_text()
-    # The actuator stamps its outputs with its own clock when a command arrives, not with the
-    # command's stamp, so a command and its answer are paired by content: the injected volume
-    # the command asks for equals the segments' volumes minus their rest volumes.
+    # A command and its answer are paired by content, independent of stamps: the injected
+    # volume the command asks for equals the segments' volumes minus their rest volumes.
     rest = rest_volume('paper')
     counts: dict[str, int] = defaultdict(int)
-    asked: Counter = Counter()
-    answered: Counter = Counter()
+    asked: list[float] = []
+    answered: list[float] = []
     command_stamps = []
     for item in read_bag(bag):
         counts[item.topic] += 1
         if item.topic == '/pump/command':
-            asked[volume_key(item.msg.position[0])] += 1
+            asked.append(float(item.msg.position[0]))
             command_stamps.append(_stamp(item.msg))
         elif item.topic == '/actuator/volumes':
-            answered[volume_key(sum(item.msg.position) - rest)] += 1
-    unanswered = sum((asked - answered).values())
-    unasked = sum((answered - asked).values())
+            answered.append(float(sum(item.msg.position)) - rest)
+    unanswered, unasked, worst = match_volumes(asked, answered)
     outcome.update(counts=dict(counts), unanswered=unanswered, unasked=unasked,
+                   worst_match_m3=worst,
                    lossless=(counts['/pump/command'] == counts['/actuator/volumes']
                              == counts['/actuator/pressure'] == counts['/actuator/curvatures']
                              and unanswered == 0 and unasked == 0),
@@ -591,16 +628,19 @@ def part_processes(repeats: int) -> str:
              'Console scripts started as a user starts them (`--ros-args -p ...`, '
              '`use_sim_time:=true`), one process each: `syringe_pump` (paper scene, 50 Hz, '
              'programme shortened with `legs` to 0 -> 10 -> 0 mL = 400 s sim), `actuator`, '
-             '`camera` (10 Hz), `recorder` (every rig topic except /clock) and `sim_clock` '
+             '`camera` (10 Hz), `recorder` (every rig topic except /clock; on wall time, see '
+             'below) and `sim_clock` '
              '(1000 ticks per wall second, the default). The recorder is subscribed to every '
              'topic before `sim_clock` starts, and `sim_clock` is stopped before the recorder '
              'when the programme ends, so every command the pump sent should be in the bag '
              'with its answers. Lossless = the bag holds as many /actuator/volumes, '
              '/actuator/pressure and /actuator/curvatures as /pump/command messages, and every '
-             'command has its /actuator/volumes: paired by content (the actuator stamps its '
-             'outputs with its own clock at receipt, not with the command stamp), the volumes '
-             'minus the rest volumes equal the commanded injected volume (to 1e-13 m^3), as a '
-             'multiset. Fresh processes and a fresh ROS domain per speed-up.', '',
+             'command has its /actuator/volumes: paired by content, independent of stamps: the '
+             'volumes minus the rest volumes equal the commanded injected volume (to 1e-12 '
+             'm^3), as a multiset. After the programme the clock is stopped and the recorder '
+             'is stopped '
+             f'only when no /actuator/volumes came for {QUIET_S:g} s and {QUIET_S:g} s more '
+             'have passed. Fresh processes and a fresh ROS domain per speed-up.', '',
              '| speed-up | wall [s] | commands | commands / sim s | volumes | pressure | '
              'curvatures | backbone | commands without volumes | lossless | load (1 min) |',
              '|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|']
@@ -644,7 +684,10 @@ def part_processes(repeats: int) -> str:
     lines += ['', "Commands per sim second below the pump's 50 Hz are not losses: a timer on "
               'sim time fires at most once per /clock tick, so at speed-up S with 1000 clock '
               'ticks per wall second the pump can tick at most 1000 / S times per sim second '
-              '(and less when a process falls behind).', '',
+              '(and less when a process falls behind: every node on sim time handles every '
+              '/clock message, 1000 per wall second, in Python).', '',
+              'The recorder runs without use_sim_time: its topic discovery timer is on the '
+              'node clock, so on sim time it subscribes to nothing until /clock runs.', '',
               under_load_note(load_before, load_text())]
     return '\n'.join(lines)
 
@@ -706,15 +749,16 @@ def part_latency(repeats: int) -> str:
 
     warm = started_ns + int(LATENCY_WARMUP_S * 1e9)
     rest = rest_volume('paper')
-    # The actuator stamps its outputs with its own clock when the command arrives (volumes and
-    # curvatures of one command alike), so the chain is paired by content: volumes -> command
-    # by the injected volume (distinct at every tick while the pump inflates), curvatures ->
-    # volumes by their common stamp, frame -> curvatures by the backbone's tip point.
+    # Paired by content, so the result does not rest on how the actuator stamps its outputs:
+    # volumes -> command by the injected volume (distinct at every tick while the pump
+    # inflates), curvatures -> volumes by their common stamp (one command's outputs share it),
+    # frame -> curvatures by the backbone's tip point.
     command_stamp_of: dict[int, int] = {}
     for _, msg in received['/pump/command']:
         if _stamp(msg) >= warm:
             command_stamp_of.setdefault(volume_key(msg.position[0]), _stamp(msg))
-    total_ms, to_actuator_ms, from_actuator_ms = [], [], []
+    total_ms = []
+    hop_ms = [(t - _stamp(m)) * 1e-6 for t, m in received['/pump/command'] if _stamp(m) >= warm]
     command_of_actuator_stamp: dict[int, int] = {}
     for received_ns, msg in received['/actuator/volumes']:
         command = command_stamp_of.get(volume_key(sum(msg.position) - rest))
@@ -723,8 +767,6 @@ def part_latency(repeats: int) -> str:
         answered = _stamp(msg)
         command_of_actuator_stamp.setdefault(answered, command)
         total_ms.append((received_ns - command) * 1e-6)
-        to_actuator_ms.append((answered - command) * 1e-6)
-        from_actuator_ms.append((received_ns - answered) * 1e-6)
     curvatures = [(_stamp(m), list(m.position)) for _, m in received['/actuator/curvatures']
                   if _stamp(m) in command_of_actuator_stamp]
     # The camera draws the latest curvatures with the same kinematics, so a frame's tip point
@@ -759,13 +801,12 @@ def part_latency(repeats: int) -> str:
         f'/actuator/volumes, /actuator/curvatures and /camera/backbone and notes the wall '
         f'clock (`time.time_ns()`) when each callback runs. {LATENCY_RUN_S:.0f} s run, the '
         f"first {LATENCY_WARMUP_S:.0f} s dropped. A command's time is its header stamp: the "
-        "pump's ROS clock (system time) read in its tick just before publishing. The actuator "
-        'stamps its outputs with its own clock when the command arrives (not with the '
-        "command stamp), so answers are paired with commands by content: the volumes' sum "
-        'minus the rest volumes is the commanded injected volume.', '',
+        "pump's ROS clock (system time) read in its tick just before publishing. Answers are "
+        "paired with commands by content, independent of stamps: the volumes' sum minus the "
+        'rest volumes is the commanded injected volume.', '',
         '- command -> volumes: probe receipt of the /actuator/volumes answering a command '
-        'minus the command stamp (pump -> actuator -> probe: two DDS hops, the solve); split '
-        "at the actuator's stamp (its receipt of the command).",
+        'minus the command stamp (pump -> actuator -> probe: two DDS hops, the solve); for '
+        "scale, one hop: the probe's own receipt of /pump/command minus its stamp.",
         '- command -> pose: for each command shown by a /camera/backbone frame, the receipt '
         'of the first frame showing it minus the command stamp. A frame shows the command '
         'whose curvatures give the same tip point (same kinematics, exact match). It '
@@ -774,10 +815,8 @@ def part_latency(repeats: int) -> str:
         'before any frame are not counted.', '',
         '| latency [ms] | median | p90 | p99 | max | samples |', '|---|---:|---:|---:|---:|---:|',
         f'| **command -> /actuator/volumes received** | {percentiles(total_ms)} |',
-        f'| of which: pump -> actuator receipt (actuator stamp - command stamp) | '
-        f'{percentiles(to_actuator_ms)} |',
-        f'| of which: actuator receipt -> probe receipt (solve, publish, hop) | '
-        f'{percentiles(from_actuator_ms)} |',
+        f'| for scale: command -> /pump/command received by the probe (one hop) | '
+        f'{percentiles(hop_ms)} |',
         f'| **command -> first /camera/backbone showing it, received** | '
         f'{percentiles(pose_ms)} |',
         f'| of which: until the frame (frame stamp - command stamp) | {percentiles(wait_ms)} |',
