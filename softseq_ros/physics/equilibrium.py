@@ -18,7 +18,7 @@ segments reaches at that volume), or where a segment leaves its table (the end o
 :class:`Tracker` follows any history of commanded volumes. It moves along the current branch and
 applies the branch-end rules in order, so a jump from V_a to V_b lands where a walk through every
 volume in between lands: a dropped command cannot change the physics. Looking up a state costs a
-binary search on the branch's samples and a Newton polish of the equilibrium equations.
+binary search on the branch's samples and a cubic; states next to a fold are solved exactly.
 """
 
 from bisect import bisect_right
@@ -37,6 +37,11 @@ from softseq_ros.physics.segments import Piece, Segment
 FloatArray = NDArray[np.float64]
 
 SEQUENCE_TYPES = ('none', 'partial', 'symmetric', 'asymmetric')
+
+# Largest error of a branch's cubics at an interval's middle, as a fraction of the volume
+# range, and how many times an interval that misses it is split in two at assembly.
+CUBIC_TOLERANCE = 1e-10
+REFINEMENTS = 16
 
 
 class DomainError(ValueError):
@@ -104,9 +109,12 @@ class _Branch:
     pieces: tuple[Piece, ...]
     spline: PPoly | None = None      # (v_i, p, k_i) as piecewise cubics of V
     knots: list[float] | None = None  # total as a list, for scalar lookups
-    rough: FloatArray | None = None  # (m, 2): V-intervals the cubic cannot follow (near folds)
+    rough: NDArray[np.bool_] | None = None  # per interval: solved exactly (next to folds)
     lower: _End = field(default_factory=lambda: _End('limit'))
     upper: _End = field(default_factory=lambda: _End('limit'))
+
+    def __post_init__(self) -> None:
+        self.any_rough = bool(self.rough is not None and self.rough.any())
 
     @property
     def lo(self) -> float:
@@ -144,13 +152,13 @@ class EquilibriumMap:
     The equilibrium set of connected segments, assembled once.
 
     ``resolution`` is the number of samples that each segment's PV curve contributes across its
-    whole volume range (more samples: better initial guesses for the Newton polish near folds,
-    longer assembly). ``polish`` is the number of Newton iterations applied to each looked-up
-    state (0 returns the interpolated branch samples).
+    whole volume range (more samples: smaller interpolation error, longer assembly).
+    ``polish`` (default on) solves the states next to folds exactly; off, they are
+    interpolated linearly between the branch's samples.
     """
 
     def __init__(self, segments: Sequence[Segment], resolution: int = 2000,
-                 polish: int = 2) -> None:
+                 polish: bool = True) -> None:
         """Assemble the equilibrium set of ``segments`` (base to tip)."""
         if len(segments) < 2:
             raise ValueError(f'an actuator needs at least 2 segments, got {len(segments)}')
@@ -158,7 +166,7 @@ class EquilibriumMap:
             raise ValueError(f'resolution must be >= 16, got {resolution}')
         self.segments = list(segments)
         self.resolution = int(resolution)
-        self.polish = int(polish)
+        self.polish = bool(polish)
         self.rest_volumes = np.array([s.rest_volume for s in self.segments])
         self.max_volumes = np.array([s.max_volume for s in self.segments])
         self.total_rest_volume = float(self.rest_volumes.sum())
@@ -321,51 +329,99 @@ class EquilibriumMap:
 
     def _add_branch(self, volumes: FloatArray, pressure: FloatArray,
                     config: tuple[Piece, ...]) -> None:
+        """
+        Store one stable stretch as a branch: Hermite cubics of the state in total volume.
+
+        Every interval is checked against the exact state at its middle and split there where
+        the cubic misses it, a few times over: next to a fold or bifurcation the state goes like
+        a square root of the volume, so the samples crowd there. The last interval touching
+        the singular point stays 'rough', now tiny, and its states are solved exactly.
+        """
+        flat = any(pc.direction == 0 for pc in config)
+        passed: set[tuple[float, float]] = set()
+        fitted = self._fit(volumes, pressure, config, flat, passed)
+        for _ in range(0 if flat else REFINEMENTS):
+            if fitted is None:
+                return
+            total, volumes, pressure, _, rough, misses = fitted
+            split = misses | rough
+            if not split.any():
+                break
+            passed.update(zip(total[:-1][~split].tolist(), total[1:][~split].tolist()))
+            middle = 0.5 * (pressure[:-1][split] + pressure[1:][split])
+            fitted = self._fit(np.concatenate([volumes, self._volumes_at(config, middle)]),
+                               np.concatenate([pressure, middle]), config, flat, passed)
+        if fitted is None:
+            return
+        total, volumes, pressure, coefficients, rough, misses = fitted
+        rough |= misses
+        values = np.concatenate([volumes, pressure[:, None], self.curvatures(volumes)], axis=1)
+        y0, y1 = values[:-1], values[1:]
+        coefficients = np.where(rough[None, :, None], np.stack(
+            [np.zeros_like(y0), np.zeros_like(y0), y1 - y0, y0]), coefficients)
+        h = np.diff(total)[:, None]
+        # From powers of t = (V - V_k) / h to powers of (V - V_k), as PPoly evaluates them.
+        coefficients = coefficients / h[None, :, :] ** np.arange(3, -1, -1)[:, None, None]
+        spline = PPoly(coefficients, total, extrapolate=True)
+        self.branches.append(_Branch(total, volumes, pressure, config, spline, total.tolist(),
+                                     rough))
+
+    def _fit(self, volumes: FloatArray, pressure: FloatArray, config: tuple[Piece, ...],
+             flat: bool, passed: set[tuple[float, float]]) -> tuple | None:
+        """Sorted samples, their Hermite cubics in t, and the intervals the cubics cannot take."""
         total = volumes.sum(axis=1)
         order = np.argsort(total, kind='stable')
         total, volumes, pressure = total[order], volumes[order], pressure[order]
         keep = np.concatenate([[True], np.diff(total) > 0.0])
         if keep.sum() < 2:
-            return
+            return None
         total, volumes, pressure = total[keep], volumes[keep], pressure[keep]
+        n = volumes.shape[1]
         k = self._stiffness(config, volumes)
         d = _cofactor_sum(k)
         with np.errstate(divide='ignore', invalid='ignore'):
             # dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D, both finite off folds.
             slopes = np.concatenate([_cofactors(k), np.prod(k, axis=1, keepdims=True)
                                      * self._k_scale], axis=1) / d[:, None]
-        n = volumes.shape[1]
-        values = np.concatenate([volumes, pressure[:, None]], axis=1)
-        h = np.diff(total)[:, None]
-        secant = np.abs(np.diff(values, axis=0))
-        tolerance = np.concatenate([np.full(n, self._tol_v), [1e-9 * self.p_scale]])
-        reach = np.maximum(np.abs(slopes[:-1]), np.abs(slopes[1:])) * h
-        rough = ~np.all(np.isfinite(slopes[:-1]) & np.isfinite(slopes[1:])
-                        & (reach <= 4.0 * secant + tolerance), axis=1)
         # Curvatures ride along: dk_i/dV = dk_i/dv_i dv_i/dV.
-        curvature = self.curvatures(volumes)
         curvature_slope = np.stack([s.curvature_slope(volumes[:, j])
                                     for j, s in enumerate(self.segments)], axis=1)
-        values = np.concatenate([values, curvature], axis=1)
         slopes = np.concatenate([slopes, curvature_slope * slopes[:, :n]], axis=1)
-        if any(pc.direction == 0 for pc in config):
+        values = np.concatenate([volumes, pressure[:, None], self.curvatures(volumes)], axis=1)
+        h = np.diff(total)[:, None]
+        if flat:
             slopes = np.nan_to_num(slopes)
-            rough[:] = False
-        # Hermite cubic per interval in t = (V - V_k) / h: c0 + t (c1 + t (c2 + t c3));
-        # the rough intervals get the chord, to be polished by Newton.
+        rough = ~np.all(np.isfinite(slopes[:-1]) & np.isfinite(slopes[1:]), axis=1)
+        # Hermite cubic per interval in t = (V - V_k) / h: c3 + t (c2 + t (c1 + t c0)).
         m0 = np.where(rough[:, None], 0.0, slopes[:-1] * h)
         m1 = np.where(rough[:, None], 0.0, slopes[1:] * h)
         y0, y1 = values[:-1], values[1:]
         coefficients = np.stack([2.0 * (y0 - y1) + m0 + m1, 3.0 * (y1 - y0) - 2.0 * m0 - m1,
                                  m0, y0])
-        coefficients = np.where(rough[None, :, None], np.stack(
-            [np.zeros_like(y0), np.zeros_like(y0), y1 - y0, y0]), coefficients)
-        # From powers of t = (V - V_k) / h to powers of (V - V_k), as PPoly evaluates them.
-        coefficients /= h[None, :, :] ** np.arange(3, -1, -1)[:, None, None]
-        spline = PPoly(coefficients, total, extrapolate=True)
-        rough_intervals = np.stack([total[:-1][rough], total[1:][rough]], axis=1)
-        self.branches.append(_Branch(total, volumes, pressure, config, spline, total.tolist(),
-                                     rough_intervals))
+        misses = np.zeros_like(rough)
+        if not flat:
+            unchecked = np.array([pair not in passed for pair in
+                                  zip(total[:-1].tolist(), total[1:].tolist())])
+            if unchecked.any():
+                misses[unchecked] = self._cubic_misses(
+                    config, total[:-1][unchecked], np.diff(total)[unchecked],
+                    pressure[:-1][unchecked], pressure[1:][unchecked],
+                    coefficients[:, unchecked, :n])
+        return total, volumes, pressure, coefficients, rough, misses & ~rough
+
+    def _cubic_misses(self, config: tuple[Piece, ...], start: FloatArray, width: FloatArray,
+                      p_start: FloatArray, p_end: FloatArray,
+                      cubic: FloatArray) -> NDArray[np.bool_]:
+        """
+        Intervals whose volume cubic misses the exact state at their middle.
+
+        An a-posteriori check: the exact state halfway in pressure against the cubic at the
+        same total volume. Misses cluster next to folds and bifurcations.
+        """
+        middle = self._volumes_at(config, 0.5 * (p_start + p_end))
+        t = ((middle.sum(axis=1) - start) / width)[:, None]
+        guess = ((cubic[0] * t + cubic[1]) * t + cubic[2]) * t + cubic[3]
+        return ~(np.max(np.abs(guess - middle), axis=1) <= CUBIC_TOLERANCE * self.v_scale)
 
     # ------------------------------------------------------------------ connections
 
@@ -497,15 +553,15 @@ class EquilibriumMap:
 
         Cubic Hermite interpolation between the branch's exact samples, with the exact slopes
         dv_i/dV, dp/dV and dk_i/dV: no segment model is evaluated. Only intervals next to a
-        fold, where the state varies like a square root of the volume, are polished by Newton
-        iterations.
+        fold, where the state varies like a square root of the volume, are solved exactly.
         """
         branch = self.branches[index]
         total = np.clip(np.asarray(total, dtype=float), branch.lo, branch.hi)
         values = branch.spline(total)
-        if self.polish and branch.rough.size:
-            rows = np.flatnonzero(np.any((total[:, None] >= branch.rough[:, 0])
-                                         & (total[:, None] <= branch.rough[:, 1]), axis=1))
+        if self.polish and branch.any_rough:
+            interval = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
+                               branch.total.size - 2)
+            rows = np.flatnonzero(branch.rough[interval])
             if rows.size:
                 values[rows] = self._polish(branch, total[rows], values[rows])
         return values
@@ -514,61 +570,50 @@ class EquilibriumMap:
         """One state (v_1..v_N, p, k_1..k_N) on branch ``index``: the per-command fast path."""
         branch = self.branches[index]
         total = min(max(total, branch.lo), branch.hi)
-        if branch.rough.size and np.any((branch.rough[:, 0] <= total)
-                                        & (total <= branch.rough[:, 1])):
-            return self.evaluate(index, np.array([total]))[0]
         i = min(max(bisect_right(branch.knots, total) - 1, 0), len(branch.knots) - 2)
+        if self.polish and branch.rough[i]:
+            return self.evaluate(index, np.array([total]))[0]
         c = branch.spline.c[:, i, :]
         dt = total - branch.knots[i]
         return ((c[0] * dt + c[1]) * dt + c[2]) * dt + c[3]
 
     def _polish(self, branch: _Branch, total: FloatArray, values: FloatArray) -> FloatArray:
-        n = len(self.segments)
+        """
+        Exact states next to a fold or bifurcation, where no cubic in V follows the state.
+
+        Inside one sample interval the total volume is monotone in the common pressure, with
+        dV/dp = sum 1/k_i. A safeguarded Newton on the pressure (a halving where the step would
+        leave the interval), with every segment's volume from its own monotone piece, cannot
+        fail and reaches round-off in a few steps.
+        """
         i = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
                     branch.total.size - 2)
-        bracket = np.abs(branch.volumes[i + 1] - branch.volumes[i]) + self._tol_v
-        volumes = self._newton(values[:, :n], total, bracket)
-        pressure = np.mean([s.pressure(volumes[:, j]) for j, s in enumerate(self.segments)],
-                           axis=0)
-        return np.concatenate([volumes, pressure[:, None], self.curvatures(volumes)], axis=1)
-
-    def _newton(self, volumes: FloatArray, total: FloatArray, bracket: FloatArray) -> FloatArray:
-        """
-        Polish p_i(v_i) = p, sum v_i = V by Newton on the bordered system.
-
-        Each segment's update is (dp - r_i) / k_i except the one with the smallest |k_i|, which
-        takes what the volume balance leaves: that keeps the solve finite at a segment's own
-        peak or valley. A step larger than the sample spacing (near a fold, where the system is
-        singular) is refused and the interpolated state kept.
-        """
-        start = volumes
-        for _ in range(self.polish):
-            p_each = np.stack([s.pressure(volumes[:, j]) for j, s in enumerate(self.segments)],
-                              axis=1)
+        # 'below' and 'above' are the pressures whose totals are below and above the target.
+        below, above = branch.pressure[i].copy(), branch.pressure[i + 1].copy()
+        t0, t1 = branch.total[i], branch.total[i + 1]
+        pressure = below + (above - below) * (total - t0) / (t1 - t0)
+        for _ in range(64):
+            volumes = self._volumes_at(branch.pieces, pressure)
+            excess = volumes.sum(axis=1) - total
+            short = excess < 0.0
+            below = np.where(short, pressure, below)
+            above = np.where(short, above, pressure)
+            done = (np.abs(excess) <= 4.0 * np.finfo(float).eps * self.v_scale) | (
+                np.abs(above - below) <= 4.0 * np.spacing(np.abs(above)))
+            if np.all(done):
+                break
             k = np.stack([s.stiffness(volumes[:, j]) for j, s in enumerate(self.segments)],
                          axis=1)
-            p = p_each.mean(axis=1, keepdims=True)
-            r = p_each - p
-            c = volumes.sum(axis=1) - total
-            m = np.argmin(np.abs(k), axis=1)
-            rows = np.arange(k.shape[0])
-            k_m = k[rows, m]
-            r_m = r[rows, m]
-            others = np.ones_like(k, dtype=bool)
-            others[rows, m] = False
-            safe_k = np.where(others, k, 1.0)
-            inv_sum = np.sum(np.where(others, 1.0 / safe_k, 0.0), axis=1)
-            r_sum = np.sum(np.where(others, r / safe_k, 0.0), axis=1)
-            denominator = 1.0 + k_m * inv_sum
             with np.errstate(divide='ignore', invalid='ignore'):
-                dp = (r_m - k_m * c + k_m * r_sum) / denominator
-                dv = np.where(others, (dp[:, None] - r) / safe_k, 0.0)
-            dv[rows, m] = -c - dv.sum(axis=1)
-            candidate = volumes + dv
-            ok = np.all(np.isfinite(candidate), axis=1) & np.all(
-                np.abs(candidate - start) <= bracket, axis=1)
-            volumes = np.where(ok[:, None], candidate, volumes)
-        return volumes
+                step = pressure - excess / np.sum(1.0 / k, axis=1)
+            inside = (np.isfinite(step) & (step > np.minimum(below, above))
+                      & (step < np.maximum(below, above)))
+            pressure = np.where(done, pressure, np.where(inside, step, 0.5 * (below + above)))
+        volumes = self._volumes_at(branch.pieces, pressure)
+        # The bisection leaves the volume balance off by round-off; the largest volume takes it.
+        largest = np.argmax(volumes, axis=1)
+        volumes[np.arange(volumes.shape[0]), largest] += total - volumes.sum(axis=1)
+        return np.concatenate([volumes, pressure[:, None], self.curvatures(volumes)], axis=1)
 
     def curvatures(self, volumes: FloatArray) -> FloatArray:
         """Per-segment curvature for volumes (n, N), in 1/m."""

@@ -135,28 +135,40 @@ class Segment(ABC):
         """
         Volumes on a rising or falling ``piece`` where the pressure equals ``p``.
 
-        Bisection on the bracket the piece gives, vectorised: it cannot fail on a monotone piece
-        and reaches the round-off floor in at most 64 halvings. Pressures outside the piece's range
-        return the nearer end.
+        Safeguarded Newton, vectorised: a Newton step where it stays inside the bracket the
+        piece gives, a halving where it would not. It cannot fail on a monotone piece and
+        reaches round-off in a few steps (at most 64 halvings near a peak, where the slope
+        vanishes). Pressures outside the piece's range return the nearer end.
         """
         if piece.direction == 0:
             raise ValueError('a flat piece has no inverse')
         target = np.asarray(p, dtype=float)
+        sign = float(piece.direction)
         lo = np.full(target.shape, piece.v_lo)
         hi = np.full(target.shape, piece.v_hi)
-        sign = float(piece.direction)
-        for _ in range(64):
-            mid = 0.5 * (lo + hi)
-            above = sign * (self.pressure(mid) - target) > 0.0
-            hi = np.where(above, mid, hi)
-            lo = np.where(above, lo, mid)
-            if np.all(hi - lo <= 4.0 * np.spacing(np.maximum(np.abs(hi), 1e-300))):
+        span = piece.p_at_hi - piece.p_at_lo
+        guess = piece.v_lo + (piece.v_hi - piece.v_lo) * np.clip(
+            (target - piece.p_at_lo) / span, 0.0, 1.0) if span else 0.5 * (lo + hi)
+        x = np.broadcast_to(guess, target.shape).astype(float)
+        floor = 4.0 * np.finfo(float).eps * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+        for _ in range(96):
+            residual = sign * (self.pressure(x) - target)
+            above = residual > 0.0
+            hi = np.where(above, x, hi)
+            lo = np.where(above, lo, x)
+            done = (np.abs(residual) <= floor) | (
+                hi - lo <= 4.0 * np.spacing(np.maximum(np.abs(hi), 1e-300)))
+            if np.all(done):
                 break
+            slope = sign * self.stiffness(x)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                step = x - residual / slope
+            inside = np.isfinite(step) & (step > lo) & (step < hi)
+            x = np.where(done, x, np.where(inside, step, 0.5 * (lo + hi)))
         # A pressure at a piece's end maps to that end exactly: near a peak the pressure is flat to
         # round-off over a stretch of volume, and the junctions between pieces must agree.
-        middle = 0.5 * (lo + hi)
-        middle = np.where(target == piece.p_at_lo, piece.v_lo, middle)
-        return np.where(target == piece.p_at_hi, piece.v_hi, middle)
+        x = np.where(target == piece.p_at_lo, piece.v_lo, x)
+        return np.where(target == piece.p_at_hi, piece.v_hi, x)
 
     def _arclength(self, v: FloatArray) -> FloatArray:
         """Cumulative length along the PV curve, volume and pressure scaled by their ranges."""
