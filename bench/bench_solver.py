@@ -455,14 +455,14 @@ def figure(all_rows, path):
                          and row.get('polish') == 0 else None)
         dyn = [r for r in rows if r.get('slowness') and 'failed' not in r]
         if dyn:
-            right.loglog([r['slowness'] for r in dyn], [r['split'] for r in dyn], 'o-',
+            right.loglog([r['slowness'] for r in dyn], [r['off'] for r in dyn], 'o-',
                          color=colour, label=name)
     left.set(xscale='log', yscale='log', xlabel='time per step in a 100k-step sweep [s]',
              ylabel='max volume-split error / volume range',
              title='o ours (resolutions, polish)  s naive  ^ dynamic  x numpy.interp')
     left.legend(fontsize=8)
     right.set(xlabel='slowness Q R / p_scale (pump flow x resistance)',
-              ylabel='max volume-split error / volume range',
+              ylabel='max split error / range, away from snaps',
               title='dynamic reference approaches the quasi-static path')
     right.legend(fontsize=8)
     fig.tight_layout()
