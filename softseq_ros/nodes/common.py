@@ -49,7 +49,9 @@ def _qos(depth: int, *, reliable: bool = True, latched: bool = False) -> QoSProf
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
-COMMAND_QOS = _qos(100)
+# Deep: a command the actuator's queue drops is skipped physics-wise (the jump rule), but its
+# answer is missing from the recording; a stalled process must not lose any.
+COMMAND_QOS = _qos(1000)
 STATUS_QOS = _qos(10, latched=True)
 PRESSURE_QOS = _qos(100)
 VOLUMES_QOS = _qos(1, latched=True)

@@ -18,6 +18,7 @@ from typing import Any, Sequence
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -130,7 +131,10 @@ class Recorder(Node):
         self._reported: set[str] = set()
         self.get_logger().info(
             f'recording {len(self._wanted)} topics into {self._output}')
-        self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        # Wall-clock discovery: with use_sim_time the node clock stands still until /clock
+        # arrives, and the topics must be found before that.
+        self.create_timer(DISCOVERY_PERIOD_S, self._discover,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._discover()
 
     @property
