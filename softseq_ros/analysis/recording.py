@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.bag.reader import read_bag
+from softseq_ros.physics.csv_columns import read_columns
 
 PUMP_TOPIC = '/pump/command'
 VOLUMES_TOPIC = '/actuator/volumes'
@@ -120,22 +121,6 @@ def _injected_at(times: FloatArray, injected: FloatArray, at: FloatArray) -> Flo
 
 def read_experiment(path: str | os.PathLike) -> tuple[FloatArray, FloatArray]:
     """Injected volume [m^3] and gauge pressure [Pa] columns of a measured PV curve (CSV)."""
-    from softseq_ros.physics.solve import read_history
-
-    path = Path(path)
-    injected = read_history(path)
-    lines = [line for line in path.read_text().splitlines()
-             if line.strip() and not line.lstrip().startswith('#')]
-    header = [h.strip() for h in lines[0].split(',')]
-    if 'pressure_pa' not in header:
-        raise RecordingError(f'{path}: no column pressure_pa in the header ({",".join(header)})')
-    column = header.index('pressure_pa')
-    pressure = []
-    for row_number, line in enumerate(lines[1:], start=1):
-        cells = line.split(',')
-        try:
-            pressure.append(float(cells[column]))
-        except (IndexError, ValueError):
-            raise RecordingError(f'{path}: row {row_number}, column pressure_pa: not a '
-                                 'number') from None
-    return injected, np.asarray(pressure)
+    columns = read_columns(path, ('injected_m3', 'pressure_pa'), RecordingError,
+                           'experiment file')
+    return columns['injected_m3'], columns['pressure_pa']

@@ -37,24 +37,16 @@ from softseq_ros.nodes.common import (
     OUTPUT_TOPICS,
     TOPICS,
     RigNode,
+    outputs_reason,
     run_node,
     stamp_header,
     stamp_ns,
 )
 from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, State, Tracker
-from softseq_ros.physics.scene import OUTPUT_NAMES
 
 ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events')
 RESUME_POLL_S = 0.02
 MAX_BUFFERED_COMMANDS = 100_000
-
-
-def _outputs_reason(value: list[str]) -> str | None:
-    unknown = [name for name in value if name not in OUTPUT_NAMES]
-    if unknown:
-        return (f'unknown output(s) {", ".join(unknown)}; expected some of '
-                f'{", ".join(OUTPUT_NAMES)}')
-    return None
 
 
 class ActuatorNode(RigNode):
@@ -69,7 +61,7 @@ class ActuatorNode(RigNode):
         outputs = self.declare_texts(
             'outputs', sorted(scene.outputs), 'Outputs to publish (scene output names); the '
             'actuator serves pressure, volumes, curvature and events.', read_only=True,
-            check=_outputs_reason)
+            check=outputs_reason)
         self.ambient_pressure_pa = self.declare_number(
             'ambient_pressure_pa', DEFAULT_AMBIENT_PRESSURE_PA,
             'Added to the gauge pressure on /actuator/pressure [Pa].', minimum=0.0)

@@ -38,6 +38,7 @@ from softseq_ros.nodes.common import (
     FRAME_ID,
     OUTPUT_TOPICS,
     RigNode,
+    outputs_reason,
     run_node,
     set_timer_rate,
     stamp_header,
@@ -49,18 +50,9 @@ from softseq_ros.physics.kinematics import (
     segment_end_indices,
 )
 from softseq_ros.physics.render import SEGMENT_RGB, SideViewRenderer
-from softseq_ros.physics.scene import OUTPUT_NAMES
 
 CAMERA_OUTPUTS = ('poses', 'markers', 'image')
 MARKER_WIDTH_M = 0.015  # the paper's 15 x 15 mm section
-
-
-def _outputs_reason(value: list[str]) -> str | None:
-    unknown = [name for name in value if name not in OUTPUT_NAMES]
-    if unknown:
-        return (f'unknown output(s) {", ".join(unknown)}; expected some of '
-                f'{", ".join(OUTPUT_NAMES)}')
-    return None
 
 
 def _increasing_reason(value: list[float]) -> str | None:
@@ -100,7 +92,7 @@ class CameraNode(RigNode):
                                       minimum=16, maximum=8192, read_only=True)
         outputs = self.declare_texts(
             'outputs', sorted(scene.outputs), 'Outputs to publish (scene output names); the '
-            'camera serves poses, markers and image.', read_only=True, check=_outputs_reason)
+            'camera serves poses, markers and image.', read_only=True, check=outputs_reason)
         self.outputs = frozenset(name for name in outputs if name in CAMERA_OUTPUTS)
         for name in sorted(self.outputs):
             for topic in OUTPUT_TOPICS[name]:

@@ -35,7 +35,7 @@ from sensor_msgs.msg import FluidPressure, Image, JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from softseq_ros.physics.scene import Scene, SceneError, load_scene
+from softseq_ros.physics.scene import OUTPUT_NAMES, Scene, SceneError, load_scene
 
 FRAME_ID = 'softseq_base'
 DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
@@ -105,6 +105,15 @@ OUTPUT_TOPICS: dict[str, tuple[str, ...]] = {
     'markers': ('/camera/markers',),
     'image': ('/camera/image',),
 }
+
+
+def outputs_reason(value: list[str]) -> str | None:
+    """Why an ``outputs`` parameter is refused (an unknown output name), or None."""
+    unknown = [name for name in value if name not in OUTPUT_NAMES]
+    if unknown:
+        return (f'unknown output(s) {", ".join(unknown)}; expected some of '
+                f'{", ".join(OUTPUT_NAMES)}')
+    return None
 
 
 class NodeConfigError(ValueError):

@@ -9,7 +9,6 @@ assembles.
 """
 
 from abc import ABC, abstractmethod
-import csv
 from dataclasses import dataclass
 import math
 from pathlib import Path
@@ -19,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
+from softseq_ros.physics.csv_columns import read_columns
 from softseq_ros.physics.materials import Material
 
 FloatArray = NDArray[np.float64]
@@ -199,38 +199,6 @@ class Segment(ABC):
         return np.interp(np.linspace(0.0, arc[-1], count), arc, fine)
 
 
-def _read_table(path: Path) -> dict[str, FloatArray]:
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise TableError(f'{path}: cannot read the segment table ({err.strerror})') from None
-    rows = [line for line in text.splitlines()
-            if line.strip() and not line.lstrip().startswith('#')]
-    if not rows:
-        raise TableError(f'{path}: no header and no rows')
-    reader = csv.reader(rows)
-    header = [h.strip() for h in next(reader)]
-    missing = [c for c in TABLE_COLUMNS if c not in header]
-    if missing:
-        raise TableError(f'{path}: header lacks column(s) {", ".join(missing)} '
-                         f'(expected {",".join(TABLE_COLUMNS)})')
-    index = {c: header.index(c) for c in TABLE_COLUMNS}
-    columns: dict[str, list[float]] = {c: [] for c in TABLE_COLUMNS}
-    for line_no, row in enumerate(reader, start=2):
-        for column, i in index.items():
-            try:
-                value = float(row[i])
-            except (IndexError, ValueError):
-                cell = row[i] if i < len(row) else '<missing>'
-                raise TableError(f'{path}: data row {line_no - 1}, column {column}: '
-                                 f'not a number: {cell!r}') from None
-            if not math.isfinite(value):
-                raise TableError(f'{path}: data row {line_no - 1}, column {column}: '
-                                 f'must be finite, got {value}')
-            columns[column].append(value)
-    return {c: np.asarray(v, dtype=float) for c, v in columns.items()}
-
-
 class TabulatedSegment(Segment):
     """
     A segment given by a table of volume, pressure and curvature (from FEM or from the rig).
@@ -278,7 +246,7 @@ class TabulatedSegment(Segment):
                  length: float | None = None) -> 'TabulatedSegment':
         """Read a table with header volume_m3,pressure_pa,curvature_per_m."""
         path = Path(path)
-        columns = _read_table(path)
+        columns = read_columns(path, TABLE_COLUMNS, TableError, 'segment table')
         if length is None:
             raise TableError(f'{path}: the segment length must be given (m)')
         return cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],

@@ -7,13 +7,13 @@ volume-history CSV files of ``softseq solve``.
 """
 
 import csv
-import math
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
+from softseq_ros.physics.csv_columns import read_columns
 from softseq_ros.physics.equilibrium import EquilibriumMap
 from softseq_ros.physics.equilibrium import Path as SolvedPath
 from softseq_ros.physics.segments import Segment
@@ -34,36 +34,8 @@ def build_map(segments: Sequence[Segment], resolution: int | None = None) -> Equ
 
 def read_history(path: str | Path) -> NDArray[np.float64]:
     """Commanded injected volumes, in order, from the ``injected_m3`` column of a CSV file."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise HistoryError(f'{path}: cannot read the volume history ({err.strerror})') from None
-    lines = [line for line in text.splitlines()
-             if line.strip() and not line.lstrip().startswith('#')]
-    if not lines:
-        raise HistoryError(f'{path}: empty file, expected a header with {INJECTED_COLUMN}')
-    reader = csv.reader(lines)
-    header = [h.strip() for h in next(reader)]
-    if INJECTED_COLUMN not in header:
-        raise HistoryError(f'{path}: no column {INJECTED_COLUMN} in the header '
-                           f'({",".join(header)})')
-    column = header.index(INJECTED_COLUMN)
-    values = []
-    for row_number, row in enumerate(reader, start=1):
-        cell = row[column].strip() if column < len(row) else ''
-        try:
-            value = float(cell)
-        except ValueError:
-            raise HistoryError(f'{path}: row {row_number}, column {INJECTED_COLUMN}: not a '
-                               f'number: {cell!r}') from None
-        if not math.isfinite(value):
-            raise HistoryError(f'{path}: row {row_number}, column {INJECTED_COLUMN}: must be '
-                               f'finite, got {cell}')
-        values.append(value)
-    if not values:
-        raise HistoryError(f'{path}: no rows below the header')
-    return np.asarray(values)
+    return read_columns(path, (INJECTED_COLUMN,), HistoryError, 'volume history')[
+        INJECTED_COLUMN]
 
 
 def path_columns(names: Sequence[str]) -> list[str]:
