@@ -406,3 +406,52 @@ def test_scene_is_frozen():
     scene = scene_from_dict(copy.deepcopy(valid_scene()), None)
     with pytest.raises(AttributeError):
         scene.name = 'other'
+
+
+def noisy_scene(tmp_path, smoothing=None):
+    """A linear partner and a measured-looking table: a smooth plateau curve plus row noise."""
+    rng = np.random.default_rng(7)
+    v = np.linspace(1e-6, 41e-6, 200)
+    clean = 8000.0 * (1.0 - np.exp(-(v - v[0]) / 5e-6))
+    noisy = clean + rng.normal(0.0, 0.01 * 8000.0, v.size)
+    noisy[0] = 0.0
+    rows = '\n'.join(f'{a:.17g},{b:.17g},0.0' for a, b in zip(v, noisy))
+    (tmp_path / 'rig.csv').write_text('volume_m3,pressure_pa,curvature_per_m\n' + rows + '\n')
+    segment = {'name': 'measured', 'length_m': 0.1, 'table': 'rig.csv'}
+    if smoothing is not None:
+        segment['smoothing'] = smoothing
+    data = {'name': 'noisy', 'segments': [
+        {'name': 'spring', 'length_m': 0.1,
+         'linear': {'rest_volume_m3': 1e-6, 'stiffness_pa_per_m3': 1e9, 'max_volume_m3': 60e-6}},
+        segment],
+        'pump': {'legs': [{'inflate_to_m3': 1e-5}]}}
+    path = tmp_path / 'noisy.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path, clean, v
+
+
+def test_opt_in_smoothing_removes_the_spurious_snaps_of_noisy_rig_data(tmp_path):
+    from softseq_ros.physics.equilibrium import Tracker
+
+    raw_path, clean, v = noisy_scene(tmp_path)
+    raw = load_scene(raw_path)
+    smoothed = load_scene(noisy_scene(tmp_path, smoothing={})[0])
+    # 1 % noise on a 200-row table turns one rising curve into dozens of tiny peaks.
+    assert len(raw.segments[1].monotone_pieces()) > 10
+    assert len(smoothed.segments[1].monotone_pieces()) == 1
+    history = np.concatenate([np.linspace(0, 30e-6, 3000), np.linspace(30e-6, 0, 3000)])
+    assert Tracker(EquilibriumMap(raw.segments)).sweep(history).events
+    assert not Tracker(EquilibriumMap(smoothed.segments)).sweep(history).events
+    # The smoothed curve stays near the noise-free one (noise was 80 Pa).
+    error = np.abs(smoothed.segments[1].pressure(v) - clean)
+    assert error[5:].max() < 80.0
+
+
+def test_smoothing_is_for_tables_only(tmp_path):
+    data = yaml.safe_load(noisy_scene(tmp_path)[0].read_text())
+    data['segments'][0]['smoothing'] = {}
+    path = tmp_path / 'bad.yaml'
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert 'segments[0].smoothing: only a table can be smoothed' in str(info.value)

@@ -11,6 +11,7 @@ publish. Every quantity is SI and every key that carries a unit says so in its s
       - name: bottom                  # letters, digits, '_'; unique
         length_m: 0.111
         table: segments/paper_bottom.csv        # CSV relative to this file, or:
+        # smoothing: {noise_std_pa, prominence_pa}  # opt-in, tables only (measured rig data)
         # linear: {rest_volume_m3, stiffness_pa_per_m3, max_volume_m3,
         #          curvature_per_m_per_m3: 0.0}
         # balloon: {material: {law: gent, shear_modulus_pa: ..., jm: ...}, radius_m,
@@ -49,6 +50,7 @@ import yaml
 from softseq_ros.physics.materials import LAW_NAMES, make_material, material_parameter_names
 from softseq_ros.physics.profile import DEFAULT_FLOW_RATE, Leg, PumpProfile
 from softseq_ros.physics.segments import BalloonSegment, LinearSegment, Segment, TabulatedSegment
+from softseq_ros.physics.smoothing import smooth_table
 
 PACKAGE = 'softseq_ros'
 
@@ -374,7 +376,7 @@ def _material(ctx: _Context, value: object, key_path: str) -> Any:
 
 
 def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
-    raw = _mapping(ctx, value, key_path, ('name', 'length_m'), _MODELS)
+    raw = _mapping(ctx, value, key_path, ('name', 'length_m'), _MODELS + ('smoothing',))
     name = _text(ctx, raw['name'], _join(key_path, 'name'))
     if not _SEGMENT_NAME.match(name):
         raise ctx.error(_join(key_path, 'name'),
@@ -389,13 +391,18 @@ def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
     model = models[0]
     where = _join(key_path, model)
     spec = raw[model]
+    if 'smoothing' in raw and model != 'table':
+        raise ctx.error(_join(key_path, 'smoothing'), 'only a table can be smoothed')
     try:
         if model == 'table':
             relative = _text(ctx, spec, where)
             table = (ctx.folder / relative) if not Path(relative).is_absolute() else Path(relative)
             if not table.is_file():
                 raise ctx.error(where, f'file not found: {table}')
-            return TabulatedSegment.from_csv(table, name=name, length=length)
+            segment = TabulatedSegment.from_csv(table, name=name, length=length)
+            if 'smoothing' not in raw:
+                return segment
+            return _smoothed(ctx, raw['smoothing'], _join(key_path, 'smoothing'), segment)
         gain_key = 'curvature_per_m_per_m3'
         if model == 'linear':
             params = _mapping(ctx, spec, where,
@@ -426,6 +433,34 @@ def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
     except ValueError as err:
         # The segment models check their own consistency; keep their words, add the key path.
         raise ctx.error(where, str(err)) from None
+
+
+def _smoothed(ctx: _Context, value: object, key_path: str,
+              segment: TabulatedSegment) -> TabulatedSegment:
+    """
+    A measured table with its noise smoothed (opt-in: ``smoothing: {}`` or with parameters).
+
+    See :func:`softseq_ros.physics.smoothing.smooth_table`: ``noise_std_pa`` (estimated from
+    the rows when absent) and ``prominence_pa``, the smallest peak or valley kept (6 noise
+    deviations when absent).
+    """
+    options = _mapping(ctx, {} if value is None else value, key_path, (),
+                       ('noise_std_pa', 'prominence_pa'))
+    noise = options.get('noise_std_pa')
+    prominence = options.get('prominence_pa')
+    try:
+        pressures = smooth_table(
+            segment.volumes, segment.pressures,
+            noise_std=None if noise is None else _number(
+                ctx, noise, _join(key_path, 'noise_std_pa'), ge=0.0),
+            prominence=None if prominence is None else _number(
+                ctx, prominence, _join(key_path, 'prominence_pa'), ge=0.0))
+    except SceneError:
+        raise
+    except ValueError as err:
+        raise ctx.error(key_path, str(err)) from None
+    return TabulatedSegment(segment.name, segment.length, segment.volumes, pressures,
+                            segment.curvatures, source=f'{segment.source} (smoothed)')
 
 
 def _segments(ctx: _Context, value: object) -> tuple[Segment, ...]:
