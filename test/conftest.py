@@ -47,3 +47,16 @@ def ros_env() -> dict[str, str]:
     # Child output must reach the test promptly, even when a child is killed.
     env['PYTHONUNBUFFERED'] = '1'
     return env
+
+
+@pytest.fixture
+def context():
+    """A fresh rclpy Context for one test, shut down afterwards."""
+    import rclpy
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)

@@ -4,14 +4,12 @@ import json
 from pathlib import Path
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from test_nodes import spinning, wait_for
 import yaml
 
 from softseq_ros.analysis.recording import load_recording
@@ -81,62 +79,30 @@ def test_batch_bag_is_deterministic_and_matches_the_solver(fast_scene, tmp_path)
     assert len(messages(bag, '/camera/snapshots')) == 6
 
 
-def spin_in_thread(executor):
-    def spin() -> None:
-        try:
-            executor.spin()
-        except ExternalShutdownException:
-            pass
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
-    return thread
-
-
-def wait_for(condition, what: str, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f'timed out waiting for {what}')
-        time.sleep(0.01)
-
-
 @pytest.mark.ros
-def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(fast_scene, tmp_path):
+def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, tmp_path):
     batch_bag, dds_bag = tmp_path / 'batch', tmp_path / 'dds'
     BatchRun(fast_scene, batch_bag).run()
 
-    context = rclpy.Context()
-    rclpy.init(context=context)
     scene = [Parameter('scene', value=str(fast_scene))]
-    nodes = []
-    try:
-        pump = SyringePumpNode(context=context, parameter_overrides=[
-            *scene, Parameter('autostart', value=False)])
-        actuator = ActuatorNode(context=context, parameter_overrides=[
-            *scene, Parameter('resume_timeout_s', value=0.0)])
-        camera = CameraNode(context=context, parameter_overrides=scene)
-        recorder = Recorder(context=context, parameter_overrides=[
-            Parameter('topics', value=list(RECORDED)), Parameter('output', value=str(dds_bag))])
-        nodes = [pump, actuator, camera, recorder]
-        executor = SingleThreadedExecutor(context=context)
-        for node in nodes:
-            executor.add_node(node)
-        thread = spin_in_thread(executor)
+    pump = SyringePumpNode(context=context, parameter_overrides=[
+        *scene, Parameter('autostart', value=False)])
+    actuator = ActuatorNode(context=context, parameter_overrides=[
+        *scene, Parameter('resume_timeout_s', value=0.0)])
+    camera = CameraNode(context=context, parameter_overrides=scene)
+    recorder = Recorder(context=context, parameter_overrides=[
+        Parameter('topics', value=list(RECORDED)), Parameter('output', value=str(dds_bag))])
+    with spinning(context, pump, actuator, camera, recorder) as executor:
         try:
             wait_for(lambda: set(recorder.recorded_topics) == set(RECORDED),
-                     'the recorder to subscribe to every rig topic')
+                     'the recorder to subscribe to every rig topic', timeout=60.0)
             wait_for(lambda: not actuator._resuming, 'the actuator to start')
             executor.create_task(pump.start)
-            wait_for(lambda: pump.state == 'finished', 'the pump programme to finish')
+            wait_for(lambda: pump.state == 'finished', 'the pump programme to finish',
+                     timeout=60.0)
             time.sleep(1.0)  # the pump keeps commanding its end volume; let the run settle
         finally:
-            executor.shutdown(timeout_sec=10.0)
-            thread.join(timeout=10.0)
             recorder.close_bag()
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
 
     batch, dds = bag_summary(batch_bag), bag_summary(dds_bag)
     assert {t: s.type_name for t, s in batch.topics.items()} == \

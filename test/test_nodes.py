@@ -14,7 +14,6 @@ import time
 
 import numpy as np
 import pytest
-import rclpy
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -106,16 +105,6 @@ def spinning(context, *nodes):
         thread.join(timeout=10.0)
         for node in nodes:
             node.destroy_node()
-
-
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    try:
-        yield ctx
-    finally:
-        rclpy.try_shutdown(context=ctx)
 
 
 class Collector(Node):

@@ -16,7 +16,6 @@ import sys
 
 import numpy as np
 import pytest
-import rclpy
 from test_nodes import (
     Collector,
     call_trigger,
@@ -65,16 +64,6 @@ def node_processes(env, log_dir: Path):
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
-
-
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    try:
-        yield ctx
-    finally:
-        rclpy.try_shutdown(context=ctx)
 
 
 def test_console_script_nodes_match_the_solver(context, ros_env, tmp_path):
