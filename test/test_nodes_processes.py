@@ -183,3 +183,19 @@ def test_a_bad_parameter_on_the_command_line_is_one_line(ros_env, tmp_path):
         assert 'Traceback' not in result.stderr
         errors = [line for line in result.stderr.splitlines() if line.startswith('camera: ')]
         assert len(errors) == 1 and expected in errors[0], result.stderr
+
+
+def test_yaml_text_that_rcl_cannot_parse_is_one_line_with_the_fix(ros_env):
+    # rcl reads -p values as YAML; the pump's legs are YAML text and need their own quotes.
+    script = os.path.join(sys.prefix, 'bin', 'syringe_pump')
+    result = subprocess.run([script, '--ros-args', '-p', 'legs:=[{inflate_to_m3: 5.0e-6}]'],
+                            env=ros_env, capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2, result.stderr
+    assert 'Traceback' not in result.stderr
+    errors = [line for line in result.stderr.splitlines() if line.startswith('syringe_pump: ')]
+    assert len(errors) == 1 and 'quote a value' in errors[0], result.stderr
+    quoted = subprocess.run([script, '--ros-args', '-p', "legs:='[{inflate_to_m3: 5.0e-6}]'",
+                             '-p', 'cycles:=0'], env=ros_env, capture_output=True, text=True,
+                            timeout=30)
+    # Quoted, the legs parse; the next mistake (cycles) is the one reported.
+    assert quoted.returncode == 2 and 'cycles' in quoted.stderr, quoted.stderr

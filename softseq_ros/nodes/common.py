@@ -27,6 +27,7 @@ from rcl_interfaces.msg import (
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -376,7 +377,16 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
     A configuration mistake (scene file, parameter value) ends the process with one line on
     stderr and exit status 2, not a traceback.
     """
-    rclpy.init(args=args)
+    name = getattr(node_class, 'NODE_NAME', 'node')
+    try:
+        rclpy.init(args=args)
+    except _rclpy.RCLError as err:
+        # rcl parses -p values as YAML: a string holding YAML (the pump's legs) needs its own
+        # quotes, -p "legs:='[{inflate_to_m3: 5.0e-6}]'".
+        reason = ' '.join(str(err).split(', at ')[0].split())
+        print(f'{name}: error: {reason}; quote a value that is YAML text, e.g. '
+              '-p "legs:=\'[{inflate_to_m3: 5.0e-6}]\'"', file=sys.stderr)
+        sys.exit(2)
     node = None
     error = None
     try:
@@ -396,6 +406,5 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
             node.destroy_node()
         rclpy.try_shutdown()
     if error is not None:
-        name = getattr(node_class, 'NODE_NAME', 'node')
         print(f'{name}: error: {error}', file=sys.stderr)
         sys.exit(2)
