@@ -45,7 +45,7 @@ from softseq_ros.physics.smoothing import smooth_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESOLUTIONS = (250, 500, 1000, 2000, 4000)
-POLISH = (0, 2)
+POLISH = (0, 2)  # off, on (EquilibriumMap takes polish as a flag)
 REFERENCE_RESOLUTION = 32000
 SWEEP_STEPS = 100_000
 
