@@ -343,8 +343,7 @@ class EquilibriumMap:
         for _ in range(0 if flat else REFINEMENTS):
             if fitted is None:
                 return
-            total, volumes, pressure, _, rough, misses = fitted
-            split = misses | rough
+            total, volumes, pressure, _, split = fitted
             if not split.any():
                 break
             passed.update(zip(total[:-1][~split].tolist(), total[1:][~split].tolist()))
@@ -353,12 +352,7 @@ class EquilibriumMap:
                                np.concatenate([pressure, middle]), config, flat, passed)
         if fitted is None:
             return
-        total, volumes, pressure, coefficients, rough, misses = fitted
-        rough |= misses
-        values = np.concatenate([volumes, pressure[:, None], self.curvatures(volumes)], axis=1)
-        y0, y1 = values[:-1], values[1:]
-        coefficients = np.where(rough[None, :, None], np.stack(
-            [np.zeros_like(y0), np.zeros_like(y0), y1 - y0, y0]), coefficients)
+        total, volumes, pressure, coefficients, rough = fitted
         h = np.diff(total)[:, None]
         # From powers of t = (V - V_k) / h to powers of (V - V_k), as PPoly evaluates them.
         coefficients = coefficients / h[None, :, :] ** np.arange(3, -1, -1)[:, None, None]
@@ -368,7 +362,11 @@ class EquilibriumMap:
 
     def _fit(self, volumes: FloatArray, pressure: FloatArray, config: tuple[Piece, ...],
              flat: bool, passed: set[tuple[float, float]]) -> tuple | None:
-        """Sorted samples, their Hermite cubics in t, and the intervals the cubics cannot take."""
+        """
+        Sorted samples, their cubics in t, and the intervals the Hermite cubics cannot take.
+
+        Those 'rough' intervals (a fold at an end, or a miss at the middle) get the chord.
+        """
         total = volumes.sum(axis=1)
         order = np.argsort(total, kind='stable')
         total, volumes, pressure = total[order], volumes[order], pressure[order]
@@ -407,7 +405,10 @@ class EquilibriumMap:
                     config, total[:-1][unchecked], np.diff(total)[unchecked],
                     pressure[:-1][unchecked], pressure[1:][unchecked],
                     coefficients[:, unchecked, :n])
-        return total, volumes, pressure, coefficients, rough, misses & ~rough
+        rough |= misses
+        chord = np.stack([np.zeros_like(y0), np.zeros_like(y0), y1 - y0, y0])
+        coefficients = np.where(rough[None, :, None], chord, coefficients)
+        return total, volumes, pressure, coefficients, rough
 
     def _cubic_misses(self, config: tuple[Piece, ...], start: FloatArray, width: FloatArray,
                       p_start: FloatArray, p_end: FloatArray,

@@ -124,13 +124,6 @@ class Segment(ABC):
             pieces.append(Piece(lo, hi, direction, p_lo, p_hi))
         return pieces
 
-    def check_volume(self, v: ArrayLike) -> None:
-        """Raise ValueError when a volume lies outside what the model covers."""
-        arr = np.asarray(v, dtype=float)
-        if arr.size and (np.nanmin(arr) < self.rest_volume or np.nanmax(arr) > self.max_volume):
-            raise ValueError(f'segment {self.name!r}: volume outside its range '
-                             f'[{self.rest_volume:.6g}, {self.max_volume:.6g}] m^3')
-
     def invert(self, piece: Piece, p: ArrayLike) -> FloatArray:
         """
         Volumes on a rising or falling ``piece`` where the pressure equals ``p``.
