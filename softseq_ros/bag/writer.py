@@ -40,10 +40,10 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
 import yaml
 
 from .cdr import encode
+from .mcap_file import ChunkedMcapWriter
 from .msgdefs import canonical_type_name, message_definition, type_description_hash
 
 METADATA_FILE = 'metadata.yaml'
@@ -55,8 +55,8 @@ MESSAGE_ENCODING = 'cdr'
 # mcap-cpp's default chunk size, which rosbag2 keeps.
 DEFAULT_CHUNK_SIZE = 768 * 1024
 DEFAULT_FLUSH_PERIOD_S = 0.5
-_COMPRESSIONS = {None: CompressionType.NONE, 'none': CompressionType.NONE,
-                 'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4}
+# The chunk compression names MCAP records carry ('' = none).
+_COMPRESSIONS = {None: '', 'none': '', 'zstd': 'zstd', 'lz4': 'lz4'}
 # RMW_DURATION_INFINITE as rosbag2 writes it: {sec: INT64_MAX // 1e9, nsec: INT64_MAX % 1e9}.
 INFINITE_DURATION = {'sec': 9223372036, 'nsec': 854775807}
 
@@ -230,8 +230,8 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._flush_period_s = flush_period_s
         self._file: BinaryIO = open(self._mcap_path, 'xb')
-        self._writer = Writer(self._file, chunk_size=chunk_size,
-                              compression=_COMPRESSIONS[compression])
+        self._writer = ChunkedMcapWriter(self._file, chunk_size=chunk_size,
+                                         compression=_COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=_library_name())
         self._stop = threading.Event()
         self._flusher: threading.Thread | None = None
@@ -332,22 +332,24 @@ class BagWriter:
         the receive time), both in nanoseconds since the epoch of the clock in use.
         """
         with self._lock:
-            self._check_open()
+            if self._closed:
+                self._check_open()
             entry = self._topics.get(topic)
             if entry is None:
                 raise BagWriterError(f'topic {topic}: not registered; call add_topic first')
             if log_time_ns < 0:
                 raise BagWriterError(f'topic {topic}: negative log time {log_time_ns} ns')
             publish = log_time_ns if publish_time_ns is None else publish_time_ns
-            self._writer.add_message(channel_id=entry.channel_id, log_time=int(log_time_ns),
-                                     data=bytes(cdr_bytes), publish_time=int(publish),
-                                     sequence=entry.message_count)
+            self._writer.add_message(entry.channel_id, int(log_time_ns), bytes(cdr_bytes),
+                                     int(publish), entry.message_count)
             entry.message_count += 1
             self._message_count += 1
-            self._start_ns = log_time_ns if self._start_ns is None else min(
-                self._start_ns, log_time_ns)
-            self._end_ns = log_time_ns if self._end_ns is None else max(
-                self._end_ns, log_time_ns)
+            if self._start_ns is None:
+                self._start_ns = self._end_ns = log_time_ns
+            elif log_time_ns > self._end_ns:
+                self._end_ns = log_time_ns
+            elif log_time_ns < self._start_ns:
+                self._start_ns = log_time_ns
             self._unflushed = True
             if (self._flush_period_s is not None
                     and time.monotonic() - self._last_flush >= self._flush_period_s):

@@ -1,0 +1,279 @@
+"""
+A chunked MCAP writer whose per-message cost is one struct pack and two list appends.
+
+mcap's own ``Writer`` builds a ``Message`` dataclass per message and writes its fields one by
+one through a ``BytesIO`` (about 15 us per message), which was a fifth of a batch run. Here a
+message record goes straight into the chunk's ``bytearray``, and the message indexes are packed
+as whole arrays when the chunk closes. Every other record (header, schemas, channels, chunks'
+framing, summary, footer) is written by mcap's own record classes, so the layout stays the
+library's: schemas and channels inside the chunks, then a summary with schemas, channels,
+statistics, chunk, attachment and metadata indexes, and summary offsets.
+
+Compression runs on a worker thread (zstd and lz4 release the GIL), so on a machine with two
+cores the next chunk is filled while the last one is compressed; records still reach the
+file in order.
+"""
+
+from array import array
+from concurrent.futures import Future, ThreadPoolExecutor
+import struct
+from typing import Any, BinaryIO
+import zlib
+
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+MAGIC = b'\x89MCAP0\r\n'
+# Message record: opcode, record length, channel id, sequence, log time, publish time.
+_MESSAGE_HEADER = struct.Struct('<BQHIQQ')
+_MESSAGE_FIXED = 2 + 4 + 8 + 8
+_MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
+_FOOTER_CRC_PREFIX = struct.Struct('<BQQQ')
+
+
+def _compressor(compression: str) -> Any:
+    if compression == 'zstd':
+        import zstandard
+        return zstandard.ZstdCompressor().compress
+    if compression == 'lz4':
+        import lz4.frame
+        return lz4.frame.compress
+    return None
+
+
+class _OpenChunk:
+    """The chunk being filled: its records, message indexes and time range."""
+
+    __slots__ = ('data', 'indexes', 'start', 'end', 'count')
+
+    def __init__(self) -> None:
+        self.data = bytearray()
+        self.indexes: dict[int, array] = {}
+        self.start = 0
+        self.end = 0
+        self.count = 0
+
+
+class ChunkedMcapWriter:
+    """Write an MCAP file with chunks, message indexes and a summary to a binary stream."""
+
+    def __init__(self, stream: BinaryIO, *, chunk_size: int, compression: str = 'zstd') -> None:
+        """``compression`` is 'zstd', 'lz4' or '' (none); chunks close past ``chunk_size``."""
+        self._stream = stream
+        self._chunk_size = chunk_size
+        self._compression = compression
+        self._compress = _compressor(compression)
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix='mcap-chunk') \
+            if self._compress is not None else None
+        self._pending: Future | None = None
+        self._pending_chunk: tuple[_OpenChunk, bytes] | None = None
+        self._chunk = _OpenChunk()
+        self._schemas: list[Schema] = []
+        self._channels: list[Channel] = []
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._channel_counts: dict[int, int] = {}
+        self._message_count = 0
+        self._start = 0
+        self._end = 0
+        self._chunk_count = 0
+        self._offset = 0
+
+    # ---------------------------------------------------------------- records
+
+    def _write(self, data: bytes) -> None:
+        self._stream.write(data)
+        self._offset += len(data)
+
+    def _write_record(self, record: Any) -> int:
+        """Write one record outside any chunk; return its offset."""
+        builder = RecordBuilder()
+        record.write(builder)
+        offset = self._offset
+        self._write(builder.end())
+        return offset
+
+    def start(self, profile: str, library: str) -> None:
+        """Write the magic and the header."""
+        self._write(MAGIC)
+        self._write_record(Header(profile=profile, library=library))
+
+    def _append_to_chunk(self, record: Any) -> None:
+        builder = RecordBuilder()
+        record.write(builder)
+        self._chunk.data += builder.end()
+
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """Add a schema (written into the chunk in progress, as mcap does); return its id."""
+        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+        self._schemas.append(schema)
+        self._append_to_chunk(schema)
+        return schema.id
+
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int,
+                         metadata: dict[str, str]) -> int:
+        """Add a channel (written into the chunk in progress); return its id."""
+        channel = Channel(id=len(self._channels) + 1, topic=topic,
+                          message_encoding=message_encoding, schema_id=schema_id,
+                          metadata=dict(metadata))
+        self._channels.append(channel)
+        self._channel_counts[channel.id] = 0
+        self._append_to_chunk(channel)
+        return channel.id
+
+    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
+                    sequence: int) -> None:
+        """Append one message record to the chunk in progress."""
+        chunk = self._chunk
+        buffer = chunk.data
+        index = chunk.indexes.get(channel_id)
+        if index is None:
+            index = chunk.indexes[channel_id] = array('Q')
+        index.append(log_time)
+        index.append(len(buffer))
+        buffer += _MESSAGE_HEADER.pack(Opcode.MESSAGE, _MESSAGE_FIXED + len(data), channel_id,
+                                       sequence, log_time, publish_time)
+        buffer += data
+        if chunk.count:
+            if log_time < chunk.start:
+                chunk.start = log_time
+            if log_time > chunk.end:
+                chunk.end = log_time
+        else:
+            chunk.start = chunk.end = log_time
+        chunk.count += 1
+        self._channel_counts[channel_id] += 1
+        if len(buffer) > self._chunk_size:
+            self._close_chunk()
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Write a metadata record (after the chunk in progress) and index it."""
+        self._close_chunk()
+        self._drain()
+        builder = RecordBuilder()
+        Metadata(name=name, metadata=data).write(builder)
+        record = builder.end()
+        self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record),
+                                                    name=name))
+        self._write(record)
+
+    # ---------------------------------------------------------------- chunks
+
+    def _close_chunk(self) -> None:
+        chunk = self._chunk
+        if not chunk.count:
+            return  # schemas and channels alone stay for the next chunk, as in mcap
+        self._chunk = _OpenChunk()
+        self._message_count += chunk.count
+        self._start = min(self._start, chunk.start) if self._chunk_count else chunk.start
+        self._end = max(self._end, chunk.end)
+        self._chunk_count += 1
+        data = bytes(chunk.data)
+        if self._worker is None:
+            self._write_chunk(chunk, data, data)
+            return
+        # One compression in flight: the file gets the chunks in order.
+        compressed = self._worker.submit(self._compress, data)
+        self._drain()
+        self._pending = compressed
+        self._pending_chunk = (chunk, data)
+
+    def _drain(self) -> None:
+        if self._pending is not None:
+            compressed = self._pending.result()
+            chunk, data = self._pending_chunk
+            self._pending = self._pending_chunk = None
+            self._write_chunk(chunk, data, compressed)
+
+    def _write_chunk(self, chunk: _OpenChunk, data: bytes, compressed: bytes) -> None:
+        record = Chunk(compression=self._compression, data=compressed,
+                       message_start_time=chunk.start, message_end_time=chunk.end,
+                       uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))
+        chunk_offset = self._offset
+        builder = RecordBuilder()
+        record.write(builder)
+        chunk_record = builder.end()
+        self._write(chunk_record)
+        index_offsets = {}
+        index_start = self._offset
+        parts = []
+        for channel_id, entries in chunk.indexes.items():
+            index_offsets[channel_id] = self._offset + sum(len(p) for p in parts)
+            payload = entries.tobytes() if _LITTLE else struct.pack(
+                f'<{len(entries)}Q', *entries)
+            parts.append(_MESSAGE_INDEX_HEADER.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(payload),
+                                                    channel_id, len(payload)) + payload)
+        for part in parts:
+            self._write(part)
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=chunk.start, message_end_time=chunk.end,
+            chunk_start_offset=chunk_offset, chunk_length=len(chunk_record),
+            message_index_offsets=index_offsets,
+            message_index_length=self._offset - index_start,
+            compression=self._compression, compressed_size=len(compressed),
+            uncompressed_size=len(data)))
+
+    def flush(self) -> None:
+        """Close the chunk in progress and write everything to the stream."""
+        self._close_chunk()
+        self._drain()
+        self._stream.flush()
+
+    # ---------------------------------------------------------------- summary
+
+    def finish(self) -> None:
+        """Write the data end, the summary, the footer and the closing magic."""
+        self._close_chunk()
+        self._drain()
+        if self._worker is not None:
+            self._worker.shutdown()
+        self._write_record(DataEnd(data_section_crc=0))
+        summary_start = self._offset
+        builder = RecordBuilder()
+        offsets = []
+
+        def group(opcode: Opcode, records: list[Any]) -> None:
+            start = builder.count
+            for record in records:
+                record.write(builder)
+            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
+                                         group_length=builder.count - start))
+
+        group(Opcode.SCHEMA, self._schemas)
+        group(Opcode.CHANNEL, self._channels)
+        group(Opcode.STATISTICS, [Statistics(
+            attachment_count=0, channel_count=len(self._channels),
+            channel_message_counts=dict(self._channel_counts), chunk_count=self._chunk_count,
+            message_count=self._message_count, message_end_time=self._end,
+            message_start_time=self._start, metadata_count=len(self._metadata_indexes),
+            schema_count=len(self._schemas))])
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.ATTACHMENT_INDEX, [])
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = summary_start + builder.count
+        for offset in offsets:
+            offset.write(builder)
+        summary = builder.end()
+        crc = zlib.crc32(summary)
+        crc = zlib.crc32(_FOOTER_CRC_PREFIX.pack(Opcode.FOOTER, 8 + 8 + 4, summary_start,
+                                                 summary_offset_start), crc)
+        self._write(summary)
+        self._write_record(Footer(summary_start=summary_start,
+                                  summary_offset_start=summary_offset_start, summary_crc=crc))
+        self._write(MAGIC)
+
+
+_LITTLE = struct.pack('=H', 1) == struct.pack('<H', 1)
