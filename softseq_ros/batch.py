@@ -20,6 +20,7 @@ from typing import Any, Callable, TextIO
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
 from softseq_ros.bag.writer import (
     BagWriter,
@@ -136,13 +137,22 @@ class BatchRun:
                 self._report(wall_start, duration)
 
     def _emit(self, topic: str, msg: Any) -> None:
-        if topic not in self._counts:
-            self._writer.add_topic(topic, message_type_name(msg), qos_yaml(TOPICS[topic].qos))
-            self._counts[topic] = 0
-        self._writer.write(topic, serialize(msg), self._now_ns, self._now_ns)
-        self._counts[topic] += 1
-        for node_name, handler in ROUTES.get(topic, ()):
-            self._queue.append((getattr(self._nodes[node_name], handler), msg))
+        counts = self._counts
+        if topic not in counts:
+            spec = TOPICS[topic]
+            self._writer.add_topic(topic, message_type_name(spec.msg_type()), qos_yaml(spec.qos))
+            counts[topic] = 0
+        # A node may send a message already serialised (as rclpy's publish allows).
+        serialised = type(msg) is bytes
+        self._writer.write(topic, msg if serialised else serialize(msg), self._now_ns,
+                           self._now_ns)
+        counts[topic] += 1
+        routes = ROUTES.get(topic)
+        if routes:
+            if serialised:
+                msg = deserialize_message(msg, TOPICS[topic].msg_type)
+            for node_name, handler in routes:
+                self._queue.append((getattr(self._nodes[node_name], handler), msg))
 
     def _deliver(self) -> None:
         """Hand queued messages to their subscribers, in the order they were sent."""

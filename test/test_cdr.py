@@ -1,13 +1,14 @@
 """The fast CDR encoders against rclpy's own (de)serialisation of the same messages."""
 
 from geometry_msgs.msg import Point, Pose, PoseArray
+import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure, Image, JointState
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 
-from softseq_ros.bag.cdr import ENCODERS, encode
+from softseq_ros.bag.cdr import ENCODERS, FixedLayout, encode
 from softseq_ros.bag.writer import message_type_name, serialize
 
 
@@ -75,3 +76,43 @@ def test_every_rig_type_has_an_encoder():
 def test_unknown_types_fall_back():
     from builtin_interfaces.msg import Time
     assert encode(Time(), 'builtin_interfaces/msg/Time') is None
+
+
+def test_fixed_layout_restamps_and_refills_a_pose_array():
+    layout = FixedLayout(stamped(PoseArray(poses=[Pose() for _ in range(41)])),
+                         'geometry_msgs/msg/PoseArray')
+    values = np.random.default_rng(3).normal(size=(41, 7))
+    stamp = 1_795_000_123 * 10**9 + 987_654_321
+    decoded = deserialize_message(layout.encode(stamp, [values]), PoseArray)
+    expected = stamped(PoseArray(poses=[
+        Pose(position=Point(x=v[0], y=v[1], z=v[2])) for v in values]),
+        sec=1_795_000_123, nanosec=987_654_321)
+    for pose_msg, v in zip(expected.poses, values):
+        o = pose_msg.orientation
+        o.x, o.y, o.z, o.w = v[3:]
+    assert decoded == expected
+
+
+def test_fixed_layout_restamps_every_marker_but_not_the_texture_header():
+    example = MESSAGES[-1]
+    layout = FixedLayout(example, 'visualization_msgs/msg/MarkerArray')
+    assert layout.block_sizes == (21 * 24,)
+    points = np.arange(63, dtype=float).reshape(21, 3)
+    decoded = deserialize_message(layout.encode(5 * 10**9 + 7, [points]), MarkerArray)
+    marker, empty = decoded.markers
+    assert (marker.header.stamp.sec, marker.header.stamp.nanosec) == (5, 7)
+    assert (empty.header.stamp.sec, empty.header.stamp.nanosec) == (5, 7)
+    assert (marker.texture.header.stamp.sec, marker.texture.header.stamp.nanosec) == (0, 0)
+    assert [(p.x, p.y, p.z) for p in marker.points] == [tuple(r) for r in points.tolist()]
+    # Everything else stays as in the example.
+    marker.header, marker.points = example.markers[0].header, example.markers[0].points
+    assert marker == example.markers[0]
+
+
+def test_fixed_layout_refuses_blocks_of_another_shape():
+    layout = FixedLayout(PoseArray(poses=[Pose() for _ in range(3)]),
+                         'geometry_msgs/msg/PoseArray')
+    with pytest.raises(ValueError, match='block of 112 bytes where the layout holds 168'):
+        layout.encode(0, [np.zeros((2, 7))])
+    with pytest.raises(ValueError, match='expected 1 blocks, got 2'):
+        layout.encode(0, [np.zeros((3, 7)), np.zeros((3, 7))])

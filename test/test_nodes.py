@@ -12,6 +12,7 @@ import math
 import threading
 import time
 
+from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
 from rclpy.exceptions import InvalidParameterValueException
@@ -19,6 +20,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 import yaml
@@ -447,7 +449,8 @@ def test_camera_snapshots_and_seeded_noise(context, tmp_path):
         clock = Clock()
         sent = []
         camera = CameraNode(context=context, emit=lambda t, m: sent.append(
-            (t, np.array([[p.position.x, p.position.z] for p in m.poses]))
+            (t, np.array([[p.position.x, p.position.z]
+                          for p in deserialize_message(m, PoseArray).poses]))
             if t != '/camera/markers' else None), now=clock,
             parameter_overrides=[Parameter('scene', value=scene_path),
                                  Parameter('noise_std_m', value=1.0e-3),

@@ -22,8 +22,14 @@ curvatures carrying that stamp.
 
 /camera/image (rgb8 side view, softseq_ros.physics.render) is rendered only while someone
 subscribes (or, in batch mode, when the outputs list ``image``).
+
+Poses and markers go out already serialised (``Publisher.publish`` takes CDR bytes): their
+layout never changes, so each frame is a template with new stamps and numbers
+(softseq_ros.bag.cdr.FixedLayout), a few microseconds instead of filling dozens of rclpy Pose
+and Point objects. Subscribers receive ordinary PoseArray and MarkerArray messages.
 """
 
+import math
 from typing import Any
 
 from builtin_interfaces.msg import Duration
@@ -34,6 +40,7 @@ from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from softseq_ros.bag.cdr import FixedLayout
 from softseq_ros.nodes.common import (
     FRAME_ID,
     OUTPUT_TOPICS,
@@ -44,11 +51,7 @@ from softseq_ros.nodes.common import (
     stamp_header,
     stamp_ns,
 )
-from softseq_ros.physics.kinematics import (
-    backbone_batch,
-    orientation_quaternions,
-    segment_end_indices,
-)
+from softseq_ros.physics.kinematics import PoseSampler, segment_end_indices
 from softseq_ros.physics.render import SEGMENT_RGB, SideViewRenderer
 
 CAMERA_OUTPUTS = ('poses', 'markers', 'image')
@@ -101,35 +104,41 @@ class CameraNode(RigNode):
         self.lengths = np.array(scene.lengths)
         self.rest_total = float(sum(s.rest_volume for s in scene.segments))
         n = len(scene.segments)
+        self.n_segments = n
         self.segment_ends = segment_end_indices(n, self.points_per_segment)
-        self.n_points = 1 + n * self.points_per_segment
+        self._sampler = PoseSampler(self.lengths, self.points_per_segment)
+        self.n_points = self._sampler.n_points
         self._rng = np.random.default_rng(seed)
         self._renderer = SideViewRenderer(width, height,
                                           half_extent_m=1.05 * float(self.lengths.sum()))
 
-        self._curvatures: np.ndarray | None = None
+        self._curvatures: list[float] | None = None
         self._backbone_stale = False
         self._curvature_stamp = -1
-        self._points = np.zeros((self.n_points, 2))
-        self._quaternions = np.zeros((self.n_points, 4))
+        self._poses = np.zeros((self.n_points, 7))
         self._injected: float | None = None
         self._pending_stamp: int | None = None
         self._pending_count = 0
         self.images_rendered = 0
 
-        self._backbone = self._pose_array()
-        self._snapshot = self._pose_array()
-        self._markers = MarkerArray(markers=[
+        poses = PoseArray(poses=[Pose() for _ in range(self.n_points)])
+        poses.header.frame_id = FRAME_ID
+        self._pose_layout = FixedLayout(poses, 'geometry_msgs/msg/PoseArray')
+        markers = MarkerArray(markers=[
             Marker(ns='backbone', id=i, type=Marker.LINE_STRIP, action=Marker.ADD,
                    lifetime=Duration(), frame_locked=False,
                    points=[Point() for _ in range(self.points_per_segment + 1)],
                    color=ColorRGBA(r=rgb[0] / 255.0, g=rgb[1] / 255.0, b=rgb[2] / 255.0,
                                    a=1.0))
             for i, rgb in ((i, SEGMENT_RGB[i % len(SEGMENT_RGB)]) for i in range(n))])
-        for marker in self._markers.markers:
+        for marker in markers.markers:
             marker.header.frame_id = FRAME_ID
             marker.pose.orientation.w = 1.0
             marker.scale.x = MARKER_WIDTH_M
+        self._marker_layout = FixedLayout(markers, 'visualization_msgs/msg/MarkerArray')
+        # Segment i's line runs from its start point to its end point (shared with the next).
+        starts = [0, *self.segment_ends[:-1].tolist()]
+        self._marker_rows = [(a, b + 1) for a, b in zip(starts, self.segment_ends.tolist())]
         self._image = Image(height=height, width=width, encoding='rgb8', is_bigendian=0,
                             step=3 * width)
         self._image.header.frame_id = FRAME_ID
@@ -139,23 +148,22 @@ class CameraNode(RigNode):
         self._timer = self._make_timer(self.rate_hz, self.tick)
         self.configured = True
 
-    def _pose_array(self) -> PoseArray:
-        msg = PoseArray(poses=[Pose() for _ in range(self.n_points)])
-        msg.header.frame_id = FRAME_ID
-        return msg
-
     # ---------------------------------------------------------------- inputs
+
+    def _usable(self, values: Any) -> bool:
+        return len(values) == self.n_segments and all(map(math.isfinite, values))
 
     def on_curvatures(self, msg: JointState) -> None:
         """Keep the latest curvatures; complete a pending snapshot of this command."""
-        if len(msg.position) != self.lengths.size or not np.all(np.isfinite(msg.position)):
+        position = msg.position
+        if not self._usable(position):
             self.warn_throttled('curvatures', f'ignoring /actuator/curvatures with '
-                                              f'{len(msg.position)} values (expected '
-                                              f'{self.lengths.size} finite)')
+                                              f'{len(position)} values (expected '
+                                              f'{self.n_segments} finite)')
             return
-        # A copy: np.asarray would alias the message's buffer, which its sender may reuse.
-        curvatures = np.array(msg.position, dtype=float)
-        if self._curvatures is None or not np.array_equal(curvatures, self._curvatures):
+        # A copy: the message's buffer may be reused by its sender.
+        curvatures = list(position)
+        if curvatures != self._curvatures:
             self._curvatures = curvatures
             # The backbone is computed when a frame or a snapshot needs it, not at the
             # actuator's rate: most curvature messages are never drawn.
@@ -166,10 +174,11 @@ class CameraNode(RigNode):
 
     def on_volumes(self, msg: JointState) -> None:
         """Detect trigger crossings of the injected volume."""
-        if len(msg.position) != self.lengths.size or not np.all(np.isfinite(msg.position)):
+        position = msg.position
+        if not self._usable(position):
             self.warn_throttled('volumes', 'ignoring /actuator/volumes of the wrong size')
             return
-        injected = float(sum(msg.position)) - self.rest_total
+        injected = sum(position) - self.rest_total
         previous, self._injected = self._injected, injected
         if previous is None or not self.triggers or 'poses' not in self.outputs:
             return
@@ -186,36 +195,26 @@ class CameraNode(RigNode):
 
     def _update_backbone(self) -> None:
         if self._backbone_stale:
-            points, angles = backbone_batch(self._curvatures[None, :], self.lengths,
-                                            self.points_per_segment)
-            self._points = points[0]
-            self._quaternions = orientation_quaternions(angles[0])
+            self._poses = self._sampler.poses(self._curvatures)
             self._backbone_stale = False
 
     def _take_snapshots(self) -> None:
         self._update_backbone()
-        self._fill_poses(self._snapshot, self._noisy_points(), self.now_ns())
+        snapshot = self._pose_layout.encode(self.now_ns(), [self._noisy_poses()])
         for _ in range(self._pending_count):
-            self._publish('/camera/snapshots', self._snapshot)
+            self._publish('/camera/snapshots', snapshot)
         self._pending_stamp = None
         self._pending_count = 0
 
     # ---------------------------------------------------------------- outputs
 
-    def _noisy_points(self) -> np.ndarray:
+    def _noisy_poses(self) -> np.ndarray:
+        """The poses with noise on every point's x and z (the clean poses when off)."""
         if self.noise_std_m > 0.0:
-            return self._points + self._rng.normal(0.0, self.noise_std_m, self._points.shape)
-        return self._points
-
-    def _fill_poses(self, msg: PoseArray, points: np.ndarray, now: int) -> None:
-        stamp_header(msg.header, now)
-        xs, zs = points[:, 0].tolist(), points[:, 1].tolist()
-        qy, qw = self._quaternions[:, 1].tolist(), self._quaternions[:, 3].tolist()
-        for pose, x, z, y_part, w_part in zip(msg.poses, xs, zs, qy, qw):
-            pose.position.x = x
-            pose.position.z = z
-            pose.orientation.y = y_part
-            pose.orientation.w = w_part
+            noisy = self._poses.copy()
+            noisy[:, [0, 2]] += self._rng.normal(0.0, self.noise_std_m, (self.n_points, 2))
+            return noisy
+        return self._poses
 
     def image_wanted(self) -> bool:
         """True when the image must be rendered this frame."""
@@ -231,22 +230,15 @@ class CameraNode(RigNode):
             return
         self._update_backbone()
         now = self.now_ns()
-        points = self._noisy_points()
+        poses = self._noisy_poses()
         if 'poses' in self.outputs:
-            self._fill_poses(self._backbone, points, now)
-            self._publish('/camera/backbone', self._backbone)
+            self._publish('/camera/backbone', self._pose_layout.encode(now, [poses]))
         if 'markers' in self.outputs:
-            xs, zs = points[:, 0].tolist(), points[:, 1].tolist()
-            start = 0
-            for marker, end in zip(self._markers.markers, self.segment_ends.tolist()):
-                stamp_header(marker.header, now)
-                for point, x, z in zip(marker.points, xs[start:end + 1], zs[start:end + 1]):
-                    point.x = x
-                    point.z = z
-                start = end
-            self._publish('/camera/markers', self._markers)
+            points = poses[:, :3]
+            self._publish('/camera/markers', self._marker_layout.encode(
+                now, [points[start:end] for start, end in self._marker_rows]))
         if self.image_wanted():
-            pixels = self._renderer.render(self._points, self.segment_ends)
+            pixels = self._renderer.render(self._poses[:, [0, 2]], self.segment_ends)
             self.images_rendered += 1
             stamp_header(self._image.header, now)
             self._image.data = pixels.tobytes()

@@ -13,11 +13,12 @@ arc length ``s`` from a segment start ``(x0, z0, theta0)`` is reached along the 
 
     dx = s cos(theta0 + k s / 2) sinc(k s / 2),  dz = s sin(theta0 + k s / 2) sinc(k s / 2)
 
-with sinc(u) = sin(u) / u, which is exact for every ``k`` and has no division by ``k``: a
-straight segment (k = 0) and a slightly bent one share one formula.
+with sinc(u) = sin(u) / u (1 at u = 0), which is exact for every ``k`` and has no division by
+``k``: a straight segment and a slightly bent one share one formula.
 """
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -65,6 +66,13 @@ def _check_inputs(curvatures: NDArray[np.float64], lengths: NDArray[np.float64],
         raise ValueError(f'points_per_segment must be >= 1, got {points_per_segment}')
 
 
+def _sin_ratio(half_turn: NDArray[np.float64]) -> NDArray[np.float64]:
+    """sin(h) / h, 1 at h = 0 (sin(h) / h is accurate down to the smallest h; only 0 is not)."""
+    ratio = np.ones_like(half_turn)
+    np.divide(np.sin(half_turn), half_turn, out=ratio, where=half_turn != 0.0)
+    return ratio
+
+
 def segment_end_indices(n_segments: int, points_per_segment: int) -> NDArray[np.intp]:
     """Index of each segment end in a backbone sampled with ``points_per_segment`` per segment."""
     return (np.arange(1, n_segments + 1) * points_per_segment).astype(np.intp)
@@ -101,8 +109,7 @@ def backbone_batch(curvatures: ArrayLike, lengths: ArrayLike,
         [np.zeros((n_states, 1)), np.cumsum(turns, axis=1)[:, :-1]], axis=1)
 
     chord_angle = start_angle[:, :, np.newaxis] + half_turn
-    # np.sinc(u) = sin(pi u) / (pi u); the argument is rescaled to get sin(h) / h.
-    chord = s[np.newaxis, :, :] * np.sinc(half_turn / np.pi)
+    chord = s[np.newaxis, :, :] * _sin_ratio(half_turn)
     dx = chord * np.cos(chord_angle)
     dz = chord * np.sin(chord_angle)
 
@@ -157,3 +164,63 @@ def orientation_quaternions(angles: ArrayLike) -> NDArray[np.float64]:
     quaternions[..., 1] = np.sin(half)
     quaternions[..., 3] = np.cos(half)
     return quaternions
+
+
+class PoseSampler:
+    """
+    Backbone poses of one state after another, for one geometry: the camera's per-frame call.
+
+    ``backbone_batch`` checks its inputs and builds its sampling grid at every call, which
+    costs more than the arithmetic for a single state. Here the grid is built once and
+    :meth:`poses` repeats ``backbone_batch``'s arithmetic operation for operation (sums in the
+    same order), so both give the same numbers, bit for bit.
+    """
+
+    def __init__(self, lengths: ArrayLike, points_per_segment: int) -> None:
+        """``lengths`` (N,) [m] base to tip; ``points_per_segment`` samples after each start."""
+        length = np.asarray(lengths, dtype=float)
+        _check_inputs(np.zeros((1, length.size)), length, points_per_segment)
+        self._lengths = length.tolist()
+        fractions = np.arange(1, points_per_segment + 1, dtype=float) / points_per_segment
+        self._s = fractions[np.newaxis, :] * length[:, np.newaxis]            # (N, P)
+        self.n_points = 1 + length.size * points_per_segment
+        self._poses = np.zeros((self.n_points, 7))
+        self._poses[0, 6] = 1.0
+
+    def poses(self, curvatures: Sequence[float]) -> NDArray[np.float64]:
+        """
+        Poses ``(x, y, z, qx, qy, qz, qw)`` (M, 7) of the state ``curvatures`` (N,) [1/m].
+
+        Positions are the backbone points (y = 0); orientations are
+        ``orientation_quaternions`` of the tangent angles. The base is the origin with angle 0.
+        The array is reused by the next call.
+        """
+        kappa = [float(k) for k in curvatures]
+        start, angle = [0.0], 0.0
+        for k, length in zip(kappa[:-1], self._lengths):
+            angle += k * length
+            start.append(angle)
+        s = self._s
+        half_turn = 0.5 * np.array(kappa)[:, np.newaxis] * s
+        start_angle = np.array(start)[:, np.newaxis]
+        chord_angle = start_angle + half_turn
+        if 0.0 in kappa:
+            chord = s * _sin_ratio(half_turn)
+        else:
+            chord = s * (np.sin(half_turn) / half_turn)
+        dx = chord * np.cos(chord_angle)
+        dz = chord * np.sin(chord_angle)
+        x0 = z0 = 0.0
+        starts_x, starts_z = [0.0], [0.0]
+        for end_x, end_z in zip(dx[:-1, -1].tolist(), dz[:-1, -1].tolist()):
+            x0 += end_x
+            z0 += end_z
+            starts_x.append(x0)
+            starts_z.append(z0)
+        poses = self._poses
+        poses[1:, 0] = (np.array(starts_x)[:, np.newaxis] + dx).ravel()
+        poses[1:, 2] = (np.array(starts_z)[:, np.newaxis] + dz).ravel()
+        half = -0.5 * (start_angle + 2.0 * half_turn).ravel()
+        poses[1:, 4] = np.sin(half)
+        poses[1:, 6] = np.cos(half)
+        return poses
