@@ -23,6 +23,7 @@ binary search on the branch's samples and a cubic; states next to a fold are sol
 
 from bisect import bisect_right
 from dataclasses import dataclass, field
+from functools import cached_property
 import math
 from typing import Sequence
 
@@ -115,12 +116,15 @@ class _Branch:
 
     def __post_init__(self) -> None:
         self.any_rough = bool(self.rough is not None and self.rough.any())
+        # Per interval, the cubics' coefficients as Python floats, filled on first use: the
+        # per-command path evaluates 2N + 1 cubics, which plain floats do faster than numpy.
+        self.rows: list[list[list[float]] | None] = []
 
-    @property
+    @cached_property
     def lo(self) -> float:
         return float(self.total[0])
 
-    @property
+    @cached_property
     def hi(self) -> float:
         return float(self.total[-1])
 
@@ -595,9 +599,15 @@ class EquilibriumMap:
         i = min(max(bisect_right(branch.knots, total) - 1, 0), len(branch.knots) - 2)
         if self.polish and branch.rough[i]:
             return self.evaluate(index, np.array([total]))[0]
-        c = branch.spline.c[:, i, :]
+        rows = branch.rows
+        if not rows:
+            rows.extend([None] * (len(branch.knots) - 1))
+        coefficients = rows[i]
+        if coefficients is None:
+            coefficients = rows[i] = branch.spline.c[:, i, :].T.tolist()
         dt = total - branch.knots[i]
-        return ((c[0] * dt + c[1]) * dt + c[2]) * dt + c[3]
+        # The same Horner steps as numpy's on the arrays, so the same numbers.
+        return np.array([((a * dt + b) * dt + c) * dt + d for a, b, c, d in coefficients])
 
     def _polish(self, branch: _Branch, total: FloatArray, values: FloatArray) -> FloatArray:
         """
