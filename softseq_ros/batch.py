@@ -22,6 +22,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from softseq_ros.bag.cdr import encoder_for
 from softseq_ros.bag.writer import (
     BagWriter,
     message_type_name,
@@ -79,6 +80,8 @@ class BatchRun:
         self._now_ns = 0
         self._queue: deque[tuple[Callable[[Any], None], Any]] = deque()
         self._counts: dict[str, int] = {}
+        self._channels: dict[str, tuple[Callable[[Any], bytes], list[Any]]] = {}
+        self._nodes: dict[str, Any] = {}
 
     def _now(self) -> int:
         return self._now_ns
@@ -92,13 +95,13 @@ class BatchRun:
         try:
             with BagWriter(self.out, flush_period_s=None) as writer:
                 self._writer = writer
+                self._nodes = nodes
                 common = {'context': context, 'emit': self._emit, 'now': self._now,
                               'start_parameter_services': False, 'enable_rosout': False}
                 for cls in (SyringePumpNode, ActuatorNode, CameraNode):
                     overrides = [Parameter('scene', value=str(self.scene)),
                                  *self.parameters.get(cls.NODE_NAME, [])]
                     nodes[cls.NODE_NAME] = cls(parameter_overrides=overrides, **common)
-                self._nodes = nodes
                 self._loop(nodes['syringe_pump'], nodes['camera'], wall_start)
         finally:
             for node in nodes.values():
@@ -136,23 +139,35 @@ class BatchRun:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
 
+    def _open_topic(self, topic: str) -> tuple[Callable[[Any], bytes], list[Any]]:
+        spec = TOPICS[topic]
+        type_name = message_type_name(spec.msg_type())
+        self._writer.add_topic(topic, type_name, qos_yaml(spec.qos))
+        self._counts[topic] = 0
+        return encoder_for(type_name) or serialize, []
+
     def _emit(self, topic: str, msg: Any) -> None:
-        counts = self._counts
-        if topic not in counts:
-            spec = TOPICS[topic]
-            self._writer.add_topic(topic, message_type_name(spec.msg_type()), qos_yaml(spec.qos))
-            counts[topic] = 0
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = self._channels[topic] = self._open_topic(topic)
+        encoder, handlers = channel
         # A node may send a message already serialised (as rclpy's publish allows).
         serialised = type(msg) is bytes
-        self._writer.write(topic, msg if serialised else serialize(msg), self._now_ns,
-                           self._now_ns)
-        counts[topic] += 1
+        now = self._now_ns
+        self._writer.write(topic, msg if serialised else encoder(msg), now, now)
+        self._counts[topic] += 1
         routes = ROUTES.get(topic)
         if routes:
+            if len(handlers) != len(routes):
+                # A node may publish while the others are still being built: like a
+                # subscriber that does not exist yet, a missing node does not get the message.
+                handlers[:] = [getattr(self._nodes[node], handler) for node, handler in routes
+                               if node in self._nodes]
             if serialised:
                 msg = deserialize_message(msg, TOPICS[topic].msg_type)
-            for node_name, handler in routes:
-                self._queue.append((getattr(self._nodes[node_name], handler), msg))
+            queue = self._queue
+            for handler in handlers:
+                queue.append((handler, msg))
 
     def _deliver(self) -> None:
         """Hand queued messages to their subscribers, in the order they were sent."""

@@ -282,17 +282,26 @@ _FAST_ENCODERS: dict[str, Callable[[Any], bytes]] = {
 }
 
 
-def encode(msg: Any, type_name: str) -> bytes | None:
-    """CDR bytes of ``msg`` (a message of ``type_name``), or None for a type not handled here."""
+def encoder_for(type_name: str) -> Callable[[Any], bytes] | None:
+    """A function from a message of ``type_name`` to its CDR bytes; None if not handled here."""
     fast = _FAST_ENCODERS.get(type_name)
     if fast is not None:
-        return fast(msg)
+        return fast
     encoder = ENCODERS.get(type_name)
     if encoder is None:
         return None
-    out = _Buffer()
-    encoder(msg, out)
-    return bytes(out.data)
+
+    def encode_general(msg: Any) -> bytes:
+        out = _Buffer()
+        encoder(msg, out)
+        return bytes(out.data)
+    return encode_general
+
+
+def encode(msg: Any, type_name: str) -> bytes | None:
+    """CDR bytes of ``msg`` (a message of ``type_name``), or None for a type not handled here."""
+    encoder = encoder_for(type_name)
+    return None if encoder is None else encoder(msg)
 
 
 class _Marks:
