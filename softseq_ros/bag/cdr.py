@@ -143,69 +143,73 @@ def _fluid_pressure(msg: Any, out: _Buffer) -> None:
     out.data += _F64X2.pack(msg.fluid_pressure, msg.variance)
 
 
-# The rig sends the same frame ids and joint names hundreds of thousands of times: their
-# encoded bytes (which start at a fixed offset, right after the stamp) are kept.
-_STAMP_END = 4 + 8
-_ZEROS = (b'', b'\x00', b'\x00' * 2, b'\x00' * 3, b'\x00' * 4, b'\x00' * 5, b'\x00' * 6,
-          b'\x00' * 7)
-_BLOCK_CACHE_SIZE = 256
-_frame_blocks: dict[str, bytes] = {}
-_name_blocks: dict[tuple[str, ...], bytes] = {}
+# The rig sends messages of the same frame ids, joint names and array lengths hundreds of
+# thousands of times: for each such shape, everything after the encapsulation is one
+# struct.Struct (with the names' bytes as one field and zero padding as pad bytes), so a
+# message costs one pack call.
+_LAYOUT_CACHE_SIZE = 256
+_joint_state_layouts: dict[tuple[Any, ...], tuple[struct.Struct, bytes]] = {}
+_fluid_pressure_layouts: dict[str, tuple[struct.Struct, bytes]] = {}
 
 
-def _cached_block(cache: dict, key: Any, build: Callable[[_Buffer], None]) -> bytes:
-    block = cache.get(key)
-    if block is None:
-        out = _Buffer()
-        out.data += bytes(_STAMP_END - 4)
-        build(out)
-        block = bytes(out.data[_STAMP_END:])
-        if len(cache) >= _BLOCK_CACHE_SIZE:
-            cache.clear()
-        cache[key] = block
-    return block
+def _remember(cache: dict, key: Any, value: Any) -> Any:
+    if len(cache) >= _LAYOUT_CACHE_SIZE:
+        cache.clear()
+    cache[key] = value
+    return value
 
 
-def _append_doubles(data: bytearray, values: Any) -> None:
-    count = len(values)
-    pad = -len(data) & 3
-    if pad:
-        data += _ZEROS[pad]
-    data += _U32.pack(count)
-    if count:
-        pad = -(len(data) - 4) & 7
-        if pad:
-            data += _ZEROS[pad]
-        if _NATIVE_LITTLE and type(values) is array and values.typecode == 'd':
-            data += values.tobytes()
-        else:
-            data += struct.pack(f'<{count}d', *values)
+def _texts_block(frame_id: str, names: Any) -> bytes:
+    """Frame id and (when ``names`` is not None) a string sequence, as after a stamp."""
+    out = _Buffer()
+    out.data += bytes(8)
+    out.string(frame_id)
+    if names is not None:
+        out.strings(names)
+    return bytes(out.data[4 + 8:])
+
+
+def _joint_state_layout(key: tuple[Any, ...]) -> tuple[struct.Struct, bytes]:
+    frame_id, counts, names = key[0], key[1:4], key[4:]
+    block = _texts_block(frame_id, names)
+    offset = 8 + len(block)
+    fmt = f'<iI{len(block)}s'
+    for count in counts:
+        pad = -offset & 3
+        fmt += 'x' * pad + 'I'
+        offset += pad + 4
+        if count:
+            pad = -offset & 7
+            fmt += 'x' * pad + f'{count}d'
+            offset += pad + 8 * count
+    return _remember(_joint_state_layouts, key, (struct.Struct(fmt), block))
 
 
 def _joint_state_bytes(msg: Any) -> bytes:
     header = msg.header
     stamp = header.stamp
-    names = msg.name
-    key = (header.frame_id, *names)
-    data = bytearray(_ENCAPSULATION)
-    data += _STAMP.pack(stamp.sec, stamp.nanosec)
-    data += _cached_block(_name_blocks, key,
-                          lambda out: (out.string(key[0]), out.strings(key[1:])))
-    _append_doubles(data, msg.position)
-    _append_doubles(data, msg.velocity)
-    _append_doubles(data, msg.effort)
-    return bytes(data)
+    position, velocity, effort = msg.position, msg.velocity, msg.effort
+    key = (header.frame_id, len(position), len(velocity), len(effort), *msg.name)
+    layout, block = _joint_state_layouts.get(key) or _joint_state_layout(key)
+    return _ENCAPSULATION + layout.pack(stamp.sec, stamp.nanosec, block, key[1], *position,
+                                        key[2], *velocity, key[3], *effort)
+
+
+def _fluid_pressure_layout(frame_id: str) -> tuple[struct.Struct, bytes]:
+    block = _texts_block(frame_id, None)
+    pad = -(8 + len(block)) & 7
+    return _remember(_fluid_pressure_layouts, frame_id,
+                     (struct.Struct(f'<iI{len(block)}s{pad}xdd'), block))
 
 
 def _fluid_pressure_bytes(msg: Any) -> bytes:
     header = msg.header
     stamp = header.stamp
-    frame = header.frame_id
-    data = bytearray(_ENCAPSULATION)
-    data += _STAMP.pack(stamp.sec, stamp.nanosec)
-    data += _cached_block(_frame_blocks, frame, lambda out: (out.string(frame), out.align(8)))
-    data += _F64X2.pack(msg.fluid_pressure, msg.variance)
-    return bytes(data)
+    frame_id = header.frame_id
+    layout, block = (_fluid_pressure_layouts.get(frame_id)
+                     or _fluid_pressure_layout(frame_id))
+    return _ENCAPSULATION + layout.pack(stamp.sec, stamp.nanosec, block, msg.fluid_pressure,
+                                        msg.variance)
 
 
 def _pose_array(msg: Any, out: _Buffer) -> None:

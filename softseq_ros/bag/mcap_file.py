@@ -92,6 +92,21 @@ class ChunkedMcapWriter:
         self._chunk_count = 0
         self._offset = 0
 
+    @property
+    def message_count(self) -> int:
+        """Messages added so far."""
+        return self._message_count + self._chunk.count
+
+    @property
+    def time_range(self) -> tuple[int, int] | None:
+        """Earliest and latest log time of the messages so far; None before the first."""
+        ranges = [(self._start, self._end)] if self._message_count else []
+        if self._chunk.count:
+            ranges.append((self._chunk.start, self._chunk.end))
+        if not ranges:
+            return None
+        return min(r[0] for r in ranges), max(r[1] for r in ranges)
+
     # ---------------------------------------------------------------- records
 
     def _write(self, data: bytes) -> None:

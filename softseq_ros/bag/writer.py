@@ -222,9 +222,6 @@ class BagWriter:
         self._lock = threading.RLock()
         self._topics: dict[str, _Topic] = {}
         self._schema_ids: dict[str, int] = {}
-        self._start_ns: int | None = None
-        self._end_ns: int | None = None
-        self._message_count = 0
         self._closed = False
         self._unflushed = False
         self._last_flush = time.monotonic()
@@ -260,7 +257,7 @@ class BagWriter:
     @property
     def message_count(self) -> int:
         """Messages written so far."""
-        return self._message_count
+        return self._writer.message_count
 
     @property
     def topics(self) -> dict[str, str]:
@@ -339,21 +336,15 @@ class BagWriter:
                 raise BagWriterError(f'topic {topic}: not registered; call add_topic first')
             if log_time_ns < 0:
                 raise BagWriterError(f'topic {topic}: negative log time {log_time_ns} ns')
-            publish = log_time_ns if publish_time_ns is None else publish_time_ns
-            self._writer.add_message(entry.channel_id, int(log_time_ns), bytes(cdr_bytes),
-                                     int(publish), entry.message_count)
+            self._writer.add_message(
+                entry.channel_id, log_time_ns, cdr_bytes,
+                log_time_ns if publish_time_ns is None else publish_time_ns,
+                entry.message_count)
             entry.message_count += 1
-            self._message_count += 1
-            if self._start_ns is None:
-                self._start_ns = self._end_ns = log_time_ns
-            elif log_time_ns > self._end_ns:
-                self._end_ns = log_time_ns
-            elif log_time_ns < self._start_ns:
-                self._start_ns = log_time_ns
-            self._unflushed = True
-            if (self._flush_period_s is not None
-                    and time.monotonic() - self._last_flush >= self._flush_period_s):
-                self._flush_locked()
+            if self._flush_period_s is not None:
+                self._unflushed = True
+                if time.monotonic() - self._last_flush >= self._flush_period_s:
+                    self._flush_locked()
 
     def flush(self) -> None:
         """Close the chunk in progress and force everything written so far onto the disk."""
@@ -381,8 +372,9 @@ class BagWriter:
 
     def bag_information(self) -> dict[str, Any]:
         """Return the ``rosbag2_bagfile_information`` content for the messages so far."""
-        start = self._start_ns or 0
-        duration = (self._end_ns - self._start_ns) if self._start_ns is not None else 0
+        time_range = self._writer.time_range
+        start, duration = (time_range[0], time_range[1] - time_range[0]) if time_range \
+            else (0, 0)
         return bag_information(
             file_name=self._mcap_path.name, start_ns=start, duration_ns=duration,
             topics=[(t.name, t.type_name, t.qos_profiles_yaml, t.type_hash, t.message_count)

@@ -39,10 +39,9 @@ from softseq_ros.nodes.common import (
     RigNode,
     outputs_reason,
     run_node,
-    stamp_header,
     stamp_ns,
 )
-from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, State, Tracker
+from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, Tracker
 
 ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events')
 RESUME_POLL_S = 0.02
@@ -90,6 +89,11 @@ class ActuatorNode(RigNode):
         self._volumes = JointState(name=self.names, position=[0.0] * n, effort=[0.0] * n)
         self._curvatures = JointState(name=self.names, position=[0.0] * n)
         self._event = String()
+        # What goes out at every command, in this order.
+        self._outgoing = [(topic, msg) for name, topic, msg in (
+            ('pressure', '/actuator/pressure', self._pressure),
+            ('volumes', '/actuator/volumes', self._volumes),
+            ('curvature', '/actuator/curvatures', self._curvatures)) if name in self.outputs]
         self._last_command: float | None = None
         self._cached = False
         self.rejected_commands = 0
@@ -189,7 +193,7 @@ class ActuatorNode(RigNode):
         tracker = self.tracker
         branch, total = tracker.branch, tracker.total
         try:
-            state = tracker.step(injected)
+            snaps = tracker.move(injected)
         except DomainError as err:
             # The tracker stops at the edge of its branch; keep the state as it was.
             tracker.branch, tracker.total = branch, total
@@ -197,10 +201,11 @@ class ActuatorNode(RigNode):
             return
         self.solves += 1
         self._last_command = injected
-        self._fill(state)
-        self._send(now, state.snaps)
+        values = self.emap.values_at(tracker.branch, tracker.total)
+        self._fill(values)
+        self._send(now, snaps)
         if self.state_file is not None:
-            self._save(state)
+            self._save(injected, values)
 
     def _check_command(self, msg: JointState) -> float | None:
         if len(msg.name) != 1 or len(msg.position) != 1:
@@ -226,27 +231,26 @@ class ActuatorNode(RigNode):
         self.rejected_commands += 1
         self.warn_throttled(key, text)
 
-    def _fill(self, state: State) -> None:
-        pressure = float(state.pressure)
+    def _fill(self, values: list[float]) -> None:
+        """Fill the outgoing messages from (v_1..v_N, p, k_1..k_N)."""
+        n = len(self.names)
+        pressure = values[n]
         self._pressure.fluid_pressure = pressure + self.ambient_pressure_pa
-        volumes, curvatures = self._volumes, self._curvatures
-        for i in range(len(self.names)):
-            volumes.position[i] = float(state.volumes[i])
-            volumes.effort[i] = pressure
-            curvatures.position[i] = float(state.curvatures[i])
+        volume, effort = self._volumes.position, self._volumes.effort
+        curvature = self._curvatures.position
+        for i in range(n):
+            volume[i] = values[i]
+            effort[i] = pressure
+            curvature[i] = values[n + 1 + i]
         self._cached = True
 
     def _send(self, now: int, snaps: Any) -> None:
         outputs = self.outputs
-        if 'pressure' in outputs:
-            stamp_header(self._pressure.header, now)
-            self._publish('/actuator/pressure', self._pressure)
-        if 'volumes' in outputs:
-            stamp_header(self._volumes.header, now)
-            self._publish('/actuator/volumes', self._volumes)
-        if 'curvature' in outputs:
-            stamp_header(self._curvatures.header, now)
-            self._publish('/actuator/curvatures', self._curvatures)
+        sec, nanosec = divmod(now, 1_000_000_000)
+        for topic, msg in self._outgoing:
+            stamp = msg.header.stamp
+            stamp.sec, stamp.nanosec = sec, nanosec
+            self._publish(topic, msg)
         if 'events' in outputs:
             for snap in snaps:
                 self._event.data = json.dumps({
@@ -258,10 +262,10 @@ class ActuatorNode(RigNode):
                 self.get_logger().info(f'snap-through at {snap.injected * 1e6:.4f} mL injected')
                 self._publish('/actuator/events', self._event)
 
-    def _save(self, state: State) -> None:
+    def _save(self, injected: float, values: list[float]) -> None:
         """Write the state atomically, so a kill mid-write leaves the previous one."""
-        data = json.dumps({'names': self.names, 'injected_m3': float(state.injected),
-                           'volumes_m3': [float(v) for v in state.volumes]})
+        data = json.dumps({'names': self.names, 'injected_m3': injected,
+                           'volumes_m3': values[:len(self.names)]})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
         try:
             temporary.write_text(data, encoding='utf-8')

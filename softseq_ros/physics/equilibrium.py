@@ -594,11 +594,15 @@ class EquilibriumMap:
 
     def evaluate_one(self, index: int, total: float) -> FloatArray:
         """One state (v_1..v_N, p, k_1..k_N) on branch ``index``: the per-command fast path."""
+        return np.array(self.values_at(index, total))
+
+    def values_at(self, index: int, total: float) -> list[float]:
+        """``evaluate_one`` as a list of Python floats (for callers that want floats)."""
         branch = self.branches[index]
         total = min(max(total, branch.lo), branch.hi)
         i = min(max(bisect_right(branch.knots, total) - 1, 0), len(branch.knots) - 2)
         if self.polish and branch.rough[i]:
-            return self.evaluate(index, np.array([total]))[0]
+            return self.evaluate(index, np.array([total]))[0].tolist()
         rows = branch.rows
         if not rows:
             rows.extend([None] * (len(branch.knots) - 1))
@@ -607,7 +611,7 @@ class EquilibriumMap:
             coefficients = rows[i] = branch.spline.c[:, i, :].T.tolist()
         dt = total - branch.knots[i]
         # The same Horner steps as numpy's on the arrays, so the same numbers.
-        return np.array([((a * dt + b) * dt + c) * dt + d for a, b, c, d in coefficients])
+        return [((a * dt + b) * dt + c) * dt + d for a, b, c, d in coefficients]
 
     def _polish(self, branch: _Branch, total: FloatArray, values: FloatArray) -> FloatArray:
         """
@@ -736,12 +740,20 @@ class Tracker:
 
     def step(self, injected: float) -> State:
         """Go to a commanded injected volume; the state reports the snaps on the way."""
+        snaps = self.move(injected)
+        state = self.state
+        state.snaps = snaps
+        return state
+
+    def move(self, injected: float) -> list[SnapEvent]:
+        """
+        ``step`` without building the State: go there, return the snaps on the way.
+
+        ``emap.values_at(tracker.branch, tracker.total)`` then gives the state's numbers.
+        """
         if not math.isfinite(injected):
             raise DomainError(f'commanded injected volume must be finite, got {injected}')
-        events = self._walk(float(injected) + self.emap.total_rest_volume)
-        state = self.state
-        state.snaps = events
-        return state
+        return self._walk(float(injected) + self.emap.total_rest_volume)
 
     def sweep(self, injected: ArrayLike) -> Path:
         """Follow a whole history at once (the same rules as repeated ``step``)."""
