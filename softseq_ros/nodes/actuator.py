@@ -128,7 +128,7 @@ class ActuatorNode(RigNode):
     def _resume_poll(self) -> None:
         if self._resuming and time.monotonic() >= self._resume_deadline:
             if not self._resume_from_file():
-                self.get_logger().info('no previous state found: starting at rest')
+                self.log_info('no previous state found: starting at rest')
             self._end_resume()
 
     def _resume_from_file(self) -> bool:
@@ -138,7 +138,7 @@ class ActuatorNode(RigNode):
             saved = json.loads(self.state_file.read_text(encoding='utf-8'))
             names, volumes = list(saved['names']), [float(v) for v in saved['volumes_m3']]
         except (OSError, ValueError, KeyError, TypeError) as err:
-            self.get_logger().warning(f'state_file {self.state_file}: unreadable ({err}); '
+            self.log_warning(f'state_file {self.state_file}: unreadable ({err}); '
                                       'starting at rest')
             return False
         return self._resume_from(names, volumes, f'state_file {self.state_file}')
@@ -146,16 +146,16 @@ class ActuatorNode(RigNode):
     def _resume_from(self, names: list[str], volumes: list[float], source: str) -> bool:
         """Resume on the branch nearest ``volumes``; False (and a warning) when unusable."""
         if names != self.names or not all(math.isfinite(v) for v in volumes):
-            self.get_logger().warning(f'{source} does not fit this scene (segments {names}, '
+            self.log_warning(f'{source} does not fit this scene (segments {names}, '
                                       f'expected {self.names}); not resuming from it')
             return False
         injected = sum(volumes) - self.emap.total_rest_volume
         try:
             self.resume(injected, volumes)
         except DomainError as err:
-            self.get_logger().warning(f'{source}: cannot resume ({err})')
+            self.log_warning(f'{source}: cannot resume ({err})')
             return False
-        self.get_logger().info(f'resumed from {source} at {injected * 1e6:.4f} mL injected')
+        self.log_info(f'resumed from {source} at {injected * 1e6:.4f} mL injected')
         return True
 
     def _end_resume(self) -> None:
@@ -259,7 +259,7 @@ class ActuatorNode(RigNode):
                     'to_volumes_m3': [float(v) for v in snap.to_volumes],
                     'from_pressure_pa': float(snap.from_pressure),
                     'to_pressure_pa': float(snap.to_pressure)})
-                self.get_logger().info(f'snap-through at {snap.injected * 1e6:.4f} mL injected')
+                self.log_info(f'snap-through at {snap.injected * 1e6:.4f} mL injected')
                 self._publish('/actuator/events', self._event)
 
     def _save(self, injected: float, values: list[float]) -> None:

@@ -28,6 +28,7 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -239,6 +240,29 @@ class RigNode(Node):
             spec = TOPICS[topic]
             self.create_subscription(spec.msg_type, topic, callback, spec.qos)
 
+    def _log(self, severity: LoggingSeverity, text: str) -> None:
+        logger = self.get_logger()
+        if logger.is_enabled_for(severity):
+            # rclpy's logger locates its caller with inspect, which reads source files (half a
+            # second at the first call in a process with numpy and scipy loaded); the line is
+            # handed to rcutils as rclpy would, with the caller taken from the frame directly.
+            caller = sys._getframe(2)
+            _rclpy.rclpy_logging_rcutils_log(severity, logger.name, text,
+                                             caller.f_code.co_name, caller.f_code.co_filename,
+                                             caller.f_lineno)
+
+    def log_info(self, text: str) -> None:
+        """Log ``text`` at INFO (to the console and /rosout, as the node's logger does)."""
+        self._log(LoggingSeverity.INFO, text)
+
+    def log_warning(self, text: str) -> None:
+        """Log ``text`` at WARN."""
+        self._log(LoggingSeverity.WARN, text)
+
+    def log_error(self, text: str) -> None:
+        """Log ``text`` at ERROR."""
+        self._log(LoggingSeverity.ERROR, text)
+
     def warn_throttled(self, key: str, text: str) -> None:
         """Log a warning at most every WARNING_INTERVAL_S per ``key``, counting the rest."""
         wall = time.monotonic()
@@ -250,7 +274,7 @@ class RigNode(Node):
         if suppressed:
             text += f' ({suppressed} similar warnings suppressed)'
         self._last_warning[key] = wall
-        self.get_logger().warning(text)
+        self.log_warning(text)
 
     # ---------------------------------------------------------------- parameters
 

@@ -167,9 +167,9 @@ class SyringePumpNode(RigNode):
         self.state, self.reason = state, reason
         self._status.data = f'{state}: {reason}' if reason else state
         if state == 'stopped' and reason != 'requested':
-            self.get_logger().warning(f'pump {self._status.data}')
+            self.log_warning(f'pump {self._status.data}')
         else:
-            self.get_logger().info(f'pump {self._status.data}')
+            self.log_info(f'pump {self._status.data}')
         self._publish('/pump/status', self._status)
 
     def run_time_s(self, now_ns: int | None = None) -> float:
