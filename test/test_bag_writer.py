@@ -348,3 +348,62 @@ def test_sigkill_loses_at_most_the_last_second(tmp_path):
     # Every message up to the last one that must survive is there, in order, without gaps.
     assert values[:max(must_survive) + 1] == [float(i) for i in range(max(must_survive) + 1)]
     assert values == [float(i) for i in range(len(values))]
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', None])
+def test_every_index_points_at_its_record(tmp_path, compression):
+    """Chunk and message indexes, checked by parsing what they point at (readers seek by them)."""
+    import io
+    import zlib
+
+    import lz4.frame
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Chunk, Message, MessageIndex
+    import zstandard
+
+    directory = tmp_path / 'bag'
+    with BagWriter(directory, compression=compression, chunk_size=300) as bag:
+        for topic, (type_name, _) in SAMPLE.items():
+            bag.add_topic(topic, type_name)
+        # Out of time order on purpose: indexes hold log times, not positions.
+        for topic, (_, entries) in SAMPLE.items():
+            for log, pub, msg in entries:
+                bag.write(topic, serialize(msg), log, pub)
+    raw = (directory / 'bag_0.mcap').read_bytes()
+
+    def record_at(buffer: bytes, offset: int, opcode: int, cls):
+        assert buffer[offset] == opcode
+        length = int.from_bytes(buffer[offset + 1:offset + 9], 'little')
+        stream = ReadDataStream(io.BytesIO(buffer[offset + 9:offset + 9 + length]))
+        return cls.read(stream, length) if cls is Message else cls.read(stream)
+
+    with open(directory / 'bag_0.mcap', 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    channels = {c.id: c.topic for c in summary.channels.values()}
+    seen = []
+    assert len(summary.chunk_indexes) > 3
+    for index in summary.chunk_indexes:
+        chunk = record_at(raw, index.chunk_start_offset, 0x06, Chunk)
+        assert index.chunk_length == 9 + int.from_bytes(
+            raw[index.chunk_start_offset + 1:index.chunk_start_offset + 9], 'little')
+        if compression == 'zstd':
+            data = zstandard.ZstdDecompressor().decompress(
+                chunk.data, max_output_size=chunk.uncompressed_size)
+        else:
+            data = lz4.frame.decompress(chunk.data) if compression == 'lz4' else chunk.data
+        assert len(data) == chunk.uncompressed_size and zlib.crc32(data) == chunk.uncompressed_crc
+        times = []
+        for channel_id, offset in index.message_index_offsets.items():
+            message_index = record_at(raw, offset, 0x07, MessageIndex)
+            assert message_index.channel_id == channel_id
+            for log_time, record_offset in message_index.records:
+                message = record_at(data, record_offset, 0x05, Message)
+                assert (message.channel_id, message.log_time) == (channel_id, log_time)
+                seen.append((channels[channel_id], log_time, message.publish_time))
+                times.append(log_time)
+        assert (index.message_start_time, index.message_end_time) == (min(times), max(times))
+    expected = [(topic, log, pub) for topic, (_, entries) in SAMPLE.items()
+                for log, pub, _ in entries]
+    assert sorted(seen) == sorted(expected)
+    assert summary.statistics.message_count == len(expected)
+    assert summary.statistics.message_start_time == min(log for _, log, _ in expected)
