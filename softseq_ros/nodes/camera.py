@@ -29,6 +29,8 @@ layout never changes, so each frame is a template with new stamps and numbers
 and Point objects. Subscribers receive ordinary PoseArray and MarkerArray messages.
 """
 
+from array import array
+from bisect import bisect_right
 import math
 from typing import Any
 
@@ -116,7 +118,8 @@ class CameraNode(RigNode):
         self._backbone_stale = False
         self._curvature_stamp = -1
         self._poses = np.zeros((self.n_points, 7))
-        self._injected: float | None = None
+        self._watch_triggers = bool(self.triggers) and 'poses' in self.outputs
+        self._triggers_below: int | None = None
         self._pending_stamp: int | None = None
         self._pending_count = 0
         self.images_rendered = 0
@@ -162,13 +165,14 @@ class CameraNode(RigNode):
                                               f'{self.n_segments} finite)')
             return
         # A copy: the message's buffer may be reused by its sender.
-        curvatures = list(position)
+        curvatures = position.tolist() if type(position) is array else list(position)
         if curvatures != self._curvatures:
             self._curvatures = curvatures
             # The backbone is computed when a frame or a snapshot needs it, not at the
             # actuator's rate: most curvature messages are never drawn.
             self._backbone_stale = True
-        self._curvature_stamp = stamp_ns(msg.header)
+        stamp = msg.header.stamp
+        self._curvature_stamp = stamp.sec * 1_000_000_000 + stamp.nanosec
         if self._pending_stamp is not None and self._curvature_stamp >= self._pending_stamp:
             self._take_snapshots()
 
@@ -178,15 +182,14 @@ class CameraNode(RigNode):
         if not self._usable(position):
             self.warn_throttled('volumes', 'ignoring /actuator/volumes of the wrong size')
             return
-        injected = sum(position) - self.rest_total
-        previous, self._injected = self._injected, injected
-        if previous is None or not self.triggers or 'poses' not in self.outputs:
+        if not self._watch_triggers:
             return
-        crossed = sum(1 for t in self.triggers
-                      if previous < t <= injected or injected < t <= previous)
-        if not crossed:
+        # Triggers at or below the injected volume: a crossing changes this count.
+        below = bisect_right(self.triggers, sum(position) - self.rest_total)
+        previous, self._triggers_below = self._triggers_below, below
+        if previous is None or below == previous:
             return
-        self._pending_count += crossed
+        self._pending_count += abs(below - previous)
         stamp = stamp_ns(msg.header)
         if self._pending_stamp is None or stamp > self._pending_stamp:
             self._pending_stamp = stamp

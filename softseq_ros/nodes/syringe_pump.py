@@ -34,7 +34,6 @@ from softseq_ros.nodes.common import (
     RigNode,
     run_node,
     set_timer_rate,
-    stamp_header,
 )
 from softseq_ros.physics.profile import Leg, PumpProfile
 
@@ -141,6 +140,7 @@ class SyringePumpNode(RigNode):
             raise NodeConfigError(f'pump programme (legs, cycles, start_injected_m3): '
                                   f'{err}') from None
 
+        self._duration = self.profile.duration()
         self.state = 'idle'
         self.reason = ''
         self._elapsed_ns = 0           # run time accumulated before the current run
@@ -260,13 +260,14 @@ class SyringePumpNode(RigNode):
                 self._frozen_volume = volume = self.max_injected_m3
                 self.stop(f'injected volume reached max_injected_m3 {self.max_injected_m3:.6g} '
                           'm^3')
-            elif run_time >= self.profile.duration():
+            elif run_time >= self._duration:
                 self._pause()
                 self._set_state('finished')
             else:
                 flow = programme_flow
         command = self._command
-        stamp_header(command.header, now)
+        stamp = command.header.stamp
+        stamp.sec, stamp.nanosec = divmod(now, 1_000_000_000)
         command.position[0] = volume
         command.velocity[0] = flow
         self._publish('/pump/command', command)
