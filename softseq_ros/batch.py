@@ -80,7 +80,7 @@ class BatchRun:
         self._now_ns = 0
         self._queue: deque[tuple[Callable[[Any], None], Any]] = deque()
         self._counts: dict[str, int] = {}
-        self._channels: dict[str, tuple[Callable[[Any], bytes], list[Any]]] = {}
+        self._channels: dict[str, tuple[Callable[[Any], bytes], Any, list[Any]]] = {}
         self._nodes: dict[str, Any] = {}
 
     def _now(self) -> int:
@@ -139,22 +139,22 @@ class BatchRun:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
 
-    def _open_topic(self, topic: str) -> tuple[Callable[[Any], bytes], list[Any]]:
+    def _open_topic(self, topic: str) -> tuple[Callable[[Any], bytes], Any, list[Any]]:
         spec = TOPICS[topic]
         type_name = message_type_name(spec.msg_type())
         self._writer.add_topic(topic, type_name, qos_yaml(spec.qos))
         self._counts[topic] = 0
-        return encoder_for(type_name) or serialize, []
+        return encoder_for(type_name) or serialize, self._writer.appender(topic), []
 
     def _emit(self, topic: str, msg: Any) -> None:
         channel = self._channels.get(topic)
         if channel is None:
             channel = self._channels[topic] = self._open_topic(topic)
-        encoder, handlers = channel
+        encoder, append, handlers = channel
         # A node may send a message already serialised (as rclpy's publish allows).
         serialised = type(msg) is bytes
         now = self._now_ns
-        self._writer.write(topic, msg if serialised else encoder(msg), now, now)
+        append(msg if serialised else encoder(msg), now, now)
         self._counts[topic] += 1
         routes = ROUTES.get(topic)
         if routes:

@@ -407,3 +407,24 @@ def test_every_index_points_at_its_record(tmp_path, compression):
     assert sorted(seen) == sorted(expected)
     assert summary.statistics.message_count == len(expected)
     assert summary.statistics.message_start_time == min(log for _, log, _ in expected)
+
+
+def test_appender_writes_what_write_writes_and_only_without_the_flusher(tmp_path):
+    rows = [(T0 + 10 * i, T0 + 10 * i - 3, serialize(_joints(i))) for i in range(5)]
+    for name, use_appender in (('written', False), ('appended', True)):
+        with BagWriter(tmp_path / name / 'bag', flush_period_s=None) as bag:
+            bag.add_topic('/joints', 'sensor_msgs/msg/JointState')
+            append = bag.appender('/joints') if use_appender else None
+            for log, pub, data in rows:
+                if append:
+                    append(data, log, pub)
+                else:
+                    bag.write('/joints', data, log, pub)
+    assert ((tmp_path / 'written' / 'bag' / 'bag_0.mcap').read_bytes()
+            == (tmp_path / 'appended' / 'bag' / 'bag_0.mcap').read_bytes())
+    with BagWriter(tmp_path / 'flushed', flush_period_s=0.5) as bag:
+        bag.add_topic('/joints', 'sensor_msgs/msg/JointState')
+        with pytest.raises(BagWriterError, match='only for a writer without the periodic flush'):
+            bag.appender('/joints')
+        with pytest.raises(BagWriterError, match='topic /other: not registered'):
+            BagWriter.appender(bag, '/other')

@@ -165,19 +165,24 @@ class ChunkedMcapWriter:
         self._append_to_chunk(channel)
         return channel.id
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
-                    sequence: int) -> None:
-        """Add one message to the chunk in progress."""
+    def add_message(self, channel_id: int, data: bytes, log_time: int,
+                    publish_time: int) -> None:
+        """Add one message to the chunk in progress; its sequence number counts its channel."""
         chunk = self._chunk
+        counts = self._channel_counts
         chunk.channels.append(channel_id)
-        chunk.sequences.append(sequence)
+        chunk.sequences.append(counts[channel_id])
+        counts[channel_id] += 1
         chunk.log_times.append(log_time)
         chunk.publish_times.append(publish_time)
         chunk.data.append(data)
         chunk.size += 31 + len(data)
-        self._channel_counts[channel_id] += 1
         if chunk.size > self._chunk_size:
             self._close_chunk()
+
+    def channel_message_count(self, channel_id: int) -> int:
+        """Messages added to one channel so far."""
+        return self._channel_counts[channel_id]
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Write a metadata record (after the chunk in progress) and index it."""
