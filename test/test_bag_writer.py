@@ -426,5 +426,6 @@ def test_appender_writes_what_write_writes_and_only_without_the_flusher(tmp_path
         bag.add_topic('/joints', 'sensor_msgs/msg/JointState')
         with pytest.raises(BagWriterError, match='only for a writer without the periodic flush'):
             bag.appender('/joints')
+    with BagWriter(tmp_path / 'unflushed', flush_period_s=None) as bag:
         with pytest.raises(BagWriterError, match='topic /other: not registered'):
-            BagWriter.appender(bag, '/other')
+            bag.appender('/other')
