@@ -64,7 +64,6 @@ from rclpy.qos import QoSProfile  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from softseq_ros.bag.reader import read_bag  # noqa: E402
-import softseq_ros.batch as batch_module  # noqa: E402
 from softseq_ros.batch import BatchRun  # noqa: E402
 from softseq_ros.nodes.actuator import ActuatorNode  # noqa: E402
 from softseq_ros.nodes.common import TOPICS  # noqa: E402
@@ -180,20 +179,21 @@ class _InstrumentedBatch(_TimedBatch):
         pump.on_pressure = self._timed('pump: pressure check', pump.on_pressure)
         actuator.on_pump_command = self._timed('actuator: command handling (no solve)',
                                                actuator.on_pump_command)
-        actuator.tracker.step = self._timed('actuator: equilibrium solve (Tracker.step)',
-                                            actuator.tracker.step)
+        solve = 'actuator: equilibrium solve (Tracker.move, values_at)'
+        actuator.tracker.move = self._timed(solve, actuator.tracker.move)
+        actuator.emap.values_at = self._timed(solve, actuator.emap.values_at)
         camera.on_volumes = self._timed('camera: input handlers', camera.on_volumes)
         camera.on_curvatures = self._timed('camera: input handlers', camera.on_curvatures)
         camera.tick = self._timed('camera: frame (poses, markers)', camera.tick)
         camera._update_backbone = self._timed('camera: backbone kinematics',
                                               camera._update_backbone)
-        self._writer.write = self._timed('bag writing (MCAP, zstd chunks)', self._writer.write)
-        original_serialize = batch_module.serialize
-        batch_module.serialize = self._timed('serialisation (CDR encode)', original_serialize)
-        try:
-            super()._loop(pump, camera, wall_start)
-        finally:
-            batch_module.serialize = original_serialize
+        super()._loop(pump, camera, wall_start)
+
+    def _open_topic(self, topic):  # noqa: ANN001, ANN202
+        channel = super()._open_topic(topic)
+        channel.encode = self._timed('serialisation (CDR encode)', channel.encode)
+        channel.append = self._timed('bag writing (MCAP, zstd chunks)', channel.append)
+        return channel
 
 
 def _batch_parameters(legs=None, camera_rate=None, outputs=None):

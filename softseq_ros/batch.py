@@ -56,6 +56,17 @@ class BatchResult:
         return self.sim_duration_s / self.wall_s if self.wall_s > 0.0 else float('inf')
 
 
+@dataclass(eq=False)
+class _Channel:
+    """A recorded topic of a run: how its messages are encoded, written and routed."""
+
+    encode: Callable[[Any], bytes]
+    append: Callable[[bytes, int, int], None]
+    routes: tuple[tuple[str, str], ...]
+    handlers: list[Callable[[Any], None]] = field(default_factory=list)
+    count: int = 0
+
+
 def qos_yaml(profile: QoSProfile) -> str:
     """A publisher's QoS as rosbag2 stores it in a bag's topic metadata."""
     return offered_qos_yaml([qos_profile_dict(
@@ -79,8 +90,7 @@ class BatchRun:
         self.progress = progress
         self._now_ns = 0
         self._queue: deque[tuple[Callable[[Any], None], Any]] = deque()
-        self._counts: dict[str, int] = {}
-        self._channels: dict[str, tuple[Callable[[Any], bytes], Any, list[Any]]] = {}
+        self._channels: dict[str, _Channel] = {}
         self._nodes: dict[str, Any] = {}
 
     def _now(self) -> int:
@@ -110,7 +120,8 @@ class BatchRun:
         wall = time.perf_counter() - wall_start
         if self.progress is not None:
             self.progress.write('\n' if _is_terminal(self.progress) else '')
-        return BatchResult(self.out, self._now_ns / NS_PER_S, wall, dict(self._counts),
+        counts = {topic: channel.count for topic, channel in self._channels.items()}
+        return BatchResult(self.out, self._now_ns / NS_PER_S, wall, counts,
                            nodes['syringe_pump'].state)
 
     def _loop(self, pump: SyringePumpNode, camera: CameraNode, wall_start: float) -> None:
@@ -139,35 +150,39 @@ class BatchRun:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
 
-    def _open_topic(self, topic: str) -> tuple[Callable[[Any], bytes], Any, list[Any]]:
+    def _open_topic(self, topic: str) -> '_Channel':
         spec = TOPICS[topic]
         type_name = message_type_name(spec.msg_type())
         self._writer.add_topic(topic, type_name, qos_yaml(spec.qos))
-        self._counts[topic] = 0
-        return encoder_for(type_name) or serialize, self._writer.appender(topic), []
+        return _Channel(encoder_for(type_name) or serialize, self._writer.appender(topic),
+                        ROUTES.get(topic, ()))
 
     def _emit(self, topic: str, msg: Any) -> None:
         channel = self._channels.get(topic)
         if channel is None:
             channel = self._channels[topic] = self._open_topic(topic)
-        encoder, append, handlers = channel
-        # A node may send a message already serialised (as rclpy's publish allows).
-        serialised = type(msg) is bytes
         now = self._now_ns
-        append(msg if serialised else encoder(msg), now, now)
-        self._counts[topic] += 1
-        routes = ROUTES.get(topic)
-        if routes:
-            if len(handlers) != len(routes):
-                # A node may publish while the others are still being built: like a
-                # subscriber that does not exist yet, a missing node does not get the message.
-                handlers[:] = [getattr(self._nodes[node], handler) for node, handler in routes
-                               if node in self._nodes]
-            if serialised:
-                msg = deserialize_message(msg, TOPICS[topic].msg_type)
-            queue = self._queue
-            for handler in handlers:
-                queue.append((handler, msg))
+        # A node may send a message already serialised (as rclpy's publish allows).
+        if type(msg) is bytes:
+            channel.append(msg, now, now)
+            if channel.routes:
+                self._route(channel, deserialize_message(msg, TOPICS[topic].msg_type))
+        else:
+            channel.append(channel.encode(msg), now, now)
+            if channel.routes:
+                self._route(channel, msg)
+        channel.count += 1
+
+    def _route(self, channel: '_Channel', msg: Any) -> None:
+        handlers = channel.handlers
+        if len(handlers) != len(channel.routes):
+            # A node may publish while the others are still being built: like a subscriber
+            # that does not exist yet, a missing node does not get the message.
+            handlers[:] = [getattr(self._nodes[node], handler)
+                           for node, handler in channel.routes if node in self._nodes]
+        queue = self._queue
+        for handler in handlers:
+            queue.append((handler, msg))
 
     def _deliver(self) -> None:
         """Hand queued messages to their subscribers, in the order they were sent."""
