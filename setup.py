@@ -31,6 +31,7 @@ setup(
             'camera = softseq_ros.nodes.camera:main',
             'recorder = softseq_ros.nodes.recorder:main',
             'sim_clock = softseq_ros.nodes.sim_clock:main',
+            'rig = softseq_ros.nodes.rig:main',
         ],
     },
 )

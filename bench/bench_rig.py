@@ -721,22 +721,27 @@ def percentiles(values_ms: list[float]) -> str:
             f'{np.percentile(data, 99):.2f} | {data.max():.2f} | {data.size}')
 
 
-def part_latency(repeats: int) -> str:
-    del repeats
-    load_before = load_text()
+def latency_run(layout: str, domain: int) -> dict:
+    """
+    One real-time run at 100 Hz; ``layout`` 'processes' (one process per node, camera on its
+    timer) or 'rig' (the ``rig`` executable: all three nodes in one process, camera triggered
+    by the actuator's state). Returns the latency samples [ms] and counts.
+    """
     scene = load_scene('paper')
     lengths = np.array(scene.lengths)
     points_per_segment = scene.camera.points_per_segment
-    domain = BASE_DOMAIN_ID + 1 + len(SPEEDUPS)
-    print(f'latency: {LATENCY_RUN_S:.0f} s at 100 Hz in real time ...', flush=True)
     with tempfile.TemporaryDirectory(prefix='bench_rig_latency_') as tmp, \
             ros_context(domain) as context, \
             node_processes(child_environment(domain), Path(tmp)) as start:
         probe = Probe(context)
         with spinning(context, probe):
-            start('actuator', 'actuator', scene='paper', resume_timeout_s=0.0)
-            start('camera', 'camera', scene='paper', rate_hz=100)
-            start('pump', 'syringe_pump', scene='paper', rate_hz=100, autostart='false')
+            if layout == 'rig':
+                start('rig', 'rig', scene='paper', rate_hz=100, autostart='false',
+                      resume_timeout_s=0.0, frame_trigger='state')
+            else:
+                start('actuator', 'actuator', scene='paper', resume_timeout_s=0.0)
+                start('camera', 'camera', scene='paper', rate_hz=100)
+                start('pump', 'syringe_pump', scene='paper', rate_hz=100, autostart='false')
             wait_for(probe.matched, 'the nodes', STARTUP_TIMEOUT_S)
             wait_for(lambda: probe.count_subscribers('/pump/command') >= 1
                      and probe.count_subscribers('/actuator/curvatures') >= 2,
@@ -790,43 +795,62 @@ def part_latency(repeats: int) -> str:
             unmatched += 1
         elif command not in shown:
             shown[command] = (received_ns, frame_stamp)
-    pose_ms = [(r - c) * 1e-6 for c, (r, _) in shown.items()]
-    wait_ms = [(f - c) * 1e-6 for c, (_, f) in shown.items()]
-    delivery_ms = [(r - f) * 1e-6 for _, (r, f) in shown.items()]
+    return {
+        'total': total_ms, 'hop': hop_ms,
+        'pose': [(r - c) * 1e-6 for c, (r, _) in shown.items()],
+        'taken': [(f - c) * 1e-6 for c, (_, f) in shown.items()],
+        'delivery': [(r - f) * 1e-6 for _, (r, f) in shown.items()],
+        'commands': len(command_stamp_of), 'frames': frames, 'shown': len(shown),
+        'unmatched': unmatched, 'load': load_during}
+
+
+def part_latency(repeats: int) -> str:
+    del repeats
+    load_before = load_text()
+    base = BASE_DOMAIN_ID + 1 + len(SPEEDUPS)
+    runs = {}
+    for offset, layout in enumerate(('rig', 'processes')):
+        print(f'latency ({layout}): {LATENCY_RUN_S:.0f} s at 100 Hz in real time ...',
+              flush=True)
+        runs[layout] = latency_run(layout, base + offset)
+    rig, processes = runs['rig'], runs['processes']
     lines = [
         '## 3. Real-time latency (pump and camera at 100 Hz)', '',
-        f'Paper scene in real time: `syringe_pump` (`rate_hz:=100`), `actuator`, `camera` '
-        f'(`rate_hz:=100`) as separate processes; a probe node in the benchmark process (a '
-        f'fourth process, SingleThreadedExecutor in a thread) subscribes to /pump/command, '
-        f'/actuator/volumes, /actuator/curvatures and /camera/backbone and notes the wall '
-        f'clock (`time.time_ns()`) when each callback runs. {LATENCY_RUN_S:.0f} s run, the '
-        f"first {LATENCY_WARMUP_S:.0f} s dropped. A command's time is its header stamp: the "
-        "pump's ROS clock (system time) read in its tick just before publishing. Answers are "
-        "paired with commands by content, independent of stamps: the volumes' sum minus the "
-        'rest volumes is the commanded injected volume.', '',
-        '- command -> volumes: probe receipt of the /actuator/volumes answering a command '
-        'minus the command stamp (pump -> actuator -> probe: two DDS hops, the solve); for '
-        "scale, one hop: the probe's own receipt of /pump/command minus its stamp.",
-        '- command -> pose: for each command shown by a /camera/backbone frame, the receipt '
-        'of the first frame showing it minus the command stamp. A frame shows the command '
-        'whose curvatures give the same tip point (same kinematics, exact match). It '
-        "includes the wait for the camera's next frame (pump and camera timers run "
-        'unsynchronised: up to one 10 ms period), listed separately; commands superseded '
-        'before any frame are not counted.', '',
-        '| latency [ms] | median | p90 | p99 | max | samples |', '|---|---:|---:|---:|---:|---:|',
-        f'| **command -> /actuator/volumes received** | {percentiles(total_ms)} |',
-        f'| for scale: command -> /pump/command received by the probe (one hop) | '
-        f'{percentiles(hop_ms)} |',
-        f'| **command -> first /camera/backbone showing it, received** | '
-        f'{percentiles(pose_ms)} |',
-        f'| of which: until the frame (frame stamp - command stamp) | {percentiles(wait_ms)} |',
-        f'| of which: frame delivery (receipt - frame stamp) | {percentiles(delivery_ms)} |',
-        '',
-        f'After warm-up: {len(command_stamp_of)} commands, {len(total_ms)} answered; '
-        f'{frames} frames, '
-        f'{len(shown)} distinct commands shown, {unmatched} frames not matched to a command. '
-        f'Load average during the run: {load_during}.', '',
-        under_load_note(load_before, load_text())]
+        'Paper scene in real time, pump at 100 Hz, in two layouts:', '',
+        '- **rig**: `rig --ros-args -p rate_hz:=100 -p frame_trigger:=state` (pump, actuator '
+        'and camera in one process on one executor; the camera takes a frame as soon as new '
+        'curvatures arrive, at most about 100 per second).',
+        '- **processes**: `syringe_pump` (`rate_hz:=100`), `actuator` and `camera` '
+        '(`rate_hz:=100`, free-running frame timer) as three processes.', '',
+        f'A probe node in the benchmark process (SingleThreadedExecutor in a thread) '
+        f'subscribes to /pump/command, /actuator/volumes, /actuator/curvatures and '
+        f'/camera/backbone and notes the wall clock (`time.time_ns()`) when each callback '
+        f'runs. {LATENCY_RUN_S:.0f} s per run, the first {LATENCY_WARMUP_S:.0f} s dropped. '
+        "A command's time is its header stamp: the pump's ROS clock (system time) read in its "
+        "tick just before publishing. A frame's stamp is the camera's clock when it takes the "
+        'frame. Answers are paired with commands by content, independent of stamps: the '
+        "volumes' sum minus the rest volumes is the commanded injected volume, and a frame "
+        'shows the command whose curvatures give the same tip point (same kinematics, exact '
+        'match); commands superseded before any frame are not counted.', '',
+        '| latency [ms] | layout | median | p90 | p99 | max | samples |',
+        '|---|---|---:|---:|---:|---:|---:|']
+    rows = [
+        ('**command -> pose taken** (frame stamp - command stamp)', 'taken'),
+        ('command -> pose received by the probe (one more process hop)', 'pose'),
+        ('of which: frame delivery to the probe (receipt - frame stamp)', 'delivery'),
+        ('command -> /actuator/volumes received by the probe', 'total'),
+        ('for scale: command -> /pump/command received by the probe (one hop)', 'hop')]
+    for label, key in rows:
+        for layout, run in (('rig', rig), ('processes', processes)):
+            lines.append(f'| {label} | {layout} | {percentiles(run[key])} |')
+    lines.append('')
+    for layout, run in (('rig', rig), ('processes', processes)):
+        lines.append(
+            f'- {layout}: after warm-up {run["commands"]} commands, {len(run["total"])} '
+            f'answered; {run["frames"]} frames, {run["shown"]} distinct commands shown, '
+            f'{run["unmatched"]} frames not matched to a command; load average during the '
+            f'run {run["load"]}.')
+    lines += ['', under_load_note(load_before, load_text())]
     return '\n'.join(lines)
 
 

@@ -603,3 +603,43 @@ def test_actuator_resumes_from_the_latched_volumes_of_a_live_publisher(context):
                                atol=1e-9 * emap.v_scale)
     # Not where a fresh start would have put it.
     assert np.max(np.abs(resumed.volumes - inflating.volumes[row])) > 1e-3 * emap.v_scale
+
+
+def test_state_triggered_camera_draws_each_state_at_most_at_its_rate(context, tmp_path):
+    scene_path = write_scene(tmp_path)
+    clock = Clock()
+    sent = []
+    camera = CameraNode(context=context, emit=lambda t, m: sent.append((t, clock.ns, m)),
+                        now=clock,
+                        parameter_overrides=[Parameter('scene', value=scene_path),
+                                             Parameter('rate_hz', value=10.0),
+                                             Parameter('frame_trigger', value='state'),
+                                             Parameter('outputs', value=['poses'])])
+    try:
+        states = []
+        # 20 ms apart: a frame at most every half period (50 ms) of the 10 Hz camera.
+        for i in range(12):
+            clock.ns = 10**9 + 20_000_000 * i
+            curvatures = [1.0 + i, -2.0 * i]
+            msg = JointState(name=['bottom', 'top'], position=curvatures)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(clock.ns, 10**9)
+            camera.on_curvatures(msg)
+            states.append(curvatures)
+        camera.tick()  # the frame timer takes no frames in this mode
+    finally:
+        camera.destroy_node()
+    frames = [(now, deserialize_message(m, PoseArray)) for t, now, m in sent
+              if t == '/camera/backbone']
+    # States 0, 3, 6, 9 (60 ms apart) are drawn at once, stamped when taken.
+    assert [now for now, _ in frames] == [10**9 + 20_000_000 * i for i in (0, 3, 6, 9)]
+    assert all(stamp_ns(msg.header) == now for now, msg in frames)
+    check_poses([msg for _, msg in frames], [states[i] for i in (0, 3, 6, 9)],
+                np.array(load_scene(scene_path).lengths),
+                load_scene(scene_path).camera.points_per_segment)
+
+
+def test_camera_refuses_an_unknown_frame_trigger(context, tmp_path):
+    with pytest.raises(InvalidParameterValueException, match='must be timer or state'):
+        CameraNode(context=context, emit=lambda t, m: None, now=Clock(),
+                   parameter_overrides=[Parameter('scene', value=write_scene(tmp_path)),
+                                        Parameter('frame_trigger', value='sometimes')])

@@ -199,3 +199,38 @@ def test_yaml_text_that_rcl_cannot_parse_is_one_line_with_the_fix(ros_env):
                             timeout=30)
     # Quoted, the legs parse; the next mistake (cycles) is the one reported.
     assert quoted.returncode == 2 and 'cycles' in quoted.stderr, quoted.stderr
+
+
+def test_rig_runs_the_three_nodes_in_one_process_with_state_triggered_frames(
+        context, ros_env, tmp_path):
+    scene_path = write_scene(tmp_path)
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    topics = ['/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
+              '/actuator/curvatures', '/camera/backbone']
+    collector = Collector(topics, context)
+    got = collector.received
+    with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
+        # A global -p reaches every node that declares it; node:name:= only that node.
+        rig = start('rig', 'rig', scene=scene_path, rate_hz=50, autostart='false',
+                    resume_timeout_s=0.0, **{'camera:frame_trigger': 'state'})
+        wait_for(lambda: all(collector.matched(t) for t in topics), 'the rig up and matched',
+                 timeout=STARTUP_TIMEOUT_S)
+        wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
+                 'the actuator on /pump/command')
+        assert call_trigger(collector, '/syringe_pump/start').success
+        wait_for(lambda: any(m.data == 'finished' for m in got['/pump/status']),
+                 'the programme to finish')
+        n_commands = len(got['/pump/command'])
+        wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
+                 'the actuator outputs of every command')
+        assert rig.poll() is None
+    check_against_solver(emap, list(got['/pump/command']), got['/actuator/pressure'],
+                         got['/actuator/volumes'], got['/actuator/curvatures'])
+    curvatures = [list(m.position) for m in got['/actuator/curvatures']]
+    poses = list(got['/camera/backbone'])
+    check_poses(poses, curvatures, np.array(scene.lengths), scene.camera.points_per_segment)
+    # The camera follows the state: about one frame per actuator state (the pump runs at the
+    # camera's rate), far more than the scene's own 10 Hz camera would take.
+    assert len(poses) >= 0.8 * len(curvatures)
+    assert rig.returncode == 0, (tmp_path / 'rig.log').read_text()

@@ -22,7 +22,8 @@ REPO = Path(__file__).resolve().parent.parent
 PACKAGE = 'softseq_ros'
 VENV_BIN = Path(sys.prefix) / 'bin'
 # The executables the README promises to ROS users.
-DOCUMENTED_EXECUTABLES = {'softseq', 'syringe_pump', 'actuator', 'camera', 'recorder', 'sim_clock'}
+DOCUMENTED_EXECUTABLES = {'softseq', 'syringe_pump', 'actuator', 'camera', 'recorder',
+                          'sim_clock', 'rig'}
 # Top-level modules that exist only with a ROS install (or the ROS wheels).
 ROS_MODULES = {
     'rclpy', 'rcl_interfaces', 'rosidl_runtime_py', 'ament_index_python', 'builtin_interfaces',

@@ -10,6 +10,12 @@ position is a backbone point; its orientation is the frame whose +x axis is the 
 -theta about +y, quaternion (x, y, z, w) = (0, -sin(theta/2), 0, cos(theta/2)). Positive
 curvature turns the backbone toward +z.
 
+Frames come from a free-running timer at ``rate_hz`` (``frame_trigger: timer``, like a camera
+that is not synchronised with the rig), or, with ``frame_trigger: state``, as soon as a new
+/actuator/curvatures arrives (a camera triggered by the actuator's state: the lowest latency
+from a pump command to its pose), at most about ``rate_hz`` frames per second: a state that
+comes less than half a period after the last frame is not drawn (the next one is).
+
 ``noise_std_m`` adds Gaussian noise [m] to the x and z of every published point (a pose
 extraction error; fresh at every frame, from a generator seeded by ``seed``, so a run is
 reproducible). Orientations and the rendered image are noise free.
@@ -80,6 +86,12 @@ class CameraNode(RigNode):
         cam = scene.camera
         self.rate_hz = self.declare_number('rate_hz', cam.rate_hz, 'Frame rate [Hz].',
                                            minimum=0.0, open_minimum=True, maximum=1000.0)
+        self.frame_trigger = self.declare_text(
+            'frame_trigger', 'timer', 'What takes a frame: timer (free running at rate_hz) or '
+            'state (each new /actuator/curvatures, at most about rate_hz).', read_only=True,
+            check=lambda value: None if value in ('timer', 'state')
+            else f'must be timer or state, got {value!r}')
+        self._last_frame_ns: int | None = None
         self.noise_std_m = self.declare_number(
             'noise_std_m', cam.noise_std_m, 'Gaussian noise on every point [m].', minimum=0.0)
         seed = self.declare_integer('seed', cam.seed, 'Noise generator seed.', minimum=0,
@@ -148,7 +160,8 @@ class CameraNode(RigNode):
 
         self._subscribe('/actuator/curvatures', self.on_curvatures)
         self._subscribe('/actuator/volumes', self.on_volumes)
-        self._timer = self._make_timer(self.rate_hz, self.tick)
+        self._timer = (self._make_timer(self.rate_hz, self.tick)
+                       if self.frame_trigger == 'timer' else None)
         self.configured = True
 
     # ---------------------------------------------------------------- inputs
@@ -175,6 +188,11 @@ class CameraNode(RigNode):
         self._curvature_stamp = stamp.sec * 1_000_000_000 + stamp.nanosec
         if self._pending_stamp is not None and self._curvature_stamp >= self._pending_stamp:
             self._take_snapshots()
+        if self.frame_trigger == 'state':
+            now = self.now_ns()
+            last = self._last_frame_ns
+            if last is None or now - last >= 500_000_000 / self.rate_hz:
+                self._frame(now)
 
     def on_volumes(self, msg: JointState) -> None:
         """Detect trigger crossings of the injected volume."""
@@ -228,11 +246,14 @@ class CameraNode(RigNode):
         return self._rig_publishers['/camera/image'].get_subscription_count() > 0
 
     def tick(self) -> None:
-        """Publish the latest backbone, markers and (when wanted) the image."""
-        if self._curvatures is None:
+        """The frame timer: publish the latest backbone, markers and (when wanted) the image."""
+        if self._curvatures is None or self.frame_trigger != 'timer':
             return
+        self._frame(self.now_ns())
+
+    def _frame(self, now: int) -> None:
+        self._last_frame_ns = now
         self._update_backbone()
-        now = self.now_ns()
         poses = self._noisy_poses()
         if 'poses' in self.outputs:
             self._publish('/camera/backbone', self._pose_layout.encode(now, [poses]))

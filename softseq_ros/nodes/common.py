@@ -26,7 +26,7 @@ from rcl_interfaces.msg import (
 )
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
@@ -401,7 +401,12 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
     A configuration mistake (scene file, parameter value) ends the process with one line on
     stderr and exit status 2, not a traceback.
     """
-    name = getattr(node_class, 'NODE_NAME', 'node')
+    run_nodes([node_class], args, getattr(node_class, 'NODE_NAME', 'node'))
+
+
+def run_nodes(node_classes: Sequence[Callable[..., Node]], args: list[str] | None,
+              name: str) -> None:
+    """``run_node`` for several nodes in one process, on one single-threaded executor."""
     try:
         rclpy.init(args=args)
     except _rclpy.RCLError as err:
@@ -411,11 +416,15 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
         print(f'{name}: error: {reason}; quote a value that is YAML text, e.g. '
               '-p "legs:=\'[{inflate_to_m3: 5.0e-6}]\'"', file=sys.stderr)
         sys.exit(2)
-    node = None
+    nodes: list[Node] = []
     error = None
     try:
-        node = node_class()
-        rclpy.spin(node)
+        for node_class in node_classes:
+            nodes.append(node_class())
+        executor = SingleThreadedExecutor()
+        for node in nodes:
+            executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (SceneError, NodeConfigError, ParameterException) as err:
@@ -426,7 +435,7 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
         if rclpy.ok():
             raise
     finally:
-        if node is not None:
+        for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
     if error is not None:

@@ -1,0 +1,24 @@
+"""
+The whole rig in one process: syringe pump, actuator and camera nodes on one executor.
+
+The same nodes as ``syringe_pump``, ``actuator`` and ``camera`` started one by one, composed as
+ROS 2 components would be: a message between them never leaves the process (Fast DDS delivers
+within its participant) and one executor runs every callback, so a pump command reaches the
+actuator, and its state the camera, without waking other processes. ``--ros-args -p name:=value``
+sets a parameter of every node that declares it (``scene``, ``rate_hz``); ``-p
+camera:rate_hz:=100`` sets it for one node.
+"""
+
+from softseq_ros.nodes.actuator import ActuatorNode
+from softseq_ros.nodes.camera import CameraNode
+from softseq_ros.nodes.common import run_nodes
+from softseq_ros.nodes.syringe_pump import SyringePumpNode
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the pump, actuator and camera nodes in this process."""
+    run_nodes([SyringePumpNode, ActuatorNode, CameraNode], args, 'rig')
+
+
+if __name__ == '__main__':
+    main()
