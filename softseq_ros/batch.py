@@ -9,7 +9,6 @@ repeated here and nothing goes through DDS, so a run is as fast as the machine a
 deterministic: the same scene gives the same bag contents.
 """
 
-from collections import deque
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
@@ -20,7 +19,6 @@ from typing import Any, Callable, TextIO
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 
 from softseq_ros.bag.cdr import encoder_for
 from softseq_ros.bag.writer import (
@@ -32,11 +30,12 @@ from softseq_ros.bag.writer import (
 )
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.camera import CameraNode
-from softseq_ros.nodes.common import ROUTES, TOPICS
+from softseq_ros.nodes.common import TOPICS, LocalRoutes
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.physics.scene import scene_path
 
 NS_PER_S = 1_000_000_000
+NODE_CLASSES = (SyringePumpNode, ActuatorNode, CameraNode)
 PROGRESS_PERIOD_S = 0.25
 
 
@@ -62,8 +61,7 @@ class _Channel:
 
     encode: Callable[[Any], bytes]
     append: Callable[[bytes, int, int], None]
-    routes: tuple[tuple[str, str], ...]
-    handlers: list[Callable[[Any], None]] = field(default_factory=list)
+    routed: bool
     count: int = 0
 
 
@@ -89,9 +87,8 @@ class BatchRun:
         self.parameters = parameters or {}
         self.progress = progress
         self._now_ns = 0
-        self._queue: deque[tuple[Callable[[Any], None], Any]] = deque()
         self._channels: dict[str, _Channel] = {}
-        self._nodes: dict[str, Any] = {}
+        self._routes = LocalRoutes([cls.NODE_NAME for cls in NODE_CLASSES])
 
     def _now(self) -> int:
         return self._now_ns
@@ -105,13 +102,13 @@ class BatchRun:
         try:
             with BagWriter(self.out, flush_period_s=None) as writer:
                 self._writer = writer
-                self._nodes = nodes
                 common = {'context': context, 'emit': self._emit, 'now': self._now,
                               'start_parameter_services': False, 'enable_rosout': False}
-                for cls in (SyringePumpNode, ActuatorNode, CameraNode):
+                for cls in NODE_CLASSES:
                     overrides = [Parameter('scene', value=str(self.scene)),
                                  *self.parameters.get(cls.NODE_NAME, [])]
                     nodes[cls.NODE_NAME] = cls(parameter_overrides=overrides, **common)
+                    self._routes.add(nodes[cls.NODE_NAME])
                 self._loop(nodes['syringe_pump'], nodes['camera'], wall_start)
         finally:
             for node in nodes.values():
@@ -135,16 +132,16 @@ class BatchRun:
             if next_pump <= next_camera:
                 self._now_ns = next_pump
                 pump.tick()
-                self._deliver()
+                self._routes.drain()
                 next_pump += pump_period
                 if pump.state in ('finished', 'stopped'):
                     camera.tick()
-                    self._deliver()
+                    self._routes.drain()
                     return
             else:
                 self._now_ns = next_camera
                 camera.tick()
-                self._deliver()
+                self._routes.drain()
                 next_camera += camera_period
             if self.progress is not None and time.perf_counter() >= next_report:
                 next_report += PROGRESS_PERIOD_S
@@ -155,7 +152,7 @@ class BatchRun:
         type_name = message_type_name(spec.msg_type())
         self._writer.add_topic(topic, type_name, qos_yaml(spec.qos))
         return _Channel(encoder_for(type_name) or serialize, self._writer.appender(topic),
-                        ROUTES.get(topic, ()))
+                        self._routes.carries(topic))
 
     def _emit(self, topic: str, msg: Any) -> None:
         channel = self._channels.get(topic)
@@ -163,33 +160,10 @@ class BatchRun:
             channel = self._channels[topic] = self._open_topic(topic)
         now = self._now_ns
         # A node may send a message already serialised (as rclpy's publish allows).
-        if type(msg) is bytes:
-            channel.append(msg, now, now)
-            if channel.routes:
-                self._route(channel, deserialize_message(msg, TOPICS[topic].msg_type))
-        else:
-            channel.append(channel.encode(msg), now, now)
-            if channel.routes:
-                self._route(channel, msg)
+        channel.append(msg if type(msg) is bytes else channel.encode(msg), now, now)
         channel.count += 1
-
-    def _route(self, channel: '_Channel', msg: Any) -> None:
-        handlers = channel.handlers
-        if len(handlers) != len(channel.routes):
-            # A node may publish while the others are still being built: like a subscriber
-            # that does not exist yet, a missing node does not get the message.
-            handlers[:] = [getattr(self._nodes[node], handler)
-                           for node, handler in channel.routes if node in self._nodes]
-        queue = self._queue
-        for handler in handlers:
-            queue.append((handler, msg))
-
-    def _deliver(self) -> None:
-        """Hand queued messages to their subscribers, in the order they were sent."""
-        queue = self._queue
-        while queue:
-            handler, msg = queue.popleft()
-            handler(msg)
+        if channel.routed:
+            self._routes.send(topic, msg)
 
     def _report(self, wall_start: float, duration: float) -> None:
         sim = self._now_ns / NS_PER_S

@@ -10,6 +10,7 @@ In batch mode (``emit`` given) a node creates no publishers, subscriptions, serv
 the batch runner calls the public ``on_<topic>`` handlers and ``tick()`` itself.
 """
 
+from collections import deque
 from dataclasses import dataclass
 import math
 import sys
@@ -32,6 +33,7 @@ from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure, Image, JointState
 from std_msgs.msg import String
@@ -107,6 +109,65 @@ OUTPUT_TOPICS: dict[str, tuple[str, ...]] = {
     'markers': ('/camera/markers',),
     'image': ('/camera/image',),
 }
+
+
+class LocalRoutes:
+    """
+    Hands messages between the rig's nodes in one process, by ROUTES, in the order they were sent.
+
+    The batch runner and the ``rig`` executable use it. ``node_names`` are the nodes living in
+    the process; a topic is carried here when one of them consumes it (their DDS subscription
+    to it is then not made: it would deliver the same message a second time). ``send`` queues
+    a message for its consumers' handlers, ``drain`` runs the queue; a handler that publishes
+    queues more, which the same ``drain`` runs, so a pump command reaches the camera's frame
+    within the pump's own tick, as rclcpp's intra-process communication would have it.
+    """
+
+    def __init__(self, node_names: Sequence[str]) -> None:
+        """Routes among the nodes ``node_names`` (register each with :meth:`add`)."""
+        self.node_names = frozenset(node_names)
+        self._nodes: dict[str, Any] = {}
+        self._handlers: dict[str, list[Callable[[Any], None]]] = {}
+        self._queue: deque[tuple[Callable[[Any], None], Any]] = deque()
+        self._draining = False
+
+    def add(self, node: Any) -> None:
+        """Register a built node (by its NODE_NAME)."""
+        self._nodes[node.NODE_NAME] = node
+        self._handlers.clear()
+
+    def carries(self, topic: str) -> bool:
+        """True when a node of this process consumes ``topic``."""
+        return any(node in self.node_names for node, _ in ROUTES.get(topic, ()))
+
+    def send(self, topic: str, msg: Any) -> None:
+        """Queue ``msg`` (a message, or its CDR bytes) for the handlers that consume ``topic``."""
+        handlers = self._handlers.get(topic)
+        if handlers is None:
+            # A node may publish while the others are still being built: like a subscriber
+            # that does not exist yet, a node not registered yet does not get the message.
+            handlers = [getattr(self._nodes[node], handler)
+                        for node, handler in ROUTES.get(topic, ()) if node in self._nodes]
+            self._handlers[topic] = handlers
+        if handlers:
+            if type(msg) is bytes:
+                msg = deserialize_message(msg, TOPICS[topic].msg_type)
+            queue = self._queue
+            for handler in handlers:
+                queue.append((handler, msg))
+
+    def drain(self) -> None:
+        """Run the queued handlers (and what they queue); nested calls leave it to the outer."""
+        if self._draining:
+            return
+        self._draining = True
+        try:
+            queue = self._queue
+            while queue:
+                handler, msg = queue.popleft()
+                handler(msg)
+        finally:
+            self._draining = False
 
 
 def outputs_reason(value: list[str]) -> str | None:
@@ -187,14 +248,18 @@ class RigNode(Node):
 
     ``emit(topic, msg)``, when given, receives every outgoing message instead of a ROS
     publisher; ``now()`` returns the current time in nanoseconds (default: the node clock).
+    ``local_routes`` (the ``rig`` executable) hands what the node publishes also straight to
+    the other nodes of the process (see :class:`LocalRoutes`).
     Other keywords go to rclpy's Node (``context``, ``parameter_overrides``, ...).
     """
 
     def __init__(self, node_name: str, *, emit: Callable[[str, Any], None] | None = None,
-                 now: Callable[[], int] | None = None, **node_kwargs: Any) -> None:
+                 now: Callable[[], int] | None = None, local_routes: LocalRoutes | None = None,
+                 **node_kwargs: Any) -> None:
         """Create the node and install the parameter validation callbacks."""
         super().__init__(node_name, **node_kwargs)
         self._emit = emit
+        self._local_routes = local_routes
         self._now_fn = now
         self._rig_publishers: dict[str, Any] = {}
         self._rules: dict[str, _Rule] = {}
@@ -231,12 +296,17 @@ class RigNode(Node):
             self._emit(topic, msg)
         else:
             self._rig_publishers[topic].publish(msg)
+            local = self._local_routes
+            if local is not None:
+                local.send(topic, msg)
+                local.drain()
 
     def _publishes(self, topic: str) -> bool:
         return topic in self._rig_publishers
 
     def _subscribe(self, topic: str, callback: Callable[[Any], None]) -> None:
-        if self._emit is None:
+        local = self._local_routes
+        if self._emit is None and not (local is not None and local.carries(topic)):
             spec = TOPICS[topic]
             self.create_subscription(spec.msg_type, topic, callback, spec.qos)
 
@@ -406,7 +476,12 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
 
 def run_nodes(node_classes: Sequence[Callable[..., Node]], args: list[str] | None,
               name: str) -> None:
-    """``run_node`` for several nodes in one process, on one single-threaded executor."""
+    """
+    ``run_node`` for several nodes in one process, on one single-threaded executor.
+
+    With more than one node, messages between them go through :class:`LocalRoutes`; every
+    topic is still published over DDS for the world outside.
+    """
     try:
         rclpy.init(args=args)
     except _rclpy.RCLError as err:
@@ -419,8 +494,13 @@ def run_nodes(node_classes: Sequence[Callable[..., Node]], args: list[str] | Non
     nodes: list[Node] = []
     error = None
     try:
+        local = (LocalRoutes([cls.NODE_NAME for cls in node_classes])
+                 if len(node_classes) > 1 else None)
         for node_class in node_classes:
-            nodes.append(node_class())
+            node = node_class(local_routes=local) if local is not None else node_class()
+            nodes.append(node)
+            if local is not None:
+                local.add(node)
         executor = SingleThreadedExecutor()
         for node in nodes:
             executor.add_node(node)

@@ -2,11 +2,14 @@
 The whole rig in one process: syringe pump, actuator and camera nodes on one executor.
 
 The same nodes as ``syringe_pump``, ``actuator`` and ``camera`` started one by one, composed as
-ROS 2 components would be: a message between them never leaves the process (Fast DDS delivers
-within its participant) and one executor runs every callback, so a pump command reaches the
-actuator, and its state the camera, without waking other processes. ``--ros-args -p name:=value``
-sets a parameter of every node that declares it (``scene``, ``rate_hz``); ``-p
-camera:rate_hz:=100`` sets it for one node.
+ROS 2 components with intra-process communication would be: every topic is published over DDS
+for the world outside, and a message between the three nodes goes straight to its consumer's
+handler (softseq_ros.nodes.common.LocalRoutes), so a pump command reaches the actuator, and its
+state the camera, within the pump's tick. The actuator therefore hears only this process's
+pump: to drive it from another pump, start the nodes as separate processes.
+
+``--ros-args -p name:=value`` sets a parameter of every node that declares it (``scene``,
+``rate_hz``); ``-p camera:rate_hz:=100`` sets it for one node.
 """
 
 from softseq_ros.nodes.actuator import ActuatorNode
