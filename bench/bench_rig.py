@@ -174,7 +174,7 @@ class _InstrumentedBatch(_TimedBatch):
         return wrapper
 
     def _loop(self, pump, camera, wall_start) -> None:
-        actuator = self._nodes['actuator']
+        actuator = self.nodes['actuator']
         pump.tick = self._timed('pump: tick (programme, state, fill)', pump.tick)
         pump.on_pressure = self._timed('pump: pressure check', pump.on_pressure)
         actuator.on_pump_command = self._timed('actuator: command handling (no solve)',
@@ -366,7 +366,7 @@ def part_batch(repeats: int) -> str:
             print(f'  {label}', flush=True)
             options.setdefault('legs', SHORT_LEGS)
             run, result = run_batch(workdir, label, repeats, **options)
-            actuator = run._nodes['actuator']
+            actuator = run.nodes['actuator']
             reference_cpu = reference_cpu or run.cpu_s
             commands = result.message_counts.get('/pump/command', 0)
             lines.append(

@@ -98,6 +98,7 @@ class BatchRun:
         context = rclpy.Context()
         rclpy.init(context=context, args=[])
         nodes: dict[str, Any] = {}
+        self.nodes = nodes  # the run's nodes by name, for inspection after the run
         wall_start = time.perf_counter()
         try:
             with BagWriter(self.out, flush_period_s=None) as writer:
