@@ -66,34 +66,52 @@ def node_processes(env, log_dir: Path):
                 process.wait()
 
 
-def test_console_script_nodes_match_the_solver(context, ros_env, tmp_path):
-    scene_path = write_scene(tmp_path)
-    scene = load_scene(scene_path)
-    emap = EquilibriumMap(scene.segments)
-    topics = ['/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
+RUN_TOPICS = ['/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
               '/actuator/curvatures', '/camera/backbone']
-    collector = Collector(topics, context)
+
+
+def _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers):
+    """
+    Start the nodes (``start_nodes(start, scene_path)``), run the pump's programme, collect.
+
+    ``pump_subscribers`` is how many DDS subscriptions /pump/command must have before the
+    start (the collector's and any actuator's). Returns the scene, the messages received and
+    the started processes, each checked to be still running at the end.
+    """
+    scene_path = write_scene(tmp_path)
+    collector = Collector(RUN_TOPICS, context)
     got = collector.received
     with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
-        start('actuator', 'actuator', scene=scene_path, resume_timeout_s=0.2)
-        start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false')
-        start('camera', 'camera', scene=scene_path, rate_hz=20)
-        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched',
-                 timeout=STARTUP_TIMEOUT_S)
-        wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
-                 'the actuator on /pump/command')
+        processes = start_nodes(start, scene_path)
+        wait_for(lambda: all(collector.matched(t) for t in RUN_TOPICS),
+                 'all nodes up and matched', timeout=STARTUP_TIMEOUT_S)
+        wait_for(lambda: collector.count_subscribers('/pump/command') == pump_subscribers,
+                 f'{pump_subscribers} subscriptions to /pump/command')
         assert call_trigger(collector, '/syringe_pump/start').success
         wait_for(lambda: any(m.data == 'finished' for m in got['/pump/status']),
                  'the programme to finish')
         n_commands = len(got['/pump/command'])
         wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
                  'the actuator outputs of every command')
-        check_against_solver(emap, list(got['/pump/command']), got['/actuator/pressure'],
-                             got['/actuator/volumes'], got['/actuator/curvatures'])
-        poses = list(got['/camera/backbone'])
-        assert len(poses) >= 10
-        check_poses(poses, [list(m.position) for m in got['/actuator/curvatures']],
-                    np.array(scene.lengths), scene.camera.points_per_segment)
+        assert all(process.poll() is None for process in processes)
+    scene = load_scene(scene_path)
+    check_against_solver(EquilibriumMap(scene.segments), list(got['/pump/command']),
+                         got['/actuator/pressure'], got['/actuator/volumes'],
+                         got['/actuator/curvatures'])
+    check_poses(list(got['/camera/backbone']),
+                [list(m.position) for m in got['/actuator/curvatures']],
+                np.array(scene.lengths), scene.camera.points_per_segment)
+    return scene, got, processes
+
+
+def test_console_script_nodes_match_the_solver(context, ros_env, tmp_path):
+    def start_nodes(start, scene_path):
+        return [start('actuator', 'actuator', scene=scene_path, resume_timeout_s=0.2),
+                start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false'),
+                start('camera', 'camera', scene=scene_path, rate_hz=20)]
+
+    _, got, _ = _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers=2)
+    assert len(got['/camera/backbone']) >= 10
 
 
 def _hysteresis_scene(tmp_path):
@@ -203,34 +221,16 @@ def test_yaml_text_that_rcl_cannot_parse_is_one_line_with_the_fix(ros_env):
 
 def test_rig_runs_the_three_nodes_in_one_process_with_state_triggered_frames(
         context, ros_env, tmp_path):
-    scene_path = write_scene(tmp_path)
-    scene = load_scene(scene_path)
-    emap = EquilibriumMap(scene.segments)
-    topics = ['/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
-              '/actuator/curvatures', '/camera/backbone']
-    collector = Collector(topics, context)
-    got = collector.received
-    with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
+    def start_nodes(start, scene_path):
         # A global -p reaches every node that declares it; node:name:= only that node.
-        rig = start('rig', 'rig', scene=scene_path, rate_hz=50, autostart='false',
-                    resume_timeout_s=0.0, **{'camera:frame_trigger': 'state'})
-        wait_for(lambda: all(collector.matched(t) for t in topics), 'the rig up and matched',
-                 timeout=STARTUP_TIMEOUT_S)
-        # Inside the rig, commands go straight to the actuator: it has no DDS subscription.
-        assert collector.count_subscribers('/pump/command') == 1
-        assert call_trigger(collector, '/syringe_pump/start').success
-        wait_for(lambda: any(m.data == 'finished' for m in got['/pump/status']),
-                 'the programme to finish')
-        n_commands = len(got['/pump/command'])
-        wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
-                 'the actuator outputs of every command')
-        assert rig.poll() is None
-    check_against_solver(emap, list(got['/pump/command']), got['/actuator/pressure'],
-                         got['/actuator/volumes'], got['/actuator/curvatures'])
-    curvatures = [list(m.position) for m in got['/actuator/curvatures']]
-    poses = list(got['/camera/backbone'])
-    check_poses(poses, curvatures, np.array(scene.lengths), scene.camera.points_per_segment)
+        return [start('rig', 'rig', scene=scene_path, rate_hz=50, autostart='false',
+                      resume_timeout_s=0.0, **{'camera:frame_trigger': 'state'})]
+
+    # Inside the rig, commands go straight to the actuator: it has no DDS subscription, and
+    # only the collector subscribes to /pump/command.
+    _, got, (rig,) = _run_programme(context, ros_env, tmp_path, start_nodes,
+                                    pump_subscribers=1)
     # The camera follows the state: about one frame per actuator state (the pump runs at the
     # camera's rate), far more than the scene's own 10 Hz camera would take.
-    assert len(poses) >= 0.8 * len(curvatures)
+    assert len(got['/camera/backbone']) >= 0.8 * len(got['/actuator/curvatures'])
     assert rig.returncode == 0, (tmp_path / 'rig.log').read_text()
