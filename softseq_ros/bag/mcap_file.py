@@ -37,7 +37,6 @@ import numpy as np
 
 MAGIC = b'\x89MCAP0\r\n'
 # Message record: opcode, record length, channel id, sequence, log time, publish time.
-_MESSAGE_HEADER = struct.Struct('<BQHIQQ')
 _MESSAGE_FIXED = 2 + 4 + 8 + 8
 _MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
 _FOOTER_CRC_PREFIX = struct.Struct('<BQQQ')
@@ -57,7 +56,7 @@ def _compressor(compression: str) -> Any:
 _MESSAGE_RECORD = np.dtype([('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'),
                             ('sequence', '<u4'), ('log_time', '<u8'),
                             ('publish_time', '<u8')])
-assert _MESSAGE_RECORD.itemsize == 31
+_MESSAGE_HEADER_SIZE = _MESSAGE_RECORD.itemsize  # 31 bytes
 
 
 class _OpenChunk:
@@ -127,13 +126,9 @@ class ChunkedMcapWriter:
         self._stream.write(data)
         self._offset += len(data)
 
-    def _write_record(self, record: Any) -> int:
-        """Write one record outside any chunk; return its offset."""
-        builder = RecordBuilder()
-        record.write(builder)
-        offset = self._offset
-        self._write(builder.end())
-        return offset
+    def _write_record(self, record: Any) -> None:
+        """Write one record outside any chunk."""
+        self._write(_record_bytes(record))
 
     def start(self, profile: str, library: str) -> None:
         """Write the magic and the header."""
@@ -141,9 +136,7 @@ class ChunkedMcapWriter:
         self._write_record(Header(profile=profile, library=library))
 
     def _append_to_chunk(self, record: Any) -> None:
-        builder = RecordBuilder()
-        record.write(builder)
-        record_bytes = builder.end()
+        record_bytes = _record_bytes(record)
         self._chunk.prefix += record_bytes
         self._chunk.size += len(record_bytes)
 
@@ -176,7 +169,7 @@ class ChunkedMcapWriter:
         chunk.log_times.append(log_time)
         chunk.publish_times.append(publish_time)
         chunk.data.append(data)
-        chunk.size += 31 + len(data)
+        chunk.size += _MESSAGE_HEADER_SIZE + len(data)
         if chunk.size > self._chunk_size:
             self._close_chunk()
 
@@ -188,9 +181,7 @@ class ChunkedMcapWriter:
         """Write a metadata record (after the chunk in progress) and index it."""
         self._close_chunk()
         self._drain()
-        builder = RecordBuilder()
-        Metadata(name=name, metadata=data).write(builder)
-        record = builder.end()
+        record = _record_bytes(Metadata(name=name, metadata=data))
         self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record),
                                                     name=name))
         self._write(record)
@@ -231,9 +222,7 @@ class ChunkedMcapWriter:
                        message_start_time=start, message_end_time=end,
                        uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))
         chunk_offset = self._offset
-        builder = RecordBuilder()
-        record.write(builder)
-        chunk_record = builder.end()
+        chunk_record = _record_bytes(record)
         self._write(chunk_record)
         index_offsets = {}
         index_start = self._offset
@@ -298,6 +287,13 @@ class ChunkedMcapWriter:
         self._write(MAGIC)
 
 
+def _record_bytes(record: Any) -> bytes:
+    """One record (an mcap.records instance) as it stands in the file."""
+    builder = RecordBuilder()
+    record.write(builder)
+    return builder.end()
+
+
 def _assemble(chunk: _OpenChunk) -> tuple[np.ndarray, bytes]:
     """The message record headers of a chunk, and the chunk's uncompressed bytes."""
     lengths = np.fromiter(map(len, chunk.data), dtype=np.uint64, count=chunk.count)
@@ -311,7 +307,8 @@ def _assemble(chunk: _OpenChunk) -> tuple[np.ndarray, bytes]:
     headers = records.tobytes()
     parts: list[bytes | memoryview] = [b''] * (2 * chunk.count)
     view = memoryview(headers)
-    parts[0::2] = [view[i:i + 31] for i in range(0, len(headers), 31)]
+    size = _MESSAGE_HEADER_SIZE
+    parts[0::2] = [view[i:i + size] for i in range(0, len(headers), size)]
     parts[1::2] = chunk.data
     return records, bytes(chunk.prefix) + b''.join(parts)
 

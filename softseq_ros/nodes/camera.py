@@ -184,8 +184,7 @@ class CameraNode(RigNode):
             # The backbone is computed when a frame or a snapshot needs it, not at the
             # actuator's rate: most curvature messages are never drawn.
             self._backbone_stale = True
-        stamp = msg.header.stamp
-        self._curvature_stamp = stamp.sec * 1_000_000_000 + stamp.nanosec
+        self._curvature_stamp = stamp_ns(msg.header)
         if self._pending_stamp is not None and self._curvature_stamp >= self._pending_stamp:
             self._take_snapshots()
         if self.frame_trigger == 'state':

@@ -313,9 +313,9 @@ class RigNode(Node):
     def _log(self, severity: LoggingSeverity, text: str) -> None:
         logger = self.get_logger()
         if logger.is_enabled_for(severity):
-            # rclpy's logger locates its caller with inspect, which reads source files (half a
-            # second at the first call in a process with numpy and scipy loaded); the line is
-            # handed to rcutils as rclpy would, with the caller taken from the frame directly.
+            # rclpy's logger locates its caller with inspect (source files read at every call,
+            # and a scan of every loaded module at the first); the line is handed to rcutils
+            # as rclpy would, with the caller taken from the frame directly.
             caller = sys._getframe(2)
             _rclpy.rclpy_logging_rcutils_log(severity, logger.name, text,
                                              caller.f_code.co_name, caller.f_code.co_filename,

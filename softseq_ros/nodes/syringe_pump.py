@@ -34,6 +34,7 @@ from softseq_ros.nodes.common import (
     RigNode,
     run_node,
     set_timer_rate,
+    stamp_header,
 )
 from softseq_ros.physics.profile import Leg, PumpProfile
 
@@ -266,8 +267,7 @@ class SyringePumpNode(RigNode):
             else:
                 flow = programme_flow
         command = self._command
-        stamp = command.header.stamp
-        stamp.sec, stamp.nanosec = divmod(now, 1_000_000_000)
+        stamp_header(command.header, now)
         command.position[0] = volume
         command.velocity[0] = flow
         self._publish('/pump/command', command)
