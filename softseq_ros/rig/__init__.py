@@ -1,0 +1,1 @@
+"""The rig's ROS-free cores (pump, actuator, camera) and the one topic contract they share."""

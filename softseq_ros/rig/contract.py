@@ -1,0 +1,138 @@
+"""
+The rig's topic contract: every topic the rig's cores produce or consume, in one table.
+
+For each topic: its name relative to the node's namespace (``pump/command``: started with
+``-r __ns:=/rig2`` a whole rig moves to ``/rig2/pump/command``), its ROS message type, its QoS,
+which core produces it, which cores consume it, and which scene ``outputs`` entry switches it
+on (None: always on). Nodes create their publishers and subscriptions from it, the one-process
+rig and the batch runner route values between cores by it, the recorder records its topics by
+default and the analysis finds its topics by it. Nothing here imports rclpy: QoS is plain data
+that the nodes turn into rclpy profiles and the bag writer into rosbag2's QoS YAML.
+"""
+
+from dataclasses import dataclass
+
+# Core roles and the names of the ROS nodes that host them.
+PUMP = 'pump'
+ACTUATOR = 'actuator'
+CAMERA = 'camera'
+NODE_NAMES: dict[str, str] = {PUMP: 'syringe_pump', ACTUATOR: 'actuator', CAMERA: 'camera'}
+
+FRAME_ID = 'softseq_base'
+DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
+
+# Scene output names, in the order the README lists them; all but the image are on by default.
+OUTPUT_NAMES = ('pressure', 'volumes', 'curvature', 'poses', 'markers', 'image', 'events')
+DEFAULT_OUTPUTS = frozenset(name for name in OUTPUT_NAMES if name != 'image')
+
+
+@dataclass(frozen=True)
+class Qos:
+    """A topic's QoS: keep-last ``depth``, reliable or best effort, latched or volatile."""
+
+    depth: int
+    reliable: bool = True
+    latched: bool = False  # transient_local: a late joiner gets the last ``depth`` messages
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of the contract."""
+
+    name: str                      # relative to the node's namespace
+    type_name: str                 # pkg/msg/Type
+    qos: Qos
+    producer: str                  # core role
+    consumers: tuple[str, ...]     # core roles whose ``handle`` takes it
+    output: str | None             # scene output name that switches it on, None: always on
+    content: str                   # what the message holds (units, frame)
+
+
+PUMP_COMMAND = Topic(
+    'pump/command', 'sensor_msgs/msg/JointState',
+    # Deep: a command the actuator's queue drops is skipped physics-wise (the jump rule), but
+    # its answer is missing from the recording; a stalled process must not lose any.
+    Qos(1000), PUMP, (ACTUATOR,), None,
+    'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]')
+PUMP_STATUS = Topic(
+    'pump/status', 'std_msgs/msg/String', Qos(1, latched=True), PUMP, (), None,
+    'JSON {"state", "reason", "stamp_ns"}: idle, running, held, finished or stopped')
+PRESSURE = Topic(
+    'actuator/pressure', 'sensor_msgs/msg/FluidPressure', Qos(100), ACTUATOR, (PUMP,),
+    'pressure', 'absolute pressure [Pa] = gauge + ambient')
+VOLUMES = Topic(
+    'actuator/volumes', 'sensor_msgs/msg/JointState', Qos(1, latched=True), ACTUATOR,
+    (CAMERA,), 'volumes',
+    'one joint per segment, base to tip: position = volume [m^3], effort = gauge pressure [Pa]')
+CURVATURES = Topic(
+    'actuator/curvatures', 'sensor_msgs/msg/JointState', Qos(100), ACTUATOR, (CAMERA,),
+    'curvature', 'one joint per segment: position = curvature [1/m]')
+EVENTS = Topic(
+    'actuator/events', 'std_msgs/msg/String', Qos(100, latched=True), ACTUATOR, (), 'events',
+    'JSON per snap-through: injected_m3, from/to_volumes_m3, from/to_pressure_pa (gauge)')
+BACKBONE = Topic(
+    'camera/backbone', 'geometry_msgs/msg/PoseArray', Qos(10), CAMERA, (), 'poses',
+    'backbone points in softseq_base at the camera rate')
+SNAPSHOTS = Topic(
+    'camera/snapshots', 'geometry_msgs/msg/PoseArray', Qos(20, latched=True), CAMERA, (),
+    'poses', "one backbone per trigger crossing (the paper's steps)")
+SNAPSHOT_STEPS = Topic(
+    'camera/snapshot_steps', 'std_msgs/msg/String', Qos(20, latched=True), CAMERA, (), 'poses',
+    'JSON per snapshot, in the same order: step, trigger_injected_m3, direction, stamp_ns')
+MARKERS = Topic(
+    'camera/markers', 'visualization_msgs/msg/MarkerArray', Qos(10), CAMERA, (), 'markers',
+    'one LINE_STRIP per segment')
+IMAGE = Topic(
+    'camera/image', 'sensor_msgs/msg/Image', Qos(2, reliable=False), CAMERA, (), 'image',
+    'rgb8 side view, rendered only while someone subscribes')
+
+RIG_TOPICS: tuple[Topic, ...] = (PUMP_COMMAND, PUMP_STATUS, PRESSURE, VOLUMES, CURVATURES,
+                                 EVENTS, BACKBONE, SNAPSHOTS, SNAPSHOT_STEPS, MARKERS, IMAGE)
+TOPICS_BY_NAME: dict[str, Topic] = {topic.name: topic for topic in RIG_TOPICS}
+
+# The simulated clock is ROS's own (absolute by convention); QoS as rclpy's TimeSource takes it.
+CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos(1, reliable=False), 'sim_clock', (),
+              None, 'simulated time')
+
+
+def produced_by(role: str) -> tuple[Topic, ...]:
+    """The topics a core produces."""
+    return tuple(topic for topic in RIG_TOPICS if topic.producer == role)
+
+
+def consumed_by(role: str) -> tuple[Topic, ...]:
+    """The topics a core consumes."""
+    return tuple(topic for topic in RIG_TOPICS if role in topic.consumers)
+
+
+def enabled(topic: Topic, outputs: frozenset[str] | set[str]) -> bool:
+    """True when ``outputs`` (scene output names) switch ``topic`` on."""
+    return topic.output is None or topic.output in outputs
+
+
+def enabled_topics(outputs: frozenset[str] | set[str]) -> tuple[Topic, ...]:
+    """The rig's topics that the scene outputs ``outputs`` switch on, in contract order."""
+    return tuple(topic for topic in RIG_TOPICS if enabled(topic, outputs))
+
+
+def resolve(name: str, namespace: str = '/') -> str:
+    """The absolute name of a relative topic ``name`` in ``namespace`` (as ROS resolves it)."""
+    if name.startswith('/'):
+        return name
+    return namespace.rstrip('/') + '/' + name
+
+
+def relative_name(absolute: str, namespace: str = '/') -> str | None:
+    """The contract name of an absolute topic under ``namespace``, or None when not under it."""
+    prefix = namespace.rstrip('/') + '/'
+    if not absolute.startswith(prefix):
+        return None
+    return absolute[len(prefix):]
+
+
+def find_namespaces(absolute_topics: list[str] | set[str] | tuple[str, ...],
+                    name: str = PUMP_COMMAND.name) -> list[str]:
+    """The namespaces under which ``name`` appears among ``absolute_topics`` (sorted)."""
+    suffix = '/' + name
+    return sorted({topic[:-len(suffix)] or '/' for topic in absolute_topics
+                   if topic.endswith(suffix)})
