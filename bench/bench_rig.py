@@ -59,33 +59,33 @@ import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import QoSProfile  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from softseq_ros.bag.reader import read_bag  # noqa: E402
 from softseq_ros.batch import BatchRun  # noqa: E402
-from softseq_ros.nodes.actuator import ActuatorNode  # noqa: E402
-from softseq_ros.nodes.common import TOPICS  # noqa: E402
-from softseq_ros.physics.equilibrium import Tracker  # noqa: E402
+from softseq_ros.nodes.core_node import message_class, qos_profile  # noqa: E402
 from softseq_ros.physics.kinematics import backbone_batch  # noqa: E402
+from softseq_ros.physics.profile import Leg  # noqa: E402
 from softseq_ros.physics.scene import load_scene  # noqa: E402
+from softseq_ros.rig import contract  # noqa: E402
+from softseq_ros.rig.build import actuator_core  # noqa: E402
+from softseq_ros.rig.values import PumpCommand  # noqa: E402
 
 RESULTS = ROOT / 'bench' / 'rig_results.md'
 PARTS = ('batch', 'processes', 'latency')
 ML = 1.0e-6
 
 # A shortened paper programme (same scene, flow and rates): 0 -> 10 mL -> 0, 400 s of sim time.
-SHORT_LEGS = '[{inflate_to_m3: 1.0e-5}, {deflate_to_m3: 0.0}]'
+SHORT_LEGS = (Leg.inflate(1.0e-5), Leg.deflate(0.0))
+SHORT_LEGS_YAML = '[{inflate_to_m3: 1.0e-5}, {deflate_to_m3: 0.0}]'
 # Same 400 s and command count, but half of it a hold: 0 -> 5 mL, hold 200 s, -> 0.
-HOLD_LEGS = '[{inflate_to_m3: 5.0e-6}, {hold_s: 200}, {deflate_to_m3: 0.0}]'
+HOLD_LEGS = (Leg.inflate(5.0e-6), Leg.hold(200.0), Leg.deflate(0.0))
 # For cProfile (about 4x slower under the profiler): 0 -> 2.5 mL -> 0, 100 s.
-PROFILE_LEGS = '[{inflate_to_m3: 2.5e-6}, {deflate_to_m3: 0.0}]'
+PROFILE_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
 
 SPEEDUPS = (10, 30, 100, 300, 1000)
-RECORDED_TOPICS = ('/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
-                   '/actuator/curvatures', '/actuator/events', '/camera/backbone',
-                   '/camera/snapshots', '/camera/markers')
+RECORDED_TOPICS = tuple(contract.resolve(topic.name) for topic in contract.RIG_TOPICS
+                        if topic is not contract.IMAGE)
 STARTUP_TIMEOUT_S = 90.0
 LATENCY_RUN_S = 20.0
 LATENCY_WARMUP_S = 1.0
@@ -137,7 +137,7 @@ def under_load_note(before: str, after: str) -> str:
 # ------------------------------------------------------------------------------ part 1: batch
 
 class _TimedBatch(BatchRun):
-    """A BatchRun that also measures CPU time and keeps its nodes for their counters."""
+    """A BatchRun that also measures CPU time (its cores keep their counters)."""
 
     def run(self):  # noqa: ANN201
         cpu = time.process_time()
@@ -173,39 +173,39 @@ class _InstrumentedBatch(_TimedBatch):
                     stack[-1] += elapsed
         return wrapper
 
-    def _loop(self, pump, camera, wall_start) -> None:
-        actuator = self.nodes['actuator']
-        pump.tick = self._timed('pump: tick (programme, state, fill)', pump.tick)
-        pump.on_pressure = self._timed('pump: pressure check', pump.on_pressure)
-        actuator.on_pump_command = self._timed('actuator: command handling (no solve)',
-                                               actuator.on_pump_command)
+    def _loop(self, wall_start) -> None:
+        pump, actuator, camera = self.pump, self.actuator, self.camera
+        pump.tick = self._timed('pump: tick (programme, state)', pump.tick)
+        pump.handle = self._timed('pump: pressure check', pump.handle)
+        actuator.handle = self._timed('actuator: command handling (no solve)',
+                                      actuator.handle)
         solve = 'actuator: equilibrium solve (Tracker.move, values_at)'
         actuator.tracker.move = self._timed(solve, actuator.tracker.move)
         actuator.emap.values_at = self._timed(solve, actuator.emap.values_at)
-        camera.on_volumes = self._timed('camera: input handlers', camera.on_volumes)
-        camera.on_curvatures = self._timed('camera: input handlers', camera.on_curvatures)
+        camera.handle = self._timed('camera: input handlers', camera.handle)
         camera.tick = self._timed('camera: frame (poses, markers)', camera.tick)
         camera._update_backbone = self._timed('camera: backbone kinematics',
                                               camera._update_backbone)
-        super()._loop(pump, camera, wall_start)
+        # The router looks handle up on the core at every call: it calls the wrappers.
+        super()._loop(wall_start)
 
-    def _open_topic(self, topic):  # noqa: ANN001, ANN202
-        channel = super()._open_topic(topic)
-        channel.encode = self._timed('serialisation (CDR encode)', channel.encode)
-        channel.append = self._timed('bag writing (MCAP, zstd chunks)', channel.append)
-        return channel
+    def _open_channels(self, writer) -> None:  # noqa: ANN001
+        super()._open_channels(writer)
+        for channel in self._channels.values():
+            channel.encode = self._timed('serialisation (CDR encode)', channel.encode)
+            channel.append = self._timed('bag writing (MCAP, zstd chunks)', channel.append)
 
 
-def _batch_parameters(legs=None, camera_rate=None, outputs=None):
-    parameters = defaultdict(list)
+def _batch_overrides(legs=None, camera_rate=None, outputs=None):
+    overrides = defaultdict(dict)
     if legs is not None:
-        parameters['syringe_pump'].append(Parameter('legs', value=legs))
+        overrides['pump']['legs'] = legs
     if camera_rate is not None:
-        parameters['camera'].append(Parameter('rate_hz', value=float(camera_rate)))
+        overrides['camera']['rate_hz'] = float(camera_rate)
     if outputs is not None:
-        for node in ('actuator', 'camera'):
-            parameters[node].append(Parameter('outputs', value=list(outputs)))
-    return dict(parameters)
+        for role in ('actuator', 'camera'):
+            overrides[role]['outputs'] = frozenset(outputs)
+    return dict(overrides)
 
 
 def run_batch(workdir: Path, label: str, repeats: int, cls=_TimedBatch, **options):
@@ -213,7 +213,7 @@ def run_batch(workdir: Path, label: str, repeats: int, cls=_TimedBatch, **option
     best = None
     for index in range(repeats):
         out = workdir / f'{re.sub(r"[^a-z0-9]+", "_", label.lower())}_{index}'
-        run = cls('paper', out, parameters=_batch_parameters(**options))
+        run = cls('paper', out, overrides=_batch_overrides(**options))
         result = run.run()
         if best is None or result.wall_s < best[1].wall_s:
             best = (run, result)
@@ -227,47 +227,34 @@ def _messages(result) -> int:
 
 def actuator_micro(repeats: int) -> dict[str, float]:
     """Microseconds per command: a moving volume (solve) against a repeated one (cache)."""
-    context = rclpy.Context()
-    rclpy.init(context=context, args=[], domain_id=BASE_DOMAIN_ID)
-    sent = []
-    try:
-        node = ActuatorNode(context=context, emit=lambda topic, msg: sent.append(topic),
-                            now=lambda: 0, start_parameter_services=False,
-                            enable_rosout=False,
-                            parameter_overrides=[Parameter('scene', value='paper')])
-        from sensor_msgs.msg import JointState
-        count = 5000
-        volumes = np.linspace(0.0, 10.0 * ML, count).tolist()
-        command = JointState(name=['syringe'], position=[0.0], velocity=[0.0])
+    core = actuator_core(load_scene('paper'))
+    count = 5000
+    volumes = np.linspace(0.0, 10.0 * ML, count).tolist()
 
-        def feed(values) -> float:
-            start = time.perf_counter()
-            for value in values:
-                command.position[0] = value
-                node.on_pump_command(command)
-            return (time.perf_counter() - start) / len(values) * 1e6
+    def feed(values) -> float:
+        commands = [PumpCommand(0, value, 0.0) for value in values]
+        start = time.perf_counter()
+        for command in commands:
+            core.handle(command, 0)
+        return (time.perf_counter() - start) / len(values) * 1e6
 
-        moving = held = math.inf
-        for _ in range(repeats):
-            # Back to rest, so every repeat walks the same path.
-            node.tracker = Tracker(node.emap)
-            node._cached = False
-            solves = node.solves
-            moving = min(moving, feed(volumes))
-            moving_solves = node.solves - solves
-            solves = node.solves
-            held = min(held, feed([volumes[-1]] * count))
-            held_solves = node.solves - solves
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
+    moving = held = math.inf
+    for _ in range(repeats):
+        # Back to rest, so every repeat walks the same path.
+        core.resume(0.0, [s.rest_volume for s in core.emap.segments])
+        solves = core.solves
+        moving = min(moving, feed(volumes))
+        moving_solves = core.solves - solves
+        solves = core.solves
+        held = min(held, feed([volumes[-1]] * count))
+        held_solves = core.solves - solves
     return {'moving_us': moving, 'held_us': held, 'moving_solves': moving_solves,
             'held_solves': held_solves, 'count': count}
 
 
 def cprofile_top(workdir: Path, rows: int = 14) -> str:
     out = workdir / 'profiled'
-    run = BatchRun('paper', out, parameters=_batch_parameters(legs=PROFILE_LEGS))
+    run = BatchRun('paper', out, overrides=_batch_overrides(legs=PROFILE_LEGS))
     profile = cProfile.Profile()
     profile.enable()
     run.run()
@@ -366,7 +353,7 @@ def part_batch(repeats: int) -> str:
             print(f'  {label}', flush=True)
             options.setdefault('legs', SHORT_LEGS)
             run, result = run_batch(workdir, label, repeats, **options)
-            actuator = run.nodes['actuator']
+            actuator = run.actuator
             reference_cpu = reference_cpu or run.cpu_s
             commands = result.message_counts.get('/pump/command', 0)
             lines.append(
@@ -522,13 +509,14 @@ class Monitor(Node):
     def __init__(self, context) -> None:
         super().__init__('bench_monitor', context=context)
         self.statuses: list[str] = []
-        spec = TOPICS['/pump/status']
-        self.create_subscription(spec.msg_type, '/pump/status',
-                                 lambda msg: self.statuses.append(msg.data), spec.qos)
+        self.create_subscription(
+            message_class(contract.PUMP_STATUS.type_name), contract.PUMP_STATUS.name,
+            lambda msg: self.statuses.append(json.loads(msg.data)['state']),
+            qos_profile(contract.PUMP_STATUS.qos))
         self.commands_seen = 0
-        spec = TOPICS['/pump/command']
         self._command_subscription = self.create_subscription(
-            spec.msg_type, '/pump/command', self._on_command, spec.qos)
+            message_class(contract.PUMP_COMMAND.type_name), contract.PUMP_COMMAND.name,
+            self._on_command, qos_profile(contract.PUMP_COMMAND.qos))
 
     def _on_command(self, _msg) -> None:
         self.commands_seen += 1
@@ -539,10 +527,10 @@ class Monitor(Node):
 
     def watch_answers(self) -> None:
         self.last_answer = time.monotonic()
-        spec = TOPICS['/actuator/volumes']
-        self.create_subscription(spec.msg_type, '/actuator/volumes', self._on_answer,
-                                 QoSProfile(depth=1000, reliability=spec.qos.reliability,
-                                            durability=spec.qos.durability))
+        qos = qos_profile(contract.VOLUMES.qos)
+        qos.depth = 1000
+        self.create_subscription(message_class(contract.VOLUMES.type_name),
+                                 contract.VOLUMES.name, self._on_answer, qos)
 
     def _on_answer(self, _msg) -> None:
         self.last_answer = time.monotonic()
@@ -568,7 +556,7 @@ def run_sim_level(speedup: float, domain_id: int, workdir: Path) -> dict:
             recorder = start('recorder', 'recorder', output=str(bag), topics=topics)
             start('actuator', 'actuator', resume_timeout_s=0.0, **sim_params)
             start('camera', 'camera', **sim_params)
-            start('pump', 'syringe_pump', legs=f'"{SHORT_LEGS}"', autostart='false',
+            start('pump', 'syringe_pump', legs=f'"{SHORT_LEGS_YAML}"', autostart='false',
                   **sim_params)
             wait_for(lambda: all(monitor.recorder_on(t) for t in RECORDED_TOPICS),
                      'the recorder on every topic', STARTUP_TIMEOUT_S)
@@ -704,11 +692,11 @@ class Probe(Node):
         self.received: dict[str, list] = {t: [] for t in (
             '/pump/command', '/actuator/volumes', '/actuator/curvatures', '/camera/backbone')}
         for topic, store in self.received.items():
-            spec = TOPICS[topic]
-            qos = QoSProfile(depth=1000, reliability=spec.qos.reliability,
-                             durability=spec.qos.durability)
+            spec = contract.TOPICS_BY_NAME[topic.lstrip('/')]
+            qos = qos_profile(spec.qos)
+            qos.depth = 1000
             self.create_subscription(
-                spec.msg_type, topic,
+                message_class(spec.type_name), topic,
                 lambda msg, store=store: store.append((time.time_ns(), msg)), qos)
 
     def matched(self) -> bool:

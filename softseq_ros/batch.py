@@ -1,12 +1,13 @@
 """
-Batch runs: the rig's own nodes in one process, in lock-step simulated time, recorded to a bag.
+Batch runs: the rig's cores in one process, in lock-step simulated time, recorded to a bag.
 
-The pump, actuator and camera nodes are built in batch mode (their ``emit`` and ``now`` hooks):
-they create no publishers or timers, and this runner calls their ``tick()`` at their rates on a
-simulated clock and hands every message they emit to the subscribers' handlers (by the rig's
-routing table) and, serialised exactly as a publisher would, to the bag. No node logic is
-repeated here and nothing goes through DDS, so a run is as fast as the machine allows and
-deterministic: the same scene gives the same bag contents.
+The pump, actuator and camera cores (softseq_ros.rig) are built from the scene as the nodes
+build them; this runner ticks the pump and the camera at their rates on a simulated clock,
+routes every value to the cores that consume it (softseq_ros.rig.routing) and writes each one,
+encoded exactly as the nodes publish it (softseq_ros.rig.wire), into the bag. No rclpy and no
+DDS: a run is as fast as the machine allows and deterministic (the same scene and start time
+give the same bag, byte for byte). The simulated clock starts at the run's start time (wall
+clock, or ``start_time_ns`` for reproducible bags), so a batch bag is dated like a recording.
 """
 
 from dataclasses import dataclass, field
@@ -16,26 +17,15 @@ import sys
 import time
 from typing import Any, Callable, TextIO
 
-import rclpy
-from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
-from softseq_ros.bag.cdr import encoder_for
-from softseq_ros.bag.writer import (
-    BagWriter,
-    message_type_name,
-    offered_qos_yaml,
-    qos_profile_dict,
-    serialize,
-)
-from softseq_ros.nodes.actuator import ActuatorNode
-from softseq_ros.nodes.camera import CameraNode
-from softseq_ros.nodes.common import TOPICS, LocalRoutes
-from softseq_ros.nodes.syringe_pump import SyringePumpNode
-from softseq_ros.physics.scene import scene_path
+from softseq_ros.bag.writer import BagWriter, offered_qos_yaml, qos_profile_dict
+from softseq_ros.physics.scene import load_scene, scene_path
+from softseq_ros.rig import contract
+from softseq_ros.rig.build import actuator_core, camera_core, pump_core
+from softseq_ros.rig.routing import Router
+from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
+from softseq_ros.rig.wire import ENCODERS
 
 NS_PER_S = 1_000_000_000
-NODE_CLASSES = (SyringePumpNode, ActuatorNode, CameraNode)
 PROGRESS_PERIOD_S = 0.25
 
 
@@ -48,6 +38,8 @@ class BatchResult:
     wall_s: float
     message_counts: dict[str, int] = field(default_factory=dict)
     pump_state: str = ''
+    warnings: list[str] = field(default_factory=list)
+    start_time_ns: int = 0
 
     @property
     def speedup(self) -> float:
@@ -55,121 +47,133 @@ class BatchResult:
         return self.sim_duration_s / self.wall_s if self.wall_s > 0.0 else float('inf')
 
 
+def qos_yaml(qos: contract.Qos) -> str:
+    """A contract QoS as rosbag2 stores a publisher's offer in a bag's topic metadata."""
+    return offered_qos_yaml([qos_profile_dict(
+        depth=qos.depth, reliability='reliable' if qos.reliable else 'best_effort',
+        durability='transient_local' if qos.latched else 'volatile')])
+
+
 @dataclass(eq=False)
 class _Channel:
-    """A recorded topic of a run: how its messages are encoded, written and routed."""
+    """A recorded topic of a run: how its values are encoded and written."""
 
+    topic: str
     encode: Callable[[Any], bytes]
     append: Callable[[bytes, int, int], None]
-    routed: bool
     count: int = 0
 
 
-def qos_yaml(profile: QoSProfile) -> str:
-    """A publisher's QoS as rosbag2 stores it in a bag's topic metadata."""
-    return offered_qos_yaml([qos_profile_dict(
-        depth=profile.depth,
-        reliability=('reliable' if profile.reliability == ReliabilityPolicy.RELIABLE
-                     else 'best_effort'),
-        durability=('transient_local' if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                    else 'volatile'))])
-
-
 class BatchRun:
-    """One lock-step run of a scene; ``parameters`` override node parameters by node name."""
+    """
+    One lock-step run of a scene into the bag directory ``out``.
+
+    ``overrides`` replace core settings by role (``{'camera': {'rate_hz': 1.0}}``; the names
+    of softseq_ros.rig.build). ``namespace`` is the rig's namespace in the bag's topic names.
+    ``progress`` gets a progress line, ``log`` the cores' warnings (also kept in the result).
+    """
 
     def __init__(self, scene: str | os.PathLike, out: str | os.PathLike, *,
-                 parameters: dict[str, list[Parameter]] | None = None,
-                 progress: TextIO | None = None) -> None:
-        """Resolve the scene; the bag directory ``out`` must not exist yet (or be empty)."""
-        self.scene = scene_path(scene)
+                 overrides: dict[str, dict[str, Any]] | None = None,
+                 progress: TextIO | None = None, log: TextIO | None = None,
+                 start_time_ns: int | None = None, namespace: str = '/') -> None:
+        """Resolve the scene and build the cores; the bag directory must not exist yet."""
+        self.scene_path = scene_path(scene)
+        self.scene = load_scene(self.scene_path)
         self.out = Path(out)
-        self.parameters = parameters or {}
+        overrides = overrides or {}
+        unknown = sorted(set(overrides) - set(contract.NODE_NAMES))
+        if unknown:
+            raise ValueError(f'overrides: unknown core(s) {", ".join(unknown)}; expected '
+                             f'{", ".join(contract.NODE_NAMES)}')
+        self.pump, self.pump_rate_hz = pump_core(self.scene, **overrides.get(contract.PUMP, {}))
+        self.actuator = actuator_core(self.scene, **overrides.get(contract.ACTUATOR, {}))
+        self.camera = camera_core(self.scene, **overrides.get(contract.CAMERA, {}))
+        self.cores = {contract.PUMP: self.pump, contract.ACTUATOR: self.actuator,
+                      contract.CAMERA: self.camera}
+        self.outputs = self.actuator.outputs | self.camera.outputs
         self.progress = progress
-        self._now_ns = 0
-        self._channels: dict[str, _Channel] = {}
-        self._routes = LocalRoutes([cls.NODE_NAME for cls in NODE_CLASSES])
-
-    def _now(self) -> int:
-        return self._now_ns
+        self.log = log
+        self.namespace = namespace
+        self.start_time_ns = time.time_ns() if start_time_ns is None else int(start_time_ns)
+        self._now_ns = self.start_time_ns
+        self._router = Router(self.cores, lambda: self._now_ns)
+        self._channels: dict[type, _Channel] = {}
+        self.warnings: list[str] = []
 
     def run(self) -> BatchResult:
         """Run the scene's pump programme to its end; the bag is complete on return."""
-        context = rclpy.Context()
-        rclpy.init(context=context, args=[])
-        nodes: dict[str, Any] = {}
-        self.nodes = nodes  # the run's nodes by name, for inspection after the run
         wall_start = time.perf_counter()
-        try:
-            with BagWriter(self.out, flush_period_s=None) as writer:
-                self._writer = writer
-                common = {'context': context, 'emit': self._emit, 'now': self._now,
-                              'start_parameter_services': False, 'enable_rosout': False}
-                for cls in NODE_CLASSES:
-                    overrides = [Parameter('scene', value=str(self.scene)),
-                                 *self.parameters.get(cls.NODE_NAME, [])]
-                    nodes[cls.NODE_NAME] = cls(parameter_overrides=overrides, **common)
-                    self._routes.add(nodes[cls.NODE_NAME])
-                self._loop(nodes['syringe_pump'], nodes['camera'], wall_start)
-        finally:
-            for node in nodes.values():
-                node.destroy_node()
-            rclpy.try_shutdown(context=context)
+        with BagWriter(self.out, flush_period_s=None) as writer:
+            self._open_channels(writer)
+            self._loop(wall_start)
         wall = time.perf_counter() - wall_start
         if self.progress is not None:
             self.progress.write('\n' if _is_terminal(self.progress) else '')
-        counts = {topic: channel.count for topic, channel in self._channels.items()}
-        return BatchResult(self.out, self._now_ns / NS_PER_S, wall, counts,
-                           nodes['syringe_pump'].state)
+        counts = {channel.topic: channel.count for channel in self._channels.values()}
+        return BatchResult(self.out, (self._now_ns - self.start_time_ns) / NS_PER_S, wall,
+                           counts, self.pump.state, self.warnings, self.start_time_ns)
 
-    def _loop(self, pump: SyringePumpNode, camera: CameraNode, wall_start: float) -> None:
-        pump_period = round(NS_PER_S / pump.rate_hz)
+    def _open_channels(self, writer: BagWriter) -> None:
+        # Every topic the outputs switch on is in the bag, even one that gets no message
+        # (a run without snap-throughs still has its events topic).
+        for kind in TOPIC_VALUE_TYPES:
+            topic = kind.topic
+            if not contract.enabled(topic, self.outputs):
+                continue
+            name = contract.resolve(topic.name, self.namespace)
+            writer.add_topic(name, topic.type_name, qos_yaml(topic.qos))
+            self._channels[kind] = _Channel(name, ENCODERS[kind], writer.appender(name))
+
+    def _record(self, values: list) -> None:
+        channels = self._channels
+        now = self._now_ns
+        for value in values:
+            channel = channels.get(type(value))
+            if channel is not None:
+                channel.append(channel.encode(value), now, now)
+                channel.count += 1
+            elif type(value) is Notice:
+                self._notice(value)
+
+    def _notice(self, notice: Notice) -> None:
+        if notice.level in (WARNING, ERROR):
+            line = f'{contract.NODE_NAMES.get(notice.source, notice.source)}: {notice.text}'
+            self.warnings.append(line)
+            if self.log is not None:
+                # After a progress line that \r keeps rewriting, start on a line of its own.
+                self.log.write(('\n' if _is_terminal(self.progress) else '') + line + '\n')
+
+    def _loop(self, wall_start: float) -> None:
+        pump, camera, router = self.pump, self.camera, self._router
+        start = self.start_time_ns
+        pump_period = round(NS_PER_S / self.pump_rate_hz)
         camera_period = round(NS_PER_S / camera.rate_hz)
-        duration = pump.profile.duration()
-        next_pump = next_camera = 0
+        duration = pump.duration_s
+        next_pump = next_camera = start
         next_report = wall_start + PROGRESS_PERIOD_S
+        self._record(router.run(pump.begin(start)))
         while True:
             # The pump goes first at equal times: a frame shows the command of its instant.
             if next_pump <= next_camera:
                 self._now_ns = next_pump
-                pump.tick()
-                self._routes.drain()
+                self._record(router.run(pump.tick(next_pump)))
                 next_pump += pump_period
                 if pump.state in ('finished', 'stopped'):
-                    camera.tick()
-                    self._routes.drain()
+                    self._record(router.run(camera.tick(self._now_ns)))
                     return
             else:
                 self._now_ns = next_camera
-                camera.tick()
-                self._routes.drain()
+                self._record(router.run(camera.tick(next_camera)))
                 next_camera += camera_period
             if self.progress is not None and time.perf_counter() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
 
-    def _open_topic(self, topic: str) -> '_Channel':
-        spec = TOPICS[topic]
-        type_name = message_type_name(spec.msg_type())
-        self._writer.add_topic(topic, type_name, qos_yaml(spec.qos))
-        return _Channel(encoder_for(type_name) or serialize, self._writer.appender(topic),
-                        self._routes.carries(topic))
-
-    def _emit(self, topic: str, msg: Any) -> None:
-        channel = self._channels.get(topic)
-        if channel is None:
-            channel = self._channels[topic] = self._open_topic(topic)
-        now = self._now_ns
-        # A node may send a message already serialised (as rclpy's publish allows).
-        channel.append(msg if type(msg) is bytes else channel.encode(msg), now, now)
-        channel.count += 1
-        if channel.routed:
-            self._routes.send(topic, msg)
-
     def _report(self, wall_start: float, duration: float) -> None:
-        sim = self._now_ns / NS_PER_S
+        sim = (self._now_ns - self.start_time_ns) / NS_PER_S
         wall = time.perf_counter() - wall_start
-        text = (f'{self.scene.stem}: {sim:8.1f} / {duration:.1f} s simulated '
+        text = (f'{self.scene_path.stem}: {sim:8.1f} / {duration:.1f} s simulated '
                 f'({100.0 * sim / max(duration, 1e-9):3.0f} %), {sim / max(wall, 1e-9):6.0f}x '
                 'real time')
         if _is_terminal(self.progress):
@@ -183,7 +187,11 @@ def _is_terminal(stream: TextIO | None) -> bool:
     return bool(stream is not None and getattr(stream, 'isatty', lambda: False)())
 
 
-def run_scene(scene: str | os.PathLike, out: str | os.PathLike,
-              show_progress: bool = True) -> BatchResult:
+def run_scene(scene: str | os.PathLike, out: str | os.PathLike, show_progress: bool = True,
+              start_time_ns: int | None = None) -> BatchResult:
     """Run a scene in batch mode into the bag directory ``out``."""
-    return BatchRun(scene, out, progress=sys.stderr if show_progress else None).run()
+    return BatchRun(scene, out, progress=sys.stderr if show_progress else None,
+                    log=sys.stderr, start_time_ns=start_time_ns).run()
+
+
+__all__ = ['BatchResult', 'BatchRun', 'qos_yaml', 'run_scene']

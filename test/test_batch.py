@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 
+from mcap.reader import make_reader
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -21,11 +22,15 @@ from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.physics.scene import load_scene
+from softseq_ros.rig import contract
+from softseq_ros.rig.build import actuator_core
+from softseq_ros.rig.values import Notice
+from softseq_ros.rig.wire import encode, pump_command
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
-RECORDED = ('/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
-            '/actuator/curvatures', '/actuator/events', '/camera/backbone', '/camera/snapshots',
-            '/camera/markers')
+RECORDED = tuple(contract.resolve(topic.name) for topic in contract.RIG_TOPICS
+                 if topic is not contract.IMAGE)
+START_NS = 1_795_000_000 * 10**9   # 2026-11-18, a fixed date for reproducible bags
 
 
 @pytest.fixture(scope='module')
@@ -45,6 +50,13 @@ def messages(bag: Path, topic: str) -> list:
     return [m.msg for m in read_bag(bag, topics=[topic])]
 
 
+def read_raw(bag: Path, topic: str) -> list[tuple[int, bytes]]:
+    """(log time, CDR bytes) of every message of ``topic``, in log-time order."""
+    with open(next(bag.glob('*.mcap')), 'rb') as stream:
+        return [(message.log_time, message.data) for _, _, message in
+                make_reader(stream).iter_messages(topics=[topic], log_time_order=True)]
+
+
 def check_bag_against_solver(bag: Path, scene_path: Path) -> None:
     """Every recorded actuator state is the solver's answer to the recorded command history."""
     scene = load_scene(scene_path)
@@ -60,8 +72,8 @@ def check_bag_against_solver(bag: Path, scene_path: Path) -> None:
 
 def test_batch_bag_is_deterministic_and_matches_the_solver(fast_scene, tmp_path):
     # Same bag name in two places: the name is part of the bag's own metadata.
-    first = BatchRun(fast_scene, tmp_path / 'a' / 'run').run()
-    BatchRun(fast_scene, tmp_path / 'b' / 'run').run()
+    first = BatchRun(fast_scene, tmp_path / 'a' / 'run', start_time_ns=START_NS).run()
+    BatchRun(fast_scene, tmp_path / 'b' / 'run', start_time_ns=START_NS).run()
     assert first.pump_state == 'finished'
     # Same scene, same bag, byte for byte (no wall-clock time and no padding garbage in it).
     bag = tmp_path / 'a' / 'run'
@@ -72,17 +84,42 @@ def test_batch_bag_is_deterministic_and_matches_the_solver(fast_scene, tmp_path)
     assert first.sim_duration_s == pytest.approx(5.0)
     summary = bag_summary(bag)
     assert {t: s.message_count for t, s in summary.topics.items()} == first.message_counts
+    # The bag is dated at its start time; every topic the outputs switch on is in it.
+    assert summary.start_ns == START_NS
+    assert set(summary.topics) == set(RECORDED)
     check_bag_against_solver(bag, fast_scene)
     events = [json.loads(m.data) for m in messages(bag, '/actuator/events')]
     assert len(events) == 4
-    # Three triggers crossed on the way up and again on the way down.
+    # Three triggers crossed on the way up and again on the way down, each snapshot saying
+    # which; the pump's status is stamped with the instant of each change.
     assert len(messages(bag, '/camera/snapshots')) == 6
+    steps = [json.loads(m.data) for m in messages(bag, '/camera/snapshot_steps')]
+    assert [(s['step'], s['direction']) for s in steps] == [
+        (1, 'inflation'), (2, 'inflation'), (3, 'inflation'),
+        (3, 'deflation'), (2, 'deflation'), (1, 'deflation')]
+    statuses = [json.loads(m.data) for m in messages(bag, '/pump/status')]
+    assert [s['state'] for s in statuses] == ['idle', 'running', 'finished']
+    assert statuses[-1]['stamp_ns'] == START_NS + 5 * 10**9
+
+
+def test_a_batch_bag_without_snaps_still_has_its_events_topic_and_starts_now(tmp_path):
+    scene = yaml.safe_load((CONFIG / 'fig1_none.yaml').read_text())
+    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, legs=[{'inflate_to_m3': 1.0e-5}])
+    scene['camera'] = {'rate_hz': 10}
+    path = tmp_path / 'none.yaml'
+    path.write_text(yaml.safe_dump(scene))
+    before = time.time_ns()
+    result = BatchRun(path, tmp_path / 'bag').run()
+    summary = bag_summary(tmp_path / 'bag')
+    assert summary.topics['/actuator/events'].message_count == 0
+    assert result.message_counts['/actuator/events'] == 0
+    assert before <= summary.start_ns <= time.time_ns()
 
 
 @pytest.mark.ros
 def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, tmp_path):
     batch_bag, dds_bag = tmp_path / 'batch', tmp_path / 'dds'
-    BatchRun(fast_scene, batch_bag).run()
+    BatchRun(fast_scene, batch_bag, start_time_ns=START_NS).run()
 
     scene = [Parameter('scene', value=str(fast_scene))]
     pump = SyringePumpNode(context=context, parameter_overrides=[
@@ -96,7 +133,7 @@ def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, 
         try:
             wait_for(lambda: set(recorder.recorded_topics) == set(RECORDED),
                      'the recorder to subscribe to every rig topic', timeout=60.0)
-            wait_for(lambda: not actuator._resuming, 'the actuator to start')
+            wait_for(lambda: not actuator.resuming, 'the actuator to start')
             executor.create_task(pump.start)
             wait_for(lambda: pump.state == 'finished', 'the pump programme to finish',
                      timeout=60.0)
@@ -107,6 +144,20 @@ def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, 
     batch, dds = bag_summary(batch_bag), bag_summary(dds_bag)
     assert {t: s.type_name for t, s in batch.topics.items()} == \
         {t: s.type_name for t, s in dds.topics.items()}
+    # Message by message: the actuator's answers in the DDS bag are, byte for byte, what the
+    # batch runner's cores write for the same commands (the same core, the same encoding).
+    cores = actuator_core(load_scene(fast_scene))
+    raw = {topic: [data for _, data in read_raw(dds_bag, topic)]
+           for topic in ('/actuator/pressure', '/actuator/volumes', '/actuator/curvatures',
+                         '/actuator/events')}
+    expected = {topic: [] for topic in raw}
+    for msg in messages(dds_bag, '/pump/command'):
+        for value in cores.handle(pump_command(msg), 0):
+            if type(value) is not Notice:
+                expected[contract.resolve(value.topic.name)].append(encode(value))
+    for topic in raw:
+        assert raw[topic] == expected[topic], topic
+    assert len(raw['/actuator/volumes']) > 100
     # Over DDS the same physics answers to whatever commands arrived, in order.
     check_bag_against_solver(dds_bag, fast_scene)
     # The snap-throughs sit at the folds, not at the commands, so both runs report the same.

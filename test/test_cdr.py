@@ -67,10 +67,8 @@ def test_padding_is_zero_so_bags_are_deterministic(msg):
 
 
 def test_every_rig_type_has_an_encoder():
-    from softseq_ros.nodes.common import TOPICS
-    rig_types = {message_type_name(spec.msg_type()) for topic, spec in TOPICS.items()
-                 if topic != '/clock'}
-    assert rig_types <= set(ENCODERS)
+    from softseq_ros.rig import contract
+    assert {topic.type_name for topic in contract.RIG_TOPICS} <= set(ENCODERS)
 
 
 def test_unknown_types_fall_back():

@@ -22,6 +22,7 @@ from test_nodes import (
     check_against_solver,
     check_poses,
     spinning,
+    status_states,
     wait_for,
     write_scene,
 )
@@ -66,8 +67,8 @@ def node_processes(env, log_dir: Path):
                 process.wait()
 
 
-RUN_TOPICS = ['/pump/command', '/pump/status', '/actuator/pressure', '/actuator/volumes',
-              '/actuator/curvatures', '/camera/backbone']
+RUN_TOPICS = ['pump/command', 'pump/status', 'actuator/pressure', 'actuator/volumes',
+              'actuator/curvatures', 'camera/backbone']
 
 
 def _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers):
@@ -83,23 +84,25 @@ def _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers):
     got = collector.received
     with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
         processes = start_nodes(start, scene_path)
-        wait_for(lambda: all(collector.matched(t) for t in RUN_TOPICS),
+        wait_for(lambda: all(collector.matched(t) for t in got),
                  'all nodes up and matched', timeout=STARTUP_TIMEOUT_S)
         wait_for(lambda: collector.count_subscribers('/pump/command') == pump_subscribers,
                  f'{pump_subscribers} subscriptions to /pump/command')
         assert call_trigger(collector, '/syringe_pump/start').success
-        wait_for(lambda: any(m.data == 'finished' for m in got['/pump/status']),
+        wait_for(lambda: 'finished' in status_states(got['/pump/status']),
                  'the programme to finish')
         n_commands = len(got['/pump/command'])
         wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
                  'the actuator outputs of every command')
         assert all(process.poll() is None for process in processes)
     scene = load_scene(scene_path)
-    check_against_solver(EquilibriumMap(scene.segments), list(got['/pump/command']),
-                         got['/actuator/pressure'], got['/actuator/volumes'],
-                         got['/actuator/curvatures'])
-    check_poses(list(got['/camera/backbone']),
-                [list(m.position) for m in got['/actuator/curvatures']],
+    path = check_against_solver(EquilibriumMap(scene.segments), list(got['/pump/command']),
+                                got['/actuator/pressure'], got['/actuator/volumes'],
+                                got['/actuator/curvatures'])
+    # A frame shows the state of some command. Frames and curvatures come from different
+    # processes, so a frame can reach the test before (or without) the curvature message it
+    # shows: the states to match are the solver's at every command received.
+    check_poses(list(got['/camera/backbone']), path.curvatures.tolist(),
                 np.array(scene.lengths), scene.camera.points_per_segment)
     return scene, got, processes
 
@@ -147,7 +150,7 @@ def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
     state_file = tmp_path / 'actuator_state.json'
     actuator_params = {'scene': scene_path, 'resume_timeout_s': 0.5,
                        'state_file': str(state_file)}
-    topics = ['/pump/command', '/pump/status', '/actuator/volumes', '/actuator/events']
+    topics = ['pump/command', 'pump/status', 'actuator/volumes', 'actuator/events']
     collector = Collector(topics, context)
     got = collector.received
     rest = emap.total_rest_volume
@@ -158,7 +161,7 @@ def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
     with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
         actuator = start('actuator', 'actuator', **actuator_params)
         start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false')
-        wait_for(lambda: all(collector.matched(t) for t in topics), 'all nodes up and matched',
+        wait_for(lambda: all(collector.matched(t) for t in got), 'all nodes up and matched',
                  timeout=STARTUP_TIMEOUT_S)
         wait_for(lambda: collector.count_subscribers('/pump/command') == 2,
                  'the actuator on /pump/command')

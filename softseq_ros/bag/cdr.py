@@ -185,14 +185,20 @@ def _joint_state_layout(key: tuple[Any, ...]) -> tuple[struct.Struct, bytes]:
     return _remember(_joint_state_layouts, key, (struct.Struct(fmt), block))
 
 
+def joint_state_cdr(sec: int, nanosec: int, frame_id: str, names: Any, position: Any,
+                    velocity: Any, effort: Any) -> bytes:
+    """CDR bytes of a sensor_msgs/JointState from its fields (sequences of floats)."""
+    key = (frame_id, len(position), len(velocity), len(effort), *names)
+    layout, block = _joint_state_layouts.get(key) or _joint_state_layout(key)
+    return _ENCAPSULATION + layout.pack(sec, nanosec, block, key[1], *position, key[2],
+                                        *velocity, key[3], *effort)
+
+
 def _joint_state_bytes(msg: Any) -> bytes:
     header = msg.header
     stamp = header.stamp
-    position, velocity, effort = msg.position, msg.velocity, msg.effort
-    key = (header.frame_id, len(position), len(velocity), len(effort), *msg.name)
-    layout, block = _joint_state_layouts.get(key) or _joint_state_layout(key)
-    return _ENCAPSULATION + layout.pack(stamp.sec, stamp.nanosec, block, key[1], *position,
-                                        key[2], *velocity, key[3], *effort)
+    return joint_state_cdr(stamp.sec, stamp.nanosec, header.frame_id, msg.name, msg.position,
+                           msg.velocity, msg.effort)
 
 
 def _fluid_pressure_layout(frame_id: str) -> tuple[struct.Struct, bytes]:
@@ -202,14 +208,25 @@ def _fluid_pressure_layout(frame_id: str) -> tuple[struct.Struct, bytes]:
                      (struct.Struct(f'<iI{len(block)}s{pad}xdd'), block))
 
 
+def fluid_pressure_cdr(sec: int, nanosec: int, frame_id: str, fluid_pressure: float,
+                       variance: float) -> bytes:
+    """CDR bytes of a sensor_msgs/FluidPressure from its fields."""
+    layout, block = (_fluid_pressure_layouts.get(frame_id)
+                     or _fluid_pressure_layout(frame_id))
+    return _ENCAPSULATION + layout.pack(sec, nanosec, block, fluid_pressure, variance)
+
+
 def _fluid_pressure_bytes(msg: Any) -> bytes:
     header = msg.header
     stamp = header.stamp
-    frame_id = header.frame_id
-    layout, block = (_fluid_pressure_layouts.get(frame_id)
-                     or _fluid_pressure_layout(frame_id))
-    return _ENCAPSULATION + layout.pack(stamp.sec, stamp.nanosec, block, msg.fluid_pressure,
-                                        msg.variance)
+    return fluid_pressure_cdr(stamp.sec, stamp.nanosec, header.frame_id, msg.fluid_pressure,
+                              msg.variance)
+
+
+def string_cdr(text: str) -> bytes:
+    """CDR bytes of a std_msgs/String holding ``text``."""
+    encoded = text.encode()
+    return _ENCAPSULATION + _U32.pack(len(encoded) + 1) + encoded + b'\x00'
 
 
 def _pose_array(msg: Any, out: _Buffer) -> None:

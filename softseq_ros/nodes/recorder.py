@@ -27,11 +27,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
 from softseq_ros.bag.writer import BagWriter, BagWriterError, offered_qos_yaml, qos_profile_dict
-from softseq_ros.nodes.common import TOPICS
+from softseq_ros.rig import contract
 
-# The topics recorded when the `topics` parameter is not given: the whole rig except the
-# camera image, which the camera renders only while someone subscribes to it.
-RIG_TOPICS: tuple[str, ...] = tuple(topic for topic in TOPICS if topic != '/camera/image')
+# The topics recorded when the `topics` parameter is not given: every topic of the rig's
+# contract, relative to the recorder's namespace. A topic nobody publishes (an output the
+# scene does not list, such as the image by default) is not in the bag.
+RIG_TOPICS: tuple[str, ...] = tuple(topic.name for topic in contract.RIG_TOPICS)
 DISCOVERY_PERIOD_S = 0.5
 QUEUE_DEPTH = 1000
 
@@ -94,7 +95,8 @@ class Recorder(Node):
         topics = self.declare_parameter(
             'topics', list(RIG_TOPICS), ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
-                description='Topics to record (names are resolved in the node namespace).'),
+                description='Topics to record (relative names are resolved in the node '
+                            'namespace; default: every topic of the rig).'),
         ).value
         self.declare_parameter(
             'types', Parameter.Type.STRING_ARRAY, ParameterDescriptor(

@@ -8,8 +8,7 @@ paper's 2610 s programme in about 26 s; a node's timer can fire at most once per
 a 50 Hz pump under this clock publishes every 0.1 s of sim time. /clock uses the QoS rclpy's
 TimeSource subscribes with (best effort, depth 1).
 
-In batch mode (``now`` given) ``tick()`` publishes now() as the sim time: the batch runner owns
-time and the clock message only records it.
+The batch runner (``softseq run``) needs no clock: it steps the rig's cores on its own.
 """
 
 import time
@@ -18,10 +17,13 @@ from typing import Any, Callable
 from rclpy.node import Parameter
 from rosgraph_msgs.msg import Clock
 
-from softseq_ros.nodes.common import NodeConfigError, RigNode, run_node, set_timer_rate
+from softseq_ros.nodes.core_node import qos_profile
+from softseq_ros.nodes.parameters import NodeConfigError, ParameterNode
+from softseq_ros.nodes.runner import run_node
+from softseq_ros.rig.contract import CLOCK
 
 
-class SimClockNode(RigNode):
+class SimClockNode(ParameterNode):
     """Publishes /clock at ``rate_hz`` wall ticks per second, ``speedup`` x wall time."""
 
     NODE_NAME = 'sim_clock'
@@ -45,26 +47,23 @@ class SimClockNode(RigNode):
         self._origin_sim = int(round(start_s * 1e9))
         self.sim_ns = self._origin_sim
         self._clock_msg = Clock()
-        self._make_publisher('/clock')
-        self._timer = self._make_timer(self.rate_hz, self.tick)
+        self._publisher = self.create_publisher(Clock, CLOCK.name, qos_profile(CLOCK.qos))
+        self._timer = self.create_timer(1.0 / self.rate_hz, self.tick)
         self.configured = True
 
     def tick(self) -> None:
         """Advance the sim time to match the wall clock and publish it."""
-        if self._now_fn is not None:
-            self.sim_ns = int(self._now_fn())
-        else:
-            elapsed = self._wall_ns() - self._origin_wall
-            self.sim_ns = self._origin_sim + int(elapsed * self.speedup)
+        elapsed = self._wall_ns() - self._origin_wall
+        self.sim_ns = self._origin_sim + int(elapsed * self.speedup)
         stamp = self._clock_msg.clock
         stamp.sec, stamp.nanosec = divmod(self.sim_ns, 1_000_000_000)
-        self._publish('/clock', self._clock_msg)
+        self._publisher.publish(self._clock_msg)
 
     def _parameters_changed(self, parameters: list[Parameter]) -> None:
         for parameter in parameters:
             if parameter.name == 'rate_hz':
                 self.rate_hz = float(parameter.value)
-                set_timer_rate(self._timer, self.rate_hz)
+                self._timer.timer_period_ns = int(round(1e9 / self.rate_hz))
             elif parameter.name == 'speedup':
                 # Re-anchor so that the sim time stays continuous across the change.
                 wall = self._wall_ns()

@@ -1,46 +1,30 @@
 """
-Syringe pump node: publishes the commanded injected volume on /pump/command at ``rate_hz``.
+Syringe pump node: the pump core (softseq_ros.rig.pump) on a ROS timer, with services.
 
-The programme (legs at ``flow_rate_m3_per_s``, repeated ``cycles`` times) comes from the scene
-unless the parameters give it. The volume is the programme evaluated at the *run time*: the time
-since the start minus the time spent held, so a hold pauses the programme and ~/start resumes it.
-The pump publishes its current command at every tick, also when idle, held or stopped (with
-velocity 0), so the actuator and a late recorder always see where the pump is.
+Publishes ``pump/command`` (sensor_msgs/JointState, joint ``syringe``: injected volume [m^3]
+and signed flow [m^3/s]) at ``rate_hz`` and ``pump/status`` (JSON with state, reason and
+stamp; transient_local, depth 1: a late joiner gets the current state only). Listens to
+``actuator/pressure`` for its pressure relief. The programme (legs at ``flow_rate_m3_per_s``,
+repeated ``cycles`` times) comes from the scene unless the parameters give it.
 
-States, published on /pump/status (transient_local) as ``<state>`` or ``<state>: <reason>``:
-``idle`` (not started), ``running``, ``held`` (paused; ~/start resumes), ``finished`` (the
-programme is over), ``stopped: <reason>`` (by ~/stop or a safety limit; only ~/reset leaves it).
-
-Services (std_srvs/Trigger): ~/start (idle or held -> running), ~/hold (running -> held),
-~/stop (-> stopped), ~/reset (-> idle at the programme's start volume, run time 0).
-
-Safety: the pump stops when the actuator's gauge pressure (/actuator/pressure is absolute;
-``ambient_pressure_pa`` is subtracted) exceeds ``max_pressure_pa``, and when the commanded volume
-would exceed ``max_injected_m3``, where it stays.
+Services (std_srvs/Trigger): ``~/start`` (idle or held -> running), ``~/hold`` (running ->
+held), ``~/stop`` (-> stopped), ``~/reset`` (-> idle at the programme's start volume).
 """
 
-import math
 from typing import Any
 
 from rclpy.node import Parameter
-from sensor_msgs.msg import FluidPressure, JointState
-from std_msgs.msg import String
 from std_srvs.srv import Trigger
 import yaml
 
-from softseq_ros.nodes.common import (
-    DEFAULT_AMBIENT_PRESSURE_PA,
-    NodeConfigError,
-    RigNode,
-    run_node,
-    set_timer_rate,
-    stamp_header,
-)
-from softseq_ros.physics.profile import Leg, PumpProfile
+from softseq_ros.nodes.core_node import CoreNode
+from softseq_ros.nodes.parameters import NodeConfigError
+from softseq_ros.nodes.runner import run_node
+from softseq_ros.physics.profile import Leg
+from softseq_ros.rig import contract
+from softseq_ros.rig.build import pump_core
+from softseq_ros.rig.pump import DEFAULT_MAX_PRESSURE_PA, Reply
 
-# Gauge pressure above which the pump stops by default: several times the highest pressure
-# of the shipped segment models (about 20 kPa), far below what the silicone survives.
-DEFAULT_MAX_PRESSURE_PA = 100.0e3
 LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
 
 
@@ -94,13 +78,13 @@ def _legs_reason(text: str) -> str | None:
     return None
 
 
-class SyringePumpNode(RigNode):
+class SyringePumpNode(CoreNode):
     """The syringe pump: programme, run/hold/stop state machine and safety limits."""
 
-    NODE_NAME = 'syringe_pump'
+    NODE_NAME = contract.NODE_NAMES[contract.PUMP]
 
     def __init__(self, **kwargs: Any) -> None:
-        """Declare parameters (defaults from the scene), build the programme, start the timer."""
+        """Declare parameters (defaults from the scene), build the core, start the timer."""
         super().__init__(self.NODE_NAME, **kwargs)
         scene = self.declare_scene()
         default = scene.pump.profile
@@ -119,167 +103,68 @@ class SyringePumpNode(RigNode):
         start = self.declare_number(
             'start_injected_m3', default.start_injected, 'Injected volume at run time 0 [m^3].',
             minimum=0.0, read_only=True)
-        self.autostart = self.declare_flag(
+        autostart = self.declare_flag(
             'autostart', True, 'Start running at the first tick (else wait for ~/start).',
             read_only=True)
-        self.max_pressure_pa = self.declare_number(
+        max_pressure = self.declare_number(
             'max_pressure_pa', DEFAULT_MAX_PRESSURE_PA,
             'Stop when the actuator gauge pressure exceeds this [Pa].', minimum=0.0,
             open_minimum=True)
-        self.max_injected_m3 = self.declare_number(
+        max_injected = self.declare_number(
             'max_injected_m3', scene.capacity,
             'Stop when the commanded injected volume would exceed this [m^3] '
             '(default: what the segments hold).', minimum=0.0, open_minimum=True)
-        self.ambient_pressure_pa = self.declare_number(
-            'ambient_pressure_pa', DEFAULT_AMBIENT_PRESSURE_PA,
-            'Ambient pressure subtracted from /actuator/pressure [Pa].', minimum=0.0)
-        legs = parse_legs(legs_text) if legs_text else default.legs
-        try:
-            self.profile = PumpProfile(legs=legs, flow_rate=flow, cycles=cycles,
-                                       start_injected=start)
-        except ValueError as err:
-            raise NodeConfigError(f'pump programme (legs, cycles, start_injected_m3): '
-                                  f'{err}') from None
-
-        self._duration = self.profile.duration()
-        self.state = 'idle'
-        self.reason = ''
-        self._elapsed_ns = 0           # run time accumulated before the current run
-        self._running_since: int | None = None
-        self._frozen_volume: float | None = None  # where a stop left the pump
-        self._started = False
-        self._command = JointState(name=['syringe'], position=[start], velocity=[0.0])
-        self._status = String()
-
-        self._make_publisher('/pump/command')
-        self._make_publisher('/pump/status')
-        self._subscribe('/actuator/pressure', self.on_pressure)
-        if not self.batch_mode:
-            for name, handler in (('start', self.start), ('stop', self.stop),
-                                  ('hold', self.hold), ('reset', self.reset)):
-                self.create_service(Trigger, f'~/{name}', self._service(handler))
-        self._timer = self._make_timer(self.rate_hz, self.tick)
-        self._set_state('idle')
+        ambient = self.declare_number(
+            'ambient_pressure_pa', contract.DEFAULT_AMBIENT_PRESSURE_PA,
+            'Ambient pressure subtracted from actuator/pressure [Pa].', minimum=0.0)
+        self.core, _ = pump_core(
+            scene, flow_rate_m3_per_s=flow,
+            legs=parse_legs(legs_text) if legs_text else None, cycles=cycles,
+            start_injected_m3=start, autostart=autostart, max_pressure_pa=max_pressure,
+            max_injected_m3=max_injected, ambient_pressure_pa=ambient)
+        self.connect(scene.outputs)
+        for name, request in (('start', self.core.start), ('stop', self.core.stop),
+                              ('hold', self.core.hold), ('reset', self.core.reset)):
+            self.create_service(Trigger, f'~/{name}', self._service(request))
+        self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        self._timer = self.create_timer(1.0 / self.rate_hz, self.tick)
+        self.send(self.core.begin(self.now_ns()))
         self.configured = True
 
-    # ---------------------------------------------------------------- state machine
+    @property
+    def state(self) -> str:
+        """The pump's state: idle, running, held, finished or stopped."""
+        return self.core.state
 
-    def _set_state(self, state: str, reason: str = '') -> None:
-        self.state, self.reason = state, reason
-        self._status.data = f'{state}: {reason}' if reason else state
-        if state == 'stopped' and reason != 'requested':
-            self.log_warning(f'pump {self._status.data}')
-        else:
-            self.log_info(f'pump {self._status.data}')
-        self._publish('/pump/status', self._status)
-
-    def run_time_s(self, now_ns: int | None = None) -> float:
-        """Programme time [s]: time since the start minus the time held."""
-        elapsed = self._elapsed_ns
-        if self._running_since is not None:
-            now = self.now_ns() if now_ns is None else now_ns
-            elapsed += max(0, now - self._running_since)
-        return elapsed * 1e-9
-
-    def start(self) -> tuple[bool, str]:
-        """Run (from idle or held); returns (success, message)."""
-        if self.state in ('idle', 'held'):
-            self._running_since = self.now_ns()
-            self._started = True
-            self._set_state('running')
-            return True, 'running'
-        if self.state == 'running':
-            return True, 'already running'
-        return False, f'cannot start while {self._status.data}; call ~/reset first'
-
-    def hold(self) -> tuple[bool, str]:
-        """Pause the programme (running -> held)."""
-        if self.state != 'running':
-            return False, f'cannot hold while {self._status.data}'
-        self._pause()
-        self._set_state('held')
-        return True, 'held'
-
-    def stop(self, reason: str = 'requested') -> tuple[bool, str]:
-        """Stop where the pump is; only ~/reset leaves the stopped state."""
-        if self.state == 'stopped':
-            return True, f'already {self._status.data}'
-        self._frozen_volume = self._volume_now()
-        self._pause()
-        self._set_state('stopped', reason)
-        return True, self._status.data
-
-    def reset(self) -> tuple[bool, str]:
-        """Back to idle at the programme's start volume and run time 0."""
-        self._elapsed_ns = 0
-        self._running_since = None
-        self._frozen_volume = None
-        self._started = False
-        self._set_state('idle')
-        return True, 'idle'
-
-    def _pause(self) -> None:
-        if self._running_since is not None:
-            self._elapsed_ns += max(0, self.now_ns() - self._running_since)
-            self._running_since = None
-
-    def _service(self, handler: Any) -> Any:
+    def _service(self, request: Any) -> Any:
         def serve(_request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-            response.success, response.message = handler()
+            reply: Reply = request(self.now_ns())
+            self.send(reply.outputs)
+            response.success, response.message = reply.success, reply.message
             return response
         return serve
 
-    def _volume_now(self, now_ns: int | None = None) -> float:
-        if self._frozen_volume is not None:
-            return self._frozen_volume
-        return self.profile.command_at(self.run_time_s(now_ns))[0]
-
-    # ---------------------------------------------------------------- ROS entry points
-
-    def on_pressure(self, msg: FluidPressure) -> None:
-        """Stop when the actuator's gauge pressure exceeds max_pressure_pa."""
-        gauge = msg.fluid_pressure - self.ambient_pressure_pa
-        if math.isfinite(gauge) and gauge > self.max_pressure_pa and self.state in (
-                'running', 'held'):
-            self.stop(f'gauge pressure {gauge:.6g} Pa exceeds max_pressure_pa '
-                      f'{self.max_pressure_pa:.6g} Pa')
+    def start(self) -> tuple[bool, str]:
+        """Start (or resume) the programme now, as ~/start does."""
+        reply = self.core.start(self.now_ns())
+        self.send(reply.outputs)
+        return reply.success, reply.message
 
     def tick(self) -> None:
-        """Publish the command for now(): injected volume and signed flow."""
+        """The timer: command the volume of now (and any state change)."""
         now = self.now_ns()
-        if now == 0 and self._now_fn is None and self.get_parameter('use_sim_time').value:
+        if now == 0 and self._use_sim_time:
             return  # no /clock received yet: the time is unknown
-        if self.autostart and not self._started and self.state == 'idle':
-            self.start()
-        run_time = self.run_time_s(now)
-        volume, programme_flow = self.profile.command_at(run_time)
-        if self._frozen_volume is not None:
-            volume = self._frozen_volume
-        flow = 0.0
-        if self.state == 'running':
-            if volume > self.max_injected_m3:
-                self._frozen_volume = volume = self.max_injected_m3
-                self.stop(f'injected volume reached max_injected_m3 {self.max_injected_m3:.6g} '
-                          'm^3')
-            elif run_time >= self._duration:
-                self._pause()
-                self._set_state('finished')
-            else:
-                flow = programme_flow
-        command = self._command
-        stamp_header(command.header, now)
-        command.position[0] = volume
-        command.velocity[0] = flow
-        self._publish('/pump/command', command)
+        self.send(self.core.tick(now))
 
     def _parameters_changed(self, parameters: list[Parameter]) -> None:
         for parameter in parameters:
             if parameter.name == 'rate_hz':
                 self.rate_hz = float(parameter.value)
-                set_timer_rate(self._timer, self.rate_hz)
+                self._timer.timer_period_ns = int(round(1e9 / self.rate_hz))
             elif parameter.name in ('max_pressure_pa', 'max_injected_m3',
                                     'ambient_pressure_pa'):
-                setattr(self, parameter.name, float(parameter.value))
+                setattr(self.core, parameter.name, float(parameter.value))
 
 
 def main(args: list[str] | None = None) -> None:

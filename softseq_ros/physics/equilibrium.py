@@ -73,7 +73,7 @@ class State:
 
 
 @dataclass
-class Path:
+class SolvedPath:
     """States along a history of commanded volumes, one row per command."""
 
     injected: FloatArray
@@ -755,7 +755,7 @@ class Tracker:
             raise DomainError(f'commanded injected volume must be finite, got {injected}')
         return self._walk(float(injected) + self.emap.total_rest_volume)
 
-    def sweep(self, injected: ArrayLike) -> Path:
+    def sweep(self, injected: ArrayLike) -> SolvedPath:
         """Follow a whole history at once (the same rules as repeated ``step``)."""
         emap = self.emap
         commands = np.asarray(injected, dtype=float).ravel()
@@ -796,7 +796,7 @@ class Tracker:
             for b in np.unique(branch_ids):
                 rows = np.flatnonzero(branch_ids == b)
                 values[rows] = emap.evaluate(int(b), totals[rows])
-        return Path(commands, values[:, segments], values[:, :segments],
+        return SolvedPath(commands, values[:, segments], values[:, :segments],
                     values[:, segments + 1:], branch_ids, snap, events)
 
 

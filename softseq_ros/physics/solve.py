@@ -14,8 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.physics.csv_columns import read_columns
-from softseq_ros.physics.equilibrium import EquilibriumMap
-from softseq_ros.physics.equilibrium import Path as SolvedPath
+from softseq_ros.physics.equilibrium import EquilibriumMap, SolvedPath
 from softseq_ros.physics.segments import Segment
 
 INJECTED_COLUMN = 'injected_m3'

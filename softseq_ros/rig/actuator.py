@@ -1,0 +1,209 @@
+"""
+The actuator's core: the segments' quasi-static response to the pump's commanded volume.
+
+Each :class:`PumpCommand` moves the equilibrium tracker to the commanded injected volume. The
+tracker's jump rule makes a dropped command harmless: a jump lands where a walk through every
+volume in between lands. The outputs the ``outputs`` set lists go out stamped with the
+command's stamp (the state at the commanded instant, so a listener pairs them exactly):
+pressure (absolute: gauge + ``ambient_pressure_pa``), volumes (with the gauge pressure),
+curvatures, and one :class:`SnapThrough` per snap. A command equal to the previous one is not
+solved again: the same numbers go out with the new stamp.
+
+Resume: a restarted actuator must stay on the branch its history put it on (hysteresis).
+While :attr:`waiting` (the driver looks for a previous state), commands are buffered and
+answered in order once the wait ends (:meth:`end_wait`). ``state_file`` (default off) makes
+the core write its state there after every change, atomically, and :meth:`resume_from_file`
+read it back.
+
+Bad commands (NaN, negative, volumes outside the segment models) are refused with a throttled
+warning; the state stays where it was.
+"""
+
+import json
+import math
+import os
+from pathlib import Path
+
+from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.rig import contract
+from softseq_ros.rig.throttle import Throttle
+from softseq_ros.rig.values import (
+    INFO,
+    WARNING,
+    Notice,
+    Output,
+    Pressure,
+    PumpCommand,
+    SegmentCurvatures,
+    SegmentVolumes,
+    SnapThrough,
+)
+
+ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events')
+MAX_BUFFERED_COMMANDS = 100_000
+
+
+class ActuatorCore:
+    """Tracks the equilibrium of a scene's segments under the commanded injected volume."""
+
+    role = contract.ACTUATOR
+
+    def __init__(self, emap: EquilibriumMap, names: tuple[str, ...], *,
+                 outputs: frozenset[str] = frozenset(ACTUATOR_OUTPUTS),
+                 ambient_pressure_pa: float = contract.DEFAULT_AMBIENT_PRESSURE_PA,
+                 state_file: Path | None = None) -> None:
+        """An actuator at rest; ``outputs`` are scene output names (others are ignored)."""
+        self.emap = emap
+        self.tracker = Tracker(emap)
+        self.names = tuple(names)
+        self.outputs = frozenset(name for name in outputs if name in ACTUATOR_OUTPUTS)
+        self.ambient_pressure_pa = ambient_pressure_pa
+        self.state_file = state_file
+        self.rejected_commands = 0
+        self.solves = 0
+        self.waiting = False
+        self._buffered: list[tuple[PumpCommand, int]] = []
+        self._throttle = Throttle()
+        self._last_command: float | None = None
+        self._values: list[float] | None = None  # (v_1..v_N, p, k_1..k_N) of the last solve
+        n = len(self.names)
+        self._n = n
+        self._send_pressure = 'pressure' in self.outputs
+        self._send_volumes = 'volumes' in self.outputs
+        self._send_curvatures = 'curvature' in self.outputs
+        self._send_events = 'events' in self.outputs
+
+    # ---------------------------------------------------------------- commands
+
+    def handle(self, value: PumpCommand, now: int) -> list[Output]:
+        """Move to the commanded injected volume; the outputs of that state."""
+        if self.waiting:
+            if len(self._buffered) < MAX_BUFFERED_COMMANDS:
+                self._buffered.append((value, now))
+            return []
+        injected = value.injected_m3
+        if not math.isfinite(injected):
+            return self.refuse('finite', f'command refused: injected volume {injected} is '
+                                         'not finite')
+        if injected < 0.0:
+            return self.refuse('negative', f'command refused: injected volume {injected:.6g} '
+                                           'm^3 is negative')
+        # An unstamped command gets the driver's time.
+        stamp = value.stamp_ns or now
+        if self._values is not None and injected == self._last_command:
+            return self._outputs(stamp, ())
+        tracker = self.tracker
+        branch, total = tracker.branch, tracker.total
+        try:
+            snaps = tracker.move(injected)
+        except DomainError as err:
+            # The tracker stops at the edge of its branch; keep the state as it was.
+            tracker.branch, tracker.total = branch, total
+            return self.refuse('domain', f'command refused: {err}')
+        self.solves += 1
+        self._last_command = injected
+        self._values = self.emap.values_at(tracker.branch, tracker.total)
+        outputs = self._outputs(stamp, snaps)
+        if self.state_file is not None:
+            self._save(injected, outputs)
+        return outputs
+
+    def refuse(self, key: str, text: str) -> list[Output]:
+        """Count a refused command and warn (throttled per kind of refusal)."""
+        self.rejected_commands += 1
+        admitted = self._throttle.admit(key, text)
+        return [] if admitted is None else [Notice(self.role, WARNING, admitted)]
+
+    def _outputs(self, stamp: int, snaps: list) -> list[Output]:
+        values = self._values
+        n = self._n
+        pressure = values[n]
+        out: list[Output] = []
+        if self._send_pressure:
+            out.append(Pressure(stamp, pressure + self.ambient_pressure_pa))
+        if self._send_volumes:
+            out.append(SegmentVolumes(stamp, self.names, values[:n], pressure))
+        if self._send_curvatures:
+            out.append(SegmentCurvatures(stamp, self.names, values[n + 1:]))
+        for snap in snaps:
+            out.append(Notice(self.role, INFO,
+                              f'snap-through at {snap.injected * 1e6:.4f} mL injected'))
+            if self._send_events:
+                out.append(SnapThrough(stamp, float(snap.injected),
+                                       [float(v) for v in snap.from_volumes],
+                                       [float(v) for v in snap.to_volumes],
+                                       float(snap.from_pressure), float(snap.to_pressure)))
+        return out
+
+    # ---------------------------------------------------------------- state
+
+    @property
+    def volumes(self) -> list[float]:
+        """The segments' volumes [m^3] now."""
+        return self.emap.values_at(self.tracker.branch, self.tracker.total)[:self._n]
+
+    def set_ambient_pressure(self, ambient_pa: float) -> None:
+        """Change the ambient pressure added to the gauge pressure."""
+        self.ambient_pressure_pa = ambient_pa
+
+    def _save(self, injected: float, outputs: list[Output]) -> None:
+        """Write the state atomically, so a kill mid-write leaves the previous one."""
+        data = json.dumps({'names': list(self.names), 'injected_m3': injected,
+                           'volumes_m3': self._values[:self._n]})
+        temporary = self.state_file.with_name(self.state_file.name + '.tmp')
+        try:
+            temporary.write_text(data, encoding='utf-8')
+            os.replace(temporary, self.state_file)
+        except OSError as err:
+            admitted = self._throttle.admit('state_file', f'state_file {self.state_file}: '
+                                                          f'cannot write ({err.strerror})')
+            if admitted is not None:
+                outputs.append(Notice(self.role, WARNING, admitted))
+
+    # ---------------------------------------------------------------- resume
+
+    def begin_wait(self) -> None:
+        """Buffer commands until :meth:`end_wait` (the driver looks for a previous state)."""
+        self.waiting = True
+
+    def end_wait(self, now: int) -> list[Output]:
+        """Stop waiting; answer the buffered commands in order."""
+        self.waiting = False
+        buffered, self._buffered = self._buffered, []
+        out: list[Output] = []
+        for command, received in buffered:
+            out.extend(self.handle(command, received))
+        return out
+
+    def resume_from(self, names: list[str], volumes: list[float],
+                    source: str) -> tuple[bool, list[Output]]:
+        """Resume on the branch nearest ``volumes``; (False, a warning) when unusable."""
+        if list(names) != list(self.names) or not all(math.isfinite(v) for v in volumes):
+            return False, [Notice(self.role, WARNING,
+                                  f'{source} does not fit this scene (segments {list(names)}, '
+                                  f'expected {list(self.names)}); not resuming from it')]
+        injected = sum(volumes) - self.emap.total_rest_volume
+        try:
+            self.resume(injected, volumes)
+        except DomainError as err:
+            return False, [Notice(self.role, WARNING, f'{source}: cannot resume ({err})')]
+        return True, [Notice(self.role, INFO,
+                             f'resumed from {source} at {injected * 1e6:.4f} mL injected')]
+
+    def resume_from_file(self) -> tuple[bool, list[Output]]:
+        """Resume from ``state_file`` when there is one that fits."""
+        if self.state_file is None or not self.state_file.is_file():
+            return False, []
+        try:
+            saved = json.loads(self.state_file.read_text(encoding='utf-8'))
+            names, volumes = list(saved['names']), [float(v) for v in saved['volumes_m3']]
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            return False, [Notice(self.role, WARNING, f'state_file {self.state_file}: '
+                                                      f'unreadable ({err}); starting at rest')]
+        return self.resume_from(names, volumes, f'state_file {self.state_file}')
+
+    def resume(self, injected: float, volumes: list[float]) -> None:
+        """Put the tracker at ``injected`` on the branch nearest ``volumes`` (a restart)."""
+        self.tracker = Tracker(self.emap, injected=injected, volumes=volumes)
+        self._last_command = None
+        self._values = None

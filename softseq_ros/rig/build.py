@@ -1,0 +1,110 @@
+"""
+Cores from a scene: the scene gives every setting's default, keywords override them.
+
+The node adapters pass their parameters as the keywords, the batch runner its overrides, so
+both build the same cores from the same scene the same way.
+"""
+
+from pathlib import Path
+from typing import Any
+
+from softseq_ros.physics.equilibrium import EquilibriumMap
+from softseq_ros.physics.profile import Leg, PumpProfile
+from softseq_ros.physics.scene import Scene
+from softseq_ros.rig import contract
+from softseq_ros.rig.actuator import ActuatorCore
+from softseq_ros.rig.camera import CameraCore
+from softseq_ros.rig.pump import DEFAULT_MAX_PRESSURE_PA, PumpCore
+
+
+class SettingError(ValueError):
+    """A core setting that cannot run; the message names the setting."""
+
+
+def _unknown(role: str, overrides: dict[str, Any], known: tuple[str, ...]) -> None:
+    extra = sorted(set(overrides) - set(known))
+    if extra:
+        raise SettingError(f'{role}: unknown setting(s) {", ".join(extra)}; expected some of '
+                           f'{", ".join(known)}')
+
+
+PUMP_SETTINGS = ('rate_hz', 'flow_rate_m3_per_s', 'legs', 'cycles', 'start_injected_m3',
+                 'autostart', 'max_pressure_pa', 'max_injected_m3', 'ambient_pressure_pa')
+
+
+def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
+                 legs: tuple[Leg, ...] | None = None, cycles: int | None = None,
+                 start_injected_m3: float | None = None) -> PumpProfile:
+    """The scene's pump programme with any of its parts replaced."""
+    default = scene.pump.profile
+    try:
+        return PumpProfile(
+            legs=default.legs if legs is None else tuple(legs),
+            flow_rate=default.flow_rate if flow_rate_m3_per_s is None else flow_rate_m3_per_s,
+            cycles=default.cycles if cycles is None else cycles,
+            start_injected=(default.start_injected if start_injected_m3 is None
+                            else start_injected_m3))
+    except ValueError as err:
+        raise SettingError(f'pump programme (legs, cycles, start_injected_m3): {err}') from None
+
+
+def pump_core(scene: Scene, **settings: Any) -> tuple[PumpCore, float]:
+    """The scene's pump (settings from PUMP_SETTINGS override it) and its rate [Hz]."""
+    _unknown('pump', settings, PUMP_SETTINGS)
+    profile = pump_profile(scene, flow_rate_m3_per_s=settings.get('flow_rate_m3_per_s'),
+                           legs=settings.get('legs'), cycles=settings.get('cycles'),
+                           start_injected_m3=settings.get('start_injected_m3'))
+    core = PumpCore(
+        profile, autostart=settings.get('autostart', True),
+        max_pressure_pa=settings.get('max_pressure_pa', DEFAULT_MAX_PRESSURE_PA),
+        max_injected_m3=settings.get('max_injected_m3', scene.capacity),
+        ambient_pressure_pa=settings.get('ambient_pressure_pa',
+                                         contract.DEFAULT_AMBIENT_PRESSURE_PA))
+    return core, float(settings.get('rate_hz', scene.pump.rate_hz))
+
+
+ACTUATOR_SETTINGS = ('outputs', 'ambient_pressure_pa', 'state_file')
+
+
+def equilibrium_map(scene: Scene) -> EquilibriumMap:
+    """The scene's equilibrium map at the scene's solver resolution."""
+    resolution = scene.solver.resolution
+    return (EquilibriumMap(scene.segments, resolution=resolution) if resolution
+            else EquilibriumMap(scene.segments))
+
+
+def actuator_core(scene: Scene, emap: EquilibriumMap | None = None,
+                  **settings: Any) -> ActuatorCore:
+    """The scene's actuator (settings from ACTUATOR_SETTINGS override it)."""
+    _unknown('actuator', settings, ACTUATOR_SETTINGS)
+    state_file = settings.get('state_file')
+    return ActuatorCore(
+        emap if emap is not None else equilibrium_map(scene), scene.segment_names,
+        outputs=frozenset(settings.get('outputs', scene.outputs)),
+        ambient_pressure_pa=settings.get('ambient_pressure_pa',
+                                         contract.DEFAULT_AMBIENT_PRESSURE_PA),
+        state_file=Path(state_file) if state_file else None)
+
+
+CAMERA_SETTINGS = ('rate_hz', 'frame_trigger', 'noise_std_m', 'seed', 'points_per_segment',
+                   'trigger_injected_m3', 'width', 'height', 'outputs')
+
+
+def camera_core(scene: Scene, **settings: Any) -> CameraCore:
+    """The scene's camera (settings from CAMERA_SETTINGS override it)."""
+    _unknown('camera', settings, CAMERA_SETTINGS)
+    cam = scene.camera
+    try:
+        return CameraCore(
+            scene.lengths, sum(segment.rest_volume for segment in scene.segments),
+            rate_hz=float(settings.get('rate_hz', cam.rate_hz)),
+            outputs=frozenset(settings.get('outputs', scene.outputs)),
+            frame_trigger=settings.get('frame_trigger', 'timer'),
+            noise_std_m=float(settings.get('noise_std_m', cam.noise_std_m)),
+            seed=int(settings.get('seed', cam.seed)),
+            points_per_segment=int(settings.get('points_per_segment', cam.points_per_segment)),
+            triggers=tuple(settings.get('trigger_injected_m3', cam.trigger_injected_m3)),
+            image_size=(int(settings.get('width', cam.image_width_px)),
+                        int(settings.get('height', cam.image_height_px))))
+    except ValueError as err:
+        raise SettingError(f'camera: {err}') from None

@@ -1,0 +1,157 @@
+"""
+The typed values the rig's cores take and give: one class per topic of the contract, plus notices.
+
+A core never sees a ROS message: a node adapter turns received messages into these values and
+the values a core returns into CDR bytes (:mod:`softseq_ros.rig.wire`), the batch runner writes
+those same bytes into a bag, and the one-process rig hands the values straight from core to
+core. Each class names its topic (``topic``), so routing needs no parallel table. Times are
+nanoseconds on the driver's clock (ROS time, sim time or the batch runner's clock).
+"""
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from softseq_ros.rig import contract
+from softseq_ros.rig.contract import Topic
+
+
+@dataclass(slots=True)
+class PumpCommand:
+    """The syringe's commanded injected volume [m^3] and signed flow [m^3/s]."""
+
+    topic: ClassVar[Topic] = contract.PUMP_COMMAND
+    stamp_ns: int
+    injected_m3: float
+    flow_m3_per_s: float
+
+
+@dataclass(slots=True)
+class PumpStatus:
+    """The pump's state (idle, running, held, finished, stopped) and why, since ``stamp_ns``."""
+
+    topic: ClassVar[Topic] = contract.PUMP_STATUS
+    stamp_ns: int
+    state: str
+    reason: str = ''
+
+    @property
+    def text(self) -> str:
+        """``state`` or ``state: reason``, as logs show it."""
+        return f'{self.state}: {self.reason}' if self.reason else self.state
+
+
+@dataclass(slots=True)
+class Pressure:
+    """The actuator's fluid pressure, absolute [Pa] (gauge + ambient, as FluidPressure has it)."""
+
+    topic: ClassVar[Topic] = contract.PRESSURE
+    stamp_ns: int
+    absolute_pa: float
+
+
+@dataclass(slots=True)
+class SegmentVolumes:
+    """Each segment's volume [m^3] base to tip, and the common gauge pressure [Pa]."""
+
+    topic: ClassVar[Topic] = contract.VOLUMES
+    stamp_ns: int
+    names: tuple[str, ...]
+    volumes_m3: list[float]
+    gauge_pa: float
+
+
+@dataclass(slots=True)
+class SegmentCurvatures:
+    """Each segment's curvature [1/m], base to tip."""
+
+    topic: ClassVar[Topic] = contract.CURVATURES
+    stamp_ns: int
+    names: tuple[str, ...]
+    curvatures_per_m: list[float]
+
+
+@dataclass(slots=True)
+class SnapThrough:
+    """A snap-through at ``injected_m3``: from one state to another (gauge pressures)."""
+
+    topic: ClassVar[Topic] = contract.EVENTS
+    stamp_ns: int
+    injected_m3: float
+    from_volumes_m3: list[float]
+    to_volumes_m3: list[float]
+    from_pressure_pa: float
+    to_pressure_pa: float
+
+
+@dataclass(slots=True)
+class Backbone:
+    """A camera frame: poses (M, 7) as (x, y, z, qx, qy, qz, qw) in ``softseq_base``."""
+
+    topic: ClassVar[Topic] = contract.BACKBONE
+    stamp_ns: int
+    poses: np.ndarray
+
+
+@dataclass(slots=True)
+class Snapshot:
+    """The backbone at a trigger crossing (one of the paper's steps)."""
+
+    topic: ClassVar[Topic] = contract.SNAPSHOTS
+    stamp_ns: int
+    poses: np.ndarray
+
+
+@dataclass(slots=True)
+class SnapshotStep:
+    """Which trigger a snapshot belongs to: 1-based ``step``, its volume and the direction."""
+
+    topic: ClassVar[Topic] = contract.SNAPSHOT_STEPS
+    stamp_ns: int
+    step: int
+    trigger_injected_m3: float
+    direction: str           # 'inflation' or 'deflation'
+    injected_m3: float       # the injected volume of the state shown
+
+
+@dataclass(slots=True)
+class Markers:
+    """One line per segment: its points (K, 3) in ``softseq_base``."""
+
+    topic: ClassVar[Topic] = contract.MARKERS
+    stamp_ns: int
+    lines: list[np.ndarray]
+
+
+@dataclass(slots=True)
+class SideImage:
+    """An rgb8 side view of the actuator."""
+
+    topic: ClassVar[Topic] = contract.IMAGE
+    stamp_ns: int
+    width: int
+    height: int
+    rgb: bytes
+
+
+INFO = 'info'
+WARNING = 'warning'
+ERROR = 'error'
+
+
+@dataclass(slots=True)
+class Notice:
+    """A line for the log of the node hosting ``source`` (a core role); not a topic."""
+
+    topic: ClassVar[Topic | None] = None
+    source: str
+    level: str
+    text: str
+
+
+TOPIC_VALUE_TYPES = (PumpCommand, PumpStatus, Pressure, SegmentVolumes, SegmentCurvatures,
+                     SnapThrough, Backbone, Snapshot, SnapshotStep, Markers, SideImage)
+TopicValue = (PumpCommand | PumpStatus | Pressure | SegmentVolumes | SegmentCurvatures
+              | SnapThrough | Backbone | Snapshot | SnapshotStep | Markers | SideImage)
+Output = TopicValue | Notice

@@ -1,0 +1,37 @@
+"""Small scenes the tests write to files (no ROS needed to use them)."""
+
+import json
+
+import yaml
+
+# Linear bottom and a neo-Hookean balloon top (the symmetric case of Fig. 1): the top passes its
+# pressure peak at about 20 mL injected and then takes the bottom's fluid, so the path is
+# strongly nonlinear. The pump runs 0 -> 30 mL -> 0 at 20 mL/s (3 s).
+FAST_SCENE = {
+    'name': 'fast_symmetric',
+    'segments': [
+        {'name': 'bottom', 'length_m': 0.111,
+         'linear': {'rest_volume_m3': 1.0e-5, 'stiffness_pa_per_m3': 5.0e+8,
+                    'max_volume_m3': 4.0e-5, 'curvature_per_m_per_m3': 8.0e+5}},
+        {'name': 'top', 'length_m': 0.111,
+         'balloon': {'material': {'law': 'neo_hookean', 'shear_modulus_pa': 34.0e+3},
+                     'radius_m': 0.010, 'thickness_m': 2.0e-3, 'max_stretch': 2.6,
+                     'curvature_per_m_per_m3': 4.0e+5}},
+    ],
+    'pump': {'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 100,
+             'legs': [{'inflate_to_m3': 3.0e-5}, {'deflate_to_m3': 0.0}]},
+    'camera': {'rate_hz': 20, 'trigger_injected_m3': [1.0e-5, 2.5e-5]},
+    'outputs': ['pressure', 'volumes', 'curvature', 'poses', 'markers', 'image', 'events'],
+}
+
+def write_scene(folder, **changes) -> str:
+    """Write FAST_SCENE (with top-level or pump changes) as YAML; return its path."""
+    scene = json.loads(json.dumps(FAST_SCENE))
+    for key, value in changes.items():
+        if key in ('legs', 'flow_rate_m3_per_s', 'rate_hz'):
+            scene['pump'][key] = value
+        else:
+            scene[key] = value
+    path = folder / f'{scene["name"]}.yaml'
+    path.write_text(yaml.safe_dump(scene), encoding='utf-8')
+    return str(path)
