@@ -1,3 +1,70 @@
-"""softseq_ros: an emulated rig for soft actuators with a hardware-encoded inflation sequence."""
+"""
+softseq_ros: an emulated rig for soft actuators with a hardware-encoded inflation sequence.
+
+From a notebook or a script::
+
+    import softseq_ros
+    scene = softseq_ros.load_scene('paper')                 # a shipped name or a YAML file
+    path = softseq_ros.solve(scene, [0.0, 2.5e-5, 6.5e-5])  # injected volumes [m^3]
+    print(path.pressure, path.volumes, path.events)         # gauge Pa, m^3 per segment, snaps
+    result = softseq_ros.run(scene, 'bags/mine')            # the whole rig, recorded to a bag
+
+Nothing here imports ROS; ``run`` steps the rig's cores without rclpy.
+"""
+
+import os
+from typing import TYPE_CHECKING, Any, Sequence
+
+if TYPE_CHECKING:
+    from softseq_ros.batch import BatchResult
+    from softseq_ros.physics.equilibrium import SolvedPath
+    from softseq_ros.physics.scene import Scene
 
 __version__ = '0.1.0'
+__all__ = ['load_scene', 'run', 'solve']
+
+
+def load_scene(scene: 'str | os.PathLike | Scene') -> 'Scene':
+    """A validated scene from a YAML file or a shipped scene's name (a Scene is returned as is)."""
+    from softseq_ros.physics.scene import Scene
+    from softseq_ros.physics.scene import load_scene as _load
+
+    return scene if isinstance(scene, Scene) else _load(scene)
+
+
+def solve(scene: 'str | os.PathLike | Scene', injected: Sequence[float],
+          resolution: int | None = None) -> 'SolvedPath':
+    """
+    The quasi-static path along a history of injected volumes [m^3], from rest.
+
+    The history matters (snap-throughs, hysteresis): the volumes are followed in order. The
+    result holds per row the injected volume, the gauge pressure [Pa], the segment volumes
+    [m^3] and curvatures [1/m], and the snap-throughs on the way (``events``).
+    """
+    from softseq_ros.physics.equilibrium import Tracker
+    from softseq_ros.physics.solve import build_map
+
+    loaded = load_scene(scene)
+    emap = build_map(loaded.segments, resolution or loaded.solver.resolution)
+    return Tracker(emap).sweep(injected)
+
+
+def run(scene: 'str | os.PathLike | Scene', out: str | os.PathLike, *,
+        start_time_ns: int | None = None, overrides: dict[str, dict[str, Any]] | None = None,
+        namespace: str = '/') -> 'BatchResult':
+    """
+    Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
+
+    The same cores as the ROS nodes, stepped on a simulated clock that starts at
+    ``start_time_ns`` (default: now); ``overrides`` replace core settings by role, e.g.
+    ``{'camera': {'rate_hz': 30.0}}``.
+    """
+    from softseq_ros.batch import BatchRun
+    from softseq_ros.physics.scene import Scene
+
+    if isinstance(scene, Scene):
+        if scene.path is None:
+            raise ValueError('run: the scene has no file; give its path or shipped name')
+        scene = scene.path
+    return BatchRun(scene, out, overrides=overrides, start_time_ns=start_time_ns,
+                    namespace=namespace).run()

@@ -1,6 +1,7 @@
 """The ``softseq`` command: one subcommand per job."""
 
 import argparse
+from datetime import datetime, timezone
 from pathlib import Path
 import sys
 from typing import Callable, Sequence
@@ -37,10 +38,28 @@ def _classify(args: argparse.Namespace) -> int:
     return 0
 
 
+def start_time_ns(text: str) -> int:
+    """A bag start time: ISO 8601 (``2026-01-01T00:00:00Z``) or seconds since the epoch."""
+    try:
+        return int(round(float(text) * 1e9))
+    except ValueError:
+        pass
+    try:
+        when = datetime.fromisoformat(text.replace('Z', '+00:00'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'{text!r} is neither ISO 8601 (2026-01-01T00:00:00Z) nor seconds since 1970') \
+            from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=timezone.utc)
+    return int(round(when.timestamp() * 1e9))
+
+
 def _run(args: argparse.Namespace) -> int:
     from softseq_ros.batch import run_scene
 
-    result = run_scene(args.scene, args.out, show_progress=not args.quiet)
+    result = run_scene(args.scene, args.out, show_progress=not args.quiet,
+                       start_time_ns=args.start_time)
     print(f'{args.out}: {result.sim_duration_s:.1f} s of rig time in {result.wall_s:.1f} s '
           f'({result.speedup:.0f}x real time), {sum(result.message_counts.values())} messages, '
           f'pump {result.pump_state}')
@@ -119,13 +138,16 @@ def build_parser() -> argparse.ArgumentParser:
     classify.set_defaults(handler=_classify)
 
     run = sub.add_parser('run', help='run the rig in batch mode and record it to a bag',
-                         description='Run the pump, actuator and camera nodes in one process '
+                         description='Run the pump, actuator and camera cores in one process '
                          'in lock-step simulated time, as fast as the machine allows, record '
                          'every topic to an MCAP bag and write a summary with figures.')
     run.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
     run.add_argument('--out', type=Path, required=True,
                      help='bag directory to create (for example bags/paper)')
     run.add_argument('--quiet', action='store_true', help='no progress line')
+    run.add_argument('--start-time', type=start_time_ns, metavar='TIME',
+                     help='the simulated clock at the start, as ISO 8601 or seconds since '
+                     '1970 (default: now); the same scene and start time give the same bag')
     run.add_argument('--no-report', action='store_true', help='skip the summary and figures')
     run.set_defaults(handler=_run)
 
