@@ -192,3 +192,18 @@ def test_softseq_run_writes_bag_summary_and_figures(fast_scene, tmp_path):
                            timeout=300, stdin=subprocess.DEVNULL)
     assert again.returncode == 2
     assert 'already exists' in again.stderr and len(again.stderr.strip().splitlines()) == 1
+
+
+def test_softseq_run_start_time_dates_the_bag(fast_scene, tmp_path):
+    out = tmp_path / 'dated'
+    result = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'run', str(fast_scene),
+                             '--out', str(out), '--quiet', '--no-report',
+                             '--start-time', '2026-01-01T00:00:00Z'], capture_output=True,
+                            text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr
+    assert bag_summary(out).start_ns == 1_767_225_600 * 10**9
+    bad = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'run', str(fast_scene),
+                          '--out', str(tmp_path / 'never'), '--start-time', 'yesterday'],
+                         capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert bad.returncode == 2 and 'ISO 8601' in bad.stderr
+    assert not (tmp_path / 'never').exists()

