@@ -2,6 +2,7 @@
 
 import json
 from pathlib import Path
+import struct
 import subprocess
 import sys
 import time
@@ -146,17 +147,33 @@ def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, 
         {t: s.type_name for t, s in dds.topics.items()}
     # Message by message: the actuator's answers in the DDS bag are, byte for byte, what the
     # batch runner's cores write for the same commands (the same core, the same encoding).
+    # Each answer carries its command's stamp (CDR bytes 4..12), which pairs them: the
+    # recorder may close before the answers to the last commands arrive.
     cores = actuator_core(load_scene(fast_scene))
+    answers = ('/actuator/pressure', '/actuator/volumes', '/actuator/curvatures')
     raw = {topic: [data for _, data in read_raw(dds_bag, topic)]
-           for topic in ('/actuator/pressure', '/actuator/volumes', '/actuator/curvatures',
-                         '/actuator/events')}
-    expected = {topic: [] for topic in raw}
+           for topic in (*answers, '/actuator/events')}
+    expected = {topic: {} for topic in answers}
+    expected_events = []
     for msg in messages(dds_bag, '/pump/command'):
         for value in cores.handle(pump_command(msg), 0):
-            if type(value) is not Notice:
-                expected[contract.resolve(value.topic.name)].append(encode(value))
-    for topic in raw:
-        assert raw[topic] == expected[topic], topic
+            if type(value) is Notice:
+                continue
+            topic = contract.resolve(value.topic.name)
+            if topic == '/actuator/events':
+                expected_events.append(encode(value))
+            else:
+                expected[topic][value.stamp_ns] = encode(value)
+    for topic in answers:
+        paired = 0
+        for data in raw[topic]:
+            sec, nanosec = struct.unpack_from('<iI', data, 4)
+            want = expected[topic].get(sec * 10**9 + nanosec)
+            if want is not None:
+                assert data == want, topic
+                paired += 1
+        assert paired >= len(expected[topic]) - 5 and paired >= len(raw[topic]) - 5, topic
+    assert raw['/actuator/events'] == expected_events
     assert len(raw['/actuator/volumes']) > 100
     # Over DDS the same physics answers to whatever commands arrived, in order.
     check_bag_against_solver(dds_bag, fast_scene)

@@ -24,7 +24,7 @@ import math
 import os
 from pathlib import Path
 
-from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, StatePoint, Tracker
 from softseq_ros.rig import contract
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.rig.values import (
@@ -65,9 +65,7 @@ class ActuatorCore:
         self._buffered: list[tuple[PumpCommand, int]] = []
         self._throttle = Throttle()
         self._last_command: float | None = None
-        self._values: list[float] | None = None  # (v_1..v_N, p, k_1..k_N) of the last solve
-        n = len(self.names)
-        self._n = n
+        self._state: StatePoint | None = None  # the state of the last solve
         self._send_pressure = 'pressure' in self.outputs
         self._send_volumes = 'volumes' in self.outputs
         self._send_curvatures = 'curvature' in self.outputs
@@ -90,7 +88,7 @@ class ActuatorCore:
                                            'm^3 is negative')
         # An unstamped command gets the driver's time.
         stamp = value.stamp_ns or now
-        if self._values is not None and injected == self._last_command:
+        if self._state is not None and injected == self._last_command:
             return self._outputs(stamp, ())
         tracker = self.tracker
         branch, total = tracker.branch, tracker.total
@@ -102,7 +100,7 @@ class ActuatorCore:
             return self.refuse('domain', f'command refused: {err}')
         self.solves += 1
         self._last_command = injected
-        self._values = self.emap.values_at(tracker.branch, tracker.total)
+        self._state = self.emap.read(tracker.branch, tracker.total)
         outputs = self._outputs(stamp, snaps)
         if self.state_file is not None:
             self._save(injected, outputs)
@@ -115,16 +113,15 @@ class ActuatorCore:
         return [] if admitted is None else [Notice(self.role, WARNING, admitted)]
 
     def _outputs(self, stamp: int, snaps: list) -> list[Output]:
-        values = self._values
-        n = self._n
-        pressure = values[n]
+        state = self._state
+        pressure = state.pressure
         out: list[Output] = []
         if self._send_pressure:
             out.append(Pressure(stamp, pressure + self.ambient_pressure_pa))
         if self._send_volumes:
-            out.append(SegmentVolumes(stamp, self.names, values[:n], pressure))
+            out.append(SegmentVolumes(stamp, self.names, state.volumes, pressure))
         if self._send_curvatures:
-            out.append(SegmentCurvatures(stamp, self.names, values[n + 1:]))
+            out.append(SegmentCurvatures(stamp, self.names, state.curvatures))
         for snap in snaps:
             out.append(Notice(self.role, INFO,
                               f'snap-through at {snap.injected * 1e6:.4f} mL injected'))
@@ -140,7 +137,7 @@ class ActuatorCore:
     @property
     def volumes(self) -> list[float]:
         """The segments' volumes [m^3] now."""
-        return self.emap.values_at(self.tracker.branch, self.tracker.total)[:self._n]
+        return self.emap.read(self.tracker.branch, self.tracker.total).volumes
 
     def set_ambient_pressure(self, ambient_pa: float) -> None:
         """Change the ambient pressure added to the gauge pressure."""
@@ -149,7 +146,7 @@ class ActuatorCore:
     def _save(self, injected: float, outputs: list[Output]) -> None:
         """Write the state atomically, so a kill mid-write leaves the previous one."""
         data = json.dumps({'names': list(self.names), 'injected_m3': injected,
-                           'volumes_m3': self._values[:self._n]})
+                           'volumes_m3': self._state.volumes})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
         try:
             temporary.write_text(data, encoding='utf-8')
@@ -206,4 +203,4 @@ class ActuatorCore:
         """Put the tracker at ``injected`` on the branch nearest ``volumes`` (a restart)."""
         self.tracker = Tracker(self.emap, injected=injected, volumes=volumes)
         self._last_command = None
-        self._values = None
+        self._state = None

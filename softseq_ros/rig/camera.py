@@ -115,7 +115,9 @@ class CameraCore:
         """Take new curvatures (maybe a frame) or volumes (maybe a trigger crossing)."""
         if type(value) is SegmentCurvatures:
             return self._on_curvatures(value, now)
-        return self._on_volumes(value, now)
+        if type(value) is SegmentVolumes:
+            return self._on_volumes(value, now)
+        raise TypeError(f'the camera takes segment curvatures or volumes, not {value!r}')
 
     def _on_curvatures(self, value: SegmentCurvatures, now: int) -> list[Output]:
         curvatures = value.curvatures_per_m

@@ -1,0 +1,165 @@
+"""
+How stable branches end: a walk continues on another branch, snaps through, or ends the domain.
+
+A branch ends where it joins another stable branch (a segment passes a peak or valley: the
+walk continues), at a fold (D = 0: the state snaps through to the stable state that the fluid
+exchange between the segments reaches at that volume), or where a segment leaves its table
+(the end of the domain). The snap's landing state comes from the redistribution flow of the
+stored energy, integrated until it comes to rest.
+"""
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from softseq_ros.physics.assembly import (
+    Branch,
+    BranchEnd,
+    FloatArray,
+    SegmentNumerics,
+    cofactor_sum,
+    soft_direction,
+)
+from softseq_ros.physics.states import StateReader
+
+
+class BranchEnds:
+    """Sets every branch's ``upper`` and ``lower`` end; ``reader`` reads states on branches."""
+
+    def __init__(self, numerics: SegmentNumerics, branches: list[Branch],
+                 reader: StateReader) -> None:
+        """Ends of ``branches``; call :meth:`connect` for each."""
+        self.numerics = numerics
+        self.branches = branches
+        self.reader = reader
+
+    def connect(self, index: int) -> None:
+        """Decide how branch ``index`` ends, upward and downward."""
+        branch = self.branches[index]
+        branch.upper = self._end_rule(index, upward=True)
+        branch.lower = self._end_rule(index, upward=False)
+
+    def _end_rule(self, index: int, upward: bool) -> BranchEnd:
+        branch = self.branches[index]
+        end = -1 if upward else 0
+        v_end, total_end = branch.volumes[end], branch.total[end]
+        candidates = []
+        for j, other in enumerate(self.branches):
+            if j == index:
+                continue
+            start = 0 if upward else -1
+            if (abs(other.total[start] - total_end) <= self.numerics.tol_v
+                    and np.max(np.abs(other.volumes[start] - v_end)) <= self.numerics.tol_v):
+                candidates.append(j)
+        if candidates:
+            # A bifurcation (identical segments) offers several continuations: the tie is broken
+            # deterministically, the segment nearest the base taking the larger share.
+            step = 1 if upward else -2
+            best = max(candidates, key=lambda j: tuple(self.branches[j].volumes[step]))
+            return BranchEnd('continue', best)
+        # A segment at the edge of its model's range ends the domain: going on would take it
+        # outside its table (any continuation inside the range was found above).
+        if self._at_edge(v_end):
+            return BranchEnd('limit')
+        snap = self._snap(index, upward)
+        if snap is None:
+            return BranchEnd('limit')
+        return BranchEnd('snap', *snap)
+
+    def _at_edge(self, volumes: FloatArray) -> bool:
+        return bool(np.any(volumes >= self.numerics.max_volumes - self.numerics.tol_v)
+                    or np.any(volumes <= self.numerics.rest_volumes + self.numerics.tol_v))
+
+    def _snap(self, index: int, upward: bool) -> tuple[int, FloatArray] | None:
+        """
+        Where the fold at a branch end snaps to, at the same total volume.
+
+        The fluid redistributes along the gradient flow of the stored energy on sum v = V with
+        equal conductances, dv_i/dt = -(p_i - mean p): the state rolls downhill from the fold to
+        the stable equilibrium whose basin it is in. The flow starts a small step off the fold,
+        on the side the flow itself points to. None when the flow leaves a segment's range.
+        """
+        branch = self.branches[index]
+        end = -1 if upward else 0
+        v_fold = branch.volumes[end]
+        total = float(branch.total[end])
+        k = self.numerics.stiffness(branch.pieces, v_fold[None, :])[0]
+        null = soft_direction(k)
+        eps = 1e-6 * self.numerics.v_scale
+
+        def drift(v: FloatArray) -> float:
+            p = np.array([s.pressure(x) for s, x in zip(self.numerics.segments, v)])
+            return float(-np.dot(p - p.mean(), null))
+
+        direction = math.copysign(1.0, drift(v_fold + eps * null) + drift(v_fold - eps * null))
+        start = v_fold + direction * eps * null
+        landed = self._flow(start)
+        if self._at_edge(landed):
+            return None
+        target = self._nearest_branch(total, landed, exclude=index)
+        return target, self.reader.read(target, np.array([total])).volumes[0]
+
+    def _flow(self, start: FloatArray) -> FloatArray:
+        """
+        Integrate the redistribution flow from ``start`` until it comes to rest.
+
+        Scaled by the volume and pressure ranges; stiff near walls, so Radau with the exact
+        Jacobian, d(dv_i/dt)/dv_j = k_j / N - k_i delta_ij. The flow only has to reach the
+        right basin (the landing state is then read off its branch exactly), so the
+        tolerances are modest and the horizon grows until the state is balanced and stable.
+        """
+        scale_v, scale_p = self.numerics.v_scale, self.numerics.p_scale
+        segments, k_scale = self.numerics.segments, self.numerics.k_scale
+        lo, hi = self.numerics.rest_volumes, self.numerics.max_volumes
+        n = len(self.numerics.segments)
+
+        def rhs(_t: float, y: FloatArray) -> FloatArray:
+            v = np.clip(y * scale_v, lo, hi)
+            p = np.array([s.pressure(x) for s, x in zip(self.numerics.segments, v)]) / scale_p
+            return -(p - p.mean())
+
+        def jacobian(_t: float, y: FloatArray) -> FloatArray:
+            v = np.clip(y * scale_v, lo, hi)
+            k = np.array([s.stiffness(x) for s, x in zip(segments, v)]) / k_scale
+            return np.outer(np.ones(n), k) / n - np.diag(k)
+
+        def leaves_range(_t: float, y: FloatArray) -> float:
+            # Crosses zero when a segment leaves its model's range: the domain ends there.
+            v = y * scale_v
+            return float(np.min(np.minimum(v - lo, hi - v)) / scale_v)
+
+        leaves_range.terminal = True
+        y = start / scale_v
+        t = 0.0
+        for horizon in np.logspace(2, 14, 13):
+            sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian, rtol=1e-7,
+                            atol=1e-12, events=leaves_range)
+            y, t = sol.y[:, -1], horizon
+            if sol.status == 1:
+                break
+            # At rest means balanced pressures at a stable state: a fold is balanced too.
+            if np.max(np.abs(rhs(t, y))) < 1e-9 and self._is_stable(y * scale_v):
+                break
+        return np.clip(y * scale_v, lo, hi)
+
+    def _is_stable(self, volumes: FloatArray) -> bool:
+        numerics = self.numerics
+        k = np.array([s.stiffness(x) for s, x in zip(numerics.segments, volumes)])
+        k /= numerics.k_scale
+        return bool(np.sum(k < 0.0) <= 1 and cofactor_sum(k) > 1e-6)
+
+    def _nearest_branch(self, total: float, volumes: FloatArray, exclude: int) -> int:
+        best, best_distance = -1, math.inf
+        for j, other in enumerate(self.branches):
+            tol = self.numerics.tol_v
+            if j == exclude or not other.lo - tol <= total <= other.hi + tol:
+                continue
+            state = self.reader.read(j, np.array([min(max(total, other.lo), other.hi)])).volumes[0]
+            distance = float(np.max(np.abs(state - volumes)))
+            if distance < best_distance:
+                best, best_distance = j, distance
+        if best < 0 or best_distance > 1e-3 * self.numerics.v_scale:
+            raise RuntimeError(f'snap-through at total volume {total:.9g} m^3 found no stable '
+                               f'state to land on (nearest {best_distance:.3g} m^3 away)')
+        return best
