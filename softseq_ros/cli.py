@@ -50,30 +50,19 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report')
+    _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report',
+                  reference=args.reference, namespace=args.namespace, svg=not args.no_svg)
     return 0
 
 
 def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None,
-                  out: Path) -> None:
-    from softseq_ros.analysis.figures import summary, write_figures
-    from softseq_ros.analysis.recording import load_recording, read_experiment
-    from softseq_ros.bag.reader import bag_summary
-    from softseq_ros.physics.scene import load_scene
-    from softseq_ros.physics.solve import build_map
+                  out: Path, reference: Path | None = None, namespace: str | None = None,
+                  svg: bool = True) -> None:
+    from softseq_ros.analysis.report import write_report
 
-    recording = load_recording(bag)
-    emap = None
-    if scene_name is not None:
-        scene = load_scene(scene_name)
-        emap = build_map(scene.segments, scene.solver.resolution)
-    experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
-    counts = {name: topic.message_count for name, topic in bag_summary(bag).topics.items()}
-    text = summary(recording, emap, counts)
-    figures = write_figures(recording, emap, out, experiment)
-    (out / 'summary.txt').write_text(text + '\n')
+    _, text = write_report(bag, out, scene_name, experiment_csv, reference, namespace, svg)
     print(text)
-    print(f'figures: {", ".join(str(f) for f in figures)}')
+    print(f'report: {out / "report.md"}, {out / "metrics.json"}, figures in {out}')
 
 
 def _recover(args: argparse.Namespace) -> int:
@@ -135,9 +124,14 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument('bag', type=Path, help='bag directory (metadata.yaml and .mcap)')
     report.add_argument('--scene', help='scene of the run: adds the segment curves and the '
                         'equilibrium set to the figures')
-    report.add_argument('--experiment', type=Path, help='CSV with columns injected_m3 and '
-                        'pressure_pa measured on the rig')
-    report.add_argument('--out', type=Path, help='folder for the figures (default BAG/report)')
+    report.add_argument('--experiment', type=Path, help='experiment CSV (injected_m3, '
+                        'pressure_pa, optional direction, tip_x_m, tip_z_m; "# pressure_kind: '
+                        'gauge|absolute"; see docs/analysis.md)')
+    report.add_argument('--reference', type=Path, help='YAML of what a paper reports (e.g. '
+                        'config/reference/milana2018.yaml): each fact beside the recording')
+    report.add_argument('--namespace', help='rig namespace when the bag holds several rigs')
+    report.add_argument('--no-svg', action='store_true', help='PNG figures only')
+    report.add_argument('--out', type=Path, help='folder for the report (default BAG/report)')
     report.set_defaults(handler=_report)
 
     recover = sub.add_parser('recover', help='make a killed recording readable again',
