@@ -246,3 +246,53 @@ def _tip_errors(experiment: Experiment, snapshots: list) -> list[dict]:
                        'experiment_tip_m': [float(x) for x in measured],
                        'error_m': float(np.hypot(*(measured - shot.tip)))})
     return errors
+
+
+def synthetic_experiment(trace: Trace, shift_m3: float, scale: float, rows: int = 400,
+                         lengths: tuple[float, ...] | None = None,
+                         tip_offset_m: tuple[float, float] = (0.0, 0.0),
+                         absolute_ambient_pa: float | None = None) -> str:
+    """
+    A synthetic experiment file made from a model run: a known perturbation to recover.
+
+    Rows follow the first cycle; each holds experiment(u) = scale * model(u - shift) (gauge, or
+    absolute with ``absolute_ambient_pa`` added and declared). With ``lengths`` the file carries
+    the tip of the same shifted state (the model's tip at u - shift), moved by ``tip_offset_m``.
+    """
+    from softseq_ros.physics.kinematics import backbone_batch
+
+    up, down = trace.legs()
+    legs = [(1, up)] + ([(-1, down)] if down is not None else [])
+    lines = ['# SYNTHETIC experiment made from a model run (not a measurement): '
+             f'experiment(u) = {scale:g} * model(u - {shift_m3:g} m^3)',
+             f'# pressure_kind: {"gauge" if absolute_ambient_pa is None else "absolute"}']
+    if absolute_ambient_pa is not None:
+        lines.append(f'# ambient_pressure_pa: {absolute_ambient_pa:g}')
+    header = ['injected_m3', 'pressure_pa', 'direction']
+    if lengths is not None:
+        header += ['tip_x_m', 'tip_z_m']
+    lines.append(','.join(header))
+    for sign, leg in legs:
+        u, cols = _monotone(trace.injected[leg], np.column_stack(
+            [trace.pressure[leg], trace.curvatures[leg] if trace.curvatures is not None
+             else np.zeros((trace.injected[leg].size, 0))]), sign > 0)
+        grid = np.linspace(u[0], u[-1], rows // len(legs))
+        if sign < 0:
+            grid = grid[::-1]
+        pressure = scale * np.interp(grid, u, cols[:, 0])
+        if absolute_ambient_pa is not None:
+            pressure = pressure + absolute_ambient_pa
+        values = [grid + shift_m3, pressure]
+        if lengths is not None:
+            kappa = np.column_stack([np.interp(grid, u, cols[:, 1 + j])
+                                     for j in range(len(lengths))])
+            points, _ = backbone_batch(kappa, lengths, points_per_segment=20)
+            values += [points[:, -1, 0] + tip_offset_m[0], points[:, -1, 1] + tip_offset_m[1]]
+        direction = 'inflation' if sign > 0 else 'deflation'
+        for row in range(grid.size):
+            if values[0][row] < 0.0:
+                continue  # shifted below an empty actuator: no such measurement
+            cells = [f'{values[0][row]:.9e}', f'{values[1][row]:.6f}', direction]
+            cells += [f'{column[row]:.6e}' for column in values[2:]]
+            lines.append(','.join(cells))
+    return '\n'.join(lines) + '\n'

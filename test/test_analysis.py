@@ -1,0 +1,320 @@
+"""Playback analysis: the array reader, metrics against the solver, experiments, bad bags."""
+
+import json
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+import yaml
+
+from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
+from softseq_ros.analysis.recording import RecordingError, load_recording
+from softseq_ros.analysis.report import recording_trace, write_report
+from softseq_ros.bag.arrays import JointStateDecoder, open_bag
+from softseq_ros.batch import run_scene
+from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.physics.scene import load_scene
+from softseq_ros.rig import contract
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+ML = 1e-6
+
+
+def _scene(tmp_path_factory, source: str, name: str, pump: dict, camera: dict) -> Path:
+    scene = yaml.safe_load((CONFIG / source).read_text())
+    scene['name'] = name
+    scene['pump'].update(pump)
+    scene['camera'] = camera
+    folder = tmp_path_factory.mktemp(name)
+    for segment in scene['segments']:
+        if 'table' in segment:
+            segment['table'] = str(CONFIG / segment['table'])
+    path = folder / f'{name}.yaml'
+    path.write_text(yaml.safe_dump(scene))
+    return path
+
+
+@pytest.fixture(scope='module')
+def asymmetric(tmp_path_factory) -> tuple[Path, Path]:
+    """The Fig. 1 asymmetric pair, 0 -> 50 mL -> 0 at 20 mL/s: two snaps each way."""
+    scene = _scene(tmp_path_factory, 'fig1_asymmetric.yaml', 'fast_asymmetric',
+                   {'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50,
+                    'legs': [{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}]},
+                   {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5, 4.5e-5]})
+    bag = scene.parent / 'bag'
+    run_scene(scene, bag, show_progress=False)
+    return scene, bag
+
+
+@pytest.fixture(scope='module')
+def paper(tmp_path_factory) -> tuple[Path, Path]:
+    """The paper's actuator, 0 -> 65 mL -> 0 at 1 mL/s (the paper's steps as triggers)."""
+    scene = _scene(tmp_path_factory, 'paper.yaml', 'fast_paper',
+                   {'flow_rate_m3_per_s': 1.0e-6, 'rate_hz': 50},
+                   {'rate_hz': 5,
+                    'trigger_injected_m3': [5.0e-6, 1.5e-5, 2.5e-5, 4.5e-5, 6.0e-5]})
+    bag = scene.parent / 'bag'
+    run_scene(scene, bag, show_progress=False)
+    return scene, bag
+
+
+# ------------------------------------------------------------------------ the array reader
+
+
+def test_array_reader_matches_rosbags_message_for_message(asymmetric):
+    _, bag = asymmetric
+    topic = contract.resolve(contract.VOLUMES.name, '/')
+    decoder = JointStateDecoder(topic)
+    open_bag(bag).read([decoder], validate_crcs=True)
+    ours = decoder.result()
+    with AnyReader([bag]) as reader:
+        connections = [c for c in reader.connections if c.topic == topic]
+        theirs = [(t, reader.deserialize(raw, c.msgtype))
+                  for c, t, raw in reader.messages(connections=connections)]
+    assert len(theirs) == ours['stamp_ns'].size > 100
+    np.testing.assert_array_equal(ours['log_time_ns'], [t for t, _ in theirs])
+    np.testing.assert_array_equal(ours['stamp_ns'], [m.header.stamp.sec * 10**9
+                                                     + m.header.stamp.nanosec for _, m in theirs])
+    np.testing.assert_array_equal(ours['position'], [m.position for _, m in theirs])
+    np.testing.assert_array_equal(ours['effort'], [m.effort for _, m in theirs])
+    assert decoder.names == tuple(theirs[0][1].name)
+
+
+# ------------------------------------------------------------------------ metrics vs solver
+
+
+def test_batch_bag_gives_the_solvers_sequence_type_and_snap_volumes(asymmetric, tmp_path):
+    scene_path, bag = asymmetric
+    metrics, _ = write_report(bag, tmp_path / 'report', scene_name=str(scene_path),
+                              svg=False, figures=False)
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    recording = load_recording(bag)
+    solved = Tracker(emap).sweep(recording.pump_injected)
+    assert metrics['sequence_type'] == metrics['sequence_type_of_scene'] == 'asymmetric'
+    # The snaps are found in the recorded volumes, independently of the events topic.
+    assert len(solved.events) == metrics['snap_count'] == 4
+    step = float(np.max(np.abs(np.diff(recording.pump_injected))))
+    for ours, theirs in zip(metrics['snaps'], solved.events):
+        # A snap lands on the first command past the fold.
+        assert 0.0 <= abs(ours['injected_m3'] - theirs.injected) <= step
+        moved = 0.5 * np.sum(np.abs(theirs.to_volumes - theirs.from_volumes))
+        assert ours['fluid_moved_m3'] == pytest.approx(moved, rel=0.2)
+    assert [s['direction'] for s in metrics['snaps']] == ['inflation'] * 2 + ['deflation'] * 2
+    # A loop: inflation runs at higher pressure than deflation.
+    assert metrics['hysteresis_area_j'] > 0.0
+
+
+def test_paper_scene_is_partial_with_the_top_taking_over_and_meets_the_reference(paper,
+                                                                                  tmp_path):
+    scene_path, bag = paper
+    metrics, text = write_report(bag, tmp_path / 'report', scene_name=str(scene_path),
+                                 reference_file=CONFIG / 'reference' / 'milana2018.yaml',
+                                 svg=False, figures=False)
+    assert metrics['sequence_type'] == metrics['sequence_type_of_scene'] == 'partial'
+    assert metrics['snap_count'] == 0
+    assert abs(metrics['hysteresis_area_j']) < 1e-9
+    switch = metrics['switch']
+    assert switch['segment_taking_over'] == 'top'
+    assert 20 * ML < switch['injected_m3'] < 40 * ML
+    # The tables were calibrated to reach 95 % of the 65 mL pressure at 40 mL.
+    assert metrics['plateau']['onset_injected_m3'] == pytest.approx(40 * ML, abs=1 * ML)
+    checks = {c['what'].split(' (')[0]: c for c in metrics['reference']['checks']}
+    assert all(c['agrees'] for c in metrics['reference']['checks'] if 'agrees' in c)
+    assert checks['step 4 volume']['experiment_difference_m3'] == pytest.approx(-5 * ML,
+                                                                         abs=0.05 * ML)
+    steps = [(s['step'], s['direction']) for s in metrics['steps']]
+    assert steps == [(n, 'inflation') for n in range(1, 6)] + \
+        [(n, 'deflation') for n in range(5, 0, -1)]
+    saved = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
+    assert saved['sequence_type'] == 'partial'
+    assert 'partial' in (tmp_path / 'report' / 'report.md').read_text()
+
+
+# ------------------------------------------------------------------------ experiments
+
+
+@pytest.mark.parametrize(('shift', 'scale'), [(3.0 * ML, 1.08), (-2.0 * ML, 0.9)])
+def test_a_synthetic_perturbation_is_recovered(paper, tmp_path, shift, scale):
+    _, bag = paper
+    trace = recording_trace(load_recording(bag))
+    path = tmp_path / 'experiment.csv'
+    path.write_text(synthetic_experiment(trace, shift, scale, rows=300))
+    result = compare(trace, read_experiment(path))
+    align = result['alignment']
+    # Stated tolerance: 0.02 mL and 0.2 % on a 300-row file.
+    assert align['volume_shift_m3'] == pytest.approx(shift, abs=0.02 * ML)
+    assert align['pressure_scale'] == pytest.approx(scale, rel=2e-3)
+    assert align['rmse_after_pa'] < 1e-3 * result['pv_rmse_pa']
+    # Without alignment the error is what the perturbation makes.
+    assert result['pv_rmse_pa'] > 100.0
+
+
+def test_absolute_pressure_is_converted_and_undeclared_absolute_is_flagged(paper, tmp_path):
+    _, bag = paper
+    trace = recording_trace(load_recording(bag))
+    declared = tmp_path / 'absolute.csv'
+    declared.write_text(synthetic_experiment(trace, 0.0, 1.0, rows=200,
+                                             absolute_ambient_pa=101325.0))
+    experiment = read_experiment(declared)
+    assert experiment.pressure_kind == 'absolute' and not experiment.warnings
+    assert compare(trace, experiment)['pv_rmse_pa'] < 1.0
+    undeclared = tmp_path / 'undeclared.csv'
+    undeclared.write_text('\n'.join(line for line in declared.read_text().splitlines()
+                                    if 'pressure_kind' not in line and 'ambient' not in line))
+    experiment = read_experiment(undeclared)
+    assert len(experiment.warnings) == 1 and 'looks absolute' in experiment.warnings[0]
+    assert compare(trace, experiment)['pv_rmse_pa'] > 90e3
+
+
+def test_tip_errors_per_step(paper, tmp_path):
+    scene_path, bag = paper
+    recording = load_recording(bag)
+    trace = recording_trace(recording)
+    path = tmp_path / 'tips.csv'
+    path.write_text(synthetic_experiment(trace, 0.0, 1.0, rows=2000,
+                                         lengths=load_scene(scene_path).lengths,
+                                         tip_offset_m=(0.002, 0.0)))
+    errors = compare(trace, read_experiment(path), recording.snapshots)['tip_errors']
+    assert len(errors) == len(recording.snapshots) == 10
+    for error in errors:
+        assert error['error_m'] == pytest.approx(0.002, abs=2e-4)
+
+
+def test_experiment_beyond_the_recording_widens_the_axis(paper, tmp_path):
+    _, bag = paper
+    trace = recording_trace(load_recording(bag))
+    path = tmp_path / 'beyond.csv'
+    path.write_text(synthetic_experiment(trace, 10 * ML, 1.0, rows=100))
+    write_report(bag, tmp_path / 'report', experiment_csv=path, svg=False)
+    metrics = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
+    assert metrics['experiment']['rows_outside_model_range'] > 0
+    assert (tmp_path / 'report' / 'pv.png').stat().st_size > 0
+
+
+@pytest.mark.parametrize(('content', 'message'), [
+    ('injected_m3,pressure\n0,1\n', 'no column pressure_pa'),
+    ('# pressure_kind: vacuum\ninjected_m3,pressure_pa\n0,1\n', 'must be gauge or absolute'),
+    ('injected_m3,pressure_pa\n0,abc\n', 'row 1, column pressure_pa: not a number'),
+    ('injected_m3,pressure_pa\n65,1000\n', r'volumes must be in m\^3'),
+    ('injected_m3,pressure_pa,direction\n0,1,up\n', 'must be inflation or deflation'),
+])
+def test_bad_experiment_files_are_one_line(tmp_path, content, message):
+    path = tmp_path / 'bad.csv'
+    path.write_text(content)
+    with pytest.raises(ValueError, match=message) as error:
+        read_experiment(path)
+    assert str(path) in str(error.value) and '\n' not in str(error.value)
+
+
+# ------------------------------------------------------------------------ other bags
+
+
+def _copy_bag(source: Path, target: Path, rename=lambda topic: topic, extra=()) -> None:
+    """Rewrite a bag with rosbags (an independent writer): renamed topics, extra messages."""
+    with AnyReader([source]) as reader, \
+            Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connections = {}
+        for c in reader.connections:
+            connections[c.topic] = writer.add_connection(
+                rename(c.topic), c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest)
+        extras = list(extra)
+        for c in {e[0] for e in extras} - set(connections):
+            connections[c] = writer.add_connection(
+                c, 'std_msgs/msg/String', typestore=reader.typestore)
+        for c, timestamp, raw in reader.messages():
+            while extras and extras[0][1] <= timestamp:
+                topic, when, data = extras.pop(0)
+                writer.write(connections[topic], when, data)
+            writer.write(connections[c.topic], timestamp, raw)
+
+
+def _string_cdr(text: str) -> bytes:
+    encoded = text.encode() + b'\x00'
+    return b'\x00\x01\x00\x00' + len(encoded).to_bytes(4, 'little') + encoded
+
+
+def test_snapshot_steps_pair_by_stamp_and_a_latched_snapshot_is_no_step(asymmetric, tmp_path):
+    _, bag = asymmetric
+    snapshots = contract.resolve(contract.SNAPSHOTS.name, '/')
+    with AnyReader([bag]) as reader:
+        shots = [(t, raw) for c, t, raw in reader.messages(
+            connections=[c for c in reader.connections if c.topic == snapshots])]
+        first_command = next(t for c, t, raw in reader.messages() if c.topic.endswith(
+            contract.PUMP_COMMAND.name))
+    # A latched snapshot from an earlier run: stamped 5 s before this run's first command.
+    stale = bytearray(shots[0][1])
+    stale[4:8] = (-5).to_bytes(4, 'little', signed=True)
+    steps_topic = contract.resolve(contract.SNAPSHOT_STEPS.name, '/')
+    status_topic = contract.resolve(contract.PUMP_STATUS.name, '/')
+    extra = [(snapshots, first_command, bytes(stale)),
+             (status_topic, first_command, _string_cdr(json.dumps(
+                 {'state': 'running', 'reason': '', 'stamp_ns': first_command})))]
+    for number, (t, raw) in enumerate(shots):
+        stamp = int.from_bytes(raw[4:8], 'little', signed=True) * 10**9 + \
+            int.from_bytes(raw[8:12], 'little')
+        extra.append((steps_topic, t, _string_cdr(json.dumps(
+            {'step': 7 + number, 'trigger_injected_m3': 1e-6 * number, 'direction': 'inflation',
+             'injected_m3': 0.0, 'stamp_ns': stamp}))))
+    extra.sort(key=lambda e: e[1])
+    copy = tmp_path / 'copy'
+    _copy_bag(bag, copy, extra=extra)
+    recording = load_recording(copy)
+    assert [s.step for s in recording.snapshots] == [7 + n for n in range(len(shots))]
+    assert recording.ignored == {snapshots: 1}
+    assert ('running', 0.0) in [(state, t) for t, state, _ in recording.status]
+
+
+def test_two_rigs_in_one_bag_need_a_namespace(asymmetric, tmp_path, capsys):
+    _, bag = asymmetric
+    copy = tmp_path / 'one'
+    _copy_bag(bag, copy, rename=lambda topic: '/rig2' + topic)
+    assert load_recording(copy).namespace == '/rig2'
+    assert load_recording(copy, '/rig2').namespace == '/rig2'
+    with pytest.raises(RecordingError, match='no rig in namespace /rig9'):
+        load_recording(copy, 'rig9')
+    both = tmp_path / 'both'
+    with AnyReader([copy]) as reader, \
+            Writer(both, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        out = {}
+        for c in reader.connections:
+            for ns in ('/rig2', '/rig3'):
+                out[(c.topic, ns)] = writer.add_connection(
+                    c.topic.replace('/rig2', ns), c.msgtype, msgdef=c.msgdef.data,
+                    rihs01=c.digest)
+        for c, t, raw in reader.messages():
+            for ns in ('/rig2', '/rig3'):
+                writer.write(out[(c.topic, ns)], t, raw)
+    with pytest.raises(RecordingError, match='namespaces /rig2, /rig3; choose one with '
+                                             '--namespace'):
+        load_recording(both)
+    assert load_recording(both, 'rig3').namespace == '/rig3'
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, '-m', 'softseq_ros.cli', *args], capture_output=True,
+                          text=True, timeout=120, stdin=subprocess.DEVNULL)
+
+
+def test_foreign_and_broken_bags_are_one_clear_line(asymmetric, tmp_path):
+    _, bag = asymmetric
+    foreign = tmp_path / 'foreign'
+    foreign.mkdir()
+    (foreign / 'data.mcap').write_bytes(b'SQLite format 3\x00' + bytes(100))
+    truncated = tmp_path / 'truncated'
+    truncated.mkdir()
+    data = next(bag.glob('*.mcap')).read_bytes()
+    (truncated / 'cut.mcap').write_bytes(data[:len(data) // 2])
+    no_rig = tmp_path / 'no_rig'
+    _copy_bag(bag, no_rig, rename=lambda topic: topic.replace('pump', 'syringe'))
+    cases = [(foreign, 'not an MCAP file'), (truncated, 'softseq recover'),
+             (no_rig, 'not a rig recording'), (tmp_path / 'missing', 'no such bag')]
+    for path, message in cases:
+        result = _cli('report', str(path), '--out', str(tmp_path / 'out'))
+        assert result.returncode == 2, (path, result.stderr)
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and message in lines[0] and str(path) in lines[0], lines
