@@ -28,12 +28,18 @@ def _solve(args: argparse.Namespace) -> int:
 
 
 def _classify(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.robustness import robustness_lines, scene_features
     from softseq_ros.physics.equilibrium import classify
     from softseq_ros.physics.scene import load_scene
     from softseq_ros.physics.solve import build_map
 
     scene = load_scene(args.scene)
-    print(f'{scene.name}: {classify(build_map(scene.segments, scene.solver.resolution))}')
+    verdict = classify(build_map(scene.segments, scene.solver.resolution))
+    print(f'{scene.name}: {verdict}')
+    lines, warnings = robustness_lines(verdict, scene_features(scene))
+    print('\n'.join(lines))
+    for warning in warnings:
+        print(f'softseq classify: warning: {warning}', file=sys.stderr)
     return 0
 
 

@@ -75,7 +75,6 @@ class Recording:
     snapshots: list[Snapshot] = field(default_factory=list)
     backbone_count: int = 0
     namespace: str = '/'
-    pump_flow: FloatArray = field(default_factory=lambda: np.zeros(0))   # m^3/s, signed
     state_flow_sign: NDArray[np.int8] = field(default_factory=lambda: np.zeros(0, np.int8))
     curvature_injected: FloatArray = field(default_factory=lambda: np.zeros(0))
     ambient_pressure_pa: float | None = None
@@ -135,11 +134,15 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         raise RecordingError(f'{path}: no {names[contract.VOLUMES]} topic: the actuator did not '
                              'run or its volumes were not recorded')
 
-    pump = JointStateDecoder(names[contract.PUMP_COMMAND], ('position', 'velocity'))
-    state = JointStateDecoder(names[contract.VOLUMES], ('position', 'effort'))
+    # Only what the analysis uses is kept: on a 10^7-message bag every column costs 18 MB.
+    pump = JointStateDecoder(names[contract.PUMP_COMMAND], ('position', 'velocity'),
+                             log_times=False)
+    state = JointStateDecoder(names[contract.VOLUMES], ('position', 'effort'), log_times=False,
+                              mean=('effort',))
     decoders: list = [pump, state]
     optional = {}
-    for spec, decoder in ((contract.CURVATURES, lambda t: JointStateDecoder(t, ('position',))),
+    for spec, decoder in ((contract.CURVATURES,
+                           lambda t: JointStateDecoder(t, ('position',), log_times=False)),
                           (contract.PRESSURE, lambda t: FluidPressureDecoder(t, AMBIENT_SAMPLES)),
                           (contract.EVENTS, StringDecoder), (contract.PUMP_STATUS, StringDecoder),
                           (contract.SNAPSHOTS, PoseArrayDecoder),
@@ -160,45 +163,63 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     if not states.get('stamp_ns', np.zeros(0)).size:
         raise RecordingError(f'{path}: no {names[contract.VOLUMES]} messages: the actuator did '
                              'not run or its volumes were not recorded')
-    order = np.argsort(commands['stamp_ns'], kind='stable')
-    pump_stamp = commands['stamp_ns'][order]
-    pump_u = commands['position'][order, 0]
-    pump_flow = commands['velocity'][order, 0] if commands['velocity'].shape[1] else \
+    # Arrays are taken as views where possible and converted in place: on a long bag every
+    # extra column is tens of MB.
+    pump_stamp = commands['stamp_ns']
+    pump_u = commands['position'][:, 0]
+    pump_flow = commands['velocity'][:, 0] if commands['velocity'].shape[1] else \
         np.gradient(pump_u)
+    if np.any(np.diff(pump_stamp) < 0):
+        order = np.argsort(pump_stamp, kind='stable')
+        pump_stamp, pump_u, pump_flow = pump_stamp[order], pump_u[order], pump_flow[order]
     t0 = int(pump_stamp[0])
     ignored: dict[str, int] = {}
-
-    keep = states['stamp_ns'] >= t0
-    _count_ignored(ignored, names[contract.VOLUMES], keep)
-    state_stamp = states['stamp_ns'][keep]
-    index = _command_index(pump_stamp, state_stamp)
-    volumes = states['position'][keep]
-    pressure = states['effort'][keep].mean(axis=1) if states['effort'].shape[1] else \
-        np.full(state_stamp.size, np.nan)
     flow_sign = _leg_sign(pump_flow)
+    del pump_flow, commands
+
+    state_stamp, volumes, pressure = states['stamp_ns'], states['position'], states['effort']
+    keep = state_stamp >= t0
+    if not keep.all():
+        _count_ignored(ignored, names[contract.VOLUMES], keep)
+        state_stamp, volumes, pressure = state_stamp[keep], volumes[keep], pressure[keep]
+    del keep, states
+    index = _command_index(pump_stamp, state_stamp)
     recording = Recording(
-        path=path, segment_names=state.names, pump_time_s=(pump_stamp - t0) / NS_PER_S,
-        pump_injected=pump_u, state_time_s=(state_stamp - t0) / NS_PER_S,
-        state_injected=pump_u[index], pressure=pressure, volumes=volumes,
+        path=path, segment_names=state.names, pump_time_s=_seconds(pump_stamp, t0),
+        pump_injected=pump_u, state_time_s=np.zeros(0), state_injected=pump_u[index],
+        pressure=pressure[:, 0], volumes=volumes,
         curvature_time_s=np.zeros(0), curvatures=np.zeros((0, volumes.shape[1])),
-        namespace=ns, pump_flow=pump_flow, state_flow_sign=flow_sign[index],
+        namespace=ns, state_flow_sign=flow_sign[index],
         counts={topic: info.message_count for topic, info in bag.channels.items()},
         ignored=ignored, start_ns=t0)
+    del index
     recording.backbone_count = bag.channels[names[contract.BACKBONE]].message_count \
         if names[contract.BACKBONE] in bag.channels else 0
 
     if contract.CURVATURES in optional:
         curves = optional[contract.CURVATURES].result()
         if curves.get('stamp_ns', np.zeros(0)).size:
-            keep = curves['stamp_ns'] >= t0
-            _count_ignored(ignored, names[contract.CURVATURES], keep)
-            stamps = curves['stamp_ns'][keep]
-            recording.curvature_time_s = (stamps - t0) / NS_PER_S
-            recording.curvatures = curves['position'][keep]
-            recording.curvature_injected = pump_u[_command_index(pump_stamp, stamps)]
+            stamps, values = curves['stamp_ns'], curves['position']
+            del curves
+            if np.array_equal(stamps, state_stamp):
+                # The actuator answers each command with both: share the state's columns
+                # (the times are set below, with the state's).
+                recording.curvature_injected = recording.state_injected
+                recording.curvatures = values
+            else:
+                keep = stamps >= t0
+                _count_ignored(ignored, names[contract.CURVATURES], keep)
+                stamps, values = stamps[keep], values[keep]
+                recording.curvature_time_s = _seconds(stamps, t0)
+                recording.curvature_injected = pump_u[_command_index(pump_stamp, stamps)]
+                recording.curvatures = values
+            del stamps
     if contract.PRESSURE in optional:
         recording.ambient_pressure_pa = _ambient(optional[contract.PRESSURE].result(),
-                                                 state_stamp, pressure)
+                                                 state_stamp, recording.pressure)
+    recording.state_time_s = _seconds(state_stamp, t0)
+    if recording.curvature_time_s.size == 0 and recording.curvatures.shape[0]:
+        recording.curvature_time_s = recording.state_time_s
     if contract.PUMP_STATUS in optional:
         recording.status = [_status(text, log_time, t0)
                             for log_time, text in optional[contract.PUMP_STATUS].messages]
@@ -212,6 +233,14 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
             names[contract.SNAPSHOT_STEPS], pump_stamp, pump_u, flow_sign, t0, ignored,
             names[contract.SNAPSHOTS])
     return recording
+
+
+def _seconds(stamps: NDArray[np.int64], t0: int) -> FloatArray:
+    """Seconds from ``t0``, computed in place of the stamps' copy."""
+    seconds = stamps.astype(np.float64)
+    seconds -= float(t0)
+    seconds /= NS_PER_S
+    return seconds
 
 
 def _count_ignored(ignored: dict[str, int], topic: str, keep: NDArray[np.bool_]) -> None:

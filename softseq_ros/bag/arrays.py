@@ -192,9 +192,18 @@ class FixedLayoutDecoder(_Decoder):
     (name, offset, count) and the text they must share with every other message.
     """
 
-    def __init__(self, topic: str, limit: int | None = None) -> None:
+    def __init__(self, topic: str, limit: int | None = None, log_times: bool = True,
+                 mean: Iterable[str] = ()) -> None:
+        """
+        Keep at most ``limit`` messages.
+
+        ``log_times`` False drops the log time column, and a field named in ``mean`` is kept
+        as its mean over the array (n, 1): less memory on long bags where only that is needed.
+        """
         super().__init__(topic)
         self.limit = limit
+        self.log_times = log_times
+        self.mean = frozenset(mean)
         self._columns = _Columns()
         self._reserve = 0
         self.text: Any = None      # what the first message's text fields said (names, frame)
@@ -243,23 +252,29 @@ class FixedLayoutDecoder(_Decoder):
                                 where)
             return
         n = matrix.shape[0]
-        shapes = {'log_time_ns': ((), np.int64), 'stamp_ns': ((), np.int64)}
+        shapes = {'stamp_ns': ((), np.int64)}
+        if self.log_times:
+            shapes['log_time_ns'] = ((), np.int64)
         for name, _, count in fields:
-            shapes[name] = ((count,), np.float64)
+            shapes[name] = ((1 if name in self.mean else count,), np.float64)
         columns = self._columns
         columns.ensure(shapes, n, self._reserve)
         for name, _, count in fields:
-            if columns.arrays[name].shape[1] != count:
-                raise BagArrayError(f'{where}: {self.topic}.{name} changes length from '
-                                    f'{columns.arrays[name].shape[1]} to {count}')
+            width = 1 if name in self.mean else count
+            if columns.arrays[name].shape[1] != width or (name in self.mean and not count):
+                raise BagArrayError(f'{where}: {self.topic}.{name} changes length or is empty '
+                                    f'(now {count} values)')
         at = slice(columns.used, columns.used + n)
         stamps = np.ascontiguousarray(matrix[:, 4:12]).view('<i4').reshape(n, 2)
         columns.arrays['stamp_ns'][at] = (stamps[:, 0].astype(np.int64) * 1_000_000_000
                                           + stamps[:, 1].view('<u4').astype(np.int64))
-        columns.arrays['log_time_ns'][at] = log_times
+        if self.log_times:
+            columns.arrays['log_time_ns'][at] = log_times
         for name, offset, count in fields:
             block = np.ascontiguousarray(matrix[:, offset:offset + 8 * count])
-            columns.arrays[name][at] = block.view('<f8').reshape(n, count)
+            values = block.view('<f8').reshape(n, count)
+            columns.arrays[name][at] = values.mean(axis=1, keepdims=True) \
+                if name in self.mean else values
         columns.used += n
 
     def result(self) -> dict[str, np.ndarray]:
@@ -271,8 +286,10 @@ class JointStateDecoder(FixedLayoutDecoder):
     """sensor_msgs/JointState: ``position``, ``velocity``, ``effort`` as (n, joints) arrays."""
 
     def __init__(self, topic: str, fields: Iterable[str] = ('position', 'velocity', 'effort'),
-                 limit: int | None = None) -> None:
-        super().__init__(topic, limit)
+                 limit: int | None = None, log_times: bool = True,
+                 mean: Iterable[str] = ()) -> None:
+        """Read ``fields`` of every message (see :class:`FixedLayoutDecoder` for the rest)."""
+        super().__init__(topic, limit, log_times, mean)
         self.fields = tuple(fields)
 
     def _layout(self, cursor: _Cursor) -> tuple[Any, list[tuple[str, int, int]]]:
