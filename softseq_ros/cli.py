@@ -71,6 +71,23 @@ def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None
     print(f'report: {out / "report.md"}, {out / "metrics.json"}, figures in {out}')
 
 
+def _compare(args: argparse.Namespace) -> int:
+    import json
+
+    from softseq_ros.analysis.compare import compare_bags
+
+    metrics_a, metrics_b, table = compare_bags(args.a, args.b, args.namespace_a,
+                                               args.namespace_b)
+    print(table, end='')
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / 'compare.md').write_text(table)
+        (args.out / 'compare.json').write_text(json.dumps({'a': metrics_a, 'b': metrics_b},
+                                                          indent=2) + '\n')
+        print(f'written: {args.out / "compare.md"}, {args.out / "compare.json"}')
+    return 0
+
+
 def _recover(args: argparse.Namespace) -> int:
     from softseq_ros.bag.writer import recover
 
@@ -139,6 +156,17 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument('--no-svg', action='store_true', help='PNG figures only')
     report.add_argument('--out', type=Path, help='folder for the report (default BAG/report)')
     report.set_defaults(handler=_report)
+
+    compare = sub.add_parser('compare', help='two bags side by side, the same metrics',
+                             description='Read two rig bags (two resolutions, two scenes, a '
+                             'quasi-static against a dynamic run) and print their metrics side '
+                             'by side with the difference B - A.')
+    compare.add_argument('a', type=Path, help='first bag directory')
+    compare.add_argument('b', type=Path, help='second bag directory')
+    compare.add_argument('--namespace-a', help='rig namespace in A when it holds several')
+    compare.add_argument('--namespace-b', help='rig namespace in B when it holds several')
+    compare.add_argument('--out', type=Path, help='folder for compare.md and compare.json')
+    compare.set_defaults(handler=_compare)
 
     recover = sub.add_parser('recover', help='make a killed recording readable again',
                              description='Rebuild the index and metadata.yaml of a bag whose '

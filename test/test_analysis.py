@@ -318,3 +318,15 @@ def test_foreign_and_broken_bags_are_one_clear_line(asymmetric, tmp_path):
         assert result.returncode == 2, (path, result.stderr)
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and message in lines[0] and str(path) in lines[0], lines
+
+
+def test_compare_puts_two_scenes_side_by_side(asymmetric, paper, tmp_path):
+    result = _cli('compare', str(paper[1]), str(asymmetric[1]), '--out', str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    rows = {line.split('|')[1].strip(): [c.strip() for c in line.split('|')[2:-1]]
+            for line in result.stdout.splitlines() if line.startswith('| ')}
+    assert rows['sequence type'] == ['', 'partial', 'asymmetric', 'differs']
+    assert rows['snap-throughs'] == ['', '0', '4', '4']
+    assert rows['snap 1 (inflation)'][1:3] == ['-', rows['snap 1 (inflation)'][2]]
+    saved = json.loads((tmp_path / 'compare.json').read_text())
+    assert saved['a']['sequence_type'] == 'partial' and saved['b']['snap_count'] == 4
