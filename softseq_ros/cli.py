@@ -88,6 +88,16 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _library(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.library import write_library
+
+    out = args.out or Path('bags') / f'library_{Path(args.source).stem}'
+    _, table = write_library(args.source, out, args.triples, args.length_m, args.jobs)
+    print(table, end='')
+    print(f'written: {out / "library.md"}, {out / "library.json"}, {out / "library.png"}')
+    return 0
+
+
 def _recover(args: argparse.Namespace) -> int:
     from softseq_ros.bag.writer import recover
 
@@ -167,6 +177,19 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument('--namespace-b', help='rig namespace in B when it holds several')
     compare.add_argument('--out', type=Path, help='folder for compare.md and compare.json')
     compare.set_defaults(handler=_compare)
+
+    library = sub.add_parser('library', help='assemble every pair (and triple) of segments',
+                             description='Take a folder of segment tables (or a scene listing '
+                             'segments), assemble every ordered pair (base, tip) on one supply, '
+                             'optionally every ordered triple, and tabulate sequence type, '
+                             'switch and snap volumes, pressure range, hysteresis and tip reach.')
+    library.add_argument('source', help='folder of segment tables (*.csv) or a scene file')
+    library.add_argument('--triples', action='store_true', help='also every ordered triple')
+    library.add_argument('--length-m', type=float, help='segment length [m] for tables '
+                         'without a "# length_m:" line')
+    library.add_argument('--jobs', type=int, help='worker processes (default: one per core)')
+    library.add_argument('--out', type=Path, help='output folder (default bags/library_NAME)')
+    library.set_defaults(handler=_library)
 
     recover = sub.add_parser('recover', help='make a killed recording readable again',
                              description='Rebuild the index and metadata.yaml of a bag whose '
