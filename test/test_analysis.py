@@ -330,3 +330,36 @@ def test_compare_puts_two_scenes_side_by_side(asymmetric, paper, tmp_path):
     assert rows['snap 1 (inflation)'][1:3] == ['-', rows['snap 1 (inflation)'][2]]
     saved = json.loads((tmp_path / 'compare.json').read_text())
     assert saved['a']['sequence_type'] == 'partial' and saved['b']['snap_count'] == 4
+
+
+def _message_paths(node) -> list[str]:
+    """Every string in a Foxglove layout that names a topic (``/topic.field[0]`` or a topic)."""
+    if isinstance(node, dict):
+        found = [key for key in node if isinstance(key, str) and key.startswith('/')]
+        return found + [p for value in node.values() for p in _message_paths(value)]
+    if isinstance(node, list):
+        return [p for value in node for p in _message_paths(value)]
+    return [node] if isinstance(node, str) and node.startswith('/') else []
+
+
+def test_foxglove_layout_names_only_topics_and_fields_a_bag_has(asymmetric):
+    _, bag = asymmetric
+    layout = json.loads((CONFIG / 'foxglove' / 'softseq_rig.json').read_text())
+    paths = _message_paths(layout)
+    assert len(paths) >= 10
+    with AnyReader([bag]) as reader:
+        first = {}
+        for connection, _, raw in reader.messages():
+            first.setdefault(connection.topic, reader.deserialize(raw, connection.msgtype))
+    for path in paths:
+        topic, _, fields = path.partition('.')
+        assert topic in first, f'{path}: no topic {topic} in a rig bag'
+        value = first[topic]
+        for part in filter(None, fields.split('.')):
+            name, _, index = part.partition('[')
+            assert hasattr(value, name), f'{path}: {type(value).__name__} has no {name}'
+            value = getattr(value, name)
+            if index:
+                value = value[int(index.rstrip(']'))]
+        if fields:
+            assert isinstance(value, float), f'{path}: not a number'
