@@ -98,6 +98,15 @@ def _library(args: argparse.Namespace) -> int:
     return 0
 
 
+def _play(args: argparse.Namespace) -> int:
+    from softseq_ros.nodes.player import play
+
+    result = play(str(args.bag), rate=args.rate, loop=args.loop, clock=args.clock,
+                  topics=args.topics, wait_s=args.wait_for_subscribers)
+    print(f'{args.bag}: {result.messages} messages replayed in {result.loops} pass(es)')
+    return 0
+
+
 def _recover(args: argparse.Namespace) -> int:
     from softseq_ros.bag.writer import recover
 
@@ -190,6 +199,18 @@ def build_parser() -> argparse.ArgumentParser:
     library.add_argument('--jobs', type=int, help='worker processes (default: one per core)')
     library.add_argument('--out', type=Path, help='output folder (default bags/library_NAME)')
     library.set_defaults(handler=_library)
+
+    play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
+                          description='Publish every recorded message on its topic with its '
+                          'recorded timing and QoS, as recorded CDR.')
+    play.add_argument('bag', type=Path, help='bag directory')
+    play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
+    play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
+    play.add_argument('--clock', action='store_true', help='publish the bag time on /clock')
+    play.add_argument('--topics', nargs='+', help='only these topics (absolute names)')
+    play.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='S',
+                      help='wait up to S seconds for a subscriber on every topic first')
+    play.set_defaults(handler=_play)
 
     recover = sub.add_parser('recover', help='make a killed recording readable again',
                              description='Rebuild the index and metadata.yaml of a bag whose '
