@@ -303,51 +303,91 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = True) -> list[P
     return _save(fig, out, svg)
 
 
+
+
 FIGURES = ('pv', 'segments', 'volume_split', 'shapes', 'timeseries')
 
 
-def _figure_jobs(recording: Recording, emap: object | None, directory: Path,
-                 experiment: object | None, svg: bool) -> list[tuple]:
-    return [(plot_pv, (recording, emap, directory / 'pv.png', experiment, svg)),
-            (plot_segments, (recording, directory / 'segments.png', svg)),
-            (plot_volume_split, (recording, emap, directory / 'volume_split.png', svg)),
-            (plot_shapes, (recording, directory / 'shapes.png', svg)),
-            (plot_timeseries, (recording, directory / 'timeseries.png', svg))]
+def _warm_up() -> None:
+    """Import the drawing stack in a worker while the parent still reads the bag."""
+    from matplotlib.backends import backend_agg  # noqa: F401
+    from matplotlib.figure import Figure
+
+    Figure().subplots()  # loads the default fonts once
 
 
-_FORKED_JOBS: list[tuple] = []
+def start_workers(processes: int | None = None) -> object | None:
+    """
+    Forked figure workers that import matplotlib now, in parallel with reading the bag.
+
+    None on one core or where fork is not available; :func:`write_figures` then draws here.
+    """
+    import multiprocessing
+
+    count = processes if processes is not None else min(len(FIGURES), os.cpu_count() or 1)
+    if count <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
+        return None
+    return multiprocessing.get_context('fork').Pool(count, initializer=_warm_up)
 
 
-def _run_forked(index: int) -> list[Path]:
-    function, args = _FORKED_JOBS[index]
-    return function(*args)
+def _draw(name: str, args: tuple) -> list[Path]:
+    return _FIGURE_FUNCTIONS[name](*args)
+
+
+def thinned(recording: Recording) -> Recording:
+    """
+    The rows a figure can show: at most about MAX_POINTS per leg, every snap and its row before.
+
+    Drawing a million points shows nothing more than a few thousand, and the thinned copy is
+    what goes to the figure workers (small to send).
+    """
+    from dataclasses import replace
+
+    states = np.unique(np.concatenate([rows for _, rows in _legs(recording)] or
+                                      [np.zeros(0, np.intp)]))
+    pump = _thin(recording.pump_time_s.size) if recording.pump_time_s.size > 4 * MAX_POINTS \
+        else np.arange(recording.pump_time_s.size)
+    aligned = recording.curvatures.shape[0] == recording.volumes.shape[0]
+    curves = states if aligned else _thin(recording.curvatures.shape[0])
+    curvature_time = recording.curvature_time_s
+    curvature_injected = recording.curvature_injected
+    return replace(
+        recording,
+        pump_time_s=recording.pump_time_s[pump], pump_injected=recording.pump_injected[pump],
+        state_time_s=recording.state_time_s[states],
+        state_injected=recording.state_injected[states], pressure=recording.pressure[states],
+        volumes=recording.volumes[states], state_flow_sign=recording.state_flow_sign[states],
+        curvatures=recording.curvatures[curves] if recording.curvatures.shape[0] else
+        recording.curvatures,
+        curvature_time_s=curvature_time[curves] if curvature_time.size else curvature_time,
+        curvature_injected=(curvature_injected[curves] if curvature_injected.size
+                            else curvature_injected))
 
 
 def write_figures(recording: Recording, emap: object | None, directory: Path,
                   experiment: object | None = None, svg: bool = True,
-                  processes: int | None = None) -> list[Path]:
+                  workers: object | None = None) -> list[Path]:
     """
     All figures of a run into ``directory`` (PNG, and SVG unless ``svg`` is False).
 
-    Drawing is most of a report's time, so with more than one core the figures are drawn by
-    forked worker processes, which share the recording's arrays without copying them.
+    Drawing is most of a report's time: with ``workers`` (from :func:`start_workers`) the
+    figures are drawn in those processes, in parallel.
     """
-    import multiprocessing
-
     directory.mkdir(parents=True, exist_ok=True)
-    jobs = _figure_jobs(recording, emap, directory, experiment, svg)
-    count = processes if processes is not None else min(len(jobs), os.cpu_count() or 1)
-    if count <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
-        return [path for function, args in jobs for path in function(*args)]
-    _FORKED_JOBS[:] = jobs
-    try:
-        with multiprocessing.get_context('fork').Pool(count) as pool:
-            # The slowest figures first, so that the two workers finish together.
-            order = [0, 1, 3, 4, 2]
-            done = dict(zip(order, pool.map(_run_forked, order, chunksize=1)))
-    finally:
-        _FORKED_JOBS.clear()
-    return [path for index in range(len(jobs)) for path in done[index]]
+    recording = thinned(recording)
+    jobs = [('pv', (recording, emap, directory / 'pv.png', experiment, svg)),
+            ('segments', (recording, directory / 'segments.png', svg)),
+            ('volume_split', (recording, emap, directory / 'volume_split.png', svg)),
+            ('shapes', (recording, directory / 'shapes.png', svg)),
+            ('timeseries', (recording, directory / 'timeseries.png', svg))]
+    if workers is None:
+        return [path for name, args in jobs for path in _draw(name, args)]
+    pending = [workers.apply_async(_draw, job) for job in jobs]
+    return [path for result in pending for path in result.get()]
+
+
+_FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': plot_volume_split,
+                     'shapes': plot_shapes, 'timeseries': plot_timeseries}
 
 
 def _save(fig: object, out: Path, svg: bool) -> list[Path]:

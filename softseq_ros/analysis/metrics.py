@@ -87,14 +87,20 @@ def snap_rows(injected: FloatArray, volumes: FloatArray,
     command: exchanged = (sum_i |dv_i| - |du|) / 2, several times |du| and a visible share of
     the range (a continuous exchange, as in a symmetric sequence, moves about |du| per command).
     """
-    if injected.size < 2:
+    rows, moved = [], []
+    block = 1 << 18  # bounded temporaries on long recordings
+    for start in range(0, max(injected.size - 1, 0), block):
+        part = slice(start, min(start + block + 1, injected.size))
+        du = np.abs(np.diff(injected[part]))
+        dv = np.abs(np.diff(volumes[part], axis=0)).sum(axis=1)
+        exchanged = 0.5 * np.maximum(dv - du, 0.0)
+        found = np.flatnonzero((exchanged > SNAP_EXCHANGE_PER_STEP * du)
+                               & (exchanged > SNAP_SHARE_OF_RANGE * v_range))
+        rows.append(found + start + 1)
+        moved.append(exchanged[found])
+    if not rows:
         return np.zeros(0, np.intp), np.zeros(0)
-    du = np.abs(np.diff(injected))
-    dv = np.abs(np.diff(volumes, axis=0)).sum(axis=1)
-    exchanged = 0.5 * np.maximum(dv - du, 0.0)
-    rows = np.flatnonzero((exchanged > SNAP_EXCHANGE_PER_STEP * du)
-                          & (exchanged > SNAP_SHARE_OF_RANGE * v_range))
-    return rows + 1, exchanged[rows]
+    return np.concatenate(rows), np.concatenate(moved)
 
 
 def detect_snaps(trace: Trace, v_range: float) -> list[dict]:
@@ -134,7 +140,9 @@ def analyse(trace: Trace, v_range: float | None = None) -> dict:
     up, down = trace.legs()
     u_all = trace.injected
     v_range = float(v_range if v_range else max(np.ptp(u_all), 1e-300))
-    snaps = detect_snaps(trace, v_range)
+    cycle = slice(up.start, (down or up).stop)
+    snaps = detect_snaps(Trace(u_all[cycle], trace.pressure[cycle], trace.volumes[cycle],
+                               trace.sign[cycle]), v_range)
     u_up, cols_up = _monotone(u_all[up], np.column_stack([trace.pressure[up],
                                                           trace.volumes[up]]), True)
     p_up, v_up = cols_up[:, 0], cols_up[:, 1:]

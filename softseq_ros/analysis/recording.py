@@ -50,6 +50,7 @@ class Snapshot:
     step: int | None = None      # 1-based index into the camera's trigger list
     trigger_injected: float | None = None
     direction: str = INFLATION
+    cycle: int = 1               # 1-based: which inflation leg (with its deflation) it is in
 
     @property
     def tip(self) -> FloatArray:
@@ -136,7 +137,7 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
 
     # Only what the analysis uses is kept: on a 10^7-message bag every column costs 18 MB.
     pump = JointStateDecoder(names[contract.PUMP_COMMAND], ('position', 'velocity'),
-                             log_times=False)
+                             log_times=False, signs=('velocity',))
     state = JointStateDecoder(names[contract.VOLUMES], ('position', 'effort'), log_times=False,
                               mean=('effort',))
     decoders: list = [pump, state]
@@ -155,11 +156,11 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     except BagArrayError as err:
         raise RecordingError(str(err)) from None
 
-    commands = pump.result()
+    commands = pump.release()
     if not commands.get('stamp_ns', np.zeros(0)).size:
         raise RecordingError(f'{path}: no {names[contract.PUMP_COMMAND]} messages: not a rig '
                              'recording, or the pump never ran')
-    states = state.result()
+    states = state.release()
     if not states.get('stamp_ns', np.zeros(0)).size:
         raise RecordingError(f'{path}: no {names[contract.VOLUMES]} messages: the actuator did '
                              'not run or its volumes were not recorded')
@@ -167,9 +168,9 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     # extra column is tens of MB.
     pump_stamp = commands['stamp_ns']
     pump_u = commands['position'][:, 0]
-    pump_flow = commands['velocity'][:, 0] if commands['velocity'].shape[1] else \
-        np.gradient(pump_u)
-    if np.any(np.diff(pump_stamp) < 0):
+    pump_flow = commands['velocity'][:, 0] if commands['velocity'].size else \
+        np.sign(np.gradient(pump_u)).astype(np.int8)
+    if np.any(pump_stamp[1:] < pump_stamp[:-1]):
         order = np.argsort(pump_stamp, kind='stable')
         pump_stamp, pump_u, pump_flow = pump_stamp[order], pump_u[order], pump_flow[order]
     t0 = int(pump_stamp[0])
@@ -185,7 +186,7 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     del keep, states
     index = _command_index(pump_stamp, state_stamp)
     recording = Recording(
-        path=path, segment_names=state.names, pump_time_s=_seconds(pump_stamp, t0),
+        path=path, segment_names=state.names, pump_time_s=np.zeros(0),
         pump_injected=pump_u, state_time_s=np.zeros(0), state_injected=pump_u[index],
         pressure=pressure[:, 0], volumes=volumes,
         curvature_time_s=np.zeros(0), curvatures=np.zeros((0, volumes.shape[1])),
@@ -197,7 +198,7 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         if names[contract.BACKBONE] in bag.channels else 0
 
     if contract.CURVATURES in optional:
-        curves = optional[contract.CURVATURES].result()
+        curves = optional[contract.CURVATURES].release()
         if curves.get('stamp_ns', np.zeros(0)).size:
             stamps, values = curves['stamp_ns'], curves['position']
             del curves
@@ -217,7 +218,7 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     if contract.PRESSURE in optional:
         recording.ambient_pressure_pa = _ambient(optional[contract.PRESSURE].result(),
                                                  state_stamp, recording.pressure)
-    recording.state_time_s = _seconds(state_stamp, t0)
+    recording.state_time_s = _seconds(state_stamp, t0, in_place=True)
     if recording.curvature_time_s.size == 0 and recording.curvatures.shape[0]:
         recording.curvature_time_s = recording.state_time_s
     if contract.PUMP_STATUS in optional:
@@ -232,14 +233,22 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
             optional[contract.SNAPSHOTS].messages, steps.messages if steps else None,
             names[contract.SNAPSHOT_STEPS], pump_stamp, pump_u, flow_sign, t0, ignored,
             names[contract.SNAPSHOTS])
+    recording.pump_time_s = _seconds(pump_stamp, t0, in_place=True)
     return recording
 
 
-def _seconds(stamps: NDArray[np.int64], t0: int) -> FloatArray:
-    """Seconds from ``t0``, computed in place of the stamps' copy."""
-    seconds = stamps.astype(np.float64)
-    seconds -= float(t0)
-    seconds /= NS_PER_S
+def _seconds(stamps: NDArray[np.int64], t0: int, in_place: bool = False) -> FloatArray:
+    """Seconds from ``t0``; ``in_place`` reuses the stamps' memory (blockwise, no copy)."""
+    if not in_place:
+        seconds = stamps.astype(np.float64)
+        seconds -= float(t0)
+        seconds /= NS_PER_S
+        return seconds
+    seconds = stamps.view(np.float64)
+    block = 1 << 20
+    for start in range(0, stamps.size, block):
+        part = slice(start, start + block)
+        seconds[part] = (stamps[part] - t0) / NS_PER_S
     return seconds
 
 
@@ -251,18 +260,24 @@ def _count_ignored(ignored: dict[str, int], topic: str, keep: NDArray[np.bool_])
 
 def _command_index(pump_stamp: NDArray[np.int64], at: NDArray[np.int64]) -> NDArray[np.intp]:
     """The last pump command at or before each stamp (an answer carries its command's stamp)."""
-    return np.clip(np.searchsorted(pump_stamp, at, side='right') - 1, 0, pump_stamp.size - 1)
+    index = np.searchsorted(pump_stamp, at, side='right')
+    index -= 1
+    return np.clip(index, 0, pump_stamp.size - 1, out=index)
 
 
 def _leg_sign(flow: FloatArray) -> NDArray[np.int8]:
     """+1 on inflation, -1 on deflation; a hold (no flow) belongs to the leg before it."""
-    sign = np.sign(flow).astype(np.int8)
-    moving = np.flatnonzero(sign != 0)
+    sign = (flow > 0).view(np.int8) - (flow < 0).view(np.int8)
+    moving = np.flatnonzero(sign)
     if not moving.size:
         return np.ones_like(sign)
-    last = np.maximum.accumulate(np.where(sign != 0, np.arange(sign.size), -1))
-    filled = np.where(last >= 0, sign[np.maximum(last, 0)], sign[moving[0]])
-    return filled.astype(np.int8)
+    # Forward fill over holds: the last moving row at or before each row (int32 indices).
+    last = np.zeros(sign.size, dtype=np.int32)
+    last[moving] = moving
+    np.maximum.accumulate(last, out=last)
+    filled = sign[last]
+    filled[:moving[0]] = sign[moving[0]]
+    return filled
 
 
 def _ambient(pressure: dict, state_stamp: NDArray[np.int64], gauge: FloatArray) -> float | None:
@@ -324,13 +339,16 @@ def _snapshots(shots: list, steps: list[tuple[int, str]] | None, steps_topic: st
                                  f'{text[:60]!r}') from None
     used = [False] * len(parsed)
     result = []
+    # Rows where a new inflation leg starts after a deflation: the cycles' boundaries.
+    starts = np.flatnonzero((flow_sign[1:] > 0) & (flow_sign[:-1] < 0)) + 1
     for _, stamp, points in shots:
         if stamp < t0:
             ignored[topic] = ignored.get(topic, 0) + 1
             continue
         index = int(_command_index(pump_stamp, np.array([stamp]))[0])
         shot = Snapshot((stamp - t0) / NS_PER_S, float(pump_u[index]), points[:, [0, 2]],
-                        direction=INFLATION if flow_sign[index] >= 0 else DEFLATION)
+                        direction=INFLATION if flow_sign[index] >= 0 else DEFLATION,
+                        cycle=int(np.searchsorted(starts, index, side='right')) + 1)
         # Pair by stamp, in order: the first unused step message with this snapshot's stamp.
         for k, (step_stamp, step, trigger, direction) in enumerate(parsed):
             if not used[k] and step_stamp == stamp:
@@ -344,11 +362,20 @@ def _snapshots(shots: list, steps: list[tuple[int, str]] | None, steps_topic: st
 
 
 def _number_steps(shots: list[Snapshot]) -> None:
-    """Older bags carry no step messages: inflation snapshots count up, deflation ones match."""
-    rising = [s for s in shots if s.direction == INFLATION]
-    for number, shot in enumerate(rising, start=1):
-        shot.step = number
+    """
+    Older bags carry no step messages: number each inflation leg's snapshots 1, 2, ...
+
+    A deflation snapshot takes the number of the nearest-volume snapshot of the inflation leg
+    before it.
+    """
+    rising: list[Snapshot] = []
+    previous = None
     for shot in shots:
-        if shot.direction == DEFLATION and rising:
-            nearest = min(rising, key=lambda s: abs(s.injected - shot.injected))
-            shot.step = nearest.step
+        if shot.direction == INFLATION:
+            if previous == DEFLATION:
+                rising = []
+            rising.append(shot)
+            shot.step = len(rising)
+        elif rising:
+            shot.step = min(rising, key=lambda s: abs(s.injected - shot.injected)).step
+        previous = shot.direction

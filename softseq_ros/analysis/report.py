@@ -59,7 +59,8 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         'snap_events_topic': [{k: e[k] for k in ('injected_m3', 'from_pressure_pa',
                                                  'to_pressure_pa') if k in e}
                               for e in recording.events],
-        'steps': [{'step': s.step, 'direction': s.direction, 'injected_m3': s.injected,
+        'steps': [{'step': s.step, 'direction': s.direction, 'cycle': s.cycle,
+                   'injected_m3': s.injected,
                    'trigger_injected_m3': s.trigger_injected, 'time_s': s.time_s,
                    'tip_m': [float(x) for x in s.tip]} for s in recording.snapshots],
         'warnings': [],
@@ -126,7 +127,7 @@ def against_reference(metrics: dict, reference: dict) -> dict:
         checks.append({'what': 'segment with the lower plateau (takes the inflow after the '
                        'switch)', 'reported': lower, 'recorded': taking,
                        'segment_pressure_limits_pa': limits or None, 'agrees': bool(agrees)})
-    steps = {(s['step'], s['direction']): s for s in metrics['steps']}
+    steps = {(s['step'], s['direction']): s for s in _first_cycle_steps(metrics)[0]}
     for entry in reported.get('steps', []):
         shot = steps.get((int(entry['step']), 'inflation'))
         recorded = None if shot is None else shot['injected_m3']
@@ -146,6 +147,24 @@ def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str
                  svg: bool = True, figures: bool = True) -> tuple[dict, str]:
     """Read the bag, write metrics.json, report.md, summary.txt and figures; return both."""
     out = Path(out)
+    workers = None
+    if figures:
+        from softseq_ros.analysis.figures import start_workers
+
+        workers = start_workers()
+    try:
+        return _write_report(bag, out, scene_name, experiment_csv, reference_file, namespace,
+                             svg, figures, workers)
+    finally:
+        if workers is not None:
+            workers.terminate()
+            workers.join()
+
+
+def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
+                  experiment_csv: str | os.PathLike | None,
+                  reference_file: str | os.PathLike | None, namespace: str | None, svg: bool,
+                  figures: bool, workers: object | None) -> tuple[dict, str]:
     experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
     reference = load_reference(reference_file) if reference_file is not None else None
     scene = emap = None
@@ -171,7 +190,7 @@ def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str
     if figures:
         from softseq_ros.analysis.figures import write_figures
 
-        written = write_figures(recording, emap, out, experiment, svg)
+        written = write_figures(recording, emap, out, experiment, svg, workers)
     metrics['figures'] = [p.name for p in written]
     (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json) + '\n')
     text = summary_text(metrics)
@@ -226,10 +245,13 @@ def summary_text(metrics: dict) -> str:
     else:
         lines.append('snap-throughs: none')
     lines.append(f'hysteresis area: {metrics["hysteresis_area_j"] * 1e3:.4f} mJ')
-    for step in metrics['steps']:
+    first, later = _first_cycle_steps(metrics)
+    for step in first:
         tip = step['tip_m']
         lines.append(f'step {step["step"]} ({step["direction"]}) at {_ml(step["injected_m3"], 1)}'
                      f': tip at x {tip[0] * MM:.1f} mm, z {tip[1] * MM:.1f} mm')
+    if later:
+        lines.append(f'({later} snapshots of later cycles in metrics.json)')
     experiment = metrics.get('experiment')
     if experiment:
         lines.append(f'experiment {experiment["file"]}: PV RMSE {_kpa(experiment["pv_rmse_pa"])}'
@@ -250,6 +272,11 @@ def summary_text(metrics: dict) -> str:
     for warning in metrics['warnings']:
         lines.append(f'warning: {warning}')
     return '\n'.join(lines)
+
+
+def _first_cycle_steps(metrics: dict) -> tuple[list[dict], int]:
+    first = [step for step in metrics['steps'] if step.get('cycle', 1) == 1]
+    return first, len(metrics['steps']) - len(first)
 
 
 def _check_text(check: dict) -> str:
@@ -292,10 +319,13 @@ def markdown(metrics: dict) -> str:
             lines.append(f'| {_ml(snap["injected_m3"], 3)} | {snap["direction"]} | '
                          f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '
                          f'{_ml(snap["fluid_moved_m3"], 3)} |')
-    if metrics['steps']:
-        lines += ['', '## Steps (camera snapshots)', '',
+    first, later = _first_cycle_steps(metrics)
+    if first:
+        lines += ['', '## Steps (camera snapshots, first cycle)', '',
                   '| step | direction | injected | tip x | tip z |', '|---:|---|---:|---:|---:|']
-        for step in metrics['steps']:
+        if later:
+            lines.insert(-2, f'{later} snapshots of later cycles are in `metrics.json`.\n')
+        for step in first:
             lines.append(f'| {step["step"]} | {step["direction"]} | '
                          f'{_ml(step["injected_m3"], 1)} | {step["tip_m"][0] * MM:.1f} mm | '
                          f'{step["tip_m"][1] * MM:.1f} mm |')

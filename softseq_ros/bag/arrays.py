@@ -204,6 +204,7 @@ class FixedLayoutDecoder(_Decoder):
         self.limit = limit
         self.log_times = log_times
         self.mean = frozenset(mean)
+        self.signs: frozenset[str] = frozenset()
         self._columns = _Columns()
         self._reserve = 0
         self.text: Any = None      # what the first message's text fields said (names, frame)
@@ -255,14 +256,16 @@ class FixedLayoutDecoder(_Decoder):
         shapes = {'stamp_ns': ((), np.int64)}
         if self.log_times:
             shapes['log_time_ns'] = ((), np.int64)
+        reduced = self.mean | self.signs
         for name, _, count in fields:
-            shapes[name] = ((1 if name in self.mean else count,), np.float64)
+            shapes[name] = ((min(count, 1) if name in reduced else count,),
+                            np.int8 if name in self.signs else np.float64)
         columns = self._columns
         columns.ensure(shapes, n, self._reserve)
         for name, _, count in fields:
-            width = 1 if name in self.mean else count
-            if columns.arrays[name].shape[1] != width or (name in self.mean and not count):
-                raise BagArrayError(f'{where}: {self.topic}.{name} changes length or is empty '
+            width = min(count, 1) if name in reduced else count
+            if columns.arrays[name].shape[1] != width:
+                raise BagArrayError(f'{where}: {self.topic}.{name} changes length '
                                     f'(now {count} values)')
         at = slice(columns.used, columns.used + n)
         stamps = np.ascontiguousarray(matrix[:, 4:12]).view('<i4').reshape(n, 2)
@@ -273,13 +276,25 @@ class FixedLayoutDecoder(_Decoder):
         for name, offset, count in fields:
             block = np.ascontiguousarray(matrix[:, offset:offset + 8 * count])
             values = block.view('<f8').reshape(n, count)
-            columns.arrays[name][at] = values.mean(axis=1, keepdims=True) \
-                if name in self.mean else values
+            if not count:
+                continue
+            if name in self.signs:
+                columns.arrays[name][at] = np.sign(values[:, :1])
+            elif name in self.mean:
+                columns.arrays[name][at] = values.mean(axis=1, keepdims=True)
+            else:
+                columns.arrays[name][at] = values
         columns.used += n
 
     def result(self) -> dict[str, np.ndarray]:
         """Columns: log_time_ns, stamp_ns and the float64 fields, in file order."""
         return self._columns.result()
+
+    def release(self) -> dict[str, np.ndarray]:
+        """:meth:`result`, the decoder letting go of the columns (a caller may free them)."""
+        columns = self._columns.result()
+        self._columns = _Columns()
+        return columns
 
 
 class JointStateDecoder(FixedLayoutDecoder):
@@ -287,10 +302,16 @@ class JointStateDecoder(FixedLayoutDecoder):
 
     def __init__(self, topic: str, fields: Iterable[str] = ('position', 'velocity', 'effort'),
                  limit: int | None = None, log_times: bool = True,
-                 mean: Iterable[str] = ()) -> None:
-        """Read ``fields`` of every message (see :class:`FixedLayoutDecoder` for the rest)."""
+                 mean: Iterable[str] = (), signs: Iterable[str] = ()) -> None:
+        """
+        Read ``fields`` of every message (see :class:`FixedLayoutDecoder` for the rest).
+
+        A field in ``signs`` keeps only the sign of its first value, as int8 (the direction
+        of a flow, for one eighth of the memory).
+        """
         super().__init__(topic, limit, log_times, mean)
         self.fields = tuple(fields)
+        self.signs = frozenset(signs)
 
     def _layout(self, cursor: _Cursor) -> tuple[Any, list[tuple[str, int, int]]]:
         _, frame_id = _header(cursor)
