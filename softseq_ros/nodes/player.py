@@ -23,8 +23,9 @@ from rosgraph_msgs.msg import Clock
 import yaml
 
 from softseq_ros.bag.arrays import BagArrays, open_bag
+from softseq_ros.rig import contract
 
-CLOCK_TOPIC = '/clock'
+CLOCK_TOPIC = contract.CLOCK.name
 # rclpy's TimeSource subscribes to /clock with this QoS.
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 1: ReliabilityPolicy.RELIABLE,
