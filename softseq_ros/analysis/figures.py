@@ -316,22 +316,56 @@ def _warm_up() -> None:
     Figure().subplots()  # loads the default fonts once
 
 
-def start_workers(processes: int | None = None) -> object | None:
+def start_workers() -> object | None:
     """
-    Forked figure workers that import matplotlib now, in parallel with reading the bag.
+    A forked figure worker that imports matplotlib now, in parallel with reading the bag.
 
-    None on one core or where fork is not available; :func:`write_figures` then draws here.
+    It splits itself in two when it draws (:func:`_draw_split`), so matplotlib is imported
+    once for two cores. None on one core or where fork is not available; :func:`write_figures`
+    then draws here.
     """
     import multiprocessing
 
-    count = processes if processes is not None else min(len(FIGURES), os.cpu_count() or 1)
-    if count <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
+    if (os.cpu_count() or 1) <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
         return None
-    return multiprocessing.get_context('fork').Pool(count, initializer=_warm_up)
+    return multiprocessing.get_context('fork').Pool(1, initializer=_warm_up)
 
 
 def _draw(name: str, args: tuple) -> list[Path]:
     return _FIGURE_FUNCTIONS[name](*args)
+
+
+def _draw_split(jobs: list[tuple[str, tuple]]) -> list[list[Path]]:
+    """Draw ``jobs`` in this process and a fork of it (which has matplotlib loaded already)."""
+    ours, theirs = jobs[0::2], jobs[1::2]
+    child = os.fork() if theirs else 0
+    if theirs and child == 0:
+        status = 0
+        try:
+            for name, args in theirs:
+                _draw(name, args)
+        except BaseException:  # noqa: BLE001 - reported through the exit status
+            import traceback
+
+            traceback.print_exc()
+            status = 1
+        finally:
+            os._exit(status)
+    drawn = [_draw(name, args) for name, args in ours]
+    if theirs:
+        _, status = os.waitpid(child, 0)
+        if status != 0:
+            raise RuntimeError(f'drawing {", ".join(n for n, _ in theirs)} failed (see above)')
+    result: list[list[Path]] = []
+    for index, (name, args) in enumerate(jobs):
+        result.append(drawn[index // 2] if index % 2 == 0 else _outputs(name, args))
+    return result
+
+
+def _outputs(name: str, args: tuple) -> list[Path]:
+    """The files a figure job writes (what the forked half drew)."""
+    out = next(a for a in args if isinstance(a, Path))
+    return [out, out.with_suffix('.svg')] if args[-1] else [out]
 
 
 def thinned(recording: Recording) -> Recording:
@@ -382,8 +416,11 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
             ('timeseries', (recording, directory / 'timeseries.png', svg))]
     if workers is None:
         return [path for name, args in jobs for path in _draw(name, args)]
-    pending = [workers.apply_async(_draw, job) for job in jobs]
-    return [path for result in pending for path in result.get()]
+    # Alternate slow and fast figures so that both halves take about as long.
+    order = [0, 4, 1, 3, 2]
+    drawn = workers.apply(_draw_split, ([jobs[i] for i in order],))
+    by_job = dict(zip(order, drawn))
+    return [path for index in range(len(jobs)) for path in by_job[index]]
 
 
 _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': plot_volume_split,
