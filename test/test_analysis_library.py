@@ -50,3 +50,20 @@ def test_a_folder_without_tables_or_lengths_is_refused(tmp_path):
     with pytest.raises(LibraryError, match='--length-m'):
         library_entries(tmp_path)
     assert library_entries(tmp_path, length_m=0.1)[0].length_m == 0.1
+
+
+def test_triples_add_every_ordered_triple(tmp_path):
+    source = tmp_path / 'two'
+    source.mkdir()
+    for name in ('paper_bottom', 'paper_top'):
+        (source / f'{name}.csv').write_text((LIBRARY / f'{name}.csv').read_text())
+    results, _ = write_library(source, tmp_path / 'out', triples=True, processes=2,
+                               progress=None)
+    triples = [r for r in results if len(r['segments']) == 3]
+    assert len(results) == 4 + 8 and len(triples) == 8
+    for result in triples:
+        assert result['sequence_type'] == result['sequence_type_of_sweep']
+    # Three identical monotone segments share the inflow equally: no sequence.
+    same = next(r for r in triples if r['segments'] == ['paper_top'] * 3)
+    assert same['sequence_type'] == 'none'
+    assert any(r['sequence_type'] == 'partial' for r in triples)

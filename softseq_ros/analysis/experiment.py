@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.analysis.metrics import Trace, _monotone
+from softseq_ros.analysis.metrics import Trace, monotone_leg
 
 FloatArray = NDArray[np.float64]
 DEFAULT_AMBIENT_PA = 101325.0
@@ -156,9 +156,9 @@ def _signs(injected: FloatArray, directions: list[int]) -> NDArray[np.int8]:
 
 def _model_curves(trace: Trace) -> dict[int, tuple[FloatArray, FloatArray]]:
     up, down = trace.legs()
-    curves = {1: _monotone(trace.injected[up], trace.pressure[up], True)}
+    curves = {1: monotone_leg(trace.injected[up], trace.pressure[up], True)}
     if down is not None and trace.injected[down].size > 2:
-        curves[-1] = _monotone(trace.injected[down], trace.pressure[down], False)
+        curves[-1] = monotone_leg(trace.injected[down], trace.pressure[down], False)
     return curves
 
 
@@ -273,7 +273,7 @@ def synthetic_experiment(trace: Trace, shift_m3: float, scale: float, rows: int 
         header += ['tip_x_m', 'tip_z_m']
     lines.append(','.join(header))
     for sign, leg in legs:
-        u, cols = _monotone(trace.injected[leg], np.column_stack(
+        u, cols = monotone_leg(trace.injected[leg], np.column_stack(
             [trace.pressure[leg], trace.curvatures[leg] if trace.curvatures is not None
              else np.zeros((trace.injected[leg].size, 0))]), sign > 0)
         grid = np.linspace(u[0], u[-1], rows // len(legs))

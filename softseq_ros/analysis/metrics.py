@@ -63,8 +63,8 @@ class Trace:
         return slice(start, end), slice(end, stop)
 
 
-def _monotone(u: FloatArray, columns: FloatArray,
-              increasing: bool) -> tuple[FloatArray, FloatArray]:
+def monotone_leg(u: FloatArray, columns: FloatArray,
+                 increasing: bool) -> tuple[FloatArray, FloatArray]:
     """Rows of a leg with strictly monotone u (a repeated command keeps its last state)."""
     if u.size == 0:
         return u, columns
@@ -143,7 +143,7 @@ def analyse(trace: Trace, v_range: float | None = None) -> dict:
     cycle = slice(up.start, (down or up).stop)
     snaps = detect_snaps(Trace(u_all[cycle], trace.pressure[cycle], trace.volumes[cycle],
                                trace.sign[cycle]), v_range)
-    u_up, cols_up = _monotone(u_all[up], np.column_stack([trace.pressure[up],
+    u_up, cols_up = monotone_leg(u_all[up], np.column_stack([trace.pressure[up],
                                                           trace.volumes[up]]), True)
     p_up, v_up = cols_up[:, 0], cols_up[:, 1:]
     result: dict = {'injected_range_m3': [float(u_all.min()), float(u_all.max())]}
@@ -152,7 +152,7 @@ def analyse(trace: Trace, v_range: float | None = None) -> dict:
     hysteresis = 0.0
     has_deflation = down is not None and trace.injected[down].size > 2
     if has_deflation:
-        u_dn, cols_dn = _monotone(u_all[down], np.column_stack([trace.pressure[down],
+        u_dn, cols_dn = monotone_leg(u_all[down], np.column_stack([trace.pressure[down],
                                                                 trace.volumes[down]]), False)
         lo, hi = max(u_up[0], u_dn[0]), min(u_up[-1], u_dn[-1])
         inside = (u_up >= lo) & (u_up <= hi)

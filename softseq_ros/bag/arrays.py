@@ -113,21 +113,22 @@ class _Cursor:
     def align(self, size: int) -> None:
         self.pos += -(self.pos - 4) % size
 
-    def _need(self, size: int) -> None:
+    def need(self, size: int) -> None:
+        """Fail clearly when the message ends before ``size`` more bytes."""
         if self.pos + size > len(self.data):
             raise BagArrayError(f'{self.where}: message ends inside a field (CDR of '
                                 f'{len(self.data)} bytes, needed {self.pos + size})')
 
     def u32(self) -> int:
         self.align(4)
-        self._need(4)
+        self.need(4)
         value = _U32.unpack_from(self.data, self.pos)[0]
         self.pos += 4
         return value
 
     def string(self) -> str:
         length = self.u32()
-        self._need(length)
+        self.need(length)
         raw = bytes(self.data[self.pos:self.pos + length])
         self.pos += length
         return raw.rstrip(b'\x00').decode('utf-8', errors='replace')
@@ -138,13 +139,13 @@ class _Cursor:
         if count:
             self.align(8)
         start = self.pos
-        self._need(8 * count)
+        self.need(8 * count)
         self.pos += 8 * count
         return start, count
 
     def float64(self) -> float:
         self.align(8)
-        self._need(8)
+        self.need(8)
         value = struct.unpack_from('<d', self.data, self.pos)[0]
         self.pos += 8
         return value
@@ -153,7 +154,7 @@ class _Cursor:
 def _header(cursor: _Cursor) -> tuple[int, str]:
     """Stamp [ns] and frame id of a std_msgs/Header."""
     cursor.align(4)
-    cursor._need(8)
+    cursor.need(8)
     sec, nanosec = struct.unpack_from('<iI', cursor.data, cursor.pos)
     cursor.pos += 8
     return sec * 1_000_000_000 + nanosec, cursor.string()
@@ -367,7 +368,7 @@ class PoseArrayDecoder(_Decoder):
             count = cursor.u32()
             if count:
                 cursor.align(8)
-            cursor._need(56 * count)
+            cursor.need(56 * count)
             poses = np.frombuffer(data, '<f8', 7 * count, cursor.pos).reshape(count, 7)
             self.messages.append((log_time, stamp, poses[:, :3].copy()))
 
