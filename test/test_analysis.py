@@ -185,15 +185,22 @@ def test_tip_errors_per_step(paper, tmp_path):
         assert error['error_m'] == pytest.approx(0.002, abs=2e-4)
 
 
-def test_experiment_beyond_the_recording_widens_the_axis(paper, tmp_path):
+def test_experiment_beyond_the_recording_widens_the_axis(paper, tmp_path, monkeypatch):
+    from softseq_ros.analysis import figures
+
     _, bag = paper
-    trace = recording_trace(load_recording(bag))
+    recording = load_recording(bag)
+    trace = recording_trace(recording)
     path = tmp_path / 'beyond.csv'
     path.write_text(synthetic_experiment(trace, 10 * ML, 1.0, rows=100))
-    write_report(bag, tmp_path / 'report', experiment_csv=path, svg=False)
-    metrics = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
-    assert metrics['experiment']['rows_outside_model_range'] > 0
-    assert (tmp_path / 'report' / 'pv.png').stat().st_size > 0
+    experiment = read_experiment(path)
+    drawn = []
+    monkeypatch.setattr(figures, '_save', lambda fig, out, svg: drawn.append(fig) or [out])
+    figures.plot_pv(recording, None, tmp_path / 'pv.png', experiment, svg=False)
+    low, high = drawn[0].axes[0].get_xlim()
+    assert high >= experiment.injected.max() * 1e6 > recording.state_injected.max() * 1e6
+    assert low <= 0.0
+    assert compare(trace, experiment)['rows_outside_model_range'] > 0
 
 
 @pytest.mark.parametrize(('content', 'message'), [
