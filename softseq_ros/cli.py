@@ -37,7 +37,8 @@ def _classify(args: argparse.Namespace) -> int:
     verdict = classify(build_map(scene.segments, scene.solver.resolution))
     print(f'{scene.name}: {verdict}')
     lines, warnings = robustness_lines(verdict, scene_features(scene))
-    print('\n'.join(lines))
+    for line in lines:
+        print(line)
     for warning in warnings:
         print(f'softseq classify: warning: {warning}', file=sys.stderr)
     return 0

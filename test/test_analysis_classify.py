@@ -46,8 +46,8 @@ pump:
                             capture_output=True, text=True, timeout=120,
                             stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.splitlines()[0] == 'pair: partial'
-    assert 'rests on no pressure peak or valley' in result.stdout
+    # Monotone curves: the verdict rests on no peak or valley, so nothing more is said.
+    assert result.stdout.splitlines() == ['pair: partial'] and not result.stderr
     # The edge itself, reached by the solver's own range, is inside the domain both ways.
     segments = [TabulatedSegment.from_csv(top, 'soft', 0.111),
                 TabulatedSegment.from_csv(stiffer, 'stiff', 0.111)]

@@ -74,10 +74,13 @@ def smallest_features(segments: list, scene_entries: list[dict] | None = None) -
 
 
 def robustness_lines(verdict: str, features: list[Feature]) -> tuple[list[str], list[str]]:
-    """Lines that say what the verdict rests on, and warnings when that is near the noise."""
+    """
+    Lines that say what the verdict rests on, and warnings when that is near the noise.
+
+    Monotone curves give no lines: such a verdict rests on no peak or valley a wiggle could fake.
+    """
     if not features:
-        return ([f'robustness: {verdict} rests on no pressure peak or valley (every PV curve is '
-                 'monotone)'], [])
+        return [], []
     lines, warnings = [], []
     for feature in features:
         noise = (f'{feature.noise_pa:.3g} Pa ({feature.noise_source})'
