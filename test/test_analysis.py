@@ -370,3 +370,19 @@ def test_foxglove_layout_names_only_topics_and_fields_a_bag_has(asymmetric):
                 value = value[int(index.rstrip(']'))]
         if fields:
             assert isinstance(value, float), f'{path}: not a number'
+
+
+def test_thinned_figures_keep_every_snap_and_invent_none(asymmetric, monkeypatch):
+    from softseq_ros.analysis import figures
+
+    _, bag = asymmetric
+    recording = load_recording(bag)
+    monkeypatch.setattr(figures, 'MAX_POINTS', 16)
+    small = figures.thinned(recording)
+    assert small.volumes.shape[0] < recording.volumes.shape[0] // 2
+    snaps = figures._snap_rows(recording)
+    assert snaps.size == 4
+    # The thinned copy points at the same states: each snap row and the row before it.
+    np.testing.assert_array_equal(small.volumes[small.snap_rows], recording.volumes[snaps])
+    np.testing.assert_array_equal(small.volumes[small.snap_rows - 1],
+                                  recording.volumes[snaps - 1])

@@ -75,6 +75,8 @@ def _legs(recording: Recording) -> list[tuple[str, NDArray[np.intp]]]:
 
 
 def _snap_rows(recording: Recording) -> NDArray[np.intp]:
+    if recording.snap_rows is not None:
+        return recording.snap_rows
     span = float(np.ptp(recording.state_injected)) or 1.0
     return snap_rows(recording.state_injected, recording.volumes, span)[0]
 
@@ -379,6 +381,9 @@ def thinned(recording: Recording) -> Recording:
 
     states = np.unique(np.concatenate([rows for _, rows in _legs(recording)] or
                                       [np.zeros(0, np.intp)]))
+    # Snaps are found on every row: between thinned rows a fast but continuous exchange of
+    # fluid would look like one.
+    snaps = np.searchsorted(states, _snap_rows(recording))
     pump = _thin(recording.pump_time_s.size) if recording.pump_time_s.size > 4 * MAX_POINTS \
         else np.arange(recording.pump_time_s.size)
     aligned = recording.curvatures.shape[0] == recording.volumes.shape[0]
@@ -395,7 +400,8 @@ def thinned(recording: Recording) -> Recording:
         recording.curvatures,
         curvature_time_s=curvature_time[curves] if curvature_time.size else curvature_time,
         curvature_injected=(curvature_injected[curves] if curvature_injected.size
-                            else curvature_injected))
+                            else curvature_injected),
+        snap_rows=snaps)
 
 
 def write_figures(recording: Recording, emap: object | None, directory: Path,

@@ -83,6 +83,8 @@ class Recording:
     counts: dict[str, int] = field(default_factory=dict)
     ignored: dict[str, int] = field(default_factory=dict)
     start_ns: int = 0
+    # Rows a snap-through lands on, when already known (a thinned copy keeps the original's).
+    snap_rows: NDArray[np.intp] | None = None
 
     @property
     def inflating(self) -> NDArray[np.bool_]:
