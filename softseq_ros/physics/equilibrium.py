@@ -805,7 +805,6 @@ class Tracker:
         return Path(commands, values[:, segments], values[:, :segments],
                     values[:, segments + 1:], branch_ids, snap, events)
 
-
     def _on_branch(self, index: int, totals: FloatArray) -> FloatArray:
         """Totals clipped to a branch: a command at a domain edge may pass it by round-off."""
         branch = self.emap.branches[index]
