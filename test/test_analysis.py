@@ -386,3 +386,14 @@ def test_thinned_figures_keep_every_snap_and_invent_none(asymmetric, monkeypatch
     np.testing.assert_array_equal(small.volumes[small.snap_rows], recording.volumes[snaps])
     np.testing.assert_array_equal(small.volumes[small.snap_rows - 1],
                                   recording.volumes[snaps - 1])
+
+
+def test_report_writes_every_figure_as_png_and_svg(asymmetric, tmp_path):
+    scene_path, bag = asymmetric
+    metrics, _ = write_report(bag, tmp_path, scene_name=str(scene_path))
+    names = {'pv', 'segments', 'volume_split', 'shapes', 'timeseries'}
+    assert set(metrics['figures']) == {f'{n}.{ext}' for n in names for ext in ('png', 'svg')}
+    for name in metrics['figures']:
+        data = (tmp_path / name).read_bytes()
+        assert data.startswith(b'\x89PNG') if name.endswith('.png') else b'<svg' in data[:400]
+    assert '![pv.png](pv.png)' in (tmp_path / 'report.md').read_text()

@@ -312,7 +312,7 @@ FIGURES = ('pv', 'segments', 'volume_split', 'shapes', 'timeseries')
 
 def _warm_up() -> None:
     """Import the drawing stack in a worker while the parent still reads the bag."""
-    from matplotlib.backends import backend_agg  # noqa: F401
+    from matplotlib.backends import backend_agg, backend_svg  # noqa: F401
     from matplotlib.figure import Figure
 
     Figure().subplots()  # loads the default fonts once
@@ -337,9 +337,9 @@ def _draw(name: str, args: tuple) -> list[Path]:
     return _FIGURE_FUNCTIONS[name](*args)
 
 
-def _draw_split(jobs: list[tuple[str, tuple]]) -> list[list[Path]]:
-    """Draw ``jobs`` in this process and a fork of it (which has matplotlib loaded already)."""
-    ours, theirs = jobs[0::2], jobs[1::2]
+def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
+    """Draw ``jobs[:split]`` here and the rest in a fork (which has matplotlib loaded)."""
+    ours, theirs = jobs[:split], jobs[split:]
     child = os.fork() if theirs else 0
     if theirs and child == 0:
         status = 0
@@ -358,10 +358,7 @@ def _draw_split(jobs: list[tuple[str, tuple]]) -> list[list[Path]]:
         _, status = os.waitpid(child, 0)
         if status != 0:
             raise RuntimeError(f'drawing {", ".join(n for n, _ in theirs)} failed (see above)')
-    result: list[list[Path]] = []
-    for index, (name, args) in enumerate(jobs):
-        result.append(drawn[index // 2] if index % 2 == 0 else _outputs(name, args))
-    return result
+    return drawn + [_outputs(name, args) for name, args in theirs]
 
 
 def _outputs(name: str, args: tuple) -> list[Path]:
@@ -422,9 +419,9 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
             ('timeseries', (recording, directory / 'timeseries.png', svg))]
     if workers is None:
         return [path for name, args in jobs for path in _draw(name, args)]
-    # Alternate slow and fast figures so that both halves take about as long.
-    order = [0, 4, 1, 3, 2]
-    drawn = workers.apply(_draw_split, ([jobs[i] for i in order],))
+    # Two halves of about equal drawing time (PV and shapes against the other three).
+    order = [0, 3, 1, 4, 2]
+    drawn = workers.apply(_draw_split, ([jobs[i] for i in order], 2))
     by_job = dict(zip(order, drawn))
     return [path for index in range(len(jobs)) for path in by_job[index]]
 
