@@ -52,7 +52,7 @@ class Trace:
         sign = self.sign
         rising = np.flatnonzero(sign > 0)
         if not rising.size:
-            raise ValueError('the recording holds no inflation')
+            raise ValueError('the pump never inflates in this recording: nothing to measure')
         start = int(rising[0])
         falling = np.flatnonzero(sign[start:] < 0)
         if not falling.size:

@@ -38,7 +38,10 @@ def recording_metrics(recording: Recording, scene: object | None = None,
                       emap: object | None = None) -> dict:
     """Every number of a recording (first cycle), SI units, gauge pressures."""
     trace = recording_trace(recording)
-    result = analyse(trace)
+    try:
+        result = analyse(trace)
+    except ValueError as err:
+        raise ValueError(f'{recording.path}: {err}') from None
     top = int(np.argmax(recording.state_injected))
     rest = recording.volumes[0]
     added = recording.volumes[top] - rest
