@@ -307,9 +307,6 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = True) -> list[P
 
 
 
-FIGURES = ('pv', 'segments', 'volume_split', 'shapes', 'timeseries')
-
-
 def _warm_up() -> None:
     """Import the drawing stack in a worker while the parent still reads the bag."""
     from matplotlib.backends import backend_agg, backend_svg  # noqa: F401
