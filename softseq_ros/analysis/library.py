@@ -164,8 +164,8 @@ def run_library(entries: list[Entry], triples: bool = False, processes: int | No
 
 def library_markdown(results: list[dict]) -> str:
     """The library's table (mL, kPa, mJ, mm)."""
-    lines = ['| base -> tip | type | switch | snaps (injected, fluid moved) | pressure range '
-             '(gauge) | hysteresis | tip at full inflation (x, z) |',
+    lines = ['| base -> tip | type | switch | snaps (injected, i: inflation, d: deflation; '
+             'fluid moved) | pressure range (gauge) | hysteresis | tip at full inflation (x, z) |',
              '|---|---|---|---|---|---|---|']
     for r in results:
         switch = (f'{r["switch_injected_m3"] * 1e6:.1f} mL ({r["switch_segment"]})'
