@@ -29,12 +29,19 @@ def _solve(args: argparse.Namespace) -> int:
 
 
 def _classify(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.robustness import robustness_lines, scene_features
     from softseq_ros.physics.equilibrium import classify
     from softseq_ros.physics.scene import load_scene
     from softseq_ros.physics.solve import build_map
 
     scene = load_scene(args.scene)
-    print(f'{scene.name}: {classify(build_map(scene.segments, scene.solver.resolution))}')
+    verdict = classify(build_map(scene.segments, scene.solver.resolution))
+    print(f'{scene.name}: {verdict}')
+    lines, warnings = robustness_lines(verdict, scene_features(scene))
+    for line in lines:
+        print(line)
+    for warning in warnings:
+        print(f'softseq classify: warning: {warning}', file=sys.stderr)
     return 0
 
 
@@ -69,30 +76,55 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report')
+    _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report',
+                  reference=args.reference, namespace=args.namespace, svg=not args.no_svg)
     return 0
 
 
 def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None,
-                  out: Path) -> None:
-    from softseq_ros.analysis.figures import summary, write_figures
-    from softseq_ros.analysis.recording import load_recording, read_experiment
-    from softseq_ros.bag.reader import bag_summary
-    from softseq_ros.physics.scene import load_scene
-    from softseq_ros.physics.solve import build_map
+                  out: Path, reference: Path | None = None, namespace: str | None = None,
+                  svg: bool = True) -> None:
+    from softseq_ros.analysis.report import write_report
 
-    recording = load_recording(bag)
-    emap = None
-    if scene_name is not None:
-        scene = load_scene(scene_name)
-        emap = build_map(scene.segments, scene.solver.resolution)
-    experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
-    counts = {name: topic.message_count for name, topic in bag_summary(bag).topics.items()}
-    text = summary(recording, emap, counts)
-    figures = write_figures(recording, emap, out, experiment)
-    (out / 'summary.txt').write_text(text + '\n')
+    _, text = write_report(bag, out, scene_name, experiment_csv, reference, namespace, svg)
     print(text)
-    print(f'figures: {", ".join(str(f) for f in figures)}')
+    print(f'report: {out / "report.md"}, {out / "metrics.json"}, figures in {out}')
+
+
+def _compare(args: argparse.Namespace) -> int:
+    import json
+
+    from softseq_ros.analysis.compare import compare_bags
+
+    metrics_a, metrics_b, table = compare_bags(args.a, args.b, args.namespace_a,
+                                               args.namespace_b)
+    print(table, end='')
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / 'compare.md').write_text(table)
+        (args.out / 'compare.json').write_text(json.dumps({'a': metrics_a, 'b': metrics_b},
+                                                          indent=2) + '\n')
+        print(f'written: {args.out / "compare.md"}, {args.out / "compare.json"}')
+    return 0
+
+
+def _library(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.library import write_library
+
+    out = args.out or Path('bags') / f'library_{Path(args.source).stem}'
+    _, table = write_library(args.source, out, args.triples, args.length_m, args.jobs)
+    print(table, end='')
+    print(f'written: {out / "library.md"}, {out / "library.json"}, {out / "library.png"}')
+    return 0
+
+
+def _play(args: argparse.Namespace) -> int:
+    from softseq_ros.nodes.player import play
+
+    result = play(str(args.bag), rate=args.rate, loop=args.loop, clock=args.clock,
+                  topics=args.topics, wait_s=args.wait_for_subscribers)
+    print(f'{args.bag}: {result.messages} messages replayed in {result.loops} pass(es)')
+    return 0
 
 
 def _recover(args: argparse.Namespace) -> int:
@@ -157,10 +189,51 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument('bag', type=Path, help='bag directory (metadata.yaml and .mcap)')
     report.add_argument('--scene', help='scene of the run: adds the segment curves and the '
                         'equilibrium set to the figures')
-    report.add_argument('--experiment', type=Path, help='CSV with columns injected_m3 and '
-                        'pressure_pa measured on the rig')
-    report.add_argument('--out', type=Path, help='folder for the figures (default BAG/report)')
+    report.add_argument('--experiment', type=Path, help='experiment CSV (injected_m3, '
+                        'pressure_pa, optional direction, tip_x_m, tip_z_m; "# pressure_kind: '
+                        'gauge|absolute"; see docs/analysis.md)')
+    report.add_argument('--reference', type=Path, help='YAML of what a paper reports (e.g. '
+                        'config/reference/milana2018.yaml): each fact beside the recording')
+    report.add_argument('--namespace', help='rig namespace when the bag holds several rigs')
+    report.add_argument('--no-svg', action='store_true', help='PNG figures only')
+    report.add_argument('--out', type=Path, help='folder for the report (default BAG/report)')
     report.set_defaults(handler=_report)
+
+    compare = sub.add_parser('compare', help='two bags side by side, the same metrics',
+                             description='Read two rig bags (two resolutions, two scenes, a '
+                             'quasi-static against a dynamic run) and print their metrics side '
+                             'by side with the difference B - A.')
+    compare.add_argument('a', type=Path, help='first bag directory')
+    compare.add_argument('b', type=Path, help='second bag directory')
+    compare.add_argument('--namespace-a', help='rig namespace in A when it holds several')
+    compare.add_argument('--namespace-b', help='rig namespace in B when it holds several')
+    compare.add_argument('--out', type=Path, help='folder for compare.md and compare.json')
+    compare.set_defaults(handler=_compare)
+
+    library = sub.add_parser('library', help='assemble every pair (and triple) of segments',
+                             description='Take a folder of segment tables (or a scene listing '
+                             'segments), assemble every ordered pair (base, tip) on one supply, '
+                             'optionally every ordered triple, and tabulate sequence type, '
+                             'switch and snap volumes, pressure range, hysteresis and tip reach.')
+    library.add_argument('source', help='folder of segment tables (*.csv) or a scene file')
+    library.add_argument('--triples', action='store_true', help='also every ordered triple')
+    library.add_argument('--length-m', type=float, help='segment length [m] for tables '
+                         'without a "# length_m:" line')
+    library.add_argument('--jobs', type=int, help='worker processes (default: one per core)')
+    library.add_argument('--out', type=Path, help='output folder (default bags/library_NAME)')
+    library.set_defaults(handler=_library)
+
+    play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
+                          description='Publish every recorded message on its topic with its '
+                          'recorded timing and QoS, as recorded CDR.')
+    play.add_argument('bag', type=Path, help='bag directory')
+    play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
+    play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
+    play.add_argument('--clock', action='store_true', help='publish the bag time on /clock')
+    play.add_argument('--topics', nargs='+', help='only these topics (absolute names)')
+    play.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='S',
+                      help='wait up to S seconds for a subscriber on every topic first')
+    play.set_defaults(handler=_play)
 
     recover = sub.add_parser('recover', help='make a killed recording readable again',
                              description='Rebuild the index and metadata.yaml of a bag whose '

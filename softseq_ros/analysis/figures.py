@@ -1,169 +1,436 @@
 """
-Figures of a rig run in the paper's style, and the short text summary.
+Figures of a rig run in the paper's style.
 
-Humans read mL, kPa and mm here; the data stay SI underneath. Figures: the PV curves (Fig. 4A / 6),
-the volume split with its stable and unstable equilibria (Fig. 1B / 4B), the tentacle's shape at
-the camera's trigger volumes (Fig. 7) and the time series of the run.
+Humans read mL, kPa and mm here; the data stay SI underneath, and every pressure axis says
+gauge. Inflation is drawn solid in blue, deflation dashed in orange throughout; a snap-through is
+an arrow from the state before to the state after. Figures: the PV curve (Fig. 4A / 6), each
+segment's volume and curvature against the injected volume (Fig. 3), the v1-v2 plane with stable
+and unstable equilibria and lines of constant total volume (Fig. 1B / 4B), the tentacle's shape
+at the camera's steps (Fig. 7) and the time series.
+
+Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot: it costs half a
+second to import), and long recordings are thinned to a few thousand points per line, keeping
+every snap-through, which is what a figure can show anyway.
 """
 
+import os
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from numpy.typing import NDArray
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from softseq_ros.analysis.recording import Recording  # noqa: E402
-from softseq_ros.physics.equilibrium import EquilibriumMap, classify  # noqa: E402
+from softseq_ros.analysis.metrics import snap_rows
+from softseq_ros.analysis.recording import DEFLATION, INFLATION, Recording
 
 ML = 1e6
 KPA = 1e-3
 MM = 1e3
+MAX_POINTS = 2000
+STYLE = {INFLATION: {'color': 'tab:blue', 'ls': '-'},
+         DEFLATION: {'color': 'tab:orange', 'ls': '--'}}
+GAUGE = 'gauge pressure [kPa]'
+INJECTED = 'injected volume [mL]'
 
 
-def plot_pv(recording: Recording, emap: EquilibriumMap | None, out: Path,
-            experiment: tuple[np.ndarray, np.ndarray] | None = None) -> Path:
-    """Segment PV curves and the actuator's recorded pressure against injected volume."""
-    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+def _figure(width: float, height: float, rows: int = 1, cols: int = 1,  # noqa: ANN201
+            margins: dict | None = None, **kwargs: object):
+    """A figure on the Agg canvas with fixed margins (automatic layouts cost half the time)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height))
+    FigureCanvasAgg(fig)
+    fig.subplots_adjust(**{'left': 0.12, 'right': 0.97, 'bottom': 0.11, 'top': 0.92,
+                           'hspace': 0.12, 'wspace': 0.08, **(margins or {})})
+    axes = fig.subplots(rows, cols, squeeze=False, **kwargs)
+    return fig, axes
+
+
+def _thin(size: int, keep: NDArray[np.intp] | None = None) -> NDArray[np.intp]:
+    """Row indices for plotting at most about MAX_POINTS rows, always keeping ``keep``."""
+    if size <= MAX_POINTS:
+        return np.arange(size)
+    rows = np.linspace(0, size - 1, MAX_POINTS).astype(np.intp)
+    if keep is not None and keep.size:
+        rows = np.union1d(rows, np.clip(np.concatenate([keep - 1, keep]), 0, size - 1))
+    return rows
+
+
+def _legs(recording: Recording) -> list[tuple[str, NDArray[np.intp]]]:
+    """Contiguous runs of inflation and deflation rows, thinned, each with its direction."""
+    sign = recording.state_flow_sign
+    if not sign.size:
+        return []
+    breaks = np.flatnonzero(np.diff(sign) != 0) + 1
+    starts = np.concatenate([[0], breaks])
+    stops = np.concatenate([breaks, [sign.size]])
+    snaps = _snap_rows(recording)
+    runs = []
+    for start, stop in zip(starts.tolist(), stops.tolist()):
+        keep = snaps[(snaps >= start) & (snaps < stop)] - start
+        rows = start + _thin(stop - start, keep)
+        # A snap is drawn as an arrow, not as a line across the gap.
+        runs.append((INFLATION if sign[start] > 0 else DEFLATION, rows))
+    return runs
+
+
+def _snap_rows(recording: Recording) -> NDArray[np.intp]:
+    if recording.snap_rows is not None:
+        return recording.snap_rows
+    span = float(np.ptp(recording.state_injected)) or 1.0
+    return snap_rows(recording.state_injected, recording.volumes, span)[0]
+
+
+def _broken(values: NDArray[np.float64], rows: NDArray[np.intp],
+            snaps: NDArray[np.intp]) -> NDArray[np.float64]:
+    """``values[rows]`` with NaN inserted before each snap row (no line across a snap)."""
+    out = values[rows].astype(float)
+    if not snaps.size:
+        return out
+    cut = np.isin(rows, snaps)
+    if not cut.any():
+        return out
+    out = np.insert(out, np.flatnonzero(cut), np.nan, axis=0)
+    return out
+
+
+def _draw_legs(ax: object, recording: Recording, x: NDArray[np.float64],
+               y: NDArray[np.float64], label: str = '', **extra: object) -> None:
+    snaps = _snap_rows(recording)
+    shown = set()
+    for direction, rows in _legs(recording):
+        style = dict(STYLE[direction])
+        style.update(extra)
+        name = f'{label}{direction}' if direction not in shown else None
+        shown.add(direction)
+        ax.plot(_broken(x, rows, snaps), _broken(y, rows, snaps), lw=1.5, label=name, **style)
+    for row in snaps.tolist():
+        direction = INFLATION if recording.state_flow_sign[row] > 0 else DEFLATION
+        ax.annotate('', xy=(x[row], y[row]), xytext=(x[row - 1], y[row - 1]),
+                    arrowprops={'arrowstyle': '->', 'color': STYLE[direction]['color'],
+                                'lw': 1.4})
+
+
+def _x_limits(ax: object, *ranges: tuple[float, float]) -> None:
+    lo = min(r[0] for r in ranges)
+    hi = max(r[1] for r in ranges)
+    pad = 0.03 * (hi - lo or 1.0)
+    ax.set_xlim(lo - pad, hi + pad)
+
+
+def plot_pv(recording: Recording, emap: object | None, out: Path, experiment: object | None = None,
+            svg: bool = True) -> list[Path]:
+    """Gauge pressure against injected volume, inflation and deflation apart, snaps marked."""
+    fig, axes = _figure(6.4, 4.6)
+    ax = axes[0, 0]
+    u = recording.state_injected * ML
+    ranges = [(float(u.min()), float(u.max()))]
     if emap is not None:
         for segment in emap.segments:
             v = np.linspace(segment.rest_volume, segment.max_volume, 600)
-            ax.plot((v - segment.rest_volume) * ML, segment.pressure(v) * KPA, '--', lw=1,
-                    label=f'segment {segment.name} alone')
-    ax.plot(recording.state_injected * ML, recording.pressure * KPA, 'k-', lw=1.6,
-            label='actuator (recorded)')
+            dv = (v - segment.rest_volume) * ML
+            shown = dv <= max(u.max() * 1.2, 1e-9)
+            ax.plot(dv[shown], segment.pressure(v[shown]) * KPA, ':', lw=1,
+                    label=f'segment {segment.name} alone (vs its own added volume)')
+    _draw_legs(ax, recording, u, recording.pressure * KPA, label='actuator, ')
     if experiment is not None:
-        ax.plot(experiment[0] * ML, experiment[1] * KPA, '.', ms=3, color='tab:red',
-                label='experiment')
-    ax.set_xlabel('injected volume [mL]')
-    ax.set_ylabel('pressure [kPa]')
-    top = max(recording.state_injected.max(), 1e-12) * ML * 1.15
-    ax.set_xlim(0, top)
+        for direction, marker in ((1, 'o'), (-1, 's')):
+            rows = experiment.sign == direction
+            if rows.any():
+                ax.plot(experiment.injected[rows] * ML, experiment.pressure[rows] * KPA, marker,
+                        ms=2.5, mfc='none', color='tab:red' if direction > 0 else 'tab:purple',
+                        label=f'experiment, {INFLATION if direction > 0 else DEFLATION}')
+        ranges.append((float(experiment.injected.min() * ML),
+                       float(experiment.injected.max() * ML)))
+    _x_limits(ax, *ranges)
+    ax.set_xlabel(INJECTED)
+    ax.set_ylabel(GAUGE)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title('Pressure-volume curves')
-    return _save(fig, out)
+    ax.legend(fontsize=7, loc='lower right')
+    ax.set_title('Pressure-volume curve (Fig. 4A / 6 style); arrows: snap-throughs', fontsize=10)
+    return _save(fig, out, svg)
 
 
-def plot_volume_split(recording: Recording, emap: EquilibriumMap | None, out: Path) -> Path:
-    """Volume of each segment; for two segments, v1 against v2 with the equilibrium set."""
-    fig, ax = plt.subplots(figsize=(5.6, 5.0))
-    names = recording.segment_names
-    if emap is not None and len(names) == 2:
-        rest = emap.rest_volumes
-        shown_stable = shown_unstable = False
-        for curve in emap.equilibrium_set():
-            dv = (curve.volumes - rest) * ML
-            for mask, colour, label, shown in ((curve.stable, 'tab:blue', 'stable', shown_stable),
-                                                (~curve.stable, 'tab:red', 'unstable',
-                                                 shown_unstable)):
-                if mask.any():
-                    ax.plot(np.where(mask, dv[:, 0], np.nan), np.where(mask, dv[:, 1], np.nan),
-                            color=colour, lw=1.2, label=None if shown else label)
-            shown_stable |= bool(curve.stable.any())
-            shown_unstable |= bool((~curve.stable).any())
-        dv = (recording.volumes - rest) * ML
-        ax.plot(dv[:, 0], dv[:, 1], 'k.', ms=1.5, label='recorded')
-        ax.set_xlabel(f'{names[0]} [mL]')
-        ax.set_ylabel(f'{names[1]} [mL]')
-        ax.set_aspect('equal', adjustable='box')
-        limit = np.nanmax(dv) * 1.1
-        ax.set_xlim(0, limit)
-        ax.set_ylim(0, limit)
-        ax.set_title('Volume distribution (Fig. 1B style)')
-    else:
-        rest = recording.volumes[0]
-        for j, name in enumerate(names):
-            ax.plot(recording.state_injected * ML, (recording.volumes[:, j] - rest[j]) * ML,
-                    '.', ms=1.5, label=name)
-        ax.set_xlabel('injected volume [mL]')
-        ax.set_ylabel('segment volume change [mL]')
-        ax.set_title('Volume distribution')
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, markerscale=4)
-    return _save(fig, out)
-
-
-def plot_shapes(recording: Recording, out: Path) -> Path:
-    """The backbone at each camera trigger volume (the paper's numbered steps)."""
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
-    colours = plt.cm.viridis(np.linspace(0.0, 0.9, max(len(recording.snapshots), 1)))
-    for number, (shot, colour) in enumerate(zip(recording.snapshots, colours), start=1):
-        ax.plot(shot.points[:, 0] * MM, shot.points[:, 1] * MM, '-', color=colour, lw=2,
-                label=f'step {number}: {shot.injected * ML:.1f} mL')
-    ax.plot([0], [0], 'ks', ms=6)
-    ax.set_xlabel('x [mm]')
-    ax.set_ylabel('z [mm]')
-    ax.set_aspect('equal', adjustable='datalim')
-    ax.grid(alpha=0.3)
-    if recording.snapshots:
-        ax.legend(fontsize=8)
-    ax.set_title('Tentacle shape at the trigger volumes (Fig. 7 style)')
-    return _save(fig, out)
-
-
-def plot_timeseries(recording: Recording, out: Path) -> Path:
-    """Commanded volume, pressure and segment volumes against time."""
-    fig, axes = plt.subplots(3, 1, figsize=(6.4, 6.4), sharex=True)
-    axes[0].plot(recording.pump_time_s, recording.pump_injected * ML, 'k-')
-    axes[0].set_ylabel('injected [mL]')
-    axes[1].plot(recording.state_time_s, recording.pressure * KPA, 'k-')
-    axes[1].set_ylabel('pressure [kPa]')
-    for j, name in enumerate(recording.segment_names):
-        axes[2].plot(recording.state_time_s, recording.volumes[:, j] * ML, label=name)
-    axes[2].set_ylabel('volume [mL]')
-    axes[2].set_xlabel('time [s]')
-    axes[2].legend(fontsize=8)
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    return _save(fig, out)
-
-
-def write_figures(recording: Recording, emap: EquilibriumMap | None, directory: Path,
-                  experiment: tuple[np.ndarray, np.ndarray] | None = None) -> list[Path]:
-    """All figures of a run into ``directory``."""
-    directory.mkdir(parents=True, exist_ok=True)
-    return [plot_pv(recording, emap, directory / 'pv.png', experiment),
-            plot_volume_split(recording, emap, directory / 'volume_split.png'),
-            plot_shapes(recording, directory / 'shapes.png'),
-            plot_timeseries(recording, directory / 'timeseries.png')]
-
-
-def summary(recording: Recording, emap: EquilibriumMap | None = None,
-            counts: dict[str, int] | None = None) -> str:
-    """A few lines a researcher reads first: sequence, snaps, pressures, shapes."""
-    lines = [f'recording: {recording.path}']
-    duration = recording.pump_time_s[-1] if recording.pump_time_s.size else 0.0
-    lines.append(f'duration: {duration:.1f} s of rig time, peak injected '
-                 f'{recording.pump_injected.max() * ML:.2f} mL')
-    if emap is not None:
-        lines.append(f'sequence type: {classify(emap)}')
-    top = int(np.argmax(recording.state_injected))
+def plot_segments(recording: Recording, out: Path, svg: bool = True) -> list[Path]:
+    """Volume added to each segment and its curvature against injected volume (Fig. 3)."""
+    n = len(recording.segment_names)
+    fig, axes = _figure(6.4, 5.8, 2, 1, {'top': 0.93, 'bottom': 0.09}, sharex=True)
+    u = recording.state_injected * ML
     rest = recording.volumes[0]
-    share = (recording.volumes[top] - rest) / max(float(np.sum(recording.volumes[top] - rest)),
-                                                  1e-300)
-    split = ', '.join(f'{n} {s * 100:.0f} %' for n, s in zip(recording.segment_names, share))
-    lines.append(f'at peak injection: pressure {recording.pressure[top] * KPA:.2f} kPa, '
-                 f'split {split}')
-    if recording.events:
-        for event in recording.events:
-            lines.append(f'snap-through at {event["injected_m3"] * ML:.3f} mL: pressure '
-                         f'{event["from_pressure_pa"] * KPA:.2f} -> '
-                         f'{event["to_pressure_pa"] * KPA:.2f} kPa')
-    else:
-        lines.append('snap-throughs: none')
-    for number, shot in enumerate(recording.snapshots, start=1):
-        tip = shot.points[-1]
-        lines.append(f'step {number} at {shot.injected * ML:.1f} mL: tip at x {tip[0] * MM:.1f} '
-                     f'mm, z {tip[1] * MM:.1f} mm')
-    if counts:
-        lines.append('messages: ' + ', '.join(f'{t} {n}' for t, n in sorted(counts.items())))
-    return '\n'.join(lines)
+    colours = ['tab:green', 'tab:purple', 'tab:brown', 'tab:cyan', 'tab:olive']
+    for j, name in enumerate(recording.segment_names):
+        colour = colours[j % len(colours)]
+        _draw_legs(axes[0, 0], recording, u, (recording.volumes[:, j] - rest[j]) * ML,
+                   label=f'{name}, ', color=colour)
+        if recording.curvatures.shape[0] == recording.volumes.shape[0]:
+            _draw_legs(axes[1, 0], recording, u, recording.curvatures[:, j],
+                       label=f'{name}, ', color=colour)
+    axes[0, 0].set_ylabel('volume added to segment [mL]')
+    axes[1, 0].set_ylabel('segment curvature [1/m]')
+    axes[1, 0].set_xlabel(INJECTED)
+    for ax in axes[:, 0]:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=max(1, n))
+    axes[0, 0].set_title('Segment volume and curvature (Fig. 3 style); solid: inflation, '
+                         'dashed: deflation', fontsize=9)
+    return _save(fig, out, svg)
 
 
-def _save(fig: plt.Figure, out: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+def plot_volume_split(recording: Recording, emap: object | None, out: Path,
+                      svg: bool = True) -> list[Path]:
+    """v1 against v2 (added volumes): equilibria, constant total volume, the recorded path."""
+    fig, axes = _figure(5.8, 5.6, margins={'left': 0.13, 'bottom': 0.1, 'top': 0.93})
+    ax = axes[0, 0]
+    names = recording.segment_names
+    if len(names) != 2:
+        return _segments_instead(fig, recording, out, svg)
+    rest = emap.rest_volumes if emap is not None else recording.volumes[0]
+    dv = (recording.volumes - rest) * ML
+    limit = float(np.nanmax(dv)) * 1.1 or 1.0
+    if emap is not None:
+        shown = set()
+        for curve in emap.equilibrium_set():
+            cv = (curve.volumes - rest) * ML
+            for mask, colour, label in ((curve.stable, 'k', 'stable equilibria'),
+                                        (~curve.stable, 'tab:red', 'unstable equilibria')):
+                if mask.any():
+                    ax.plot(np.where(mask, cv[:, 0], np.nan), np.where(mask, cv[:, 1], np.nan),
+                            color=colour, lw=0.9, alpha=0.6,
+                            label=None if label in shown else label)
+                    shown.add(label)
+        limit = max(limit, 0.0)
+    step = _nice_step(2 * limit / 8)
+    for total in np.arange(step, 2 * limit + step, step):
+        ax.plot([0, total], [total, 0], color='0.75', lw=0.6, zorder=0)
+        if total < limit:
+            # Labelled next to the x axis, away from the path, which leaves the origin upward.
+            ax.text(total - 0.03 * limit, 0.03 * limit, f'{total:g} mL', fontsize=6,
+                    color='0.45', rotation=-45, ha='center', va='center')
+    _draw_legs(ax, recording, dv[:, 0], dv[:, 1], label='recorded, ')
+    ax.set_xlabel(f'volume added to {names[0]} [mL]')
+    ax.set_ylabel(f'volume added to {names[1]} [mL]')
+    ax.set_aspect('equal', adjustable='box')
+    ax.set_xlim(0, limit)
+    ax.set_ylim(0, limit)
+    ax.grid(alpha=0.2)
+    ax.legend(fontsize=7, loc='upper right')
+    ax.set_title('Volume distribution (Fig. 1B / 4B style); grey: constant total volume',
+                 fontsize=9)
+    return _save(fig, out, svg)
+
+
+def _segments_instead(fig: object, recording: Recording, out: Path, svg: bool) -> list[Path]:
+    ax = fig.axes[0]
+    u = recording.state_injected * ML
+    rest = recording.volumes[0]
+    for j, name in enumerate(recording.segment_names):
+        _draw_legs(ax, recording, u, (recording.volumes[:, j] - rest[j]) * ML,
+                   label=f'{name}, ')
+    ax.set_xlabel(INJECTED)
+    ax.set_ylabel('volume added to segment [mL]')
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title('Volume distribution', fontsize=10)
+    return _save(fig, out, svg)
+
+
+def _nice_step(raw: float) -> float:
+    exponent = 10 ** np.floor(np.log10(raw)) if raw > 0 else 1.0
+    for factor in (1, 2, 5, 10):
+        if raw <= factor * exponent:
+            return float(factor * exponent)
+    return float(10 * exponent)
+
+
+def plot_shapes(recording: Recording, out: Path, svg: bool = True) -> list[Path]:
+    """The backbone at each step: inflation and deflation in two panels, one colour per step."""
+    from matplotlib import colormaps
+
+    fig, axes = _figure(9.6, 5.2, 1, 2, {'left': 0.07, 'bottom': 0.3, 'top': 0.88},
+                        sharex=True, sharey=True)
+    steps = sorted({s.step for s in recording.snapshots if s.step is not None})
+    palette = colormaps['tab10']
+    colour = {step: palette(i % 10) for i, step in enumerate(steps)}
+    for ax, direction in zip(axes[0], (INFLATION, DEFLATION)):
+        shots = [s for s in recording.snapshots if s.direction == direction]
+        for shot in shots:
+            label = (f'step {shot.step}: {shot.injected * ML:.1f} mL' if shot.step is not None
+                     else f'{shot.injected * ML:.1f} mL')
+            ax.plot(shot.points[:, 0] * MM, shot.points[:, 1] * MM, '-', lw=2,
+                    color=colour.get(shot.step, 'k'), label=label)
+            ax.plot(*(shot.tip * MM), 'o', ms=3, color=colour.get(shot.step, 'k'))
+        ax.plot([0], [0], 'ks', ms=6)
+        ax.set_xlabel('x [mm]')
+        ax.set_aspect('equal', adjustable='box')
+        ax.grid(alpha=0.3)
+        ax.set_title(f'{direction} ({len(shots)} snapshots)', fontsize=10)
+        if shots:
+            ax.legend(fontsize=7, loc='upper center', bbox_to_anchor=(0.5, -0.15), ncol=3,
+                      frameon=False)
+    axes[0, 0].set_ylabel('z [mm]')
+    _square_limits(axes[0, 0], recording)
+    fig.suptitle('Tentacle shape at the camera steps (Fig. 7 style)', fontsize=10)
+    return _save(fig, out, svg)
+
+
+def _square_limits(ax: object, recording: Recording) -> None:
+    """Both panels show every snapshot at one scale (equal aspect, shared limits)."""
+    if not recording.snapshots:
+        return
+    points = np.vstack([s.points for s in recording.snapshots] + [np.zeros((1, 2))]) * MM
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    size = float(np.max(hi - lo)) * 1.08 or 1.0
+    centre = 0.5 * (lo + hi)
+    ax.set_xlim(centre[0] - size / 2, centre[0] + size / 2)
+    ax.set_ylim(centre[1] - size / 2, centre[1] + size / 2)
+
+
+def plot_timeseries(recording: Recording, out: Path, svg: bool = True) -> list[Path]:
+    """Injected volume, gauge pressure and each segment's total volume against time."""
+    fig, axes = _figure(6.4, 6.4, 3, 1, {'top': 0.95, 'bottom': 0.08}, sharex=True)
+    rows = _thin(recording.pump_time_s.size)
+    axes[0, 0].plot(recording.pump_time_s[rows], recording.pump_injected[rows] * ML, 'k-')
+    axes[0, 0].set_ylabel('injected (pump) [mL]')
+    rows = _thin(recording.state_time_s.size, _snap_rows(recording))
+    axes[1, 0].plot(recording.state_time_s[rows], recording.pressure[rows] * KPA, 'k-')
+    axes[1, 0].set_ylabel(GAUGE)
+    for j, name in enumerate(recording.segment_names):
+        axes[2, 0].plot(recording.state_time_s[rows], recording.volumes[rows, j] * ML,
+                        label=name)
+    axes[2, 0].set_ylabel('segment volume, total [mL]')
+    axes[2, 0].set_xlabel('time from the first pump command [s]')
+    axes[2, 0].legend(fontsize=8)
+    for ax in axes[:, 0]:
+        ax.grid(alpha=0.3)
+    return _save(fig, out, svg)
+
+
+
+
+def _warm_up() -> None:
+    """Import the drawing stack in a worker while the parent still reads the bag."""
+    from matplotlib.backends import backend_agg, backend_svg  # noqa: F401
+    from matplotlib.figure import Figure
+
+    Figure().subplots()  # loads the default fonts once
+
+
+def start_workers() -> object | None:
+    """
+    A forked figure worker that imports matplotlib now, in parallel with reading the bag.
+
+    It splits itself in two when it draws (:func:`_draw_split`), so matplotlib is imported
+    once for two cores. None on one core or where fork is not available; :func:`write_figures`
+    then draws here.
+    """
+    import multiprocessing
+
+    if (os.cpu_count() or 1) <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
+        return None
+    return multiprocessing.get_context('fork').Pool(1, initializer=_warm_up)
+
+
+def _draw(name: str, args: tuple) -> list[Path]:
+    return _FIGURE_FUNCTIONS[name](*args)
+
+
+def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
+    """Draw ``jobs[:split]`` here and the rest in a fork (which has matplotlib loaded)."""
+    ours, theirs = jobs[:split], jobs[split:]
+    child = os.fork() if theirs else 0
+    if theirs and child == 0:
+        status = 0
+        try:
+            for name, args in theirs:
+                _draw(name, args)
+        except BaseException:  # noqa: BLE001 - reported through the exit status
+            import traceback
+
+            traceback.print_exc()
+            status = 1
+        finally:
+            os._exit(status)
+    drawn = [_draw(name, args) for name, args in ours]
+    if theirs:
+        _, status = os.waitpid(child, 0)
+        if status != 0:
+            raise RuntimeError(f'drawing {", ".join(n for n, _ in theirs)} failed (see above)')
+    return drawn + [_outputs(name, args) for name, args in theirs]
+
+
+def _outputs(name: str, args: tuple) -> list[Path]:
+    """The files a figure job writes (what the forked half drew)."""
+    out = next(a for a in args if isinstance(a, Path))
+    return [out, out.with_suffix('.svg')] if args[-1] else [out]
+
+
+def thinned(recording: Recording) -> Recording:
+    """
+    The rows a figure can show: at most about MAX_POINTS per leg, every snap and its row before.
+
+    Drawing a million points shows nothing more than a few thousand, and the thinned copy is
+    what goes to the figure workers (small to send).
+    """
+    from dataclasses import replace
+
+    states = np.unique(np.concatenate([rows for _, rows in _legs(recording)] or
+                                      [np.zeros(0, np.intp)]))
+    # Snaps are found on every row: between thinned rows a fast but continuous exchange of
+    # fluid would look like one.
+    snaps = np.searchsorted(states, _snap_rows(recording))
+    pump = _thin(recording.pump_time_s.size) if recording.pump_time_s.size > 4 * MAX_POINTS \
+        else np.arange(recording.pump_time_s.size)
+    aligned = recording.curvatures.shape[0] == recording.volumes.shape[0]
+    curves = states if aligned else _thin(recording.curvatures.shape[0])
+    curvature_time = recording.curvature_time_s
+    curvature_injected = recording.curvature_injected
+    return replace(
+        recording,
+        pump_time_s=recording.pump_time_s[pump], pump_injected=recording.pump_injected[pump],
+        state_time_s=recording.state_time_s[states],
+        state_injected=recording.state_injected[states], pressure=recording.pressure[states],
+        volumes=recording.volumes[states], state_flow_sign=recording.state_flow_sign[states],
+        curvatures=recording.curvatures[curves] if recording.curvatures.shape[0] else
+        recording.curvatures,
+        curvature_time_s=curvature_time[curves] if curvature_time.size else curvature_time,
+        curvature_injected=(curvature_injected[curves] if curvature_injected.size
+                            else curvature_injected),
+        snap_rows=snaps)
+
+
+def write_figures(recording: Recording, emap: object | None, directory: Path,
+                  experiment: object | None = None, svg: bool = True,
+                  workers: object | None = None) -> list[Path]:
+    """
+    All figures of a run into ``directory`` (PNG, and SVG unless ``svg`` is False).
+
+    Drawing is most of a report's time: with ``workers`` (from :func:`start_workers`) the
+    figures are drawn in those processes, in parallel.
+    """
+    directory.mkdir(parents=True, exist_ok=True)
+    recording = thinned(recording)
+    jobs = [('pv', (recording, emap, directory / 'pv.png', experiment, svg)),
+            ('segments', (recording, directory / 'segments.png', svg)),
+            ('volume_split', (recording, emap, directory / 'volume_split.png', svg)),
+            ('shapes', (recording, directory / 'shapes.png', svg)),
+            ('timeseries', (recording, directory / 'timeseries.png', svg))]
+    if workers is None:
+        return [path for name, args in jobs for path in _draw(name, args)]
+    # Two halves of about equal drawing time (PV and shapes against the other three).
+    order = [0, 3, 1, 4, 2]
+    drawn = workers.apply(_draw_split, ([jobs[i] for i in order], 2))
+    by_job = dict(zip(order, drawn))
+    return [path for index in range(len(jobs)) for path in by_job[index]]
+
+
+_FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': plot_volume_split,
+                     'shapes': plot_shapes, 'timeseries': plot_timeseries}
+
+
+def _save(fig: object, out: Path, svg: bool) -> list[Path]:
+    fig.savefig(out, dpi=110)
+    written = [out]
+    if svg:
+        fig.savefig(out.with_suffix('.svg'))
+        written.append(out.with_suffix('.svg'))
+    return written

@@ -1,8 +1,14 @@
 """
 A rig recording as arrays: what the pump commanded, what the actuator did, what the camera saw.
 
-Reads a bag written by the recorder or by ``softseq run`` (topics as in the README) and returns
-plain numpy arrays in SI units, ready to compare with an experiment or with the solver.
+Reads a bag written by the recorder or by ``softseq run``. Topics are found through the rig's
+contract (:mod:`softseq_ros.rig.contract`): names are relative to the rig's namespace, which is
+found from the bag's topics. Only the topics the analysis needs are read, straight into arrays
+(:mod:`softseq_ros.bag.arrays`); everything is SI, pressures are gauge unless named absolute.
+
+What belongs to this run: the run starts at the first pump command. A latched message stamped
+before it (an actuator state, a snapshot, a snap-through event kept by a transient-local
+publisher from an earlier run) is left out and counted in ``ignored``.
 """
 
 from dataclasses import dataclass, field
@@ -13,17 +19,21 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.bag.reader import read_bag
-from softseq_ros.physics.csv_columns import read_columns
-
-PUMP_TOPIC = '/pump/command'
-VOLUMES_TOPIC = '/actuator/volumes'
-CURVATURES_TOPIC = '/actuator/curvatures'
-EVENTS_TOPIC = '/actuator/events'
-SNAPSHOTS_TOPIC = '/camera/snapshots'
-BACKBONE_TOPIC = '/camera/backbone'
+from softseq_ros.bag.arrays import (
+    BagArrayError,
+    FluidPressureDecoder,
+    JointStateDecoder,
+    PoseArrayDecoder,
+    StringDecoder,
+    open_bag,
+)
+from softseq_ros.rig import contract
 
 FloatArray = NDArray[np.float64]
+NS_PER_S = 1_000_000_000
+# Pressure messages read to find the ambient pressure (absolute minus gauge): it is constant.
+AMBIENT_SAMPLES = 2000
+INFLATION, DEFLATION = 'inflation', 'deflation'
 
 
 class RecordingError(ValueError):
@@ -35,8 +45,17 @@ class Snapshot:
     """The camera's backbone at one trigger volume: points (M, 2) as (x, z) in m."""
 
     time_s: float
-    injected: float
+    injected: float              # pump's commanded injected volume at the snapshot [m^3]
     points: FloatArray
+    step: int | None = None      # 1-based index into the camera's trigger list
+    trigger_injected: float | None = None
+    direction: str = INFLATION
+    cycle: int = 1               # 1-based: which inflation leg (with its deflation) it is in
+
+    @property
+    def tip(self) -> FloatArray:
+        """Tip position (x, z) [m]."""
+        return self.points[-1]
 
 
 @dataclass
@@ -56,71 +75,309 @@ class Recording:
     events: list[dict] = field(default_factory=list)
     snapshots: list[Snapshot] = field(default_factory=list)
     backbone_count: int = 0
+    namespace: str = '/'
+    state_flow_sign: NDArray[np.int8] = field(default_factory=lambda: np.zeros(0, np.int8))
+    curvature_injected: FloatArray = field(default_factory=lambda: np.zeros(0))
+    ambient_pressure_pa: float | None = None
+    status: list[tuple[float, str, str]] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
+    ignored: dict[str, int] = field(default_factory=dict)
+    start_ns: int = 0
+    # Rows a snap-through lands on, when already known (a thinned copy keeps the original's).
+    snap_rows: NDArray[np.intp] | None = None
+
+    @property
+    def inflating(self) -> NDArray[np.bool_]:
+        """Per state: on an inflation leg (a hold counts with the leg before it)."""
+        return self.state_flow_sign > 0
+
+    @property
+    def deflating(self) -> NDArray[np.bool_]:
+        """Per state: on a deflation leg."""
+        return self.state_flow_sign < 0
 
 
-def _stamp_s(msg: object) -> float:
-    stamp = msg.header.stamp  # type: ignore[attr-defined]
-    return stamp.sec + stamp.nanosec * 1e-9
+def _topic(namespace: str, spec: contract.Topic) -> str:
+    return contract.resolve(spec.name, namespace)
 
 
-def load_recording(directory: str | os.PathLike) -> Recording:
+def find_namespace(topics: list[str], path: Path, namespace: str | None) -> str:
+    """The rig namespace of a bag: the one given, or the only one its topics hold."""
+    found = contract.find_namespaces(topics)
+    if namespace is not None:
+        wanted = '/' + namespace.strip('/') if namespace.strip('/') else '/'
+        if wanted not in found:
+            raise RecordingError(
+                f'{path}: no rig in namespace {wanted} (found: {", ".join(found) or "none"})')
+        return wanted
+    if not found:
+        raise RecordingError(f'{path}: no {contract.PUMP_COMMAND.name} topic in any namespace: '
+                             f'not a rig recording (topics: {", ".join(topics) or "none"})')
+    if len(found) > 1:
+        raise RecordingError(f'{path}: holds rigs in namespaces {", ".join(found)}; choose one '
+                             'with --namespace')
+    return found[0]
+
+
+def load_recording(directory: str | os.PathLike, namespace: str | None = None) -> Recording:
     """Read a rig bag into arrays; raises RecordingError when the pump or actuator is missing."""
     path = Path(directory)
-    pump_t, pump_u = [], []
-    state_t, pressure, volumes = [], [], []
-    curv_t, curvatures = [], []
-    events: list[dict] = []
-    snapshots: list[tuple[float, FloatArray]] = []
-    names: tuple[str, ...] = ()
-    backbones = 0
-    for item in read_bag(path):
-        msg = item.msg
-        if item.topic == PUMP_TOPIC:
-            pump_t.append(_stamp_s(msg))
-            pump_u.append(float(msg.position[0]))
-        elif item.topic == VOLUMES_TOPIC:
-            names = tuple(msg.name)
-            state_t.append(_stamp_s(msg))
-            volumes.append(np.asarray(msg.position, dtype=float))
-            pressure.append(float(np.mean(msg.effort)))
-        elif item.topic == CURVATURES_TOPIC:
-            curv_t.append(_stamp_s(msg))
-            curvatures.append(np.asarray(msg.position, dtype=float))
-        elif item.topic == EVENTS_TOPIC:
-            events.append(json.loads(msg.data))
-        elif item.topic == SNAPSHOTS_TOPIC:
-            points = np.array([[p.position.x, p.position.z] for p in msg.poses])
-            snapshots.append((_stamp_s(msg), points))
-        elif item.topic == BACKBONE_TOPIC:
-            backbones += 1
-    if not pump_t:
-        raise RecordingError(f'{path}: no {PUMP_TOPIC} messages: not a rig recording')
-    if not state_t:
-        raise RecordingError(f'{path}: no {VOLUMES_TOPIC} messages: the actuator did not run '
-                             'or its volumes were not recorded')
-    t0 = pump_t[0]
-    pump_time = np.asarray(pump_t) - t0
-    pump_injected = np.asarray(pump_u)
-    state_time = np.asarray(state_t) - t0
-    vols = np.vstack(volumes)
-    state_injected = _injected_at(pump_time, pump_injected, state_time)
-    shots = [Snapshot(t - t0, float(_injected_at(pump_time, pump_injected,
-                                                 np.array([t - t0]))[0]), pts)
-             for t, pts in snapshots]
-    curv = np.vstack(curvatures) if curvatures else np.zeros((0, len(names)))
-    return Recording(path, names, pump_time, pump_injected, state_time, state_injected,
-                     np.asarray(pressure), vols, np.asarray(curv_t) - t0, curv, events, shots,
-                     backbones)
+    try:
+        bag = open_bag(path)
+    except BagArrayError as err:
+        raise RecordingError(str(err)) from None
+    ns = find_namespace(bag.topics, path, namespace)
+    names = {spec: _topic(ns, spec) for spec in contract.RIG_TOPICS}
+    for spec, topic in names.items():
+        info = bag.channels.get(topic)
+        if info is not None and info.type_name != spec.type_name:
+            raise RecordingError(f'{path}: topic {topic} is {info.type_name}, the rig publishes '
+                                 f'{spec.type_name} there')
+    if names[contract.VOLUMES] not in bag.channels:
+        raise RecordingError(f'{path}: no {names[contract.VOLUMES]} topic: the actuator did not '
+                             'run or its volumes were not recorded')
+
+    # Only what the analysis uses is kept: on a 10^7-message bag every column costs 18 MB.
+    pump = JointStateDecoder(names[contract.PUMP_COMMAND], ('position', 'velocity'),
+                             log_times=False, signs=('velocity',))
+    state = JointStateDecoder(names[contract.VOLUMES], ('position', 'effort'), log_times=False,
+                              mean=('effort',))
+    decoders: list = [pump, state]
+    optional = {}
+    for spec, decoder in ((contract.CURVATURES,
+                           lambda t: JointStateDecoder(t, ('position',), log_times=False)),
+                          (contract.PRESSURE, lambda t: FluidPressureDecoder(t, AMBIENT_SAMPLES)),
+                          (contract.EVENTS, StringDecoder), (contract.PUMP_STATUS, StringDecoder),
+                          (contract.SNAPSHOTS, PoseArrayDecoder),
+                          (contract.SNAPSHOT_STEPS, StringDecoder)):
+        if names[spec] in bag.channels:
+            optional[spec] = decoder(names[spec])
+            decoders.append(optional[spec])
+    try:
+        bag.read(decoders)
+    except BagArrayError as err:
+        raise RecordingError(str(err)) from None
+
+    commands = pump.release()
+    if not commands.get('stamp_ns', np.zeros(0)).size:
+        raise RecordingError(f'{path}: no {names[contract.PUMP_COMMAND]} messages: not a rig '
+                             'recording, or the pump never ran')
+    states = state.release()
+    if not states.get('stamp_ns', np.zeros(0)).size:
+        raise RecordingError(f'{path}: no {names[contract.VOLUMES]} messages: the actuator did '
+                             'not run or its volumes were not recorded')
+    # Arrays are taken as views where possible and converted in place: on a long bag every
+    # extra column is tens of MB.
+    pump_stamp = commands['stamp_ns']
+    pump_u = commands['position'][:, 0]
+    pump_flow = commands['velocity'][:, 0] if commands['velocity'].size else \
+        np.sign(np.gradient(pump_u)).astype(np.int8)
+    if np.any(pump_stamp[1:] < pump_stamp[:-1]):
+        order = np.argsort(pump_stamp, kind='stable')
+        pump_stamp, pump_u, pump_flow = pump_stamp[order], pump_u[order], pump_flow[order]
+    t0 = int(pump_stamp[0])
+    ignored: dict[str, int] = {}
+    flow_sign = _leg_sign(pump_flow)
+    del pump_flow, commands
+
+    state_stamp, volumes, pressure = states['stamp_ns'], states['position'], states['effort']
+    keep = state_stamp >= t0
+    if not keep.all():
+        _count_ignored(ignored, names[contract.VOLUMES], keep)
+        state_stamp, volumes, pressure = state_stamp[keep], volumes[keep], pressure[keep]
+    del keep, states
+    index = _command_index(pump_stamp, state_stamp)
+    recording = Recording(
+        path=path, segment_names=state.names, pump_time_s=np.zeros(0),
+        pump_injected=pump_u, state_time_s=np.zeros(0), state_injected=pump_u[index],
+        pressure=pressure[:, 0], volumes=volumes,
+        curvature_time_s=np.zeros(0), curvatures=np.zeros((0, volumes.shape[1])),
+        namespace=ns, state_flow_sign=flow_sign[index],
+        counts={topic: info.message_count for topic, info in bag.channels.items()},
+        ignored=ignored, start_ns=t0)
+    del index
+    recording.backbone_count = bag.channels[names[contract.BACKBONE]].message_count \
+        if names[contract.BACKBONE] in bag.channels else 0
+
+    if contract.CURVATURES in optional:
+        curves = optional[contract.CURVATURES].release()
+        if curves.get('stamp_ns', np.zeros(0)).size:
+            stamps, values = curves['stamp_ns'], curves['position']
+            del curves
+            if np.array_equal(stamps, state_stamp):
+                # The actuator answers each command with both: share the state's columns
+                # (the times are set below, with the state's).
+                recording.curvature_injected = recording.state_injected
+                recording.curvatures = values
+            else:
+                keep = stamps >= t0
+                _count_ignored(ignored, names[contract.CURVATURES], keep)
+                stamps, values = stamps[keep], values[keep]
+                recording.curvature_time_s = _seconds(stamps, t0)
+                recording.curvature_injected = pump_u[_command_index(pump_stamp, stamps)]
+                recording.curvatures = values
+            del stamps
+    if contract.PRESSURE in optional:
+        recording.ambient_pressure_pa = _ambient(optional[contract.PRESSURE].result(),
+                                                 state_stamp, recording.pressure)
+    recording.state_time_s = _seconds(state_stamp, t0, in_place=True)
+    if recording.curvature_time_s.size == 0 and recording.curvatures.shape[0]:
+        recording.curvature_time_s = recording.state_time_s
+    if contract.PUMP_STATUS in optional:
+        recording.status = [_status(text, log_time, t0)
+                            for log_time, text in optional[contract.PUMP_STATUS].messages]
+    if contract.EVENTS in optional:
+        recording.events = _events(optional[contract.EVENTS].messages, names[contract.EVENTS],
+                                   t0, ignored)
+    if contract.SNAPSHOTS in optional:
+        steps = optional.get(contract.SNAPSHOT_STEPS)
+        recording.snapshots = _snapshots(
+            optional[contract.SNAPSHOTS].messages, steps.messages if steps else None,
+            names[contract.SNAPSHOT_STEPS], pump_stamp, pump_u, flow_sign, t0, ignored,
+            names[contract.SNAPSHOTS])
+    recording.pump_time_s = _seconds(pump_stamp, t0, in_place=True)
+    return recording
 
 
-def _injected_at(times: FloatArray, injected: FloatArray, at: FloatArray) -> FloatArray:
-    """The last commanded volume at or before each time in ``at``."""
-    index = np.clip(np.searchsorted(times, at, side='right') - 1, 0, times.size - 1)
-    return injected[index]
+def _seconds(stamps: NDArray[np.int64], t0: int, in_place: bool = False) -> FloatArray:
+    """Seconds from ``t0``; ``in_place`` reuses the stamps' memory (blockwise, no copy)."""
+    if not in_place:
+        seconds = stamps.astype(np.float64)
+        seconds -= float(t0)
+        seconds /= NS_PER_S
+        return seconds
+    seconds = stamps.view(np.float64)
+    block = 1 << 20
+    for start in range(0, stamps.size, block):
+        part = slice(start, start + block)
+        seconds[part] = (stamps[part] - t0) / NS_PER_S
+    return seconds
 
 
-def read_experiment(path: str | os.PathLike) -> tuple[FloatArray, FloatArray]:
-    """Injected volume [m^3] and gauge pressure [Pa] columns of a measured PV curve (CSV)."""
-    columns = read_columns(path, ('injected_m3', 'pressure_pa'), RecordingError,
-                           'experiment file')
-    return columns['injected_m3'], columns['pressure_pa']
+def _count_ignored(ignored: dict[str, int], topic: str, keep: NDArray[np.bool_]) -> None:
+    dropped = int(keep.size - np.count_nonzero(keep))
+    if dropped:
+        ignored[topic] = ignored.get(topic, 0) + dropped
+
+
+def _command_index(pump_stamp: NDArray[np.int64], at: NDArray[np.int64]) -> NDArray[np.intp]:
+    """The last pump command at or before each stamp (an answer carries its command's stamp)."""
+    index = np.searchsorted(pump_stamp, at, side='right')
+    index -= 1
+    return np.clip(index, 0, pump_stamp.size - 1, out=index)
+
+
+def _leg_sign(flow: FloatArray) -> NDArray[np.int8]:
+    """+1 on inflation, -1 on deflation; a hold (no flow) belongs to the leg before it."""
+    sign = (flow > 0).view(np.int8) - (flow < 0).view(np.int8)
+    moving = np.flatnonzero(sign)
+    if not moving.size:
+        return np.ones_like(sign)
+    # Forward fill over holds: the last moving row at or before each row (int32 indices).
+    last = np.zeros(sign.size, dtype=np.int32)
+    last[moving] = moving
+    np.maximum.accumulate(last, out=last)
+    filled = sign[last]
+    filled[:moving[0]] = sign[moving[0]]
+    return filled
+
+
+def _ambient(pressure: dict, state_stamp: NDArray[np.int64], gauge: FloatArray) -> float | None:
+    stamps = pressure.get('stamp_ns', np.zeros(0, np.int64))
+    if not stamps.size or not state_stamp.size:
+        return None
+    at = np.searchsorted(state_stamp, stamps)
+    matched = (at < state_stamp.size) & (state_stamp[np.minimum(at, state_stamp.size - 1)]
+                                         == stamps)
+    if not matched.any():
+        return None
+    difference = pressure['fluid_pressure'][matched, 0] - gauge[at[matched]]
+    return float(np.median(difference))
+
+
+def _status(text: str, log_time_ns: int, t0: int) -> tuple[float, str, str]:
+    """Pump status: JSON {"state", "reason", "stamp_ns"}, or plain text in older bags."""
+    if text.startswith('{'):
+        try:
+            value = json.loads(text)
+            stamp = int(value.get('stamp_ns', log_time_ns))
+            return (stamp - t0) / NS_PER_S, str(value.get('state', '')), \
+                str(value.get('reason', ''))
+        except (json.JSONDecodeError, TypeError, ValueError, AttributeError):
+            pass
+    state, _, reason = text.partition(':')
+    return (log_time_ns - t0) / NS_PER_S, state.strip(), reason.strip()
+
+
+def _events(messages: list[tuple[int, str]], topic: str, t0: int,
+            ignored: dict[str, int]) -> list[dict]:
+    events = []
+    for number, (_, text) in enumerate(messages, start=1):
+        try:
+            event = json.loads(text)
+            float(event['injected_m3'])
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            raise RecordingError(f'{topic}: message {number} is not a snap-through event '
+                                 f'(JSON with injected_m3): {text[:60]!r}') from None
+        if 'stamp_ns' in event and int(event['stamp_ns']) < t0:
+            ignored[topic] = ignored.get(topic, 0) + 1
+            continue
+        events.append(event)
+    return events
+
+
+def _snapshots(shots: list, steps: list[tuple[int, str]] | None, steps_topic: str,
+               pump_stamp: NDArray[np.int64], pump_u: FloatArray, flow_sign: NDArray[np.int8],
+               t0: int, ignored: dict[str, int], topic: str) -> list[Snapshot]:
+    parsed = []
+    for number, (_, text) in enumerate(steps or [], start=1):
+        try:
+            value = json.loads(text)
+            parsed.append((int(value['stamp_ns']), int(value['step']),
+                           float(value['trigger_injected_m3']), str(value['direction'])))
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            raise RecordingError(f'{steps_topic}: message {number} is not a snapshot step (JSON '
+                                 f'with stamp_ns, step, trigger_injected_m3, direction): '
+                                 f'{text[:60]!r}') from None
+    used = [False] * len(parsed)
+    result = []
+    # Rows where a new inflation leg starts after a deflation: the cycles' boundaries.
+    starts = np.flatnonzero((flow_sign[1:] > 0) & (flow_sign[:-1] < 0)) + 1
+    for _, stamp, points in shots:
+        if stamp < t0:
+            ignored[topic] = ignored.get(topic, 0) + 1
+            continue
+        index = int(_command_index(pump_stamp, np.array([stamp]))[0])
+        shot = Snapshot((stamp - t0) / NS_PER_S, float(pump_u[index]), points[:, [0, 2]],
+                        direction=INFLATION if flow_sign[index] >= 0 else DEFLATION,
+                        cycle=int(np.searchsorted(starts, index, side='right')) + 1)
+        # Pair by stamp, in order: the first unused step message with this snapshot's stamp.
+        for k, (step_stamp, step, trigger, direction) in enumerate(parsed):
+            if not used[k] and step_stamp == stamp:
+                used[k] = True
+                shot.step, shot.trigger_injected, shot.direction = step, trigger, direction
+                break
+        result.append(shot)
+    if steps is None:
+        _number_steps(result)
+    return result
+
+
+def _number_steps(shots: list[Snapshot]) -> None:
+    """
+    Older bags carry no step messages: number each inflation leg's snapshots 1, 2, ...
+
+    A deflation snapshot takes the number of the nearest-volume snapshot of the inflation leg
+    before it.
+    """
+    rising: list[Snapshot] = []
+    previous = None
+    for shot in shots:
+        if shot.direction == INFLATION:
+            if previous == DEFLATION:
+                rising = []
+            rising.append(shot)
+            shot.step = len(rising)
+        elif rising:
+            shot.step = min(rising, key=lambda s: abs(s.injected - shot.injected)).step
+        previous = shot.direction

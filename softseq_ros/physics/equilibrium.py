@@ -207,6 +207,11 @@ class Tracker:
             end = branch.upper if upward else branch.lower
             edge = branch.hi if upward else branch.lo
             if end.kind == 'limit':
+                if abs(total - edge) <= emap._tol_v:
+                    # The domain's edge itself (reached up to round-off, e.g. its own
+                    # injected_range) is inside it: stay on the edge.
+                    self.total = edge
+                    return events
                 self.branch, self.total = before
                 raise DomainError(
                     f'injected volume {total - emap.total_rest_volume:.6g} m^3 is beyond what '
@@ -280,15 +285,21 @@ class Tracker:
             window = 256
         segments = len(emap.segments)
         if np.all(branch_ids == branch_ids[0]) if n else True:
-            values = (emap.reader.rows(int(branch_ids[0]), totals) if n
+            values = (emap.reader.rows(int(branch_ids[0]),
+                                       self._on_branch(int(branch_ids[0]), totals)) if n
                       else np.empty((0, 2 * segments + 1)))
         else:
             values = np.empty((n, 2 * segments + 1))
             for b in np.unique(branch_ids):
                 rows = np.flatnonzero(branch_ids == b)
-                values[rows] = emap.reader.rows(int(b), totals[rows])
+                values[rows] = emap.reader.rows(int(b), self._on_branch(int(b), totals[rows]))
         return SolvedPath(commands, values[:, segments], values[:, :segments],
-                    values[:, segments + 1:], branch_ids, snap, events)
+                          values[:, segments + 1:], branch_ids, snap, events)
+
+    def _on_branch(self, index: int, totals: FloatArray) -> FloatArray:
+        """Totals clipped to a branch: a command at a domain edge may pass it by round-off."""
+        branch = self.emap.branches[index]
+        return np.clip(totals, branch.lo, branch.hi)
 
 
 def classify(emap: EquilibriumMap, samples: int = 4001) -> str:

@@ -1,0 +1,364 @@
+"""
+The report of a rig bag: metrics.json, report.md, summary.txt and the figures.
+
+``metrics.json`` holds every number in SI (m^3, Pa gauge, J, m, s); ``report.md`` and the
+summary show the same numbers in mL, kPa and mm for people.
+"""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
+from softseq_ros.analysis.metrics import Trace, analyse, segment_limits
+from softseq_ros.analysis.recording import Recording, load_recording
+
+ML = 1e6
+KPA = 1e-3
+MM = 1e3
+
+
+class ReferenceFileError(ValueError):
+    """A reference file that cannot be used."""
+
+
+def recording_trace(recording: Recording) -> Trace:
+    """The states of a recording as a :class:`Trace`."""
+    curvatures = recording.curvatures if recording.curvatures.shape[0] == \
+        recording.volumes.shape[0] else None
+    return Trace(recording.state_injected, recording.pressure, recording.volumes,
+                 recording.state_flow_sign, curvatures, recording.events,
+                 recording.segment_names)
+
+
+def recording_metrics(recording: Recording, scene: object | None = None,
+                      emap: object | None = None) -> dict:
+    """Every number of a recording (first cycle), SI units, gauge pressures."""
+    trace = recording_trace(recording)
+    try:
+        result = analyse(trace)
+    except ValueError as err:
+        raise ValueError(f'{recording.path}: {err}') from None
+    top = int(np.argmax(recording.state_injected))
+    rest = recording.volumes[0]
+    added = recording.volumes[top] - rest
+    share = added / max(float(np.sum(added)), 1e-300)
+    metrics: dict = {
+        'bag': str(recording.path),
+        'namespace': recording.namespace,
+        'units': 'SI: volumes m^3, pressures Pa (gauge), energy J, positions m, times s',
+        'segments': list(recording.segment_names),
+        'duration_s': float(recording.pump_time_s[-1]),
+        'message_counts': dict(sorted(recording.counts.items())),
+        'ignored_from_before_the_first_pump_command': recording.ignored,
+        'ambient_pressure_pa': recording.ambient_pressure_pa,
+        **result,
+        'peak_injection': {'injected_m3': float(recording.state_injected[top]),
+                           'pressure_pa': float(recording.pressure[top]),
+                           'share_of_added_volume': [float(x) for x in share]},
+        'snap_events_topic': [{k: e[k] for k in ('injected_m3', 'from_pressure_pa',
+                                                 'to_pressure_pa') if k in e}
+                              for e in recording.events],
+        'steps': [{'step': s.step, 'direction': s.direction, 'cycle': s.cycle,
+                   'injected_m3': s.injected,
+                   'trigger_injected_m3': s.trigger_injected, 'time_s': s.time_s,
+                   'tip_m': [float(x) for x in s.tip]} for s in recording.snapshots],
+        'warnings': [],
+    }
+    if recording.ignored:
+        metrics['warnings'].append(
+            'left out, stamped before the first pump command (latched from an earlier run): '
+            + ', '.join(f'{topic} {n}' for topic, n in sorted(recording.ignored.items())))
+    if scene is not None and emap is not None:
+        from softseq_ros.physics.equilibrium import classify
+
+        metrics['scene'] = scene.name
+        metrics['sequence_type_of_scene'] = classify(emap)
+        metrics['segment_pressure_limits_pa'] = segment_limits(list(scene.segments),
+                                                               scene.segment_names)
+        if metrics['sequence_type_of_scene'] != metrics['sequence_type']:
+            metrics['warnings'].append(
+                f'the recording reads as {metrics["sequence_type"]}, the scene classifies as '
+                f'{metrics["sequence_type_of_scene"]} over its whole range (the pump may not '
+                'cover it)')
+    return metrics
+
+
+def load_reference(path: str | os.PathLike) -> dict:
+    """A reference file (YAML) of what a paper reports; see config/reference/."""
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except OSError as err:
+        raise ReferenceFileError(f'{path}: cannot read the reference file ({err.strerror})') \
+            from None
+    except yaml.YAMLError as err:
+        raise ReferenceFileError(f'{path}: not valid YAML ({err})') from None
+    if not isinstance(document, dict) or 'reported' not in document:
+        raise ReferenceFileError(f'{path}: a reference file needs a mapping "reported"')
+    return document
+
+
+def against_reference(metrics: dict, reference: dict) -> dict:
+    """Each reported fact beside what the recording shows, with the difference."""
+    reported = reference['reported']
+    checks = []
+    if 'sequence_type' in reported:
+        checks.append({'what': 'sequence type', 'reported': reported['sequence_type'],
+                       'recorded': metrics['sequence_type'],
+                       'agrees': reported['sequence_type'] == metrics['sequence_type']})
+    onset = (metrics.get('plateau') or {}).get('onset_injected_m3')
+    if 'plateau_onset_injected_m3' in reported:
+        target = float(reported['plateau_onset_injected_m3'])
+        tolerance = float(reported.get('plateau_onset_tolerance_m3', 0.1 * target))
+        checks.append({'what': 'combined PV plateau reached (95 % of the final pressure) at',
+                       'reported_m3': target, 'recorded_m3': onset,
+                       'difference_m3': None if onset is None else onset - target,
+                       'agrees': onset is not None and abs(onset - target) <= tolerance})
+    order = reported.get('segment_plateau_lower')
+    if order:
+        switch = metrics.get('switch') or {}
+        limits = metrics.get('segment_pressure_limits_pa') or {}
+        lower = order
+        taking = switch.get('segment_taking_over')
+        agrees = taking == lower
+        if limits:
+            agrees = agrees and limits.get(lower, np.inf) == min(limits.values())
+        checks.append({'what': 'segment with the lower plateau (takes the inflow after the '
+                       'switch)', 'reported': lower, 'recorded': taking,
+                       'segment_pressure_limits_pa': limits or None, 'agrees': bool(agrees)})
+    steps = {(s['step'], s['direction']): s for s in _first_cycle_steps(metrics)[0]}
+    for entry in reported.get('steps', []):
+        shot = steps.get((int(entry['step']), 'inflation'))
+        recorded = None if shot is None else shot['injected_m3']
+        row = {'what': f'step {entry["step"]} volume', 'recorded_m3': recorded}
+        for key in ('simulation_injected_m3', 'experiment_injected_m3'):
+            if key in entry:
+                row[key.replace('_injected_m3', '_reported_m3')] = float(entry[key])
+                row[key.replace('_injected_m3', '_difference_m3')] = \
+                    None if recorded is None else recorded - float(entry[key])
+        checks.append(row)
+    return {'source': reference.get('source', ''), 'checks': checks}
+
+
+def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str | None = None,
+                 experiment_csv: str | os.PathLike | None = None,
+                 reference_file: str | os.PathLike | None = None, namespace: str | None = None,
+                 svg: bool = True, figures: bool = True) -> tuple[dict, str]:
+    """Read the bag, write metrics.json, report.md, summary.txt and figures; return both."""
+    out = Path(out)
+    workers = None
+    if figures:
+        from softseq_ros.analysis.figures import start_workers
+
+        workers = start_workers()
+    try:
+        return _write_report(bag, out, scene_name, experiment_csv, reference_file, namespace,
+                             svg, figures, workers)
+    finally:
+        if workers is not None:
+            workers.terminate()
+            workers.join()
+
+
+def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
+                  experiment_csv: str | os.PathLike | None,
+                  reference_file: str | os.PathLike | None, namespace: str | None, svg: bool,
+                  figures: bool, workers: object | None) -> tuple[dict, str]:
+    experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
+    reference = load_reference(reference_file) if reference_file is not None else None
+    scene = emap = None
+    if scene_name is not None:
+        from softseq_ros.physics.scene import load_scene
+        from softseq_ros.physics.solve import build_map
+
+        scene = load_scene(scene_name)
+        emap = build_map(scene.segments, scene.solver.resolution)
+    recording = load_recording(bag, namespace)
+    if scene is not None and scene.segment_names != recording.segment_names:
+        raise ValueError(f'{bag}: the bag\'s segments {", ".join(recording.segment_names)} are '
+                         f'not the scene\'s {", ".join(scene.segment_names)}')
+    metrics = recording_metrics(recording, scene, emap)
+    if experiment is not None:
+        metrics['warnings'].extend(experiment.warnings)
+        metrics['experiment'] = compare(recording_trace(recording), experiment,
+                                        recording.snapshots)
+    if reference is not None:
+        metrics['reference'] = against_reference(metrics, reference)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    if figures:
+        from softseq_ros.analysis.figures import write_figures
+
+        written = write_figures(recording, emap, out, experiment, svg, workers)
+    metrics['figures'] = [p.name for p in written]
+    (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json) + '\n')
+    text = summary_text(metrics)
+    (out / 'summary.txt').write_text(text + '\n')
+    (out / 'report.md').write_text(markdown(metrics))
+    return metrics, text
+
+
+def _json(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f'not JSON serialisable: {type(value).__name__}')
+
+
+def _ml(value: float | None, digits: int = 2) -> str:
+    return '-' if value is None else f'{value * ML:.{digits}f} mL'
+
+
+def _kpa(value: float | None, digits: int = 2) -> str:
+    return '-' if value is None else f'{value * KPA:.{digits}f} kPa'
+
+
+def summary_text(metrics: dict) -> str:
+    """A few lines a researcher reads first."""
+    lines = [f'recording: {metrics["bag"]} (namespace {metrics["namespace"]})',
+             f'duration: {metrics["duration_s"]:.1f} s of rig time, injected '
+             f'{_ml(metrics["injected_range_m3"][0])} to {_ml(metrics["injected_range_m3"][1])}']
+    scene_type = metrics.get('sequence_type_of_scene')
+    lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording)'
+                 + (f'; scene: {scene_type}' if scene_type else ''))
+    switch = metrics.get('switch')
+    if switch:
+        lines.append(f'switch: at {_ml(switch["injected_m3"])} injected, '
+                     f'{switch["segment_taking_over"]} takes over the inflow')
+    peak = metrics['peak_injection']
+    split = ', '.join(f'{name} {share * 100:.0f} %' for name, share in
+                      zip(metrics['segments'], peak['share_of_added_volume']))
+    lines.append(f'at peak injection: gauge pressure {_kpa(peak["pressure_pa"])}, '
+                 f'added volume split {split}')
+    plateau = metrics.get('plateau')
+    if plateau:
+        lines.append(f'plateau: {_kpa(plateau["pressure_pa"])} gauge at the end of inflation, '
+                     f'95 % of it reached at {_ml(plateau["onset_injected_m3"])}')
+    if metrics['snaps']:
+        for snap in metrics['snaps']:
+            lines.append(f'snap-through at {_ml(snap["injected_m3"], 3)} ({snap["direction"]}): '
+                         f'gauge pressure {_kpa(snap["from_pressure_pa"])} -> '
+                         f'{_kpa(snap["to_pressure_pa"])}, {_ml(snap["fluid_moved_m3"], 3)} '
+                         'moved between segments')
+    else:
+        lines.append('snap-throughs: none')
+    lines.append(f'hysteresis area: {metrics["hysteresis_area_j"] * 1e3:.4f} mJ')
+    first, later = _first_cycle_steps(metrics)
+    for step in first:
+        tip = step['tip_m']
+        lines.append(f'step {step["step"]} ({step["direction"]}) at {_ml(step["injected_m3"], 1)}'
+                     f': tip at x {tip[0] * MM:.1f} mm, z {tip[1] * MM:.1f} mm')
+    if later:
+        lines.append(f'({later} snapshots of later cycles in metrics.json)')
+    experiment = metrics.get('experiment')
+    if experiment:
+        lines.append(f'experiment {experiment["file"]}: PV RMSE {_kpa(experiment["pv_rmse_pa"])}'
+                     f', max {_kpa(experiment["pv_max_error_pa"])} '
+                     f'({experiment["rows_outside_model_range"]} rows outside the recording)')
+        align = experiment.get('alignment')
+        if align:
+            lines.append(f'  best alignment: experiment = {align["pressure_scale"]:.4f} x model('
+                         f'u - {_ml(align["volume_shift_m3"], 3)}), RMSE after '
+                         f'{_kpa(align["rmse_after_pa"])}')
+        for tip in experiment['tip_errors']:
+            lines.append(f'  step {tip["step"]} ({tip["direction"]}): tip error '
+                         f'{tip["error_m"] * MM:.1f} mm')
+    reference = metrics.get('reference')
+    if reference:
+        lines.append(f'against {reference["source"]}:')
+        lines.extend('  ' + _check_text(check) for check in reference['checks'])
+    for warning in metrics['warnings']:
+        lines.append(f'warning: {warning}')
+    return '\n'.join(lines)
+
+
+def _first_cycle_steps(metrics: dict) -> tuple[list[dict], int]:
+    first = [step for step in metrics['steps'] if step.get('cycle', 1) == 1]
+    return first, len(metrics['steps']) - len(first)
+
+
+def _check_text(check: dict) -> str:
+    mark = {True: 'agrees', False: 'differs', None: ''}.get(check.get('agrees'), '')
+    if 'recorded_m3' in check:
+        parts = [f'{check["what"]}: recorded {_ml(check["recorded_m3"], 1)}']
+        for key in ('reported_m3', 'simulation_reported_m3', 'experiment_reported_m3'):
+            if key in check:
+                label = key.replace('_reported_m3', '').replace('reported_m3', 'reported')
+                parts.append(f'{label or "reported"} {_ml(check[key], 1)}')
+        return ', '.join(parts) + (f' ({mark})' if mark else '')
+    return f'{check["what"]}: recorded {check["recorded"]}, reported {check["reported"]} ({mark})'
+
+
+def markdown(metrics: dict) -> str:
+    """report.md: the summary as a short document with tables."""
+    lines = [f'# Report of `{metrics["bag"]}`', '',
+             'Pressures are gauge; the numbers in SI are in `metrics.json`.', '',
+             '| quantity | value |', '|---|---|',
+             f'| sequence type (recording) | {metrics["sequence_type"]} |']
+    if metrics.get('sequence_type_of_scene'):
+        lines.append(f'| sequence type (scene `{metrics["scene"]}`) | '
+                     f'{metrics["sequence_type_of_scene"]} |')
+    switch = metrics.get('switch')
+    lines.append("| switch (largest change of a segment's share of the inflow) | "
+                 + (f'{_ml(switch["injected_m3"])}, {switch["segment_taking_over"]} takes over'
+                    if switch else '-') + ' |')
+    plateau = metrics.get('plateau') or {}
+    lines.append(f'| plateau pressure (end of inflation) | {_kpa(plateau.get("pressure_pa"))} |')
+    lines.append(f'| plateau reached (95 %) at | {_ml(plateau.get("onset_injected_m3"))} |')
+    lines.append(f'| hysteresis area | {metrics["hysteresis_area_j"] * 1e3:.4f} mJ |')
+    lines.append(f'| snap-throughs | {metrics["snap_count"]} |')
+    for name, limit in (metrics.get('segment_pressure_limits_pa') or {}).items():
+        lines.append(f'| {name}: highest pressure of its curve (peak or plateau) | '
+                     f'{_kpa(limit)} |')
+    if metrics['snaps']:
+        lines += ['', '## Snap-throughs', '', '| injected | direction | gauge pressure | '
+                  'fluid moved |', '|---:|---|---|---:|']
+        for snap in metrics['snaps']:
+            lines.append(f'| {_ml(snap["injected_m3"], 3)} | {snap["direction"]} | '
+                         f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '
+                         f'{_ml(snap["fluid_moved_m3"], 3)} |')
+    first, later = _first_cycle_steps(metrics)
+    if first:
+        lines += ['', '## Steps (camera snapshots, first cycle)', '',
+                  '| step | direction | injected | tip x | tip z |', '|---:|---|---:|---:|---:|']
+        if later:
+            lines.insert(-2, f'{later} snapshots of later cycles are in `metrics.json`.\n')
+        for step in first:
+            lines.append(f'| {step["step"]} | {step["direction"]} | '
+                         f'{_ml(step["injected_m3"], 1)} | {step["tip_m"][0] * MM:.1f} mm | '
+                         f'{step["tip_m"][1] * MM:.1f} mm |')
+    experiment = metrics.get('experiment')
+    if experiment:
+        align = experiment.get('alignment') or {}
+        lines += ['', f'## Against the experiment `{experiment["file"]}`', '',
+                  '| quantity | value |', '|---|---|',
+                  f'| PV RMSE | {_kpa(experiment["pv_rmse_pa"], 3)} |',
+                  f'| PV max error | {_kpa(experiment["pv_max_error_pa"], 3)} |',
+                  f"| rows outside the recording's range | "
+                  f'{experiment["rows_outside_model_range"]} |',
+                  f'| best volume shift | {_ml(align.get("volume_shift_m3"), 3)} |',
+                  f'| best pressure scale | {align.get("pressure_scale", float("nan")):.4f} |',
+                  f'| RMSE after alignment | {_kpa(align.get("rmse_after_pa"), 3)} |']
+        for tip in experiment['tip_errors']:
+            lines.append(f'| step {tip["step"]} ({tip["direction"]}) tip error | '
+                         f'{tip["error_m"] * MM:.2f} mm |')
+    reference = metrics.get('reference')
+    if reference:
+        lines += ['', f'## Against {reference["source"]}', '']
+        lines.extend(f'- {_check_text(check)}' for check in reference['checks'])
+    if metrics['warnings']:
+        lines += ['', '## Warnings', '']
+        lines.extend(f'- {warning}' for warning in metrics['warnings'])
+    if metrics.get('figures'):
+        lines += ['', '## Figures', '']
+        lines.extend(f'![{name}]({name})' for name in metrics['figures'] if name.endswith('.png'))
+    return '\n'.join(lines) + '\n'
+
+
+__all__ = ['Experiment', 'against_reference', 'load_reference', 'markdown',
+           'recording_metrics', 'recording_trace', 'summary_text', 'write_report']

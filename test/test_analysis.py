@@ -1,0 +1,471 @@
+"""Playback analysis: the array reader, metrics against the solver, experiments, bad bags."""
+
+import json
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+import yaml
+
+from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
+from softseq_ros.analysis.recording import RecordingError, load_recording
+from softseq_ros.analysis.report import recording_trace, write_report
+from softseq_ros.bag.arrays import JointStateDecoder, open_bag
+from softseq_ros.batch import run_scene
+from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.physics.scene import load_scene
+from softseq_ros.rig import contract
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+ML = 1e-6
+
+
+def _scene(tmp_path_factory, source: str, name: str, pump: dict, camera: dict) -> Path:
+    scene = yaml.safe_load((CONFIG / source).read_text())
+    scene['name'] = name
+    scene['pump'].update(pump)
+    scene['camera'] = camera
+    folder = tmp_path_factory.mktemp(name)
+    for segment in scene['segments']:
+        if 'table' in segment:
+            segment['table'] = str(CONFIG / segment['table'])
+    path = folder / f'{name}.yaml'
+    path.write_text(yaml.safe_dump(scene))
+    return path
+
+
+@pytest.fixture(scope='module')
+def asymmetric(tmp_path_factory) -> tuple[Path, Path]:
+    """The Fig. 1 asymmetric pair, 0 -> 50 mL -> 0 at 20 mL/s: two snaps each way."""
+    scene = _scene(tmp_path_factory, 'fig1_asymmetric.yaml', 'fast_asymmetric',
+                   {'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50,
+                    'legs': [{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}]},
+                   {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5, 4.5e-5]})
+    bag = scene.parent / 'bag'
+    run_scene(scene, bag, show_progress=False)
+    return scene, bag
+
+
+@pytest.fixture(scope='module')
+def paper(tmp_path_factory) -> tuple[Path, Path]:
+    """The paper's actuator, 0 -> 65 mL -> 0 at 1 mL/s (the paper's steps as triggers)."""
+    scene = _scene(tmp_path_factory, 'paper.yaml', 'fast_paper',
+                   {'flow_rate_m3_per_s': 1.0e-6, 'rate_hz': 50},
+                   {'rate_hz': 5,
+                    'trigger_injected_m3': [5.0e-6, 1.5e-5, 2.5e-5, 4.5e-5, 6.0e-5]})
+    bag = scene.parent / 'bag'
+    run_scene(scene, bag, show_progress=False)
+    return scene, bag
+
+
+# ------------------------------------------------------------------------ the array reader
+
+
+def test_array_reader_matches_rosbags_message_for_message(asymmetric):
+    _, bag = asymmetric
+    topic = contract.resolve(contract.VOLUMES.name, '/')
+    decoder = JointStateDecoder(topic)
+    open_bag(bag).read([decoder], validate_crcs=True)
+    ours = decoder.result()
+    with AnyReader([bag]) as reader:
+        connections = [c for c in reader.connections if c.topic == topic]
+        theirs = [(t, reader.deserialize(raw, c.msgtype))
+                  for c, t, raw in reader.messages(connections=connections)]
+    assert len(theirs) == ours['stamp_ns'].size > 100
+    np.testing.assert_array_equal(ours['log_time_ns'], [t for t, _ in theirs])
+    np.testing.assert_array_equal(ours['stamp_ns'], [m.header.stamp.sec * 10**9
+                                                     + m.header.stamp.nanosec for _, m in theirs])
+    np.testing.assert_array_equal(ours['position'], [m.position for _, m in theirs])
+    np.testing.assert_array_equal(ours['effort'], [m.effort for _, m in theirs])
+    assert decoder.names == tuple(theirs[0][1].name)
+
+
+# ------------------------------------------------------------------------ metrics vs solver
+
+
+def test_batch_bag_gives_the_solvers_sequence_type_and_snap_volumes(asymmetric, tmp_path):
+    scene_path, bag = asymmetric
+    metrics, _ = write_report(bag, tmp_path / 'report', scene_name=str(scene_path),
+                              svg=False, figures=False)
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    recording = load_recording(bag)
+    solved = Tracker(emap).sweep(recording.pump_injected)
+    assert metrics['sequence_type'] == metrics['sequence_type_of_scene'] == 'asymmetric'
+    # The snaps are found in the recorded volumes, independently of the events topic.
+    assert len(solved.events) == metrics['snap_count'] == 4
+    step = float(np.max(np.abs(np.diff(recording.pump_injected))))
+    for ours, theirs in zip(metrics['snaps'], solved.events):
+        # A snap lands on the first command past the fold.
+        assert 0.0 <= abs(ours['injected_m3'] - theirs.injected) <= step
+        moved = 0.5 * np.sum(np.abs(theirs.to_volumes - theirs.from_volumes))
+        assert ours['fluid_moved_m3'] == pytest.approx(moved, rel=0.2)
+    assert [s['direction'] for s in metrics['snaps']] == ['inflation'] * 2 + ['deflation'] * 2
+    # A loop: inflation runs at higher pressure than deflation.
+    assert metrics['hysteresis_area_j'] > 0.0
+
+
+def test_paper_scene_is_partial_with_the_top_taking_over_and_meets_the_reference(paper,
+                                                                                  tmp_path):
+    scene_path, bag = paper
+    metrics, text = write_report(bag, tmp_path / 'report', scene_name=str(scene_path),
+                                 reference_file=CONFIG / 'reference' / 'milana2018.yaml',
+                                 svg=False, figures=False)
+    assert metrics['sequence_type'] == metrics['sequence_type_of_scene'] == 'partial'
+    assert metrics['snap_count'] == 0
+    assert abs(metrics['hysteresis_area_j']) < 1e-9
+    switch = metrics['switch']
+    assert switch['segment_taking_over'] == 'top'
+    assert 20 * ML < switch['injected_m3'] < 40 * ML
+    # The tables were calibrated to reach 95 % of the 65 mL pressure at 40 mL.
+    assert metrics['plateau']['onset_injected_m3'] == pytest.approx(40 * ML, abs=1 * ML)
+    checks = {c['what'].split(' (')[0]: c for c in metrics['reference']['checks']}
+    assert all(c['agrees'] for c in metrics['reference']['checks'] if 'agrees' in c)
+    assert checks['step 4 volume']['experiment_difference_m3'] == pytest.approx(-5 * ML,
+                                                                         abs=0.05 * ML)
+    steps = [(s['step'], s['direction']) for s in metrics['steps']]
+    assert steps == [(n, 'inflation') for n in range(1, 6)] + \
+        [(n, 'deflation') for n in range(5, 0, -1)]
+    saved = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
+    assert saved['sequence_type'] == 'partial'
+    assert 'partial' in (tmp_path / 'report' / 'report.md').read_text()
+
+
+# ------------------------------------------------------------------------ experiments
+
+
+@pytest.mark.parametrize(('shift', 'scale'), [(3.0 * ML, 1.08), (-2.0 * ML, 0.9)])
+def test_a_synthetic_perturbation_is_recovered(paper, tmp_path, shift, scale):
+    _, bag = paper
+    trace = recording_trace(load_recording(bag))
+    path = tmp_path / 'experiment.csv'
+    path.write_text(synthetic_experiment(trace, shift, scale, rows=300))
+    result = compare(trace, read_experiment(path))
+    align = result['alignment']
+    # Stated tolerance: 0.02 mL and 0.2 % on a 300-row file.
+    assert align['volume_shift_m3'] == pytest.approx(shift, abs=0.02 * ML)
+    assert align['pressure_scale'] == pytest.approx(scale, rel=2e-3)
+    assert align['rmse_after_pa'] < 1e-3 * result['pv_rmse_pa']
+    # Without alignment the error is what the perturbation makes.
+    assert result['pv_rmse_pa'] > 100.0
+
+
+def test_absolute_pressure_is_converted_and_undeclared_absolute_is_flagged(paper, tmp_path):
+    _, bag = paper
+    trace = recording_trace(load_recording(bag))
+    declared = tmp_path / 'absolute.csv'
+    declared.write_text(synthetic_experiment(trace, 0.0, 1.0, rows=200,
+                                             absolute_ambient_pa=101325.0))
+    experiment = read_experiment(declared)
+    assert experiment.pressure_kind == 'absolute' and not experiment.warnings
+    assert compare(trace, experiment)['pv_rmse_pa'] < 1.0
+    undeclared = tmp_path / 'undeclared.csv'
+    undeclared.write_text('\n'.join(line for line in declared.read_text().splitlines()
+                                    if 'pressure_kind' not in line and 'ambient' not in line))
+    experiment = read_experiment(undeclared)
+    assert len(experiment.warnings) == 1 and 'looks absolute' in experiment.warnings[0]
+    assert compare(trace, experiment)['pv_rmse_pa'] > 90e3
+
+
+def test_tip_errors_per_step(paper, tmp_path):
+    scene_path, bag = paper
+    recording = load_recording(bag)
+    trace = recording_trace(recording)
+    path = tmp_path / 'tips.csv'
+    path.write_text(synthetic_experiment(trace, 0.0, 1.0, rows=2000,
+                                         lengths=load_scene(scene_path).lengths,
+                                         tip_offset_m=(0.002, 0.0)))
+    errors = compare(trace, read_experiment(path), recording.snapshots)['tip_errors']
+    assert len(errors) == len(recording.snapshots) == 10
+    for error in errors:
+        assert error['error_m'] == pytest.approx(0.002, abs=2e-4)
+
+
+def test_experiment_beyond_the_recording_widens_the_axis(paper, tmp_path, monkeypatch):
+    from softseq_ros.analysis import figures
+
+    _, bag = paper
+    recording = load_recording(bag)
+    trace = recording_trace(recording)
+    path = tmp_path / 'beyond.csv'
+    path.write_text(synthetic_experiment(trace, 10 * ML, 1.0, rows=100))
+    experiment = read_experiment(path)
+    drawn = []
+    monkeypatch.setattr(figures, '_save', lambda fig, out, svg: drawn.append(fig) or [out])
+    figures.plot_pv(recording, None, tmp_path / 'pv.png', experiment, svg=False)
+    low, high = drawn[0].axes[0].get_xlim()
+    assert high >= experiment.injected.max() * 1e6 > recording.state_injected.max() * 1e6
+    assert low <= 0.0
+    assert compare(trace, experiment)['rows_outside_model_range'] > 0
+
+
+@pytest.mark.parametrize(('content', 'message'), [
+    ('injected_m3,pressure\n0,1\n', 'no column pressure_pa'),
+    ('# pressure_kind: vacuum\ninjected_m3,pressure_pa\n0,1\n', 'must be gauge or absolute'),
+    ('injected_m3,pressure_pa\n0,abc\n', 'row 1, column pressure_pa: not a number'),
+    ('injected_m3,pressure_pa\n65,1000\n', r'volumes must be in m\^3'),
+    ('injected_m3,pressure_pa,direction\n0,1,up\n', 'must be inflation or deflation'),
+])
+def test_bad_experiment_files_are_one_line(tmp_path, content, message):
+    path = tmp_path / 'bad.csv'
+    path.write_text(content)
+    with pytest.raises(ValueError, match=message) as error:
+        read_experiment(path)
+    assert str(path) in str(error.value) and '\n' not in str(error.value)
+
+
+# ------------------------------------------------------------------------ other bags
+
+
+def _copy_bag(source: Path, target: Path, rename=lambda topic: topic, extra=()) -> None:
+    """Rewrite a bag with rosbags (an independent writer): renamed topics, extra messages."""
+    with AnyReader([source]) as reader, \
+            Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connections = {}
+        for c in reader.connections:
+            connections[c.topic] = writer.add_connection(
+                rename(c.topic), c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest)
+        extras = list(extra)
+        for c in {e[0] for e in extras} - set(connections):
+            connections[c] = writer.add_connection(
+                c, 'std_msgs/msg/String', typestore=reader.typestore)
+        for c, timestamp, raw in reader.messages():
+            while extras and extras[0][1] <= timestamp:
+                topic, when, data = extras.pop(0)
+                writer.write(connections[topic], when, data)
+            writer.write(connections[c.topic], timestamp, raw)
+
+
+def _string_cdr(text: str) -> bytes:
+    encoded = text.encode() + b'\x00'
+    return b'\x00\x01\x00\x00' + len(encoded).to_bytes(4, 'little') + encoded
+
+
+def test_snapshot_steps_pair_by_stamp_and_a_latched_snapshot_is_no_step(asymmetric, tmp_path):
+    _, bag = asymmetric
+    snapshots = contract.resolve(contract.SNAPSHOTS.name, '/')
+    with AnyReader([bag]) as reader:
+        shots = [(t, raw) for c, t, raw in reader.messages(
+            connections=[c for c in reader.connections if c.topic == snapshots])]
+        first_command = next(t for c, t, raw in reader.messages() if c.topic.endswith(
+            contract.PUMP_COMMAND.name))
+    # A latched snapshot from an earlier run: stamped 5 s before this run's first command.
+    stale = bytearray(shots[0][1])
+    stale[4:8] = (-5).to_bytes(4, 'little', signed=True)
+    steps_topic = contract.resolve(contract.SNAPSHOT_STEPS.name, '/')
+    status_topic = contract.resolve(contract.PUMP_STATUS.name, '/')
+    extra = [(snapshots, first_command, bytes(stale)),
+             (status_topic, first_command, _string_cdr(json.dumps(
+                 {'state': 'running', 'reason': '', 'stamp_ns': first_command})))]
+    for number, (t, raw) in enumerate(shots):
+        stamp = int.from_bytes(raw[4:8], 'little', signed=True) * 10**9 + \
+            int.from_bytes(raw[8:12], 'little')
+        extra.append((steps_topic, t, _string_cdr(json.dumps(
+            {'step': 7 + number, 'trigger_injected_m3': 1e-6 * number, 'direction': 'inflation',
+             'injected_m3': 0.0, 'stamp_ns': stamp}))))
+    extra.sort(key=lambda e: e[1])
+    copy = tmp_path / 'copy'
+    _copy_bag(bag, copy, extra=extra)
+    recording = load_recording(copy)
+    assert [s.step for s in recording.snapshots] == [7 + n for n in range(len(shots))]
+    assert recording.ignored == {snapshots: 1}
+    assert ('running', 0.0) in [(state, t) for t, state, _ in recording.status]
+
+
+def test_two_rigs_in_one_bag_need_a_namespace(asymmetric, tmp_path, capsys):
+    _, bag = asymmetric
+    copy = tmp_path / 'one'
+    _copy_bag(bag, copy, rename=lambda topic: '/rig2' + topic)
+    assert load_recording(copy).namespace == '/rig2'
+    assert load_recording(copy, '/rig2').namespace == '/rig2'
+    with pytest.raises(RecordingError, match='no rig in namespace /rig9'):
+        load_recording(copy, 'rig9')
+    both = tmp_path / 'both'
+    with AnyReader([copy]) as reader, \
+            Writer(both, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        out = {}
+        for c in reader.connections:
+            for ns in ('/rig2', '/rig3'):
+                out[(c.topic, ns)] = writer.add_connection(
+                    c.topic.replace('/rig2', ns), c.msgtype, msgdef=c.msgdef.data,
+                    rihs01=c.digest)
+        for c, t, raw in reader.messages():
+            for ns in ('/rig2', '/rig3'):
+                writer.write(out[(c.topic, ns)], t, raw)
+    with pytest.raises(RecordingError, match='namespaces /rig2, /rig3; choose one with '
+                                             '--namespace'):
+        load_recording(both)
+    assert load_recording(both, 'rig3').namespace == '/rig3'
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, '-m', 'softseq_ros.cli', *args], capture_output=True,
+                          text=True, timeout=120, stdin=subprocess.DEVNULL)
+
+
+def test_foreign_and_broken_bags_are_one_clear_line(asymmetric, tmp_path):
+    _, bag = asymmetric
+    foreign = tmp_path / 'foreign'
+    foreign.mkdir()
+    (foreign / 'data.mcap').write_bytes(b'SQLite format 3\x00' + bytes(100))
+    truncated = tmp_path / 'truncated'
+    truncated.mkdir()
+    data = next(bag.glob('*.mcap')).read_bytes()
+    (truncated / 'cut.mcap').write_bytes(data[:len(data) // 2])
+    no_rig = tmp_path / 'no_rig'
+    _copy_bag(bag, no_rig, rename=lambda topic: topic.replace('pump', 'syringe'))
+    cases = [(foreign, 'not an MCAP file'), (truncated, 'softseq recover'),
+             (no_rig, 'not a rig recording'), (tmp_path / 'missing', 'no such bag')]
+    for path, message in cases:
+        result = _cli('report', str(path), '--out', str(tmp_path / 'out'))
+        assert result.returncode == 2, (path, result.stderr)
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and message in lines[0] and str(path) in lines[0], lines
+
+
+def test_compare_puts_two_scenes_side_by_side(asymmetric, paper, tmp_path):
+    result = _cli('compare', str(paper[1]), str(asymmetric[1]), '--out', str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    rows = {line.split('|')[1].strip(): [c.strip() for c in line.split('|')[2:-1]]
+            for line in result.stdout.splitlines() if line.startswith('| ')}
+    assert rows['sequence type'] == ['', 'partial', 'asymmetric', 'differs']
+    assert rows['snap-throughs'] == ['', '0', '4', '4']
+    assert rows['snap 1 (inflation)'][1:3] == ['-', rows['snap 1 (inflation)'][2]]
+    saved = json.loads((tmp_path / 'compare.json').read_text())
+    assert saved['a']['sequence_type'] == 'partial' and saved['b']['snap_count'] == 4
+
+
+def _message_paths(node) -> list[str]:
+    """Every string in a Foxglove layout that names a topic (``/topic.field[0]`` or a topic)."""
+    if isinstance(node, dict):
+        found = [key for key in node if isinstance(key, str) and key.startswith('/')]
+        return found + [p for value in node.values() for p in _message_paths(value)]
+    if isinstance(node, list):
+        return [p for value in node for p in _message_paths(value)]
+    return [node] if isinstance(node, str) and node.startswith('/') else []
+
+
+def test_foxglove_layout_names_only_topics_and_fields_a_bag_has(asymmetric):
+    _, bag = asymmetric
+    layout = json.loads((CONFIG / 'foxglove' / 'softseq_rig.json').read_text())
+    paths = _message_paths(layout)
+    assert len(paths) >= 10
+    with AnyReader([bag]) as reader:
+        first = {}
+        for connection, _, raw in reader.messages():
+            first.setdefault(connection.topic, reader.deserialize(raw, connection.msgtype))
+    for path in paths:
+        topic, _, fields = path.partition('.')
+        assert topic in first, f'{path}: no topic {topic} in a rig bag'
+        value = first[topic]
+        for part in filter(None, fields.split('.')):
+            name, _, index = part.partition('[')
+            assert hasattr(value, name), f'{path}: {type(value).__name__} has no {name}'
+            value = getattr(value, name)
+            if index:
+                value = value[int(index.rstrip(']'))]
+        if fields:
+            assert isinstance(value, float), f'{path}: not a number'
+
+
+def test_thinned_figures_keep_every_snap_and_invent_none(asymmetric, monkeypatch):
+    from softseq_ros.analysis import figures
+
+    _, bag = asymmetric
+    recording = load_recording(bag)
+    monkeypatch.setattr(figures, 'MAX_POINTS', 16)
+    small = figures.thinned(recording)
+    assert small.volumes.shape[0] < recording.volumes.shape[0] // 2
+    snaps = figures._snap_rows(recording)
+    assert snaps.size == 4
+    # The thinned copy points at the same states: each snap row and the row before it.
+    np.testing.assert_array_equal(small.volumes[small.snap_rows], recording.volumes[snaps])
+    np.testing.assert_array_equal(small.volumes[small.snap_rows - 1],
+                                  recording.volumes[snaps - 1])
+
+
+def test_report_writes_every_figure_as_png_and_svg(asymmetric, tmp_path):
+    scene_path, bag = asymmetric
+    metrics, _ = write_report(bag, tmp_path, scene_name=str(scene_path))
+    names = {'pv', 'segments', 'volume_split', 'shapes', 'timeseries'}
+    assert set(metrics['figures']) == {f'{n}.{ext}' for n in names for ext in ('png', 'svg')}
+    for name in metrics['figures']:
+        data = (tmp_path / name).read_bytes()
+        assert data.startswith(b'\x89PNG') if name.endswith('.png') else b'<svg' in data[:400]
+    assert '![pv.png](pv.png)' in (tmp_path / 'report.md').read_text()
+
+
+@pytest.mark.parametrize('layout', ['lz4, chunk indexes only', 'no chunks', 'no indexes'])
+def test_other_mcap_layouts_read_the_same(asymmetric, tmp_path, layout):
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, IndexType
+    from mcap.writer import Writer as McapWriter
+
+    _, bag = asymmetric
+    options = {'lz4, chunk indexes only': {'compression': CompressionType.LZ4,
+                                           'index_types': IndexType.CHUNK, 'chunk_size': 8192},
+               'no chunks': {'use_chunking': False},
+               'no indexes': {'index_types': IndexType.NONE, 'chunk_size': 8192}}[layout]
+    copy = tmp_path / 'copy'
+    copy.mkdir()
+    with open(next(bag.glob('*.mcap')), 'rb') as source, \
+            open(copy / 'copy.mcap', 'wb') as target:
+        reader = make_reader(source)
+        writer = McapWriter(target, **options)
+        writer.start(profile='ros2', library='test')
+        schemas, channels = {}, {}
+        summary = reader.get_summary()
+        for schema in summary.schemas.values():
+            schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+        for channel in summary.channels.values():
+            channels[channel.id] = writer.register_channel(
+                channel.topic, channel.message_encoding, schemas[channel.schema_id],
+                channel.metadata)
+        for _, channel, message in reader.iter_messages():
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time, message.sequence)
+        writer.finish()
+    ours, theirs = load_recording(bag), load_recording(copy)
+    for name in ('pump_injected', 'state_injected', 'pressure', 'volumes', 'curvatures',
+                 'state_time_s'):
+        np.testing.assert_array_equal(getattr(theirs, name), getattr(ours, name), name)
+    assert [s.step for s in theirs.snapshots] == [s.step for s in ours.snapshots]
+    assert theirs.events == ours.events
+
+
+def test_joint_names_that_change_within_a_recording_are_refused(asymmetric, tmp_path):
+    from mcap.reader import make_reader
+    from mcap.writer import Writer as McapWriter
+
+    _, bag = asymmetric
+    volumes = contract.resolve(contract.VOLUMES.name, '/')
+    copy = tmp_path / 'renamed'
+    copy.mkdir()
+    with open(next(bag.glob('*.mcap')), 'rb') as source, \
+            open(copy / 'renamed.mcap', 'wb') as target:
+        reader = make_reader(source)
+        summary = reader.get_summary()
+        writer = McapWriter(target, chunk_size=4096)
+        writer.start(profile='ros2', library='test')
+        schemas = {s.id: writer.register_schema(s.name, s.encoding, s.data)
+                   for s in summary.schemas.values()}
+        channels = {c.id: writer.register_channel(c.topic, c.message_encoding,
+                                                  schemas[c.schema_id], c.metadata)
+                    for c in summary.channels.values()}
+        seen = 0
+        for _, channel, message in reader.iter_messages():
+            data = message.data
+            if channel.topic == volumes:
+                seen += 1
+                if seen > 100:  # same length, another joint name: same size, other layout
+                    data = data.replace(b'bottom\x00', b'bottoX\x00')
+            writer.add_message(channels[channel.id], message.log_time, data,
+                               message.publish_time)
+        writer.finish()
+    with pytest.raises(RecordingError, match=r'changes its names or frame id') as error:
+        load_recording(copy)
+    assert volumes in str(error.value) and '\n' not in str(error.value)
