@@ -17,7 +17,8 @@ import sys
 import time
 from typing import Any, Callable, TextIO
 
-from softseq_ros.bag.writer import BagWriter, offered_qos_yaml, qos_profile_dict
+from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
+from softseq_ros.bag.writer import BagWriter
 from softseq_ros.physics.scene import load_scene, scene_path
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core

@@ -128,7 +128,7 @@ def _play(args: argparse.Namespace) -> int:
 
 
 def _recover(args: argparse.Namespace) -> int:
-    from softseq_ros.bag.writer import recover
+    from softseq_ros.bag.recovery import recover
 
     result = recover(args.bag)
     if result.was_complete:

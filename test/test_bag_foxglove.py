@@ -11,7 +11,8 @@ import pytest
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
-from softseq_ros.bag.writer import BagWriter, serialize
+from softseq_ros.bag.forms import serialize
+from softseq_ros.bag.writer import BagWriter
 
 NPM_PACKAGES = ['@mcap/core', '@mcap/support', '@foxglove/rosmsg',
                 '@foxglove/rosmsg2-serialization']

@@ -20,16 +20,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 import yaml
 
+from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict, serialize
 from softseq_ros.bag.msgdefs import SEPARATOR, MessageDefinitionError, message_definition
 from softseq_ros.bag.reader import BagReadError, bag_summary, read_bag
-from softseq_ros.bag.writer import (
-    BagWriter,
-    BagWriterError,
-    offered_qos_yaml,
-    qos_profile_dict,
-    recover,
-    serialize,
-)
+from softseq_ros.bag.recovery import recover
+from softseq_ros.bag.writer import BagWriter, BagWriterError
 
 REPO = Path(__file__).resolve().parents[1]
 T0 = 1_700_000_000_000_000_000  # an arbitrary epoch time [ns]
@@ -296,7 +291,8 @@ def test_recover_complete_file_only_rewrites_metadata(tmp_path):
 CHILD = textwrap.dedent("""
     import sys, time
     from std_msgs.msg import Float64
-    from softseq_ros.bag.writer import BagWriter, serialize
+    from softseq_ros.bag.forms import serialize
+    from softseq_ros.bag.writer import BagWriter
     bag = BagWriter(sys.argv[1])
     bag.add_topic('/pump/injected_volume', 'std_msgs/msg/Float64')
     progress = open(sys.argv[2], 'w', buffering=1)

@@ -9,7 +9,7 @@ from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 
 from softseq_ros.bag.cdr import ENCODERS, FixedLayout, encode
-from softseq_ros.bag.writer import message_type_name, serialize
+from softseq_ros.bag.forms import message_type_name, serialize
 
 
 def stamped(msg, sec=1_795_000_000, nanosec=123_456_789, frame='softseq_base'):

@@ -1,16 +1,10 @@
 """MCAP bags in the rosbag2 layout: writing, reading, playback."""
 
+from .forms import offered_qos_yaml, qos_profile_dict, serialize
 from .msgdefs import MessageDefinitionError, message_definition, type_description_hash
 from .reader import BagMessage, BagReadError, BagSummary, TopicSummary, bag_summary, read_bag
-from .writer import (
-    BagWriter,
-    BagWriterError,
-    RecoveryResult,
-    offered_qos_yaml,
-    qos_profile_dict,
-    recover,
-    serialize,
-)
+from .recovery import RecoveryResult, recover
+from .writer import BagWriter, BagWriterError
 
 __all__ = [
     'BagMessage', 'BagReadError', 'BagSummary', 'BagWriter', 'BagWriterError',

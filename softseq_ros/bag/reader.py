@@ -5,7 +5,7 @@ Messages are decoded with rosbags (Ternaris), an independent rosbag2 implementat
 builds its decoders from the definitions stored in the bag, so no message package has to
 be installed and the decoded objects carry the ROS field names (``msg.header.stamp.sec``).
 rosbags takes topics and counts from ``metadata.yaml``: a bag whose writer died has none;
-run :func:`softseq_ros.bag.writer.recover` on it first (:func:`bag_summary` still gives a
+run :func:`softseq_ros.bag.recovery.recover` on it first (:func:`bag_summary` still gives a
 provisional summary from the .mcap alone).
 """
 
@@ -84,7 +84,7 @@ def read_bag(directory: str | os.PathLike,
     if not (path / METADATA_FILE).is_file():
         raise BagReadError(
             f'{path}: no {METADATA_FILE}; the recording did not finish - recover it first '
-            '(softseq_ros.bag.writer.recover)')
+            '(softseq recover BAG)')
     wanted = None if topics is None else set(topics)
     try:
         with AnyReader([path]) as reader:

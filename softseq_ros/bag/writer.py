@@ -1,5 +1,5 @@
 """
-Write MCAP bags in the layout of rosbag2 (ROS 2 Jazzy), and recover them after a crash.
+Write MCAP bags in the layout of rosbag2 (ROS 2 Jazzy).
 
 A bag is a directory holding one ``<name>_0.mcap`` file and a ``metadata.yaml`` beside it,
 as ``ros2 bag record -s mcap`` leaves it. What is matched (rosbag2 Jazzy,
@@ -21,28 +21,22 @@ rosbag2_storage_mcap/mcap_storage.cpp and rosbag2_storage/yaml.hpp, qos.cpp):
 
 Crash safety: the chunk in progress is closed and the file fsynced at least every
 ``flush_period_s`` (a background thread does it when no messages arrive), so after a
-SIGKILL everything written more than about that long ago is on disk; :func:`recover`
-rebuilds a complete bag from such a truncated file.
+SIGKILL everything written more than about that long ago is on disk;
+:func:`softseq_ros.bag.recovery.recover` rebuilds a complete bag from such a truncated file.
+Message and QoS forms (CDR bytes, offered QoS, rosbag2's YAML) live in
+:mod:`softseq_ros.bag.forms`.
 """
 
 from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import partial
 from importlib.metadata import PackageNotFoundError, version
-import io
 import os
 from pathlib import Path
-import struct
 import threading
 import time
-from typing import Any, BinaryIO, Callable, Iterator, Mapping, Sequence
+from typing import Any, BinaryIO, Callable, Mapping, Sequence
 
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
-import yaml
-
-from .cdr import encode
+from .forms import QosFormError, dump_yaml, parse_qos_yaml
 from .mcap_file import ChunkedMcapWriter
 from .msgdefs import canonical_type_name, message_definition, type_description_hash
 
@@ -57,8 +51,6 @@ DEFAULT_CHUNK_SIZE = 768 * 1024
 DEFAULT_FLUSH_PERIOD_S = 0.5
 # The chunk compression names MCAP records carry ('' = none).
 _COMPRESSIONS = {None: '', 'none': '', 'zstd': 'zstd', 'lz4': 'lz4'}
-# RMW_DURATION_INFINITE as rosbag2 writes it: {sec: INT64_MAX // 1e9, nsec: INT64_MAX % 1e9}.
-INFINITE_DURATION = {'sec': 9223372036, 'nsec': 854775807}
 
 
 class BagWriterError(ValueError):
@@ -71,103 +63,6 @@ def _library_name() -> str:
     except PackageNotFoundError:
         mcap_version = 'unknown'
     return f'softseq_ros bag writer; mcap-python/{mcap_version}'
-
-
-def message_type_name(msg: Any) -> str:
-    """Return ``pkg/msg/Type`` of an rclpy message object."""
-    cls = type(msg)
-    package, namespace = cls.__module__.split('.')[:2]
-    return f'{package}/{namespace}/{cls.__name__}'
-
-
-@lru_cache(maxsize=None)
-def _cdr_decoder(type_name: str) -> Any:
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-    store = get_typestore(Stores.EMPTY)
-    store.register(get_types_from_msg(message_definition(type_name), type_name))
-    return store
-
-
-def serialize(msg: Any) -> bytes:
-    """
-    Serialize an rclpy message object to CDR bytes as they travel over DDS (needs rclpy).
-
-    rclpy's serialize_message (Fast DDS) returns a buffer of the estimated size, which can
-    end in bytes that belong to no field; strict readers (rosbags) refuse such messages, and
-    a subscriber never receives them. The buffer is cut where the last field ends. The rig's
-    own types skip all that through :mod:`softseq_ros.bag.cdr`.
-    """
-    type_name = message_type_name(msg)
-    encoded = encode(msg, type_name)
-    if encoded is not None:
-        return encoded
-    from rclpy.serialization import serialize_message
-    raw = serialize_message(msg)
-    store = _cdr_decoder(type_name)
-    msgdef = store.get_msgdef(type_name)
-    decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
-    _, end = decode(raw[4:], 0, msgdef.cls, store)
-    return bytes(raw[:4 + end])
-
-
-class _IndentedDumper(yaml.SafeDumper):
-    """Indent sequences inside mappings, as yaml-cpp (and so rosbag2) does."""
-
-    def increase_indent(self, flow: bool = False, indentless: bool = False) -> None:
-        """Never emit indentless sequences."""
-        super().increase_indent(flow, False)
-
-
-def _dump_yaml(data: Any) -> str:
-    return yaml.dump(data, Dumper=_IndentedDumper, sort_keys=False, default_flow_style=False,
-                     allow_unicode=True)
-
-
-def qos_profile_dict(
-    *, history: str = 'keep_last', depth: int = 10, reliability: str = 'reliable',
-    durability: str = 'volatile', deadline: Mapping[str, int] = INFINITE_DURATION,
-    lifespan: Mapping[str, int] = INFINITE_DURATION, liveliness: str = 'automatic',
-    liveliness_lease_duration: Mapping[str, int] = INFINITE_DURATION,
-    avoid_ros_namespace_conventions: bool = False,
-) -> dict[str, Any]:
-    """
-    Build one offered QoS profile in rosbag2's version-9 form (policies by name).
-
-    Names are those of rmw's qos_string_conversions: history keep_last/keep_all,
-    reliability reliable/best_effort, durability volatile/transient_local, liveliness
-    automatic/manual_by_topic (or system_default/unknown). Durations are {sec, nsec}.
-    """
-    return {
-        'history': history, 'depth': int(depth), 'reliability': reliability,
-        'durability': durability,
-        'deadline': {'sec': int(deadline['sec']), 'nsec': int(deadline['nsec'])},
-        'lifespan': {'sec': int(lifespan['sec']), 'nsec': int(lifespan['nsec'])},
-        'liveliness': liveliness,
-        'liveliness_lease_duration': {'sec': int(liveliness_lease_duration['sec']),
-                                      'nsec': int(liveliness_lease_duration['nsec'])},
-        'avoid_ros_namespace_conventions': bool(avoid_ros_namespace_conventions),
-    }
-
-
-def offered_qos_yaml(profiles: Sequence[Mapping[str, Any]]) -> str:
-    """Serialize offered QoS profiles to the YAML string rosbag2 puts in channel metadata."""
-    if not profiles:
-        return ''
-    return _dump_yaml([dict(profile) for profile in profiles]).rstrip('\n')
-
-
-def _parse_qos_yaml(topic: str, qos_profiles_yaml: str) -> list[Any]:
-    if not qos_profiles_yaml.strip():
-        return []
-    try:
-        profiles = yaml.safe_load(qos_profiles_yaml)
-    except yaml.YAMLError as err:
-        raise BagWriterError(
-            f'topic {topic}: offered_qos_profiles is not valid YAML: {err}') from None
-    if not isinstance(profiles, list):
-        raise BagWriterError(
-            f'topic {topic}: offered_qos_profiles must be a YAML sequence of profiles')
-    return profiles
 
 
 @dataclass
@@ -237,7 +132,8 @@ class BagWriter:
             self._flusher.start()
 
     @classmethod
-    def _for_recovery(cls, directory: Path, file_name: str) -> 'BagWriter':
+    def for_recovery(cls, directory: Path, file_name: str) -> 'BagWriter':
+        """A writer of ``file_name`` in an existing bag directory (softseq_ros.bag.recovery)."""
         writer = cls.__new__(cls)
         writer._init(directory, file_name, chunk_size=DEFAULT_CHUNK_SIZE, compression='zstd',
                      flush_period_s=None)
@@ -290,6 +186,14 @@ class BagWriter:
             self._add_channel(name, type_name, message_definition(type_name),
                               qos_profiles_yaml, type_description_hash(type_name) or '')
 
+    def add_topic_with_definition(self, name: str, type_name: str, definition: str,
+                                  qos_profiles_yaml: str = '', type_hash: str = '') -> None:
+        """Register a topic whose definition text comes with it (a bag being recovered)."""
+        with self._lock:
+            if self._check_existing(name, type_name):
+                return
+            self._add_channel(name, type_name, definition, qos_profiles_yaml, type_hash)
+
     def _check_existing(self, name: str, type_name: str) -> bool:
         self._check_open()
         if not name.startswith('/'):
@@ -305,7 +209,7 @@ class BagWriter:
 
     def _add_channel(self, name: str, type_name: str, schema_text: str,
                      qos_profiles_yaml: str, type_hash: str) -> None:
-        _parse_qos_yaml(name, qos_profiles_yaml)
+        _qos_profiles(name, qos_profiles_yaml)
         schema_id = self._schema_ids.get(type_name)
         if schema_id is None:
             schema_id = self._writer.register_schema(
@@ -404,7 +308,7 @@ class BagWriter:
             self._closed = True
             self._stop.set()
             information = self.bag_information()
-            serialized = _dump_yaml(information)
+            serialized = dump_yaml(information)
             self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
             self._writer.finish()
             self._file.flush()
@@ -413,6 +317,13 @@ class BagWriter:
             write_metadata_yaml(self._directory, information)
         if self._flusher is not None and self._flusher is not threading.current_thread():
             self._flusher.join()
+
+
+def _qos_profiles(topic: str, qos_profiles_yaml: str) -> list[Any]:
+    try:
+        return parse_qos_yaml(topic, qos_profiles_yaml)
+    except QosFormError as err:
+        raise BagWriterError(str(err)) from None
 
 
 def bag_information(*, file_name: str, start_ns: int, duration_ns: int,
@@ -433,7 +344,7 @@ def bag_information(*, file_name: str, start_ns: int, duration_ns: int,
         'topics_with_message_count': [
             {'topic_metadata': {
                 'name': name, 'type': type_name, 'serialization_format': MESSAGE_ENCODING,
-                'offered_qos_profiles': _parse_qos_yaml(name, qos_yaml),
+                'offered_qos_profiles': _qos_profiles(name, qos_yaml),
                 'type_description_hash': type_hash},
              'message_count': count}
             for name, type_name, qos_yaml, type_hash, count in topics],
@@ -455,7 +366,7 @@ def write_metadata_yaml(directory: str | os.PathLike, information: Mapping[str, 
     path = directory / METADATA_FILE
     temporary = directory / (METADATA_FILE + '.tmp')
     with open(temporary, 'w', encoding='utf-8') as stream:
-        stream.write(_dump_yaml({'rosbag2_bagfile_information': dict(information)}))
+        stream.write(dump_yaml({'rosbag2_bagfile_information': dict(information)}))
         stream.flush()
         os.fsync(stream.fileno())
     temporary.replace(path)
@@ -465,104 +376,3 @@ def write_metadata_yaml(directory: str | os.PathLike, information: Mapping[str, 
     finally:
         os.close(directory_fd)
     return path
-
-
-@dataclass(frozen=True)
-class RecoveryResult:
-    """What :func:`recover` found and wrote."""
-
-    mcap_path: Path
-    message_count: int
-    was_complete: bool
-    damaged_copy: Path | None
-    stop_reason: str
-
-
-def _find_mcap(directory: Path) -> Path:
-    candidates = sorted(directory.glob('*.mcap'))
-    if len(candidates) != 1:
-        found = ', '.join(p.name for p in candidates) or 'none'
-        raise BagWriterError(f'{directory}: expected exactly one .mcap file, found {found}')
-    return candidates[0]
-
-
-def _information_from_complete(path: Path) -> dict[str, Any] | None:
-    with open(path, 'rb') as stream:
-        try:
-            summary = make_reader(stream).get_summary()
-        except (McapError, OSError, ValueError, EOFError, KeyError, struct.error):
-            return None
-    if summary is None or summary.statistics is None:
-        return None
-    stats = summary.statistics
-    rows = []
-    for channel_id, channel in summary.channels.items():
-        schema = summary.schemas.get(channel.schema_id)
-        rows.append((channel.topic, schema.name if schema else '',
-                     channel.metadata.get('offered_qos_profiles', ''),
-                     channel.metadata.get('topic_type_hash', ''),
-                     stats.channel_message_counts.get(channel_id, 0)))
-    start = stats.message_start_time if stats.message_count else 0
-    duration = stats.message_end_time - stats.message_start_time if stats.message_count else 0
-    return bag_information(file_name=path.name, start_ns=start, duration_ns=duration,
-                           topics=rows)
-
-
-def _intact_records(path: Path, outcome: dict[str, str]) -> Iterator[Any]:
-    """Yield records in file order up to the first truncated or corrupt one."""
-    with open(path, 'rb') as stream:
-        reader = StreamReader(io.BufferedReader(stream), validate_crcs=True)
-        try:
-            yield from reader.records
-        except Exception as err:  # any failure at all marks where the damaged tail starts
-            outcome['stop_reason'] = f'stopped at the damaged tail: {type(err).__name__}: {err}'
-            return
-    outcome['stop_reason'] = 'read to the end'
-
-
-def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> RecoveryResult:
-    """
-    Make a readable bag of a directory whose writer died (SIGKILL, power loss).
-
-    A complete .mcap (footer present) only gets its metadata.yaml rewritten from the file's
-    summary. A truncated one is read with the non-seeking stream reader up to the damaged
-    tail; the schemas, channels and messages read are written into a new complete .mcap of
-    the same name (the damaged file is kept as ``<name>.truncated`` unless
-    ``keep_damaged`` is False) and metadata.yaml is written for it.
-    """
-    directory = Path(directory)
-    if not directory.is_dir():
-        raise BagWriterError(f'{directory}: not a bag directory')
-    path = _find_mcap(directory)
-    information = _information_from_complete(path)
-    if information is not None:
-        write_metadata_yaml(directory, information)
-        return RecoveryResult(path, information['message_count'], True, None, 'complete file')
-
-    damaged = path.with_name(path.name + '.truncated')
-    path.replace(damaged)
-    schemas: dict[int, Schema] = {}
-    topics_by_channel: dict[int, str] = {}
-    outcome = {'stop_reason': ''}
-    writer = BagWriter._for_recovery(directory, path.name)
-    try:
-        for record in _intact_records(damaged, outcome):
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel) and record.schema_id in schemas:
-                if record.topic not in writer._topics:
-                    schema = schemas[record.schema_id]
-                    writer._add_channel(
-                        record.topic, schema.name, schema.data.decode('utf-8'),
-                        record.metadata.get('offered_qos_profiles', ''),
-                        record.metadata.get('topic_type_hash', ''))
-                topics_by_channel[record.id] = record.topic
-            elif isinstance(record, Message) and record.channel_id in topics_by_channel:
-                writer.write(topics_by_channel[record.channel_id], record.data,
-                             record.log_time, record.publish_time)
-    finally:
-        writer.close()
-    if not keep_damaged:
-        damaged.unlink()
-    return RecoveryResult(path, writer.message_count, False,
-                          damaged if keep_damaged else None, outcome['stop_reason'])

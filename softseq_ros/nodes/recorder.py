@@ -25,8 +25,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
-from softseq_ros.bag.writer import BagWriter, BagWriterError, offered_qos_yaml, qos_profile_dict
+from softseq_ros.bag.writer import BagWriter, BagWriterError
 from softseq_ros.rig import contract
 
 # The topics recorded when the `topics` parameter is not given: every topic of the rig's
