@@ -407,7 +407,7 @@ def node_processes(env: dict[str, str], log_dir: Path, code_root: Path | None = 
         for key, value in params.items():
             args += ['-p', f'{key}:={value}']
         with open(log_dir / f'{name}.log', 'ab') as log:
-            started[name] = subprocess.Popen(args, env=env, stdout=log,
+            started[name] = subprocess.Popen(args, env=env, stdout=log, cwd=code_root,
                                              stderr=subprocess.STDOUT)
         return started[name]
 
@@ -892,8 +892,9 @@ print(json.dumps({'wall': result.wall_s, 'sim': result.sim_duration_s,
 def batch_in_child(code_root: Path, out: Path) -> dict:
     """One batch run of the paper scene in a fresh interpreter running ``code_root``."""
     env = dict(os.environ, PYTHONPATH=str(code_root))
+    # Run from the tree itself: 'python -c' puts the working directory first on sys.path.
     result = subprocess.run([sys.executable, '-c', _BATCH_CHILD, str(out)], env=env,
-                            capture_output=True, text=True, timeout=1800)
+                            cwd=code_root, capture_output=True, text=True, timeout=1800)
     shutil.rmtree(out, ignore_errors=True)
     if result.returncode != 0:
         raise RuntimeError(f'batch run of {code_root} failed: {result.stderr[-2000:]}')
@@ -1022,7 +1023,7 @@ def write_results(path: Path, sections: dict[str, str]) -> None:
 
 
 def main() -> None:
-    global LATENCY_RUN_S
+    global LATENCY_RUN_S, BASELINE_REF
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--part', choices=(*PARTS, 'all'), default='all')
     parser.add_argument('--repeats', type=int, default=3,
@@ -1036,7 +1037,6 @@ def main() -> None:
     if options.latency_seconds <= LATENCY_WARMUP_S:
         parser.error(f'--latency-seconds: must be more than the {LATENCY_WARMUP_S:g} s warm-up')
     LATENCY_RUN_S = options.latency_seconds
-    global BASELINE_REF
     BASELINE_REF = options.baseline_ref
     if options.repeats < 1:
         parser.error('--repeats: must be at least 1')

@@ -194,6 +194,23 @@ def joint_state_cdr(sec: int, nanosec: int, frame_id: str, names: Any, position:
                                         *velocity, key[3], *effort)
 
 
+def joint_state_packer(frame_id: str, names: Any,
+                       counts: tuple[int, int, int]) -> tuple[Callable[..., bytes], bytes]:
+    """
+    ``(pack, block)`` for JointStates of one frame, joint names and array lengths.
+
+    ``_ENCAPSULATION``-less bytes are ``pack(sec, nanosec, block, n_position, *position,
+    n_velocity, *velocity, n_effort, *effort)``: a sender whose shape never changes looks its
+    layout up once instead of at every message.
+    """
+    key = (frame_id, *counts, *names)
+    layout, block = _joint_state_layouts.get(key) or _joint_state_layout(key)
+    return layout.pack, block
+
+
+ENCAPSULATION = _ENCAPSULATION
+
+
 def _joint_state_bytes(msg: Any) -> bytes:
     header = msg.header
     stamp = header.stamp

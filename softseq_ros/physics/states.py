@@ -54,7 +54,7 @@ class StateReader:
         A float gives a :class:`StatePoint`, an array a :class:`StateRows`.
         """
         n = self._n
-        if np.ndim(total) == 0:
+        if isinstance(total, (float, int)):   # numpy's float64 is a float too
             row = self.row(index, float(total))
             return StatePoint(row[:n], row[n], row[n + 1:])
         rows = self.rows(index, total)

@@ -141,11 +141,11 @@ class CameraCore:
         return out
 
     def _on_volumes(self, value: SegmentVolumes, now: int) -> list[Output]:
+        if not self._watch_triggers:
+            return []   # the volumes serve the snapshots only
         volumes = value.volumes_m3
         if not self._usable(volumes):
             return self._warn('volumes', 'ignoring volumes of the wrong size')
-        if not self._watch_triggers:
-            return []
         injected = sum(volumes) - self.rest_total
         # Triggers at or below the injected volume: a crossing changes this count.
         below = bisect_right(self.triggers, injected)

@@ -16,10 +16,11 @@ from typing import Any, Callable
 import numpy as np
 
 from softseq_ros.bag.cdr import (
+    ENCAPSULATION,
     FixedLayout,
     encoder_for,
     fluid_pressure_cdr,
-    joint_state_cdr,
+    joint_state_packer,
     string_cdr,
 )
 from softseq_ros.physics.render import SEGMENT_RGB
@@ -58,10 +59,19 @@ class InputError(ValueError):
 
 # ---------------------------------------------------------------- values -> CDR bytes
 
+_COMMAND_PACK, _COMMAND_BLOCK = joint_state_packer('', _SYRINGE, (1, 1, 0))
+
+
 def _pump_command(value: PumpCommand) -> bytes:
     sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
-    return joint_state_cdr(sec, nanosec, '', _SYRINGE, (value.injected_m3,),
-                           (value.flow_m3_per_s,), _NONE)
+    return ENCAPSULATION + _COMMAND_PACK(sec, nanosec, _COMMAND_BLOCK, 1, value.injected_m3, 1,
+                                         value.flow_m3_per_s, 0)
+
+
+# Per joint names: a segment state's (pack, block) for volumes (effort = pressure) and
+# for curvatures (positions only); a rig sends one set of names for hours.
+_volume_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
+_curvature_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
 
 
 def pump_status_json(value: PumpStatus) -> str:
@@ -80,15 +90,26 @@ def _pressure(value: Pressure) -> bytes:
 
 
 def _volumes(value: SegmentVolumes) -> bytes:
+    names, volumes = value.names, value.volumes_m3
+    n = len(names)
+    packer = _volume_packers.get(names)
+    if packer is None or n != len(volumes):
+        packer = _volume_packers[names] = joint_state_packer('', names, (len(volumes), 0, n))
+    pack, block = packer
     sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
-    return joint_state_cdr(sec, nanosec, '', value.names, value.volumes_m3, _NONE,
-                           (value.gauge_pa,) * len(value.names))
+    return ENCAPSULATION + pack(sec, nanosec, block, len(volumes), *volumes, 0, n,
+                                *((value.gauge_pa,) * n))
 
 
 def _curvatures(value: SegmentCurvatures) -> bytes:
+    names, curvatures = value.names, value.curvatures_per_m
+    packer = _curvature_packers.get(names)
+    if packer is None or len(names) != len(curvatures):
+        packer = _curvature_packers[names] = joint_state_packer('', names,
+                                                                (len(curvatures), 0, 0))
+    pack, block = packer
     sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
-    return joint_state_cdr(sec, nanosec, '', value.names, value.curvatures_per_m, _NONE,
-                           _NONE)
+    return ENCAPSULATION + pack(sec, nanosec, block, len(curvatures), *curvatures, 0, 0)
 
 
 def _snap_through(value: SnapThrough) -> bytes:
