@@ -35,3 +35,23 @@ def write_scene(folder, **changes) -> str:
     path = folder / f'{scene["name"]}.yaml'
     path.write_text(yaml.safe_dump(scene), encoding='utf-8')
     return str(path)
+
+
+def inside_the_hysteresis_loop(emap, samples: int = 1001):
+    """
+    The injected volume where inflation and deflation paths differ most, and both states there.
+
+    Returns (injected, inflating volumes, deflating volumes) for a sweep up to 98 % of the
+    range and back: the deflating state is where a history that went up and came back sits.
+    """
+    import numpy as np
+
+    from softseq_ros.physics.equilibrium import Tracker
+
+    grid = np.linspace(0.0, 0.98 * emap.injected_range[1], samples)
+    inflating = Tracker(emap).sweep(grid)
+    deflating = Tracker(emap, injected=grid[-1], volumes=inflating.volumes[-1]).sweep(
+        grid[::-1])
+    gap = np.max(np.abs(deflating.volumes[::-1] - inflating.volumes), axis=1)
+    row = int(np.argmax(gap))
+    return float(grid[row]), inflating.volumes[row], deflating.volumes[::-1][row]

@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 import pytest
-from scenes import FAST_SCENE, write_scene
+from scenes import FAST_SCENE, inside_the_hysteresis_loop, write_scene
 
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.physics.kinematics import backbone_batch
@@ -209,13 +209,9 @@ def test_actuator_repeats_its_outputs_without_solving_and_stamps_them(tmp_path):
 def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path):
     scene = load_scene('fig1_asymmetric')
     emap = EquilibriumMap(scene.segments)
+    middle, inflating, held = inside_the_hysteresis_loop(emap, 401)
     grid = np.linspace(0.0, 0.98 * emap.injected_range[1], 401)
-    inflating = Tracker(emap).sweep(grid)
-    deflating = Tracker(emap, injected=grid[-1], volumes=inflating.volumes[-1]).sweep(
-        grid[::-1])
-    gap = np.max(np.abs(deflating.volumes[::-1] - inflating.volumes), axis=1)
-    row = int(np.argmax(gap))
-    held = deflating.volumes[::-1][row]
+    row = int(np.argmin(np.abs(grid - middle)))
     state_file = tmp_path / 'state.json'
     first = actuator_core(scene, emap, state_file=str(state_file))
     for volume in list(grid) + list(grid[::-1][:len(grid) - row]):
@@ -232,8 +228,7 @@ def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path)
     np.testing.assert_allclose(answered[0].volumes_m3, held, rtol=1e-9,
                                atol=1e-9 * emap.v_scale)
     # A fresh start would sit on the other branch: the history matters.
-    assert np.max(np.abs(np.array(answered[0].volumes_m3) - inflating.volumes[row])) > \
-        1e-3 * emap.v_scale
+    assert np.max(np.abs(np.array(answered[0].volumes_m3) - inflating)) > 1e-3 * emap.v_scale
     wrong, notices = second.resume_from(['a', 'b'], [1e-6, 1e-6], 'a test')
     assert not wrong and 'does not fit this scene' in notices[0].text
 
