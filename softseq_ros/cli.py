@@ -3,6 +3,7 @@
 import argparse
 from datetime import datetime, timezone
 from pathlib import Path
+import signal
 import sys
 from typing import Callable, Sequence
 
@@ -247,11 +248,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class TerminatedError(Exception):
+    """SIGTERM arrived: unwind like an interrupt, so that open bags are closed completely."""
+
+
+def _terminate(_signum: int, _frame: object) -> None:
+    raise TerminatedError()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one subcommand; a user's mistake is one line on stderr and exit code 2."""
+    """
+    Run one subcommand; a user's mistake is one line on stderr and exit code 2.
+
+    SIGINT and SIGTERM stop a job as a user expects of a command line tool: whatever it was
+    writing is closed completely (a bag gets its index and metadata.yaml), and the exit code
+    is 130 or 143.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Callable[[argparse.Namespace], int] = args.handler
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return handler(args)
     except USER_ERRORS as err:
@@ -260,6 +276,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f'softseq {args.command}: interrupted', file=sys.stderr)
         return 130
+    except TerminatedError:
+        print(f'softseq {args.command}: terminated', file=sys.stderr)
+        return 143
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == '__main__':

@@ -2,6 +2,7 @@
 
 import os
 from pathlib import Path
+import shutil
 import signal
 import subprocess
 import sys
@@ -425,3 +426,78 @@ def test_appender_writes_what_write_writes_and_only_without_the_flusher(tmp_path
     with BagWriter(tmp_path / 'unflushed', flush_period_s=None) as bag:
         with pytest.raises(BagWriterError, match='topic /other: not registered'):
             bag.appender('/other')
+
+
+def _truncated_bag(tmp_path: Path, messages: int = 60) -> tuple[Path, int]:
+    """A bag cut short in a chunk, as a SIGKILL leaves it, and how many messages are intact."""
+    directory = tmp_path / 'bag'
+    with BagWriter(directory, flush_period_s=None) as bag:
+        bag.add_topic('/a', 'std_msgs/msg/Float64')
+        for i in range(messages):
+            bag.write('/a', serialize(Float64(data=float(i))), T0 + 1000 * i)
+            if i % 10 == 9:
+                bag.flush()
+    path = directory / 'bag_0.mcap'
+    whole = path.read_bytes()
+    path.write_bytes(whole[:len(whole) // 2])
+    (directory / 'metadata.yaml').unlink()
+    # What a recovery of an untouched copy finds: the reference for every later recovery.
+    reference = tmp_path / 'reference'
+    shutil.copytree(directory, reference)
+    intact = recover(reference).message_count
+    assert 0 < intact < messages
+    return directory, intact
+
+
+def test_recover_never_loses_the_only_full_copy_and_can_be_repeated(tmp_path, monkeypatch):
+    directory, intact = _truncated_bag(tmp_path)
+    original = (directory / 'bag_0.mcap').read_bytes()
+    # A recovery cut short (here: the disk fills up after 20 messages) leaves the damaged
+    # original as it was and says so in one line.
+    real_write = BagWriter.write
+    calls = {'n': 0}
+
+    def failing_write(self, *args, **kwargs):
+        calls['n'] += 1
+        if calls['n'] > 20:
+            raise OSError(28, 'No space left on device')
+        return real_write(self, *args, **kwargs)
+
+    monkeypatch.setattr(BagWriter, 'write', failing_write)
+    with pytest.raises(BagWriterError, match=r'No space left on device.*bag_0\.mcap is '
+                                             'untouched'):
+        recover(directory)
+    monkeypatch.setattr(BagWriter, 'write', real_write)
+    assert (directory / 'bag_0.mcap').read_bytes() == original
+    assert not list(directory.glob('*.recovering'))
+    # Recovered, then recovered again and again: the damaged original is kept, every time
+    # the same messages come out of it.
+    for _ in range(3):
+        result = recover(directory)
+        assert result.message_count == intact
+        assert (directory / 'bag_0.mcap.truncated').read_bytes() == original
+        assert bag_summary(directory).message_count == intact
+    # A recovery killed after the damaged file was set aside, before the new one took its
+    # name: the next one starts from the damaged original.
+    (directory / 'bag_0.mcap').unlink()
+    result = recover(directory)
+    assert not result.was_complete and result.message_count == intact
+    assert (directory / 'bag_0.mcap.truncated').read_bytes() == original
+    # And a partial output left by a cut-short recovery is replaced by a full one.
+    (directory / 'bag_0.mcap').write_bytes(original[:len(original) // 3])
+    result = recover(directory, keep_damaged=False)
+    assert result.message_count == intact and result.damaged_copy is None
+    assert not (directory / 'bag_0.mcap.truncated').exists()
+    with Reader(directory) as reader:
+        assert reader.message_count == intact
+
+
+def test_recover_refuses_what_is_not_an_mcap_file(tmp_path):
+    for name, content in (('noise', bytes(range(256)) * 40), ('text', b'hello, rig\n' * 50)):
+        directory = tmp_path / name
+        directory.mkdir()
+        (directory / f'{name}_0.mcap').write_bytes(content)
+        with pytest.raises(BagWriterError, match='not an MCAP file'):
+            recover(directory)
+        assert (directory / f'{name}_0.mcap').read_bytes() == content
+        assert sorted(p.name for p in directory.iterdir()) == [f'{name}_0.mcap']

@@ -2,6 +2,7 @@
 
 import json
 from pathlib import Path
+import signal
 import struct
 import subprocess
 import sys
@@ -11,6 +12,7 @@ from mcap.reader import make_reader
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+from rosbags.rosbag2 import Reader
 from test_nodes import spinning, wait_for
 import yaml
 
@@ -244,3 +246,34 @@ def test_softseq_run_start_time_dates_the_bag(fast_scene, tmp_path):
                          capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
     assert bad.returncode == 2 and 'ISO 8601' in bad.stderr
     assert not (tmp_path / 'never').exists()
+
+
+@pytest.mark.parametrize('signal_name, exit_code', [('SIGINT', 130), ('SIGTERM', 143)])
+def test_softseq_run_stopped_by_a_signal_closes_its_bag(tmp_path, signal_name, exit_code):
+    out = tmp_path / 'stopped'
+    process = subprocess.Popen([sys.executable, '-m', 'softseq_ros.cli', 'run', 'paper',
+                                '--out', str(out), '--quiet', '--no-report'],
+                               stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    try:
+        mcap = out / 'stopped_0.mcap'
+        deadline = time.monotonic() + 120
+        # Stop it in the middle of the run: once the bag holds a few chunks.
+        while not (mcap.exists() and mcap.stat().st_size > 3_000_000):
+            assert process.poll() is None, process.communicate()
+            assert time.monotonic() < deadline, 'the run wrote nothing'
+            time.sleep(0.05)
+        process.send_signal(getattr(signal, signal_name))
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == exit_code, stderr
+    assert len(stderr.strip().splitlines()) == 1 and 'softseq run:' in stderr
+    # Complete: summary, index and metadata.yaml, readable by an independent reader.
+    summary = bag_summary(out)
+    assert summary.complete
+    commands = summary.topics['/pump/command'].message_count
+    assert 1000 < commands < 130_501
+    with Reader(out) as reader:
+        assert reader.message_count == summary.message_count

@@ -32,12 +32,44 @@ class RecoveryResult:
     stop_reason: str
 
 
-def _find_mcap(directory: Path) -> Path:
-    candidates = sorted(directory.glob('*.mcap'))
-    if len(candidates) != 1:
-        found = ', '.join(p.name for p in candidates) or 'none'
-        raise BagWriterError(f'{directory}: expected exactly one .mcap file, found {found}')
-    return candidates[0]
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+DAMAGED_SUFFIX = '.truncated'
+RECOVERING_SUFFIX = '.recovering'
+
+
+def _bag_files(directory: Path) -> tuple[Path, Path | None]:
+    """The bag's .mcap path (perhaps missing) and an earlier recovery's damaged original."""
+    mcaps = sorted(directory.glob('*.mcap'))
+    damaged = sorted(directory.glob('*.mcap' + DAMAGED_SUFFIX))
+    if len(mcaps) > 1 or len(damaged) > 1:
+        found = ', '.join(p.name for p in [*mcaps, *damaged])
+        raise BagWriterError(f'{directory}: expected one .mcap file, found {found}')
+    if mcaps:
+        path = mcaps[0]
+        original = path.with_name(path.name + DAMAGED_SUFFIX)
+        if damaged and damaged[0] != original:
+            raise BagWriterError(f'{directory}: {damaged[0].name} does not belong to '
+                                 f'{path.name}')
+        return path, original if original.exists() else None
+    if damaged:
+        return damaged[0].with_name(damaged[0].name[:-len(DAMAGED_SUFFIX)]), damaged[0]
+    raise BagWriterError(f'{directory}: no .mcap file in it')
+
+
+def _check_mcap(path: Path) -> None:
+    with open(path, 'rb') as stream:
+        start = stream.read(len(MCAP_MAGIC))
+    if start != MCAP_MAGIC:
+        raise BagWriterError(f'{path}: not an MCAP file (it does not start with the MCAP '
+                             'magic bytes); nothing to recover')
+
+
+def _sync_directory(directory: Path) -> None:
+    descriptor = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
 
 
 def _information_from_complete(path: Path) -> dict[str, Any] | None:
@@ -76,31 +108,62 @@ def _intact_records(path: Path, outcome: dict[str, str]) -> Iterator[Any]:
 
 def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> RecoveryResult:
     """
-    Make a readable bag of a directory whose writer died (SIGKILL, power loss).
+    Make a readable bag of a directory whose writer died (SIGKILL, power loss, full disk).
 
     A complete .mcap (footer present) only gets its metadata.yaml rewritten from the file's
     summary. A truncated one is read with the non-seeking stream reader up to the damaged
-    tail; the schemas, channels and messages read are written into a new complete .mcap of
-    the same name (the damaged file is kept as ``<name>.truncated`` unless
-    ``keep_damaged`` is False) and metadata.yaml is written for it.
+    tail; the schemas, channels and messages read are written into a temporary file beside
+    it, fsynced, and only then does the damaged file become ``<name>.truncated`` and the new
+    one take its name, so the only full copy is never overwritten or deleted before its
+    replacement is on disk. A recovery that was cut short (killed, disk full) is simply run
+    again: it reads the damaged original it kept, any number of times. ``keep_damaged``
+    False removes the damaged original once the recovered bag is complete.
     """
     directory = Path(directory)
     if not directory.is_dir():
         raise BagWriterError(f'{directory}: not a bag directory')
-    path = _find_mcap(directory)
-    information = _information_from_complete(path)
-    if information is not None:
-        write_metadata_yaml(directory, information)
-        return RecoveryResult(path, information['message_count'], True, None, 'complete file')
+    path, original = _bag_files(directory)
+    if path.exists():
+        _check_mcap(path)
+        information = _information_from_complete(path)
+        if information is not None:
+            write_metadata_yaml(directory, information)
+            if original is not None and not keep_damaged:
+                original.unlink()
+            return RecoveryResult(path, information['message_count'], True,
+                                  original if keep_damaged else None, 'complete file')
+    source = original if original is not None else path
+    _check_mcap(source)
+    temporary = path.with_name(path.name + RECOVERING_SUFFIX)
+    temporary.unlink(missing_ok=True)   # left by a recovery that was killed
+    outcome = {'stop_reason': ''}
+    try:
+        writer = _copy_intact(source, directory, temporary, path.name, outcome)
+    except OSError as err:
+        temporary.unlink(missing_ok=True)
+        raise BagWriterError(f'{directory}: cannot write the recovered bag '
+                             f'({err.strerror or err}); {source.name} is untouched') from None
+    damaged = path.with_name(path.name + DAMAGED_SUFFIX)
+    if original is None:
+        os.replace(path, damaged)
+        _sync_directory(directory)
+    os.replace(temporary, path)
+    _sync_directory(directory)
+    write_metadata_yaml(directory, writer.bag_information())
+    if not keep_damaged:
+        damaged.unlink()
+    return RecoveryResult(path, writer.message_count, False,
+                          damaged if keep_damaged else None, outcome['stop_reason'])
 
-    damaged = path.with_name(path.name + '.truncated')
-    path.replace(damaged)
+
+def _copy_intact(source: Path, directory: Path, temporary: Path, final_name: str,
+                 outcome: dict[str, str]) -> BagWriter:
+    """Write what is intact in ``source`` into ``temporary`` (closed and fsynced on return)."""
     schemas: dict[int, Schema] = {}
     topics_by_channel: dict[int, str] = {}
-    outcome = {'stop_reason': ''}
-    writer = BagWriter.for_recovery(directory, path.name)
+    writer = BagWriter.for_recovery(directory, temporary.name, final_name)
     try:
-        for record in _intact_records(damaged, outcome):
+        for record in _intact_records(source, outcome):
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel) and record.schema_id in schemas:
@@ -116,7 +179,4 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
                              record.log_time, record.publish_time)
     finally:
         writer.close()
-    if not keep_damaged:
-        damaged.unlink()
-    return RecoveryResult(path, writer.message_count, False,
-                          damaged if keep_damaged else None, outcome['stop_reason'])
+    return writer

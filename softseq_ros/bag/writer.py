@@ -97,7 +97,8 @@ class BagWriter:
                    flush_period_s=flush_period_s)
 
     def _init(self, directory: Path, file_name: str | None, *, chunk_size: int,
-              compression: str | None, flush_period_s: float | None) -> None:
+              compression: str | None, flush_period_s: float | None,
+              final_name: str | None = None) -> None:
         if compression not in _COMPRESSIONS:
             raise BagWriterError(
                 f'compression {compression!r}: expected one of zstd, lz4 or None')
@@ -113,6 +114,10 @@ class BagWriter:
         directory.mkdir(parents=True, exist_ok=True)
         self._directory = directory
         self._mcap_path = directory / file_name
+        # The name the file will have in the bag (a recovery writes a temporary file first);
+        # the metadata names it, and metadata.yaml is left to whoever renames the file.
+        self._final_name = final_name or file_name
+        self._writes_metadata_yaml = final_name is None
         self._lock = threading.RLock()
         self._topics: dict[str, _Topic] = {}
         self._schema_ids: dict[str, int] = {}
@@ -132,11 +137,16 @@ class BagWriter:
             self._flusher.start()
 
     @classmethod
-    def for_recovery(cls, directory: Path, file_name: str) -> 'BagWriter':
-        """A writer of ``file_name`` in an existing bag directory (softseq_ros.bag.recovery)."""
+    def for_recovery(cls, directory: Path, file_name: str, final_name: str) -> 'BagWriter':
+        """
+        A writer of a temporary file that becomes the bag file ``final_name`` once renamed.
+
+        For softseq_ros.bag.recovery: in an existing bag directory, and its close writes no
+        metadata.yaml (the recovery does, after the rename).
+        """
         writer = cls.__new__(cls)
         writer._init(directory, file_name, chunk_size=DEFAULT_CHUNK_SIZE, compression='zstd',
-                     flush_period_s=None)
+                     flush_period_s=None, final_name=final_name)
         return writer
 
     @property
@@ -295,7 +305,7 @@ class BagWriter:
         start, duration = (time_range[0], time_range[1] - time_range[0]) if time_range \
             else (0, 0)
         return bag_information(
-            file_name=self._mcap_path.name, start_ns=start, duration_ns=duration,
+            file_name=self._final_name, start_ns=start, duration_ns=duration,
             topics=[(t.name, t.type_name, t.qos_profiles_yaml, t.type_hash,
                      self._writer.channel_message_count(t.channel_id))
                     for t in self._topics.values()])
@@ -314,7 +324,8 @@ class BagWriter:
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()
-            write_metadata_yaml(self._directory, information)
+            if self._writes_metadata_yaml:
+                write_metadata_yaml(self._directory, information)
         if self._flusher is not None and self._flusher is not threading.current_thread():
             self._flusher.join()
 
