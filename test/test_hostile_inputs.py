@@ -158,3 +158,34 @@ def test_the_range_end_itself_is_a_valid_state():
 def test_fewer_than_two_segments_are_refused():
     with pytest.raises(ValueError, match='2 segments'):
         EquilibriumMap(linear_pair()[:1])
+
+
+def test_tables_in_other_units_are_refused_naming_the_column_and_the_fix(tmp_path):
+    from softseq_ros.physics.segments import TableError, TabulatedSegment
+
+    header = 'volume_m3,pressure_pa,curvature_per_m\n'
+    in_ml = tmp_path / 'in_ml.csv'
+    in_ml.write_text(header + '11.0,0,0\n30.0,9000,1\n60.0,9500,2\n')
+    with pytest.raises(TableError, match=r'in_ml\.csv: column volume_m3: .*in mL\?'):
+        TabulatedSegment.from_csv(in_ml, length=0.1)
+    in_mpa = tmp_path / 'in_mpa.csv'
+    in_mpa.write_text(header + '1.1e-5,0,0\n3.0e-5,0.009,1\n6.0e-5,0.0095,2\n')
+    with pytest.raises(TableError, match=r'in_mpa\.csv: column pressure_pa: .*kPa or MPa\?'):
+        TabulatedSegment.from_csv(in_mpa, length=0.1)
+
+
+def test_a_table_saved_as_csv_utf8_with_a_byte_order_mark_is_read(tmp_path):
+    from softseq_ros.physics.segments import TableError, TabulatedSegment
+
+    rows = 'volume_m3,pressure_pa,curvature_per_m\n1.1e-5,0,0\n3.0e-5,9000,1\n6.0e-5,9500,2\n'
+    plain, marked = tmp_path / 'plain.csv', tmp_path / 'marked.csv'
+    plain.write_text(rows, encoding='utf-8')
+    marked.write_bytes(b'\xef\xbb\xbf' + rows.encode())
+    a, b = TabulatedSegment.from_csv(plain, length=0.1), TabulatedSegment.from_csv(marked,
+                                                                                   length=0.1)
+    assert a.volumes.tolist() == b.volumes.tolist()
+    assert a.pressures.tolist() == b.pressures.tolist()
+    latin = tmp_path / 'latin.csv'
+    latin.write_bytes('# Druck in Pa, gemessen am Prüfstand\n'.encode('latin-1') + rows.encode())
+    with pytest.raises(TableError, match='latin.csv: the segment table is not UTF-8'):
+        TabulatedSegment.from_csv(latin, length=0.1)

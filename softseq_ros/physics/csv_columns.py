@@ -25,9 +25,13 @@ def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueErro
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        # utf-8-sig: spreadsheets save "CSV UTF-8" with a byte-order mark before the header.
+        text = path.read_text(encoding='utf-8-sig')
     except OSError as err:
         raise error(f'{path}: cannot read the {what} ({err.strerror})') from None
+    except UnicodeDecodeError as err:
+        raise error(f'{path}: the {what} is not UTF-8 text (byte {err.start}); save it as '
+                    'CSV UTF-8') from None
     lines = [line for line in text.splitlines()
              if line.strip() and not line.lstrip().startswith('#')]
     if not lines:

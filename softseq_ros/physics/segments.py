@@ -30,6 +30,24 @@ class TableError(ValueError):
     """A segment table that cannot be used; the message starts with the file name."""
 
 
+# Beyond these a table is almost surely in other units: a segment holding more than a cubic
+# metre of fluid, or one whose pressures all stay within a pascal of zero.
+MAX_PLAUSIBLE_VOLUME_M3 = 1.0
+MIN_PLAUSIBLE_PRESSURE_PA = 1.0
+
+
+def _check_si(path: Path, volumes: FloatArray, pressures: FloatArray) -> None:
+    """Refuse a table whose numbers are implausible in SI units, naming the likely fix."""
+    if volumes.size and volumes[0] > MAX_PLAUSIBLE_VOLUME_M3:
+        raise TableError(f'{path}: column volume_m3: the rest volume is {volumes[0]:.6g} m^3, '
+                         f'more than {MAX_PLAUSIBLE_VOLUME_M3:g} m^3: is the table in mL? '
+                         'Volumes are in m^3 (1 mL = 1e-6 m^3)')
+    if pressures.size and np.max(np.abs(pressures)) < MIN_PLAUSIBLE_PRESSURE_PA:
+        raise TableError(f'{path}: column pressure_pa: every pressure is within '
+                         f'{MIN_PLAUSIBLE_PRESSURE_PA:g} Pa of zero: is the table in kPa or MPa? '
+                         'Pressures are gauge, in Pa (1 kPa = 1000 Pa)')
+
+
 @dataclass(frozen=True)
 class Piece:
     """A stretch [v_lo, v_hi] of a PV curve: pressure rises (+1), falls (-1) or is flat (0)."""
@@ -242,8 +260,10 @@ class TabulatedSegment(Segment):
         columns = read_columns(path, TABLE_COLUMNS, TableError, 'segment table')
         if length is None:
             raise TableError(f'{path}: the segment length must be given (m)')
-        return cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],
-                   columns['curvature_per_m'], source=str(path))
+        segment = cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],
+                      columns['curvature_per_m'], source=str(path))
+        _check_si(path, segment.volumes, segment.pressures)
+        return segment
 
     def knots(self) -> FloatArray:
         """The table's volumes: PCHIP is only once differentiable there."""
