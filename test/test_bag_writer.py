@@ -501,3 +501,59 @@ def test_recover_refuses_what_is_not_an_mcap_file(tmp_path):
             recover(directory)
         assert (directory / f'{name}_0.mcap').read_bytes() == content
         assert sorted(p.name for p in directory.iterdir()) == [f'{name}_0.mcap']
+
+
+def test_a_full_disk_stops_the_bag_in_one_line_and_keeps_what_was_flushed(tmp_path,
+                                                                          monkeypatch):
+    from softseq_ros.bag import mcap_file
+
+    directory = tmp_path / 'full'
+    bag = BagWriter(directory, flush_period_s=None)
+    bag.add_topic('/a', 'std_msgs/msg/Float64')
+    for i in range(30):
+        bag.write('/a', serialize(Float64(data=float(i))), T0 + i)
+    bag.flush()
+    real_flush = mcap_file.ChunkedMcapWriter.flush
+
+    def disk_full(self):
+        raise OSError(28, 'No space left on device')
+
+    monkeypatch.setattr(mcap_file.ChunkedMcapWriter, 'flush', disk_full)
+    for i in range(30, 40):
+        bag.write('/a', serialize(Float64(data=float(i))), T0 + i)
+    with pytest.raises(BagWriterError) as stopped:
+        bag.flush()
+    text = str(stopped.value)
+    assert 'No space left on device' in text and 'softseq recover' in text
+    assert str(directory) in text and '\n' not in text
+    with pytest.raises(BagWriterError, match='No space left'):
+        bag.write('/a', serialize(Float64(data=99.0)), T0 + 99)
+    monkeypatch.setattr(mcap_file.ChunkedMcapWriter, 'flush', real_flush)
+    with pytest.raises(BagWriterError, match='No space left'):
+        bag.close()
+    assert bag.closed and not (directory / 'metadata.yaml').exists()
+    # Everything flushed before the disk filled up comes back.
+    result = recover(directory)
+    assert result.message_count == 30
+    values = [m.msg.data for m in read_bag(directory)]
+    assert values == [float(i) for i in range(30)]
+
+
+@pytest.mark.parametrize('params, expected', [
+    (['output:={tmp}/a_file/bag'], 'cannot create the bag'),
+    (["topics:=['not a topic!']"], 'is not a valid topic name'),
+])
+def test_recorder_start_up_mistakes_are_one_line(tmp_path, params, expected):
+    (tmp_path / 'a_file').write_text('not a folder')
+    args = [sys.executable, '-m', 'softseq_ros.nodes.recorder', '--ros-args']
+    for param in params:
+        args += ['-p', param.format(tmp=tmp_path)]
+    if not any(p.startswith('output') for p in params):
+        args += ['-p', f'output:={tmp_path}/bag']
+    env = dict(os.environ, PYTHONUNBUFFERED='1')
+    result = subprocess.run(args, env=env, capture_output=True, text=True, timeout=60,
+                            stdin=subprocess.DEVNULL)
+    assert result.returncode == 1, result.stderr
+    assert 'Traceback' not in result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.startswith('recorder: ')]
+    assert len(lines) == 1 and expected in lines[0], result.stderr

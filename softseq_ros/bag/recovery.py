@@ -139,10 +139,11 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
     outcome = {'stop_reason': ''}
     try:
         writer = _copy_intact(source, directory, temporary, path.name, outcome)
-    except OSError as err:
+    except (OSError, BagWriterError) as err:
         temporary.unlink(missing_ok=True)
-        raise BagWriterError(f'{directory}: cannot write the recovered bag '
-                             f'({err.strerror or err}); {source.name} is untouched') from None
+        reason = err.strerror if isinstance(err, OSError) and err.strerror else err
+        raise BagWriterError(f'{directory}: cannot write the recovered bag ({reason}); '
+                             f'{source.name} is untouched') from None
     damaged = path.with_name(path.name + DAMAGED_SUFFIX)
     if original is None:
         os.replace(path, damaged)

@@ -111,7 +111,12 @@ class BagWriter:
                 raise BagWriterError(
                     f'{directory}: bag directory already exists and is not empty')
             file_name = f'{directory.name}_0.mcap'
-        directory.mkdir(parents=True, exist_ok=True)
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            self._file: BinaryIO = open(directory / file_name, 'xb')
+        except OSError as err:
+            raise BagWriterError(f'{directory}: cannot create the bag '
+                                 f'({err.strerror or err})') from None
         self._directory = directory
         self._mcap_path = directory / file_name
         # The name the file will have in the bag (a recovery writes a temporary file first);
@@ -125,7 +130,7 @@ class BagWriter:
         self._unflushed = False
         self._last_flush = time.monotonic()
         self._flush_period_s = flush_period_s
-        self._file: BinaryIO = open(self._mcap_path, 'xb')
+        self._failure: str | None = None
         self._writer = ChunkedMcapWriter(self._file, chunk_size=chunk_size,
                                          compression=_COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=_library_name())
@@ -249,13 +254,31 @@ class BagWriter:
                 raise BagWriterError(f'topic {topic}: not registered; call add_topic first')
             if log_time_ns < 0:
                 raise BagWriterError(f'topic {topic}: negative log time {log_time_ns} ns')
-            self._writer.add_message(
-                entry.channel_id, cdr_bytes, log_time_ns,
-                log_time_ns if publish_time_ns is None else publish_time_ns)
-            if self._flush_period_s is not None:
-                self._unflushed = True
-                if time.monotonic() - self._last_flush >= self._flush_period_s:
-                    self._flush_locked()
+            if self._failure is not None:
+                raise BagWriterError(self._failure)
+            try:
+                self._writer.add_message(
+                    entry.channel_id, cdr_bytes, log_time_ns,
+                    log_time_ns if publish_time_ns is None else publish_time_ns)
+                if self._flush_period_s is not None:
+                    self._unflushed = True
+                    if time.monotonic() - self._last_flush >= self._flush_period_s:
+                        self._flush_locked()
+            except OSError as err:
+                raise BagWriterError(self._fail(err)) from None
+
+    @property
+    def failure(self) -> str | None:
+        """Why the bag could not be written on (a full disk, say), or None."""
+        return self._failure
+
+    def _fail(self, err: OSError) -> str:
+        # What is on disk stays readable after a recovery; nothing more is written.
+        if self._failure is None:
+            self._failure = (f'{self._mcap_path}: cannot write ({err.strerror or err}); what '
+                             'was flushed before is on disk: run softseq recover '
+                             f'{self._directory} once there is room')
+        return self._failure
 
     def appender(self, topic: str) -> Callable[[bytes, int, int], None]:
         """
@@ -279,7 +302,12 @@ class BagWriter:
         """Close the chunk in progress and force everything written so far onto the disk."""
         with self._lock:
             self._check_open()
-            self._flush_locked()
+            if self._failure is not None:
+                raise BagWriterError(self._failure)
+            try:
+                self._flush_locked()
+            except OSError as err:
+                raise BagWriterError(self._fail(err)) from None
 
     def _flush_locked(self) -> None:
         self._writer.flush()
@@ -291,9 +319,12 @@ class BagWriter:
         assert self._flush_period_s is not None
         while not self._stop.wait(self._flush_period_s / 2):
             with self._lock:
-                if (not self._closed and self._unflushed
+                if (not self._closed and self._failure is None and self._unflushed
                         and time.monotonic() - self._last_flush >= self._flush_period_s / 2):
-                    self._flush_locked()
+                    try:
+                        self._flush_locked()
+                    except OSError as err:
+                        self._fail(err)   # the next write or the close reports it
 
     def _check_open(self) -> None:
         if self._closed:
@@ -311,23 +342,38 @@ class BagWriter:
                     for t in self._topics.values()])
 
     def close(self) -> None:
-        """Finish the MCAP file (summary and ``rosbag2`` record) and write metadata.yaml."""
+        """
+        Finish the MCAP file (summary and ``rosbag2`` record) and write metadata.yaml.
+
+        A bag that could not be written on (:attr:`failure`) is closed as it is on disk, for
+        ``softseq recover``; a failure while finishing raises BagWriterError saying so.
+        """
         with self._lock:
             if self._closed:
                 return
             self._closed = True
             self._stop.set()
-            information = self.bag_information()
-            serialized = dump_yaml(information)
-            self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
-            self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
-            self._file.close()
-            if self._writes_metadata_yaml:
-                write_metadata_yaml(self._directory, information)
+            try:
+                if self._failure is None:
+                    information = self.bag_information()
+                    serialized = dump_yaml(information)
+                    self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
+                    self._writer.finish()
+                    self._file.flush()
+                    os.fsync(self._file.fileno())
+                    if self._writes_metadata_yaml:
+                        write_metadata_yaml(self._directory, information)
+            except OSError as err:
+                self._fail(err)
+            finally:
+                try:
+                    self._file.close()
+                except OSError as err:
+                    self._fail(err)
         if self._flusher is not None and self._flusher is not threading.current_thread():
             self._flusher.join()
+        if self._failure is not None:
+            raise BagWriterError(self._failure)
 
 
 def _qos_profiles(topic: str, qos_profiles_yaml: str) -> list[Any]:

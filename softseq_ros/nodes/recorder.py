@@ -19,11 +19,12 @@ from typing import Any, Sequence
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import InvalidTopicNameException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.validate_topic_name import validate_topic_name
 
 from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
@@ -125,8 +126,14 @@ class Recorder(Node):
         self._wanted: dict[str, str] = {}
         for index, topic in enumerate(topics):
             given = types[index] if types else ''
-            self._wanted[self.resolve_topic_name(topic)] = (
-                canonical_type_name(given) if given else '')
+            try:
+                validate_topic_name(topic)
+            except InvalidTopicNameException as err:
+                reason = str(err).splitlines()[0]
+                raise BagWriterError(f'parameter topics: {topic!r} is not a valid topic name '
+                                     f'({reason})') from None
+            resolved = self.resolve_topic_name(topic)
+            self._wanted[resolved] = canonical_type_name(given) if given else ''
         self._output = Path(output) if output else default_output_directory()
         self._bag = BagWriter(self._output,
                               compression=None if compression == 'none' else compression)
@@ -200,7 +207,12 @@ class Recorder(Node):
                         int(info.get('source_timestamp') or received_ns))
 
     def close_bag(self) -> None:
-        """Finish the bag (summary, metadata.yaml); safe to call more than once."""
+        """
+        Finish the bag (summary, metadata.yaml); safe to call more than once.
+
+        Raises BagWriterError when the bag could not be written completely (a full disk):
+        what was flushed before is on disk, for ``softseq recover``.
+        """
         if not self._bag.closed:
             self._bag.close()
             self.get_logger().info(
@@ -220,6 +232,7 @@ def main(args: list[str] | None = None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (BagWriterError, MessageDefinitionError) as err:
+        # One line, naming the path or the topic; a failed bag is not closed a second time.
         print(f'recorder: {err}', file=sys.stderr)
         exit_code = 1
     except Exception:
@@ -229,7 +242,12 @@ def main(args: list[str] | None = None) -> None:
             raise
     finally:
         if node is not None:
-            node.close_bag()
+            try:
+                node.close_bag()
+            except BagWriterError as err:
+                if not exit_code:
+                    print(f'recorder: {err}', file=sys.stderr)
+                    exit_code = 1
             node.destroy_node()
         rclpy.try_shutdown()
     if exit_code:
