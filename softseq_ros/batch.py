@@ -87,8 +87,13 @@ class BatchRun:
         if unknown:
             raise ValueError(f'overrides: unknown core(s) {", ".join(unknown)}; expected '
                              f'{", ".join(contract.NODE_NAMES)}')
-        self.pump, self.pump_rate_hz = pump_core(self.scene, **overrides.get(contract.PUMP, {}))
         self.actuator = actuator_core(self.scene, **overrides.get(contract.ACTUATOR, {}))
+        # The pump's feedback timeout runs on the simulated clock here (the actuator answers
+        # within the same tick); without a volumes output there is no feedback to wait for.
+        pump_settings = {'feedback_clock': lambda: self._now_ns,
+                         'open_loop': 'volumes' not in self.actuator.outputs,
+                         **overrides.get(contract.PUMP, {})}
+        self.pump, self.pump_rate_hz = pump_core(self.scene, **pump_settings)
         self.camera = camera_core(self.scene, **overrides.get(contract.CAMERA, {}))
         self.cores = {contract.PUMP: self.pump, contract.ACTUATOR: self.actuator,
                       contract.CAMERA: self.camera}

@@ -2,6 +2,7 @@
 
 import argparse
 from datetime import datetime, timezone
+import os
 from pathlib import Path
 import signal
 import sys
@@ -252,7 +253,15 @@ class TerminatedError(Exception):
     """SIGTERM arrived: unwind like an interrupt, so that open bags are closed completely."""
 
 
-def _terminate(_signum: int, _frame: object) -> None:
+_MAIN_PID = os.getpid()
+
+
+def _terminate(signum: int, _frame: object) -> None:
+    if os.getpid() != _MAIN_PID:
+        # A forked worker (the report's figure pool) ends as SIGTERM ends any process.
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
     raise TerminatedError()
 
 

@@ -170,6 +170,11 @@ def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
                  'the actuator to reach the hold inside the loop')
         actuator.send_signal(signal.SIGKILL)
         actuator.wait(timeout=10)
+        # A pump with no pressure feedback holds (a real pump must not push on blind) and
+        # keeps commanding where it is.
+        wait_for(lambda: any(json.loads(m.data)['state'] == 'held'
+                             and 'no pressure' in json.loads(m.data)['reason']
+                             for m in got['/pump/status']), 'the pump to hold', timeout=30)
         before = len(got['/actuator/volumes'])
         history = np.array([m.position[0] for m in got['/pump/command']])
         events = [json.loads(m.data) for m in got['/actuator/events']]

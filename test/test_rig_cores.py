@@ -26,7 +26,6 @@ from softseq_ros.rig.values import (
     WARNING,
     Backbone,
     Notice,
-    Pressure,
     PumpCommand,
     PumpStatus,
     SegmentCurvatures,
@@ -41,6 +40,11 @@ AMBIENT = 101325.0
 
 def command(volume: float, stamp: int = 0) -> PumpCommand:
     return PumpCommand(stamp, volume, 0.0)
+
+
+def state_at(gauge_pa: float) -> SegmentVolumes:
+    """An actuator state with the gauge pressure ``gauge_pa`` (what the pump listens to)."""
+    return SegmentVolumes(0, ('bottom', 'top'), [1e-5, 1e-5], gauge_pa)
 
 
 def topic_values(outputs, kind):
@@ -59,7 +63,8 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
     assert sorted(kind.topic.name for kind in TOPIC_VALUE_TYPES) == \
         sorted(topic.name for topic in contract.RIG_TOPICS)
     assert {t.name for t in contract.consumed_by(contract.ACTUATOR)} == {'pump/command'}
-    assert {t.name for t in contract.consumed_by(contract.PUMP)} == {'actuator/pressure'}
+    # The pump's relief reads the gauge pressure the actuator computed (no ambient of its own).
+    assert {t.name for t in contract.consumed_by(contract.PUMP)} == {'actuator/volumes'}
     assert {t.name for t in contract.consumed_by(contract.CAMERA)} == {
         'actuator/volumes', 'actuator/curvatures'}
     assert contract.resolve('pump/command', '/rig2') == '/rig2/pump/command'
@@ -83,7 +88,7 @@ def test_the_batch_runner_and_the_cores_run_without_rclpy():
 
 def test_pump_programme_hold_stop_and_safety(tmp_path):
     flow = 2.0e-5
-    pump, rate = pump_core(load_scene(write_scene(tmp_path)), autostart=False)
+    pump, rate = pump_core(load_scene(write_scene(tmp_path)), autostart=False, open_loop=True)
     assert rate == 100.0
     statuses = [v.state for v in topic_values(pump.begin(0), PumpStatus)]
 
@@ -108,9 +113,9 @@ def test_pump_programme_hold_stop_and_safety(tmp_path):
     # 1.5 s of run time up (until 4.0 s), then down at the same rate.
     assert tick_at(4.5) == pytest.approx((3.0e-5 - 0.5 * flow, -flow), rel=1e-12)
     # Safety: a gauge pressure above the limit stops the pump where it is.
-    assert pump.handle(Pressure(0, AMBIENT + 99.0e3), 4_500_000_000) == []
+    assert pump.handle(state_at(99.0e3), 4_500_000_000) == []
     assert pump.state == 'running'
-    stopped = pump.handle(Pressure(0, AMBIENT + 101.0e3), 4_500_000_000)
+    stopped = pump.handle(state_at(101.0e3), 4_500_000_000)
     assert pump.state == 'stopped' and 'max_pressure_pa' in pump.reason
     warning, status = stopped
     assert warning.level == WARNING and status.state == 'stopped'
@@ -144,6 +149,48 @@ def test_pump_starts_by_itself_and_finishes_at_the_end_of_the_programme(tmp_path
     assert pump.state == 'finished'
     status, = topic_values(finished, PumpStatus)
     assert status.state == 'finished' and status.stamp_ns == 12 * 10**9
+
+
+def test_pump_holds_when_the_actuator_falls_silent_and_goes_on_only_when_asked(tmp_path):
+    scene = load_scene(write_scene(tmp_path))
+    wall = [0]
+    # 0 -> 30 mL in 1.5 s, then a long hold.
+    legs = (Leg.inflate(3.0e-5), Leg.hold(100.0))
+    pump, _ = pump_core(scene, legs=legs, feedback_timeout_s=2.0,
+                        feedback_clock=lambda: wall[0])
+
+    def tick(seconds, answer=True):
+        wall[0] = int(seconds * 1e9)
+        outputs = pump.tick(wall[0])
+        if answer:
+            pump.handle(state_at(5.0e3), wall[0])
+        return outputs
+
+    tick(0.0)
+    assert pump.state == 'running'
+    for second in (0.5, 1.0, 1.5, 2.5, 3.0):      # answered: keeps running
+        tick(second)
+    assert pump.state == 'running'
+    volumes = [topic_values(tick(3.0 + 0.5 * i, answer=False), PumpCommand)[0].injected_m3
+               for i in range(1, 5)]
+    assert pump.state == 'running'                 # 2 s of silence is the limit, not more
+    held = tick(5.5, answer=False)
+    status, = topic_values(held, PumpStatus)
+    assert status.state == 'held' and 'no pressure from the actuator for 2 s' in status.reason
+    assert [n.level for n in held if type(n) is Notice] == [WARNING]
+    # Held: the volume stays where it was, with no flow, even when the actuator is back.
+    command, = topic_values(tick(6.0), PumpCommand)
+    assert command.flow_m3_per_s == 0.0 and command.injected_m3 >= volumes[-1]
+    assert pump.state == 'held'
+    assert pump.start(int(6.5e9)).success and pump.state == 'running'
+    tick(7.0)
+    assert pump.state == 'running'
+    # Open loop (no actuator at all): never holds for want of feedback.
+    free, _ = pump_core(scene, legs=legs, open_loop=True, feedback_clock=lambda: wall[0])
+    for second in range(0, 60, 5):
+        wall[0] = second * 10**9
+        free.tick(wall[0])
+    assert free.state == 'running'
 
 
 def test_core_settings_are_checked_with_their_names(tmp_path):

@@ -4,7 +4,9 @@ Syringe pump node: the pump core (softseq_ros.rig.pump) on a ROS timer, with ser
 Publishes ``pump/command`` (sensor_msgs/JointState, joint ``syringe``: injected volume [m^3]
 and signed flow [m^3/s]) at ``rate_hz`` and ``pump/status`` (JSON with state, reason and
 stamp; transient_local, depth 1: a late joiner gets the current state only). Listens to
-``actuator/pressure`` for its pressure relief. The programme (legs at ``flow_rate_m3_per_s``,
+``actuator/volumes`` for the actuator's gauge pressure: its relief valve (``max_pressure_pa``)
+and its feedback (it holds after ``feedback_timeout_s`` without it; ``open_loop`` for a pump
+with no actuator). The programme (legs at ``flow_rate_m3_per_s``,
 repeated ``cycles`` times) comes from the scene unless the parameters give it.
 
 Services (std_srvs/Trigger): ``~/start`` (idle or held -> running), ``~/hold`` (running ->
@@ -23,7 +25,7 @@ from softseq_ros.nodes.runner import run_node
 from softseq_ros.physics.profile import Leg
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import pump_core
-from softseq_ros.rig.pump import DEFAULT_MAX_PRESSURE_PA, Reply
+from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
 
 LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
 
@@ -114,14 +116,19 @@ class SyringePumpNode(CoreNode):
             'max_injected_m3', scene.capacity,
             'Stop when the commanded injected volume would exceed this [m^3] '
             '(default: what the segments hold).', minimum=0.0, open_minimum=True)
-        ambient = self.declare_number(
-            'ambient_pressure_pa', contract.DEFAULT_AMBIENT_PRESSURE_PA,
-            'Ambient pressure subtracted from actuator/pressure [Pa].', minimum=0.0)
+        feedback_timeout = self.declare_number(
+            'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
+            'Hold when no pressure came from the actuator for this long while running '
+            '[s, wall clock].', minimum=0.0, open_minimum=True, maximum=3600.0)
+        open_loop = self.declare_flag(
+            'open_loop', False, 'Run without pressure feedback (no actuator behind the pump): '
+            'no relief valve, no feedback timeout.', read_only=True)
         self.core, _ = pump_core(
             scene, flow_rate_m3_per_s=flow,
             legs=parse_legs(legs_text) if legs_text else None, cycles=cycles,
             start_injected_m3=start, autostart=autostart, max_pressure_pa=max_pressure,
-            max_injected_m3=max_injected, ambient_pressure_pa=ambient)
+            max_injected_m3=max_injected, feedback_timeout_s=feedback_timeout,
+            open_loop=open_loop)
         self.connect(scene.outputs)
         for name, request in (('start', self.core.start), ('stop', self.core.stop),
                               ('hold', self.core.hold), ('reset', self.core.reset)):
@@ -162,8 +169,7 @@ class SyringePumpNode(CoreNode):
             if parameter.name == 'rate_hz':
                 self.rate_hz = float(parameter.value)
                 self._timer.timer_period_ns = int(round(1e9 / self.rate_hz))
-            elif parameter.name in ('max_pressure_pa', 'max_injected_m3',
-                                    'ambient_pressure_pa'):
+            elif parameter.name in ('max_pressure_pa', 'max_injected_m3', 'feedback_timeout_s'):
                 setattr(self.core, parameter.name, float(parameter.value))
 
 

@@ -14,7 +14,7 @@ from softseq_ros.physics.scene import Scene
 from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.camera import CameraCore
-from softseq_ros.rig.pump import DEFAULT_MAX_PRESSURE_PA, PumpCore
+from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, PumpCore
 
 
 class SettingError(ValueError):
@@ -29,7 +29,8 @@ def _unknown(role: str, overrides: dict[str, Any], known: tuple[str, ...]) -> No
 
 
 PUMP_SETTINGS = ('rate_hz', 'flow_rate_m3_per_s', 'legs', 'cycles', 'start_injected_m3',
-                 'autostart', 'max_pressure_pa', 'max_injected_m3', 'ambient_pressure_pa')
+                 'autostart', 'max_pressure_pa', 'max_injected_m3', 'feedback_timeout_s',
+                 'open_loop', 'feedback_clock')
 
 
 def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
@@ -58,8 +59,10 @@ def pump_core(scene: Scene, **settings: Any) -> tuple[PumpCore, float]:
         profile, autostart=settings.get('autostart', True),
         max_pressure_pa=settings.get('max_pressure_pa', DEFAULT_MAX_PRESSURE_PA),
         max_injected_m3=settings.get('max_injected_m3', scene.capacity),
-        ambient_pressure_pa=settings.get('ambient_pressure_pa',
-                                         contract.DEFAULT_AMBIENT_PRESSURE_PA))
+        feedback_timeout_s=settings.get('feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S),
+        open_loop=settings.get('open_loop', False),
+        **({'feedback_clock': settings['feedback_clock']} if 'feedback_clock' in settings
+           else {}))
     return core, float(settings.get('rate_hz', scene.pump.rate_hz))
 
 

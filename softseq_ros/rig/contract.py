@@ -58,11 +58,13 @@ PUMP_STATUS = Topic(
     'pump/status', 'std_msgs/msg/String', Qos(1, latched=True), PUMP, (), None,
     'JSON {"state", "reason", "stamp_ns"}: idle, running, held, finished or stopped')
 PRESSURE = Topic(
-    'actuator/pressure', 'sensor_msgs/msg/FluidPressure', Qos(100), ACTUATOR, (PUMP,),
+    'actuator/pressure', 'sensor_msgs/msg/FluidPressure', Qos(100), ACTUATOR, (),
     'pressure', 'absolute pressure [Pa] = gauge + ambient')
+# The pump reads its relief pressure here, gauge as the actuator computed it: no ambient
+# pressure of its own that could disagree with the actuator's.
 VOLUMES = Topic(
     'actuator/volumes', 'sensor_msgs/msg/JointState', Qos(1, latched=True), ACTUATOR,
-    (CAMERA,), 'volumes',
+    (CAMERA, PUMP), 'volumes',
     'one joint per segment, base to tip: position = volume [m^3], effort = gauge pressure [Pa]')
 CURVATURES = Topic(
     'actuator/curvatures', 'sensor_msgs/msg/JointState', Qos(100), ACTUATOR, (CAMERA,),

@@ -8,21 +8,42 @@ actuator and a late recorder always see where the pump is.
 
 States (each change is a :class:`PumpStatus`): ``idle`` (not started), ``running``, ``held``
 (paused; ``start`` resumes), ``finished`` (the programme is over), ``stopped`` (by ``stop`` or a
-safety limit; only ``reset`` leaves it). Safety: the pump stops when the actuator's gauge
-pressure exceeds ``max_pressure_pa`` and when the commanded volume would exceed
-``max_injected_m3``, where it stays.
+safety limit; only ``reset`` leaves it). Safety, as a syringe pump with a pressure sensor:
+
+- it stops when the actuator's gauge pressure (from its segment volumes message: the gauge
+  pressure the actuator computed, so no second ambient pressure can disagree with it) exceeds
+  ``max_pressure_pa``, and when the commanded volume would exceed ``max_injected_m3``;
+- it holds when it has heard no pressure for ``feedback_timeout_s`` while running (the
+  actuator died, or the topic is cut), and says why; only ``start`` resumes it. ``open_loop``
+  runs without any feedback, for a pump with no actuator behind it.
+
+The feedback timeout is measured on ``feedback_clock`` (default: the monotonic wall clock,
+so that a simulated clock running 1000x faster does not make a healthy actuator look dead).
 """
 
 from dataclasses import dataclass
 import math
+import time
+from typing import Callable
 
 from softseq_ros.physics.profile import PumpProfile
 from softseq_ros.rig import contract
-from softseq_ros.rig.values import INFO, WARNING, Notice, Output, Pressure, PumpCommand, PumpStatus
+from softseq_ros.rig.values import (
+    INFO,
+    WARNING,
+    Notice,
+    Output,
+    PumpCommand,
+    PumpStatus,
+    SegmentVolumes,
+)
 
 # Gauge pressure above which the pump stops by default: several times the highest pressure
 # of the shipped segment models (about 20 kPa), far below what the silicone survives.
 DEFAULT_MAX_PRESSURE_PA = 100.0e3
+# An actuator answers every command within milliseconds; two seconds of silence while the
+# pump pushes fluid is a dead or disconnected actuator.
+DEFAULT_FEEDBACK_TIMEOUT_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -35,20 +56,25 @@ class Reply:
 
 
 class PumpCore:
-    """The syringe pump without ROS: ``tick(now)``, ``handle(Pressure, now)`` and requests."""
+    """The syringe pump without ROS: ``tick(now)``, ``handle(SegmentVolumes, now)``, requests."""
 
     role = contract.PUMP
 
     def __init__(self, profile: PumpProfile, *, autostart: bool = True,
                  max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA,
                  max_injected_m3: float = math.inf,
-                 ambient_pressure_pa: float = contract.DEFAULT_AMBIENT_PRESSURE_PA) -> None:
+                 feedback_timeout_s: float = DEFAULT_FEEDBACK_TIMEOUT_S,
+                 open_loop: bool = False,
+                 feedback_clock: Callable[[], int] = time.monotonic_ns) -> None:
         """A pump at rest (idle) at the programme's start volume."""
         self.profile = profile
         self.autostart = autostart
         self.max_pressure_pa = max_pressure_pa
         self.max_injected_m3 = max_injected_m3
-        self.ambient_pressure_pa = ambient_pressure_pa
+        self.feedback_timeout_s = feedback_timeout_s
+        self.open_loop = open_loop
+        self._feedback_clock = feedback_clock
+        self._last_feedback: int | None = None
         self.duration_s = profile.duration()
         self.state = 'idle'
         self.reason = ''
@@ -73,7 +99,8 @@ class PumpCore:
     def _set_state(self, now: int, state: str, reason: str = '') -> None:
         self.state, self.reason = state, reason
         status = PumpStatus(now, state, reason)
-        level = WARNING if state == 'stopped' and reason != 'requested' else INFO
+        # A state the pump entered by itself, for a reason, is worth a warning.
+        level = WARNING if reason and reason != 'requested' else INFO
         self._out.append(Notice(self.role, level, f'pump {status.text}'))
         self._out.append(status)
 
@@ -119,6 +146,8 @@ class PumpCore:
         if self.state in ('idle', 'held'):
             self._running_since = now
             self._started = True
+            # The actuator gets a full timeout to answer the first command of this run.
+            self._last_feedback = self._feedback_clock()
             self._set_state(now, 'running')
             return True, 'running'
         if self.state == 'running':
@@ -140,6 +169,11 @@ class PumpCore:
         self._set_state(now, 'stopped', reason)
         return True, self.status
 
+    def _feedback_lost(self) -> bool:
+        last = self._last_feedback
+        return (last is not None
+                and self._feedback_clock() - last > self.feedback_timeout_s * 1e9)
+
     def _pause(self, now: int) -> None:
         if self._running_since is not None:
             self._elapsed_ns += max(0, now - self._running_since)
@@ -152,11 +186,13 @@ class PumpCore:
 
     # ---------------------------------------------------------------- inputs and ticks
 
-    def handle(self, value: Pressure, now: int) -> list[Output]:
-        """Stop when the actuator's gauge pressure exceeds ``max_pressure_pa``."""
-        gauge = value.absolute_pa - self.ambient_pressure_pa
-        if math.isfinite(gauge) and gauge > self.max_pressure_pa and self.state in (
-                'running', 'held'):
+    def handle(self, value: SegmentVolumes, now: int) -> list[Output]:
+        """The actuator's state: stop when its gauge pressure exceeds ``max_pressure_pa``."""
+        gauge = value.gauge_pa
+        if not math.isfinite(gauge):
+            return []
+        self._last_feedback = self._feedback_clock()
+        if gauge > self.max_pressure_pa and self.state in ('running', 'held'):
             return self.stop(now, f'gauge pressure {gauge:.6g} Pa exceeds max_pressure_pa '
                                   f'{self.max_pressure_pa:.6g} Pa').outputs
         return []
@@ -165,6 +201,11 @@ class PumpCore:
         """The command for ``now``: injected volume and signed flow (and any state change)."""
         if self.autostart and not self._started and self.state == 'idle':
             self._start(now)
+        if self.state == 'running' and not self.open_loop and self._feedback_lost():
+            self._pause(now)
+            self._set_state(now, 'held', f'no pressure from the actuator for '
+                                         f'{self.feedback_timeout_s:g} s (feedback_timeout_s); '
+                                         'call ~/start to go on')
         run_time = self.run_time_s(now)
         volume, programme_flow = self.profile.command_at(run_time)
         if self._frozen_volume is not None:
