@@ -1,0 +1,122 @@
+"""The volume-controlled FEM against closed forms and independent references (coarse meshes)."""
+
+import numpy as np
+import pytest
+
+from softseq_ros.fem.design import load_design, with_changes
+from softseq_ros.fem.segment import build_segment
+from softseq_ros.fem.sphere import (
+    neo_hookean_thick_sphere_pressure,
+    sphere_sector,
+    thick_sphere_pressure,
+    thin_mooney_rivlin_pressure,
+)
+from softseq_ros.physics.materials import MooneyRivlin
+
+MU = 1.0e4  # Pa
+A, B = 0.010, 0.012  # inner and outer radius of the thick sphere [m]
+
+
+@pytest.fixture(scope='module')
+def thick_sphere_path():
+    sphere = sphere_sector(A, B, 'neo_hookean', {'shear_modulus_pa': MU}, radial_cells=4)
+    model = sphere.model
+    v0 = model.rest_volume
+    result = model.ramp_volume(40 * v0, first_step=0.05 * v0, max_step=1.5 * v0,
+                               min_step=1e-4 * v0)
+    assert result.stop_reason == 'reached the requested volume'
+    stretch = np.array([(s.volume / v0) ** (1 / 3) for s in result.states])
+    pressure = np.array([s.pressure for s in result.states])
+    return sphere, stretch, pressure
+
+
+def test_thick_neo_hookean_sphere_matches_closed_form_through_peak(thick_sphere_path):
+    _, stretch, pressure = thick_sphere_path
+    exact = MU * neo_hookean_thick_sphere_pressure(stretch, A, B)
+    peak = int(np.argmax(exact))
+    # The run goes through the peak and far down the falling branch.
+    assert 0 < peak < len(exact) - 5
+    assert exact[-1] < 0.6 * exact[peak]
+    error = np.abs(pressure[1:] / exact[1:] - 1)
+    assert error.max() < 0.005
+    assert error[peak - 2:].max() < 0.005  # at and after the peak too
+
+
+def test_pressure_control_stops_at_the_peak_where_volume_control_goes_on(thick_sphere_path):
+    sphere, stretch, pressure = thick_sphere_path
+    peak_pressure = pressure.max()
+    model = sphere_sector(A, B, 'neo_hookean', {'shear_modulus_pa': MU}, radial_cells=4).model
+    loads = np.linspace(0.1, 1.06, 17) * peak_pressure  # 0.94 and 1.0 of the peak among them
+    result = model.ramp_pressure(loads)
+    reached = max(s.pressure for s in result.states)
+    # Load control converges right up to the peak and no further: the first load it fails at
+    # lies beyond the largest pressure of the volume-controlled path.
+    assert result.stop_reason.startswith('no convergence')
+    assert 0.99 * peak_pressure < reached <= peak_pressure * (1 + 1e-9)
+    failed_at = loads[len(result.states) - 1]
+    assert failed_at > peak_pressure
+    # Volume control got past the peak, onto the falling branch, in the same model.
+    assert stretch[-1] > 1.5 * stretch[int(np.argmax(pressure))]
+
+
+def test_thin_mooney_rivlin_balloon_matches_closed_form():
+    c1, c2 = 0.45 * MU, 0.05 * MU  # C2/C1 = 0.11 < 0.2145: a limit point exists
+    inner, thickness = 0.010, 0.0002
+    sphere = sphere_sector(inner, inner + thickness, 'mooney_rivlin',
+                           {'c1_pa': c1, 'c2_pa': c2}, radial_cells=1, lateral_cells=2)
+    model = sphere.model
+    v0 = model.rest_volume
+    result = model.ramp_volume(27 * v0, first_step=0.05 * v0, max_step=1.0 * v0,
+                               min_step=1e-4 * v0)
+    assert result.stop_reason == 'reached the requested volume'
+    stretch = np.array([(s.volume / v0) ** (1 / 3) for s in result.states[1:]])
+    pressure = np.array([s.pressure for s in result.states[1:]])
+    # Thin membrane of mid-surface radius R: stretch of the mid-surface from the volumes.
+    radius = inner + thickness / 2
+    mid_stretch = np.cbrt(radius**3 + (stretch**3 - 1) * inner**3) / radius
+    thin = thin_mooney_rivlin_pressure(mid_stretch, c1, c2, thickness, radius)
+    material = MooneyRivlin(c1, c2)
+    thick = np.array([thick_sphere_pressure(material.energy_derivative, s, inner,
+                                            inner + thickness) for s in stretch])
+    # H/R = 0.02: the thin closed form (with the mid-surface radius) and the exact thick-wall
+    # integral both agree to well under 0.5 %.
+    assert np.max(np.abs(pressure / thin - 1)) < 0.005
+    assert np.max(np.abs(pressure / thick - 1)) < 0.005
+    peak = int(np.argmax(thin))
+    assert 0 < peak < len(thin) - 3  # the run passed the balloon's limit point
+
+
+@pytest.fixture(scope='module')
+def coarse_top_cell():
+    design = with_changes(load_design('config/designs/paper_top.yaml'),
+                          {'mesh.element_size_m': 0.0025, 'mesh.thin_layer_cells': 1})
+    return build_segment(design)
+
+
+def test_volume_derivatives_match_finite_differences(coarse_top_cell):
+    model = coarse_top_cell.model
+    rng = np.random.default_rng(7)
+    q = 2e-4 * rng.normal(size=model.space.size)
+    q[model.space.angle_index] = -0.2  # a turned mid-wall cut, as in strong bending
+    x = model.positions(q)
+    jac = model.space.jacobian(q)
+    gradient = jac.T @ model.cavity.gradient(x).ravel()
+    for _ in range(3):
+        dq = 1e-6 * rng.normal(size=q.size)
+        central = (model.cavity.volume(model.positions(q + dq))
+                   - model.cavity.volume(model.positions(q - dq))) / 2
+        assert gradient @ dq == pytest.approx(central, rel=1e-6)
+    dx = 1e-7 * rng.normal(size=x.shape)
+    hessian = model.cavity.hessian(x)
+    central = (model.cavity.gradient(x + dx) - model.cavity.gradient(x - dx)).ravel() / 2
+    assert np.linalg.norm(hessian @ dx.ravel() - central) < 1e-6 * np.linalg.norm(central)
+
+
+def test_cavity_volume_of_the_unit_cell_is_its_geometry(coarse_top_cell):
+    g = coarse_top_cell.design.geometry
+    half_pitch, half_cavity = g.pitch_m / 2, g.cavity_width_m / 2
+    under_membrane = (g.height_m - g.beam_thickness_m - g.membrane_thickness_m)
+    under_wall = (g.height_m - g.beam_thickness_m - g.skin_band_thickness_m)
+    expected = half_cavity * (g.membrane_length_m / 2 * under_membrane
+                              + (half_pitch - g.membrane_length_m / 2) * under_wall)
+    assert coarse_top_cell.model.rest_volume == pytest.approx(expected, rel=1e-12)
