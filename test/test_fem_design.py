@@ -143,12 +143,17 @@ def _softseq(*args: str, env: dict | None = None) -> subprocess.CompletedProcess
     (['paper_top', '--sweep', 'mesh.element_size_m=0.001', '--out-dir', 'x',
       '--scheduler', 'tcp://127.0.0.1:1', '--workers', '2'], '--workers: not with --scheduler'),
 ])
-def test_fem_command_refuses_bad_requests_before_starting(args, expected, tmp_path):
-    done = _softseq(*args)
-    assert done.returncode == 2
-    lines = done.stderr.strip().splitlines()
+def test_fem_command_refuses_bad_requests_before_starting(args, expected, tmp_path, capsys,
+                                                         monkeypatch):
+    from softseq_ros.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(['fem', *args]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('softseq fem: error: ')
     assert expected in lines[0]
+    assert not captured.out and not list(tmp_path.iterdir())  # refused before any work
 
 
 def test_fem_command_computes_once_then_serves_the_cache(tmp_path):
