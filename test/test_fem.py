@@ -163,3 +163,19 @@ def test_paper_segments_plateau_converges_with_the_mesh(plateau_by_mesh, record_
         assert np.all(changes < 0) and np.all(np.abs(changes) < 0.05), (name, values)
     # The paper's design rule holds at every mesh: the thin-membrane top levels off lower.
     assert all(t < 0.95 * b for t, b in zip(plateau['top'], plateau['bottom']))
+
+
+def test_contact_is_seen_where_a_membrane_reaches_its_neighbours_mid_plane(coarse_top_cell):
+    for segment in (coarse_top_cell,
+                    build_segment(with_changes(coarse_top_cell.design,
+                                               {'mesh.model': 'whole_segment'}))):
+        model = segment.model
+        q = np.zeros(model.space.size)
+        x = model.positions(q).copy()
+        assert not segment.contact(x, q)
+        # Push one membrane point of the outer skin over the mid-plane of the wall beside it.
+        first = segment.top_points[segment.membrane_of_top == 0]
+        point = first[np.argmax(x[first, 0])]
+        wall_x = x[segment.wall_cuts[0], 0].mean()
+        x[point, 0] = wall_x + 1e-4
+        assert segment.contact(x, q)
