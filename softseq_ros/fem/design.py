@@ -195,10 +195,7 @@ def _geometry(ctx: _Context, value: object) -> Geometry:
         if not thickness < room:
             raise ctx.error(f'geometry.{key}', f'must leave a cavity: below height_m - '
                                                f'beam_thickness_m ({room:g} m), got {thickness:g}')
-    geometry = Geometry(**dims, wall_reading=reading,
-                        skin_band_thickness_m=band if reading == 'side_walls' else 0.0)
-    if reading == 'skin_bands':
-        geometry = Geometry(**dims, wall_reading=reading, skin_band_thickness_m=d)
+    geometry = Geometry(**dims, wall_reading=reading, skin_band_thickness_m=band)
     if not geometry.end_cap_length_m > 0:
         raise ctx.error('geometry.length_m',
                         f'{geometry.length_m:g} m holds no end caps around {geometry.membranes} '
