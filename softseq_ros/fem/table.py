@@ -108,7 +108,7 @@ def run_design(design: Design, progress: Callable[[str], None] | None = None) ->
                      wall_s=time.perf_counter() - start)
 
 
-def _provenance(result: FemResult, out_name: str) -> list[str]:
+def _provenance(result: FemResult) -> list[str]:
     from importlib.metadata import version
 
     d = result.design
@@ -129,7 +129,7 @@ def _provenance(result: FemResult, out_name: str) -> list[str]:
              f'{g.end_cap_length_m * mm:g} mm, half the width, base clamped')
     peak_p, peak_v = result.peak
     lines = [
-        f'{out_name}: FEM table of the segment design {d.name!r} '
+        f'FEM table of the segment design {d.name!r} '
         f'({d.path.name if d.path else "in memory"}), made by `softseq fem`.',
         f'{d.description}' if d.description else None,
         'Method: nonlinear hyperelastic FEM (felupe), cavity filled with an incompressible fluid',
@@ -166,7 +166,7 @@ def write_table(result: FemResult, path: Path) -> Path:
     """Write the table CSV with its provenance comments."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    lines = [f'# {line}' for line in _provenance(result, path.name)]
+    lines = [f'# {line}' for line in _provenance(result)]
     lines.append(','.join(COLUMNS))
     for row in zip(result.volumes, result.pressures, result.curvatures, result.injected,
                    result.cut_curvatures):
