@@ -53,3 +53,18 @@ def test_dask_cluster_sweep_matches_the_local_one(cases, tmp_path):
         # Same numbers whichever machine ran them (the run time aside).
         assert ((tmp_path / 'dask' / row['table']).read_text()
                 == (tmp_path / 'local' / row['table']).read_text())
+
+
+def test_softseq_fem_sweep_from_the_command_line(tmp_path, capsys):
+    from softseq_ros.cli import main
+
+    quick = [item for key, value in QUICK.items() for item in ('--set', f'{key}={value}')]
+    code = main(['fem', str(REPO / 'config' / 'designs' / 'paper_bottom.yaml'), *quick, '--quiet',
+                 '--sweep', 'geometry.wall_thickness_m=0.001,0.002', '--out-dir',
+                 str(tmp_path), '--workers', '1'])
+    assert code == 0
+    assert '2 designs on 1 local workers' in capsys.readouterr().out
+    rows = _summary(tmp_path / 'summary.csv')
+    assert [row['table'] for row in rows] == ['paper_bottom__wall_thickness_m=0.001.csv',
+                                              'paper_bottom__wall_thickness_m=0.002.csv']
+    assert all((tmp_path / row['table']).is_file() for row in rows)
