@@ -173,6 +173,12 @@ def test_contact_is_seen_where_a_membrane_reaches_its_neighbours_mid_plane(coars
         q = np.zeros(model.space.size)
         x = model.positions(q).copy()
         assert not segment.contact(x, q)
+        if segment.design.mesh.model == 'whole_segment':
+            # A segment turned far about y (as when it curls) is no contact either.
+            for angle in (0.5 * np.pi, 0.75 * np.pi, 1.2 * np.pi):
+                c, s = np.cos(angle), np.sin(angle)
+                turned = x @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+                assert not segment.contact(turned, q)
         # Push one membrane point of the outer skin over the mid-plane of the wall beside it.
         first = segment.top_points[segment.membrane_of_top == 0]
         point = first[np.argmax(x[first, 0])]

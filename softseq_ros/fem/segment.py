@@ -87,12 +87,23 @@ class SegmentModel:
             cut = x[self.wall_cuts[0]]
             offset = float(np.mean(cut @ normal))
             return bool(np.any(x[self.top_points] @ normal >= offset))
+        ref_line = self.model.reference[self.neutral_line, 0]
+        line = x[self.neutral_line][:, [0, 2]]
+        top = x[self.top_points][:, [0, 2]]
         for wall, cut_points in enumerate(self.wall_cuts):
-            cut = x[cut_points]
-            # Plane through the deformed mid-wall points (x = alpha + beta z, containing y).
-            beta, alpha = np.polyfit(cut[:, 2], cut[:, 0], 1)
-            top = x[self.top_points]
-            side = top[:, 0] - (alpha + beta * top[:, 2])
+            # The deformed mid-wall section, seen in the bending plane, as a straight line
+            # (principal direction of its points: valid at any angle the segment has turned).
+            cut = x[cut_points][:, [0, 2]]
+            centre = cut.mean(axis=0)
+            direction = np.linalg.svd(cut - centre, full_matrices=False)[2][0]
+            normal = np.array([direction[1], -direction[0]])
+            # Oriented along the beam, from this wall's left membrane to its right one.
+            x_wall = self.model.reference[cut_points[0], 0]
+            after = int(np.searchsorted(ref_line, x_wall + 1e-12))
+            tangent = line[min(after, len(line) - 1)] - line[max(after - 1, 0)]
+            if normal @ tangent < 0:
+                normal = -normal
+            side = (top - centre) @ normal
             left = self.membrane_of_top == wall
             right = self.membrane_of_top == wall + 1
             if np.any(side[left] >= 0) or np.any(side[right] <= 0):

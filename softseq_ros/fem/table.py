@@ -170,7 +170,8 @@ def write_table(result: FemResult, path: Path) -> Path:
     lines.append(','.join(COLUMNS))
     for row in zip(result.volumes, result.pressures, result.curvatures, result.injected,
                    result.cut_curvatures):
-        lines.append(','.join(f'{value:.9e}' for value in row))
+        # + 0.0 writes a negative zero (the rest state's fitted curvature) as 0.
+        lines.append(','.join(f'{value + 0.0:.9e}' for value in row))
     tmp = path.with_suffix(path.suffix + '.tmp')
     tmp.write_text('\n'.join(lines) + '\n')
     tmp.replace(path)
