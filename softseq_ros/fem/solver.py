@@ -189,8 +189,7 @@ class InflationModel:
                 self.reset_to(current.q)
                 step *= 0.5
                 if step < min_step:
-                    result.stop_reason = (f'no convergence beyond {current.volume:.6g} m^3 '
-                                          f'({err})')
+                    result.stop_reason = f'no convergence beyond the last state ({err})'
                     return result
                 continue
             result.newton_iterations += state.iterations

@@ -100,9 +100,14 @@ def run_design(design: Design, progress: Callable[[str], None] | None = None) ->
         first_step=volume.first_step_m3 / factor, max_step=volume.max_step_m3 / factor,
         min_step=volume.first_step_m3 / factor / 256, on_state=on_state)
     data = np.array(rows)
+    stop_reason = result.stop_reason
+    if stop_reason.startswith('no convergence beyond the last state'):
+        # Where, in the table's terms; a perfect model may stop at a bifurcation (see docs).
+        stop_reason = stop_reason.replace(
+            'the last state', f'{(data[-1, 0] - data[0, 0]) * 1e6:.2f} mL injected')
     return FemResult(design=design, volumes=data[:, 0], pressures=data[:, 1],
                      curvatures=data[:, 2], cut_curvatures=data[:, 3],
-                     stop_reason=result.stop_reason, contact=contact['hit'], dofs=segment.dofs,
+                     stop_reason=stop_reason, contact=contact['hit'], dofs=segment.dofs,
                      cells=segment.mesh.ncells, points=segment.mesh.npoints,
                      newton_iterations=result.newton_iterations,
                      wall_s=time.perf_counter() - start)
