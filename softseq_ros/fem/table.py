@@ -7,7 +7,7 @@ unit cell, ``cut_curvature_per_m`` (from the turning of the mid-wall cut, a chec
 curvature). The comment lines say where every number comes from.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import os
 from pathlib import Path
 import shutil
@@ -38,7 +38,6 @@ class FemResult:
     points: int
     newton_iterations: int
     wall_s: float
-    notes: list[str] = field(default_factory=list)
 
     @property
     def injected(self) -> np.ndarray:
