@@ -141,6 +141,12 @@ def _recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fem(args: argparse.Namespace) -> int:
+    from softseq_ros.fem.command import run_fem_command
+
+    return run_fem_command(args)
+
+
 def _scenes(args: argparse.Namespace) -> int:
     from softseq_ros.physics.scene import config_dir, shipped_scenes
 
@@ -243,6 +249,31 @@ def build_parser() -> argparse.ArgumentParser:
                              'flush (at most 0.5 s before the kill) is kept.')
     recover.add_argument('bag', type=Path, help='bag directory')
     recover.set_defaults(handler=_recover)
+
+    fem = sub.add_parser('fem', help='segment table from a segment design (volume-controlled FEM)',
+                         description="Compute a segment's pressure-volume and curvature table "
+                         'from its geometry and material by hyperelastic FEM with the cavity '
+                         "volume prescribed (felupe); tables are cached by the design's hash. "
+                         'With --sweep, every combination of the given values, in parallel.')
+    fem.add_argument('design', help='design YAML file, or the name of a shipped design '
+                     '(paper_top, paper_bottom)')
+    fem.add_argument('--out', type=Path, help='CSV table to write (default: the cache file)')
+    fem.add_argument('--model', choices=('unit_cell', 'whole_segment'),
+                     help="override the design's mesh.model")
+    fem.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                     help='override a design value, e.g. mesh.element_size_m=0.001')
+    fem.add_argument('--sweep', action='append', default=[], metavar='KEY=V1,V2,...',
+                     help='sweep a design value (repeat for a grid of several)')
+    fem.add_argument('--out-dir', type=Path, help='folder for the sweep tables and summary.csv')
+    fem.add_argument('--workers', type=int, help='local worker processes for a sweep '
+                     '(default: one per core)')
+    fem.add_argument('--scheduler', help='Dask scheduler address for a sweep, e.g. '
+                     'tcp://10.0.0.5:8786')
+    fem.add_argument('--no-cache', action='store_true', help='recompute even when cached')
+    fem.add_argument('--cache-dir', type=Path, help='table cache (default: $SOFTSEQ_FEM_CACHE '
+                     'or ~/.cache/softseq/fem)')
+    fem.add_argument('--quiet', action='store_true', help='no progress lines')
+    fem.set_defaults(handler=_fem)
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)

@@ -1,0 +1,402 @@
+"""
+FEM benchmarks: run time, unknowns and memory per segment and mesh density; the whole segment;
+sweep throughput with 1 and 2 workers; the paper pair across Ecoflex 00-30 fits; figures.
+
+    python bench/bench_fem.py [--part meshes|whole|sweep|materials|figures|all]
+
+Benchmarks, not tests: nothing is asserted about time. Every run is a fresh process (its peak
+resident memory is the run's), single-threaded BLAS, on a 2-core machine shared with other work
+(the load average is written beside each part). Each part stores its numbers in
+bench/fem_results.json and the whole of bench/fem_results.md is rewritten from that file, so
+one part can be re-run alone. Figures go to docs/fem_*.png.
+"""
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+import json
+import multiprocessing
+import os
+from pathlib import Path
+import resource
+import sys
+import tempfile
+import time
+
+os.environ.setdefault('OMP_NUM_THREADS', '1')
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+os.environ.setdefault('MKL_NUM_THREADS', '1')
+
+import numpy as np  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from softseq_ros.fem.design import load_design, with_changes  # noqa: E402
+
+DESIGNS = REPO / 'config' / 'designs'
+RESULTS = REPO / 'bench' / 'fem_results.json'
+REPORT = REPO / 'bench' / 'fem_results.md'
+MESH_SIZES = (0.001, 0.00075, 0.0005)
+# Ecoflex 00-30 fits (Marechal et al. 2021 database, uniaxial data) and the Sorotoki Yeoh fit.
+MATERIALS = {
+    'neo-Hooke, mu 16.1 kPa (stretch <= 2)': {'law': 'neo_hookean', 'shear_modulus_pa': 16100.0},
+    'Yeoh 7.83 / 0.103 / -0.001 kPa (stretch <= 4)': {
+        'law': 'yeoh', 'c1_pa': 7830.0, 'c2_pa': 103.0, 'c3_pa': -1.0},
+    'Arruda-Boyce mu 16.3 kPa, lambda_m 3.96 (stretch <= 4)': {
+        'law': 'arruda_boyce', 'shear_modulus_pa': 16300.0, 'lambda_m': 3.96},
+    'Arruda-Boyce mu 16.3 kPa, lambda_m 2.3': {
+        'law': 'arruda_boyce', 'shear_modulus_pa': 16300.0, 'lambda_m': 2.3},
+    'Yeoh 17 / -0.2 / 0.023 kPa (Sorotoki)': {
+        'law': 'yeoh', 'c1_pa': 17000.0, 'c2_pa': -200.0, 'c3_pa': 23.0},
+}
+
+
+def _load() -> dict:
+    return json.loads(RESULTS.read_text()) if RESULTS.is_file() else {}
+
+
+def _store(part: str, value: object) -> None:
+    data = _load()
+    data[part] = value
+    RESULTS.write_text(json.dumps(data, indent=1, sort_keys=True) + '\n')
+
+
+def _machine() -> dict:
+    return {'cores': os.cpu_count(), 'load_average': [round(v, 2) for v in os.getloadavg()],
+            'python': sys.version.split()[0], 'date_utc': time.strftime('%Y-%m-%d %H:%M',
+                                                                         time.gmtime())}
+
+
+def _run_in_child(design: object, table: str | None) -> dict:
+    """One FEM run in this (fresh) process: result numbers, wall and CPU time, peak memory."""
+    from softseq_ros.fem.table import run_design, write_table
+
+    cpu = time.process_time()
+    result = run_design(design)
+    if table is not None:
+        write_table(result, Path(table))
+    peak_p, peak_v = result.peak
+    return {'dofs': result.dofs, 'cells': result.cells, 'wall_s': round(result.wall_s, 1),
+            'cpu_s': round(time.process_time() - cpu, 1),
+            'max_rss_mb': round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 0),
+            'newton_iterations': result.newton_iterations, 'states': len(result.volumes),
+            'peak_pressure_pa': round(peak_p, 1), 'peak_injected_m3': peak_v,
+            'final_injected_m3': float(result.injected[-1]),
+            'final_pressure_pa': round(float(result.pressures[-1]), 1),
+            'final_curvature_per_m': round(float(result.curvatures[-1]), 3),
+            'stop_reason': result.stop_reason}
+
+
+def fresh_run(design: object, table: str | None = None) -> dict:
+    """Run a design in a new process (so its memory is measured alone)."""
+    context = multiprocessing.get_context('spawn')
+    with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+        return pool.submit(_run_in_child, design, table).result()
+
+
+def part_meshes() -> None:
+    rows = []
+    for name in ('top', 'bottom'):
+        base = load_design(DESIGNS / f'paper_{name}.yaml')
+        for size in MESH_SIZES:
+            design = with_changes(base, {'mesh.element_size_m': size})
+            row = {'segment': name, 'element_size_m': size, **fresh_run(design)}
+            print(row, flush=True)
+            rows.append(row)
+    _store('meshes', {'machine': _machine(), 'rows': rows})
+
+
+def part_whole() -> None:
+    rows = []
+    for model in ('unit_cell', 'whole_segment'):
+        size, thin = 0.002, 1
+        design = with_changes(load_design(DESIGNS / 'paper_top.yaml'),
+                              {'mesh.model': model, 'mesh.element_size_m': size,
+                               'mesh.thin_layer_cells': thin})
+        table = REPO / 'bench' / f'fem_{model}_top_2mm.csv'
+        row = {'segment': 'top', 'model': model, 'element_size_m': size,
+               'thin_layer_cells': thin, **fresh_run(design, str(table))}
+        print(row, flush=True)
+        rows.append(row)
+    _store('whole', {'machine': _machine(), 'rows': rows})
+
+
+def part_sweep() -> None:
+    from softseq_ros.fem.sweep import run_sweep, sweep_cases
+
+    base = with_changes(load_design(DESIGNS / 'paper_top.yaml'),
+                        {'mesh.element_size_m': 0.0015, 'volume.max_injected_m3': 3e-5})
+    cases = sweep_cases(base, {'geometry.membrane_thickness_m': [0.0005, 0.00075, 0.001,
+                                                                 0.00125]})
+    rows = []
+    for workers in (1, 2):
+        with tempfile.TemporaryDirectory() as folder:
+            start = time.perf_counter()
+            run_sweep(cases, Path(folder), workers=workers)
+            wall = time.perf_counter() - start
+        rows.append({'workers': workers, 'designs': len(cases), 'wall_s': round(wall, 1),
+                     'designs_per_minute': round(60 * len(cases) / wall, 2)})
+        print(rows[-1], flush=True)
+    _store('sweep', {'machine': _machine(), 'rows': rows,
+                     'case': 'paper_top, 1.5 mm elements, 0 to 30 mL, membrane 0.5-1.25 mm'})
+
+
+def part_materials() -> None:
+    from softseq_ros.fem.sweep import SweepCase, run_sweep
+
+    cases = []
+    for label, material in MATERIALS.items():
+        for name in ('bottom', 'top'):
+            base = load_design(DESIGNS / f'paper_{name}.yaml')
+            data_changes = {'mesh.element_size_m': 0.001}
+            design = with_changes(base, data_changes)
+            design = _with_material(design, material)
+            slug = f'{name}__' + ''.join(c if c.isalnum() else '_' for c in label)[:40]
+            cases.append(SweepCase(label=slug, changes={'material': label}, design=design))
+    out = REPO / 'bench' / 'fem_materials'
+    # Tables already there are kept (delete the folder to recompute them all).
+    missing = [case for case in cases if not (out / f'{case.label}.csv').is_file()]
+    if missing:
+        run_sweep(missing, out, workers=2, progress=print)
+    rows = []
+    for label in MATERIALS:
+        slug = ''.join(c if c.isalnum() else '_' for c in label)[:40]
+        tables = {name: out / f'{name}__{slug}.csv' for name in ('bottom', 'top')}
+        rows.append({'material': label, **_pair_summary(tables['bottom'], tables['top'])})
+        print(rows[-1], flush=True)
+    _store('materials', {'machine': _machine(), 'rows': rows, 'element_size_m': 0.001})
+
+
+def _with_material(design: object, material: dict) -> object:
+    from dataclasses import replace
+
+    from softseq_ros.fem.design import Material
+
+    return replace(design, material=Material(law=material['law'],
+                                             params={k: v for k, v in material.items()
+                                                     if k != 'law'}))
+
+
+def _pair_summary(bottom: Path, top: Path) -> dict:
+    """Sequence type and path numbers of the two tables on one syringe (0 -> 65 mL)."""
+    from softseq_ros.physics.equilibrium import Tracker, classify
+    from softseq_ros.physics.segments import TabulatedSegment
+    from softseq_ros.physics.solve import build_map
+
+    segments = (TabulatedSegment.from_csv(bottom, name='bottom', length=0.111),
+                TabulatedSegment.from_csv(top, name='top', length=0.111))
+    out = {'bottom_peak_pa': round(float(segments[0].pressures.max()), 1),
+           'top_peak_pa': round(float(segments[1].pressures.max()), 1)}
+    capacity = sum(s.max_volume - s.rest_volume for s in segments)
+    top_ml = min(65e-6, capacity * 0.999)
+    emap = build_map(segments, None)
+    out['sequence'] = classify(emap)
+    history = np.linspace(0.0, top_ml, 1301)
+    path = Tracker(emap).sweep(history)
+    pressure = np.asarray(path.pressure)
+    volumes = np.asarray(path.volumes)
+    for ml in (25, 40, 45, 60, 65):
+        i = int(np.argmin(np.abs(history - ml * 1e-6)))
+        if abs(history[i] - ml * 1e-6) < 1e-7:
+            out[f'p_at_{ml}_ml_pa'] = round(float(pressure[i]), 1)
+            out[f'top_share_at_{ml}_ml'] = round(
+                float((volumes[i, 1] - segments[1].rest_volume) / max(history[i], 1e-12)), 3)
+    top_index = int(np.argmax(pressure))
+    out['combined_peak_pa'] = round(float(pressure[top_index]), 1)
+    out['combined_peak_injected_m3'] = float(history[top_index])
+    near = np.nonzero(pressure >= 0.99 * pressure[top_index])[0]
+    out['within_1pct_of_peak_from_m3'] = float(history[near[0]])
+    out['snap_throughs'] = len(path.events)
+    out['reached_m3'] = float(history[-1])
+    return out
+
+
+def _boundary_faces(cells: np.ndarray) -> np.ndarray:
+    """Faces of a hexahedral mesh that belong to one cell only (its surface), as quads."""
+    local = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    faces = np.concatenate([cells[:, list(f)] for f in local])
+    keys = np.sort(faces, axis=1)
+    _, index, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    return faces[index[counts == 1]]
+
+
+def _draw_mesh(ax: object, points: np.ndarray, cells: np.ndarray, title: str) -> None:
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    faces = _boundary_faces(cells)
+    mm = points * 1e3
+    ax.add_collection3d(Poly3DCollection(mm[faces], facecolor='#9ecae1', edgecolor='#08519c',
+                                         linewidth=0.3, alpha=0.9))
+    lo, hi = mm.min(axis=0), mm.max(axis=0)
+    centre, span = (lo + hi) / 2, (hi - lo).max() / 2
+    for axis, setter in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
+        setter(centre[axis] - span, centre[axis] + span)
+    ax.set_xlabel('x [mm]')
+    ax.set_ylabel('y [mm]')
+    ax.set_zlabel('z [mm]')
+    ax.set_title(title, fontsize=9)
+    ax.view_init(elev=22, azim=-60)
+
+
+def write_figures() -> None:
+    """docs/fem_mesh.png (meshes, undeformed and inflated) and docs/fem_pv.png (curves)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from softseq_ros.fem.segment import build_segment
+    from softseq_ros.physics.segments import TabulatedSegment
+
+    top = with_changes(load_design(DESIGNS / 'paper_top.yaml'), {'mesh.element_size_m': 0.001})
+    segment = build_segment(top)
+    model = segment.model
+    factor = segment.volume_factor
+    result = model.ramp_volume(model.rest_volume + 30e-6 / factor, 5e-7 / factor,
+                               2e-6 / factor, 5e-7 / factor / 256)
+    deformed = model.positions(result.states[-1].q)
+    whole = build_segment(with_changes(top, {'mesh.model': 'whole_segment',
+                                             'mesh.element_size_m': 0.002,
+                                             'mesh.thin_layer_cells': 1}))
+    cells = segment.mesh.cells
+    fig = plt.figure(figsize=(13, 4.6))
+    _draw_mesh(fig.add_subplot(1, 3, 1, projection='3d'), model.reference, cells,
+               f'top unit cell, 1 mm elements ({segment.dofs} unknowns)')
+    _draw_mesh(fig.add_subplot(1, 3, 2, projection='3d'), deformed, cells,
+               f'inflated: {(result.states[-1].volume - model.rest_volume) * factor * 1e6:.0f}'
+               f' mL into the segment, {result.states[-1].pressure / 1e3:.2f} kPa')
+    _draw_mesh(fig.add_subplot(1, 3, 3, projection='3d'), whole.model.reference,
+               whole.mesh.cells, f'whole top segment, 2 mm ({whole.dofs} unknowns)')
+    fig.suptitle('Table I segment meshes (half width; x along the segment, z from the beam to '
+                 'the membranes)', fontsize=10)
+    fig.tight_layout()
+    fig.savefig(REPO / 'docs' / 'fem_mesh.png', dpi=130)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    segs = REPO / 'config' / 'segments'
+    for name, colour in (('bottom', 'tab:blue'), ('top', 'tab:red')):
+        for kind, style in (('paper_fem', '-'), ('paper', ':')):
+            table = TabulatedSegment.from_csv(segs / f'{kind}_{name}.csv', name=name,
+                                              length=0.111)
+            injected = (table.volumes - table.volumes[0]) * 1e6
+            label = f'{name}, {"FEM" if kind == "paper_fem" else "stand-in"}'
+            axes[0].plot(injected, table.pressures / 1e3, style, color=colour, label=label)
+            axes[1].plot(injected, table.curvatures, style, color=colour, label=label)
+    axes[0].set_ylabel('gauge pressure [kPa]')
+    axes[1].set_ylabel('curvature [1/m]')
+    materials = REPO / 'bench' / 'fem_materials'
+    for index, label in enumerate(MATERIALS):
+        slug = ''.join(c if c.isalnum() else '_' for c in label)[:40]
+        for name, style in (('bottom', '--'), ('top', '-')):
+            path = materials / f'{name}__{slug}.csv'
+            if not path.is_file():
+                continue
+            table = TabulatedSegment.from_csv(path, name=name, length=0.111)
+            axes[2].plot((table.volumes - table.volumes[0]) * 1e6, table.pressures / 1e3, style,
+                         color=f'C{index}', label=f'{label}' if name == 'top' else None)
+    axes[2].set_ylabel('gauge pressure [kPa] (top solid, bottom dashed)')
+    axes[2].legend(fontsize=6)
+    for ax in axes:
+        ax.set_xlabel('fluid injected into the segment [mL]')
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    axes[0].set_title('PV: FEM (Yeoh, stretch <= 4 fit) vs stand-ins', fontsize=9)
+    axes[1].set_title('curvature of the beam', fontsize=9)
+    axes[2].set_title('FEM unit cells (1 mm) across Ecoflex 00-30 fits', fontsize=9)
+    fig.tight_layout()
+    fig.savefig(REPO / 'docs' / 'fem_pv.png', dpi=130)
+    plt.close(fig)
+    print('wrote docs/fem_mesh.png, docs/fem_pv.png')
+
+
+PARTS = {'meshes': part_meshes, 'whole': part_whole, 'sweep': part_sweep,
+         'materials': part_materials}
+
+
+def write_report() -> None:
+    data = _load()
+    lines = ['# FEM benchmark results', '',
+             'Written by `python bench/bench_fem.py` (see its docstring for the method). '
+             'Times on a 2-core machine shared with other work; each run single-threaded in a '
+             "fresh process; memory is the run's peak resident set.", '']
+    if 'meshes' in data:
+        part = data['meshes']
+        lines += ['## Unit cell: time, unknowns and memory per mesh density', '',
+                  f'Machine: {part["machine"]}', '',
+                  '| segment | element [mm] | unknowns | Newton iterations | wall [s] | CPU [s] '
+                  '| memory [MB] | peak pressure [Pa] | at [mL] | curvature at the end [1/m] |',
+                  '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|']
+        for row in part['rows']:
+            lines.append(f'| {row["segment"]} | {row["element_size_m"] * 1e3:g} | {row["dofs"]} '
+                         f'| {row["newton_iterations"]} | {row["wall_s"]} | {row["cpu_s"]} | '
+                         f'{row["max_rss_mb"]:.0f} | {row["peak_pressure_pa"]} | '
+                         f'{row["peak_injected_m3"] * 1e6:.1f} | {row["final_curvature_per_m"]} |')
+        lines += ['', 'Mesh convergence of the plateau (peak) pressure, change per refinement:',
+                  '']
+        for name in ('top', 'bottom'):
+            rows = [r for r in part['rows'] if r['segment'] == name]
+            changes = [f'{(b["peak_pressure_pa"] / a["peak_pressure_pa"] - 1) * 100:+.2f} %'
+                       for a, b in zip(rows[:-1], rows[1:])]
+            lines.append(f'- {name}: ' + ', '.join(
+                f'{a["element_size_m"] * 1e3:g} -> {b["element_size_m"] * 1e3:g} mm: {c}'
+                for a, b, c in zip(rows[:-1], rows[1:], changes)))
+        lines.append('')
+    if 'whole' in data:
+        part = data['whole']
+        lines += ['## Whole segment (half-width symmetry) against the unit cell, same mesh', '',
+                  f'Machine: {part["machine"]}', '',
+                  '| segment | model | element [mm] | thin-layer cells | unknowns | wall [s] '
+                  '| memory [MB] | reached [mL] | peak pressure [Pa] | stop |',
+                  '|---|---|---:|---:|---:|---:|---:|---:|---:|---|']
+        for row in part['rows']:
+            lines.append(f'| {row["segment"]} | {row.get("model", "whole_segment")} | '
+                         f'{row["element_size_m"] * 1e3:g} | '
+                         f'{row["thin_layer_cells"]} | {row["dofs"]} | {row["wall_s"]} | '
+                         f'{row["max_rss_mb"]:.0f} | {row["final_injected_m3"] * 1e6:.1f} | '
+                         f'{row["peak_pressure_pa"]} | {row["stop_reason"]} |')
+        lines.append('')
+    if 'sweep' in data:
+        part = data['sweep']
+        lines += ['## Sweep throughput', '',
+                  f'Case: {part["case"]}. Machine: {part["machine"]}', '',
+                  '| workers | designs | wall [s] | designs per minute |', '|---:|---:|---:|---:|']
+        for row in part['rows']:
+            lines.append(f'| {row["workers"]} | {row["designs"]} | {row["wall_s"]} | '
+                         f'{row["designs_per_minute"]} |')
+        lines.append('')
+    if 'materials' in data:
+        part = data['materials']
+        lines += ['## The paper pair across Ecoflex 00-30 fits', '',
+                  f'Unit cells at {part["element_size_m"] * 1e3:g} mm; both segments on one '
+                  'syringe, 0 -> 65 mL. Machine: ' + str(part['machine']), '',
+                  '| material | bottom peak [Pa] | top peak [Pa] | sequence | p at 25 / 45 / 60 '
+                  'mL [Pa] | top share of the fluid at 45 / 60 mL | combined peak [Pa] at [mL] '
+                  '| within 1 % of it from [mL] |', '|---|---:|---:|---|---|---|---:|---:|']
+        for row in part['rows']:
+            ps = ' / '.join(str(row.get(f'p_at_{v}_ml_pa', '-')) for v in (25, 45, 60))
+            share = ' / '.join(str(row.get(f'top_share_at_{v}_ml', '-')) for v in (45, 60))
+            lines.append(f'| {row["material"]} | {row["bottom_peak_pa"]} | {row["top_peak_pa"]} '
+                         f'| {row["sequence"]} | {ps} | {share} | {row["combined_peak_pa"]} at '
+                         f'{row["combined_peak_injected_m3"] * 1e6:.1f} | '
+                         f'{row["within_1pct_of_peak_from_m3"] * 1e6:.1f} |')
+        lines.append('')
+    REPORT.write_text('\n'.join(lines) + '\n')
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--part', choices=[*PARTS, 'figures', 'report', 'all'], default='all')
+    args = parser.parse_args()
+    names = list(PARTS) + ['figures'] if args.part == 'all' else [args.part]
+    for name in names:
+        if name == 'figures':
+            write_figures()
+        elif name != 'report':
+            PARTS[name]()
+    write_report()
+    print(f'wrote {REPORT}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,1 @@
+"""Segment tables from geometry: volume-controlled hyperelastic FEM on felupe (heavy, optional)."""

@@ -1,0 +1,100 @@
+"""The ``softseq fem`` command: a segment table from a design, or a sweep of designs."""
+
+import argparse
+import os
+from pathlib import Path
+import sys
+import time
+from typing import Any
+
+import yaml
+
+from softseq_ros.fem.design import Design, DesignError, load_design, with_changes
+
+
+def design_path(name_or_path: str) -> Path:
+    """A design file, or the shipped design of that bare name (``paper_top``)."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    if path.suffix == '' and '/' not in name_or_path and os.sep not in name_or_path:
+        from softseq_ros.physics.scene import config_dir
+
+        shipped = config_dir() / 'designs' / f'{name_or_path}.yaml'
+        if shipped.is_file():
+            return shipped
+        known = ', '.join(sorted(p.stem for p in (config_dir() / 'designs').glob('*.yaml')))
+        raise DesignError(f'{name_or_path}: no such design file and no shipped design of that '
+                          f'name (shipped: {known})')
+    raise DesignError(f'{name_or_path}: design file not found')
+
+
+def _value(text: str) -> Any:
+    from softseq_ros.physics.scene import _SceneLoader
+
+    try:
+        # The scene files' reading of numbers, so 3e-6 is a number here too.
+        return yaml.load(text, Loader=_SceneLoader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.YAMLError:
+        return text
+
+
+def _assignments(items: list[str], option: str, many: bool) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition('=')
+        if not sep or not key or not value:
+            example = 'KEY=V1,V2,...' if many else 'KEY=VALUE'
+            raise DesignError(f'{option} {item!r}: expected {example}, e.g. '
+                              'geometry.membrane_thickness_m=0.0005')
+        if key in out:
+            raise DesignError(f'{option} {key}: given twice')
+        out[key] = [_value(v) for v in value.split(',')] if many else _value(value)
+    return out
+
+
+def run_fem_command(args: argparse.Namespace) -> int:
+    """Run ``softseq fem`` with parsed arguments; a bad input raises before any work."""
+    design: Design = load_design(design_path(args.design))
+    changes = _assignments(args.set, '--set', many=False)
+    if args.model is not None:
+        changes['mesh.model'] = args.model
+    if changes:
+        design = with_changes(design, changes)
+    show = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+    if not args.sweep:
+        for option, value in (('--out-dir', args.out_dir), ('--workers', args.workers),
+                              ('--scheduler', args.scheduler)):
+            if value is not None:
+                raise DesignError(f'{option}: only with --sweep')
+        from softseq_ros.fem.table import table_for
+
+        start = time.perf_counter()
+        path, computed = table_for(design, out=args.out, cache_dir=args.cache_dir,
+                                   use_cache=not args.no_cache,
+                                   stream=None if args.quiet else sys.stderr)
+        how = (f'computed in {time.perf_counter() - start:.1f} s' if computed
+               else 'from the cache')
+        print(f'{design.name}: table {path} ({how}; design hash {design.digest()})')
+        return 0
+
+    from softseq_ros.fem.sweep import run_sweep, sweep_cases
+
+    grid = _assignments(args.sweep, '--sweep', many=True)
+    if args.out_dir is None:
+        raise DesignError('--sweep: needs --out-dir for the tables and summary.csv')
+    if args.out is not None:
+        raise DesignError('--out: not with --sweep (tables go to --out-dir)')
+    if args.scheduler is not None and args.workers is not None:
+        raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if workers < 1:
+        raise DesignError(f'--workers: must be >= 1, got {workers}')
+    cases = sweep_cases(design, grid)
+    start = time.perf_counter()
+    summary = run_sweep(cases, args.out_dir, workers=workers, scheduler=args.scheduler,
+                        progress=show)
+    where = f'Dask scheduler {args.scheduler}' if args.scheduler else f'{workers} local workers'
+    print(f'{design.name}: {len(cases)} designs on {where} in '
+          f'{time.perf_counter() - start:.1f} s -> {summary}')
+    return 0

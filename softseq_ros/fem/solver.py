@@ -1,0 +1,221 @@
+"""
+Volume-controlled quasi-static inflation: a bordered Newton method on felupe's solid.
+
+The cavity is filled with an incompressible fluid whose volume is prescribed; the gauge pressure
+p is the Lagrange multiplier of that constraint (as Abaqus' ``*FLUID CAVITY`` with a
+``*FLUID FLUX``). At each volume V* the solver finds q (reduced coordinates, see
+:mod:`softseq_ros.fem.constraints`) and p with
+
+    R(q, p) = J^T (f_int(x) - p dV/dx) = 0        C(q) = V(x) - V* = 0
+
+by Newton's method on the bordered system [[A, -b], [-b^T, 0]] [dq, dp] = [-R, C], where
+A = J^T (K - p d2V/dx2) J + (second-order term of the map) and b = J^T dV/dx. The bordered matrix
+stays regular at a pressure peak, where A alone is singular and pressure control stops.
+
+felupe's nearly-incompressible solid updates its cell-wise pressure and dilatation each time it
+is handed the field: the vector is assembled with the field exactly once per iteration and the
+matrix without it, which keeps the tangent consistent (quadratic convergence).
+"""
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from numpy.typing import NDArray
+import scipy.sparse as sp
+
+from softseq_ros.fem.cavity import Cavity
+from softseq_ros.fem.constraints import ReducedSpace
+from softseq_ros.fem.ordering import SparseSolver
+
+
+class ConvergenceError(RuntimeError):
+    """Newton's method did not converge for one load level."""
+
+
+@dataclass
+class State:
+    """One converged equilibrium: volume [m^3], gauge pressure [Pa], reduced coordinates."""
+
+    volume: float
+    pressure: float
+    q: NDArray[np.float64]
+    iterations: int = 0
+
+
+@dataclass
+class PathResult:
+    """Converged states along the volume ramp, and why the ramp ended."""
+
+    states: list[State] = field(default_factory=list)
+    stop_reason: str = 'reached the requested volume'
+    newton_iterations: int = 0
+
+
+class InflationModel:
+    """
+    A felupe solid with a fluid cavity and symmetry constraints, solved by volume control.
+
+    ``solid`` is a felupe ``SolidBodyNearlyIncompressible`` on ``field`` (a FieldContainer with
+    one displacement field); ``force_scale`` [N] sets the residual tolerance (shear modulus times
+    a length squared of the model).
+    """
+
+    def __init__(self, solid: Any, field: Any, space: ReducedSpace, cavity: Cavity,
+                 force_scale: float, length_scale: float) -> None:
+        self.solid = solid
+        self.field = field
+        self.space = space
+        self.cavity = cavity
+        self.force_scale = force_scale
+        self.length_scale = length_scale
+        self.reference = space.reference
+        self.rest_volume = cavity.volume(self.reference)
+        self._bordered_solver = SparseSolver()
+        self._tangent_solver = SparseSolver()
+
+    def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Deformed point positions [m]."""
+        return self.space.positions(q)
+
+    def _load(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        x = self.space.positions(q)
+        self.field[0].values[:] = x - self.reference
+        return x
+
+    def reset_to(self, q: NDArray[np.float64]) -> None:
+        """Put the solid's internal state back at a converged q (after a failed attempt)."""
+        self._load(q)
+        # The second call sees no increment, so the cell-wise dilatation equals the true one.
+        self.solid.assemble.vector(self.field)
+        self.solid.assemble.vector(self.field)
+
+    def _system(self, q: NDArray[np.float64], p: float) -> tuple:
+        x = self._load(q)
+        f_int = np.asarray(self.solid.assemble.vector(self.field).todense()).ravel()
+        stiffness = self.solid.assemble.matrix()
+        grad = self.cavity.gradient(x).ravel()
+        force = f_int - p * grad
+        jac = self.space.jacobian(q)
+        tangent = (jac.T @ ((stiffness - p * self.cavity.hessian(x)) @ jac)
+                   + self.space.second_order(q, force))
+        return x, jac.T @ force, tangent.tocsc(), jac.T @ grad
+
+    def solve_volume(self, q0: NDArray[np.float64], p0: float, target: float,
+                     max_iterations: int = 25, tolerance: float = 1e-6) -> State:
+        """Equilibrium at the fluid volume ``target`` [m^3], starting from (q0, p0)."""
+        q, p = q0.copy(), float(p0)
+        for iteration in range(1, max_iterations + 1):
+            x, residual, tangent, b = self._system(q, p)
+            constraint = self.cavity.volume(x) - target
+            bordered = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]], format='csc')
+            rhs = np.concatenate([-residual, [constraint]])
+            try:
+                step = self._bordered_solver.solve(bordered, rhs)
+            except RuntimeError as err:  # an exactly singular matrix
+                raise ConvergenceError(f'singular bordered matrix ({err})') from None
+            if not np.all(np.isfinite(step)):
+                raise ConvergenceError('non-finite Newton step')
+            q += step[:-1]
+            p += step[-1]
+            # Converged when the correction is negligible: near the solution Newton's method
+            # converges quadratically, so the residual after such a step is far smaller still
+            # (the residual before it only guards against a stalled iteration).
+            small_step = np.max(np.abs(step[:-1])) <= tolerance * self.length_scale
+            if (small_step and np.linalg.norm(residual) <= 1e3 * tolerance * self.force_scale
+                    and abs(constraint) <= tolerance * self.rest_volume):
+                return State(volume=target, pressure=p, q=q, iterations=iteration)
+            if np.max(np.abs(step[:-1])) > 0.5 * self.length_scale:
+                raise ConvergenceError('Newton step larger than half the model size')
+        raise ConvergenceError(f'no convergence in {max_iterations} iterations')
+
+    def solve_pressure(self, q0: NDArray[np.float64], pressure: float,
+                       max_iterations: int = 25, tolerance: float = 1e-6) -> State:
+        """Equilibrium at the prescribed gauge pressure [Pa] (the usual load control)."""
+        q = q0.copy()
+        for iteration in range(1, max_iterations + 1):
+            x, residual, tangent, _ = self._system(q, pressure)
+            try:
+                step = self._tangent_solver.solve(tangent, -residual)
+            except RuntimeError as err:
+                raise ConvergenceError(f'singular tangent ({err})') from None
+            if not np.all(np.isfinite(step)):
+                raise ConvergenceError('non-finite Newton step')
+            q += step
+            if (np.linalg.norm(residual) <= tolerance * self.force_scale
+                    and np.max(np.abs(step)) <= tolerance * self.length_scale):
+                x = self.space.positions(q)
+                return State(volume=self.cavity.volume(x), pressure=pressure, q=q,
+                             iterations=iteration)
+            if np.max(np.abs(step)) > 0.5 * self.length_scale:
+                raise ConvergenceError('Newton step larger than half the model size')
+        raise ConvergenceError(f'no convergence in {max_iterations} iterations')
+
+    def ramp_volume(self, max_volume: float, first_step: float, max_step: float,
+                    min_step: float,
+                    on_state: Callable[[State], str | None] | None = None,
+                    predictor: bool = False) -> PathResult:
+        """
+        Inflate from rest to ``max_volume`` [m^3] with adaptive volume steps [m^3].
+
+        A failed step is retried at half the size down to ``min_step``; steps grow again after
+        easy convergence. ``on_state`` sees every converged state and may return a reason to
+        stop (contact, for example). The result always holds the rest state first.
+        ``predictor`` starts each step from the secant extrapolation of the last two states
+        instead of the last state; on the segments it cost a third more Newton iterations, so
+        it is off by default (the bordered system passes extrema without it).
+        """
+        q = np.zeros(self.space.size)
+        self.reset_to(q)
+        rest = State(volume=self.rest_volume, pressure=0.0, q=q.copy())
+        result = PathResult(states=[rest])
+        if on_state is not None:
+            on_state(rest)
+        step = first_step
+        previous: State | None = None
+        current = rest
+        while current.volume < max_volume * (1 - 1e-12):
+            step = min(step, max_volume - current.volume)
+            target = current.volume + step
+            q_guess, p_guess = current.q, current.pressure
+            if predictor and previous is not None:
+                # Secant predictor along the path: follows the pressure through its extrema.
+                ratio = step / (current.volume - previous.volume)
+                q_guess = current.q + ratio * (current.q - previous.q)
+                p_guess = current.pressure + ratio * (current.pressure - previous.pressure)
+            try:
+                state = self.solve_volume(q_guess, p_guess, target)
+            except ConvergenceError as err:
+                self.reset_to(current.q)
+                step *= 0.5
+                if step < min_step:
+                    result.stop_reason = f'no convergence beyond the last state ({err})'
+                    return result
+                continue
+            result.newton_iterations += state.iterations
+            previous, current = current, state
+            result.states.append(state)
+            if on_state is not None:
+                reason = on_state(state)
+                if reason:
+                    result.stop_reason = reason
+                    return result
+            if state.iterations <= 6:
+                step = min(step * 1.5, max_step)
+        return result
+
+    def ramp_pressure(self, pressures: NDArray[np.float64]) -> PathResult:
+        """Load control through the given increasing pressures [Pa]; stops where Newton fails."""
+        q = np.zeros(self.space.size)
+        self.reset_to(q)
+        result = PathResult(states=[State(volume=self.rest_volume, pressure=0.0, q=q.copy())])
+        for pressure in pressures:
+            try:
+                state = self.solve_pressure(result.states[-1].q, float(pressure))
+            except ConvergenceError as err:
+                result.stop_reason = f'no convergence at {pressure:.6g} Pa ({err})'
+                return result
+            result.newton_iterations += state.iterations
+            result.states.append(state)
+        result.stop_reason = 'reached the requested pressure'
+        return result
