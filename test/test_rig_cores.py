@@ -67,6 +67,8 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
     assert {t.name for t in contract.consumed_by(contract.PUMP)} == {'actuator/volumes'}
     assert {t.name for t in contract.consumed_by(contract.CAMERA)} == {
         'actuator/volumes', 'actuator/curvatures'}
+    # Every output a scene may list switches some topic on.
+    assert {t.output for t in contract.RIG_TOPICS} - {None} == set(contract.OUTPUT_NAMES)
     assert contract.resolve('pump/command', '/rig2') == '/rig2/pump/command'
     assert contract.resolve('pump/command') == '/pump/command'
     assert contract.relative_name('/rig2/pump/command', '/rig2') == 'pump/command'

@@ -12,6 +12,9 @@ that the nodes turn into rclpy profiles and the bag writer into rosbag2's QoS YA
 
 from dataclasses import dataclass
 
+from softseq_ros.physics.scene import DEFAULT_OUTPUTS as SCENE_DEFAULT_OUTPUTS
+from softseq_ros.physics.scene import OUTPUT_NAMES as SCENE_OUTPUT_NAMES
+
 # Core roles and the names of the ROS nodes that host them.
 PUMP = 'pump'
 ACTUATOR = 'actuator'
@@ -21,9 +24,10 @@ NODE_NAMES: dict[str, str] = {PUMP: 'syringe_pump', ACTUATOR: 'actuator', CAMERA
 FRAME_ID = 'softseq_base'
 DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
 
-# Scene output names, in the order the README lists them; all but the image are on by default.
-OUTPUT_NAMES = ('pressure', 'volumes', 'curvature', 'poses', 'markers', 'image', 'events')
-DEFAULT_OUTPUTS = frozenset(name for name in OUTPUT_NAMES if name != 'image')
+# The scene outputs a scene may list are the scene's business (physics.scene); which topics
+# each switches on is the contract's (Topic.output).
+OUTPUT_NAMES = SCENE_OUTPUT_NAMES
+DEFAULT_OUTPUTS = SCENE_DEFAULT_OUTPUTS
 
 
 @dataclass(frozen=True)
