@@ -48,15 +48,13 @@ from typing import Any
 import yaml
 
 from softseq_ros.physics.materials import LAW_NAMES, make_material, material_parameter_names
+from softseq_ros.physics.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.physics.profile import DEFAULT_FLOW_RATE, Leg, PumpProfile
 from softseq_ros.physics.segments import BalloonSegment, LinearSegment, Segment, TabulatedSegment
 from softseq_ros.physics.smoothing import smooth_table
 
 PACKAGE = 'softseq_ros'
 
-OUTPUT_NAMES = ('pressure', 'volumes', 'curvature', 'poses', 'markers', 'image', 'events')
-# Images are the heaviest output, so a scene asks for them explicitly.
-DEFAULT_OUTPUTS = frozenset(name for name in OUTPUT_NAMES if name != 'image')
 DEFAULT_PUMP_RATE_HZ = 50.0
 DEFAULT_CAMERA_RATE_HZ = 10.0
 DEFAULT_POINTS_PER_SEGMENT = 20

@@ -12,8 +12,9 @@ that the nodes turn into rclpy profiles and the bag writer into rosbag2's QoS YA
 
 from dataclasses import dataclass
 
-from softseq_ros.physics.scene import DEFAULT_OUTPUTS as SCENE_DEFAULT_OUTPUTS
-from softseq_ros.physics.scene import OUTPUT_NAMES as SCENE_OUTPUT_NAMES
+# A light module (no numpy, no scipy): the contract is read by quick commands too.
+from softseq_ros.physics.outputs import DEFAULT_OUTPUTS as SCENE_DEFAULT_OUTPUTS
+from softseq_ros.physics.outputs import OUTPUT_NAMES as SCENE_OUTPUT_NAMES
 
 # Core roles and the names of the ROS nodes that host them.
 PUMP = 'pump'
@@ -24,7 +25,7 @@ NODE_NAMES: dict[str, str] = {PUMP: 'syringe_pump', ACTUATOR: 'actuator', CAMERA
 FRAME_ID = 'softseq_base'
 DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
 
-# The scene outputs a scene may list are the scene's business (physics.scene); which topics
+# The outputs a scene may list are the scene's business (physics.outputs); which topics
 # each switches on is the contract's (Topic.output).
 OUTPUT_NAMES = SCENE_OUTPUT_NAMES
 DEFAULT_OUTPUTS = SCENE_DEFAULT_OUTPUTS
