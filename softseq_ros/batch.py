@@ -90,7 +90,7 @@ class BatchRun:
         self.actuator = actuator_core(self.scene, **overrides.get(contract.ACTUATOR, {}))
         # The pump's feedback timeout runs on the simulated clock here (the actuator answers
         # within the same tick); without a volumes output there is no feedback to wait for.
-        pump_settings = {'feedback_clock': lambda: self._now_ns,
+        pump_settings = {'feedback_clock': None,
                          'open_loop': 'volumes' not in self.actuator.outputs,
                          **overrides.get(contract.PUMP, {})}
         self.pump, self.pump_rate_hz = pump_core(self.scene, **pump_settings)

@@ -18,7 +18,8 @@ safety limit; only ``reset`` leaves it). Safety, as a syringe pump with a pressu
   runs without any feedback, for a pump with no actuator behind it.
 
 The feedback timeout is measured on ``feedback_clock`` (default: the monotonic wall clock,
-so that a simulated clock running 1000x faster does not make a healthy actuator look dead).
+so that a simulated clock running 1000x faster does not make a healthy actuator look dead;
+None: the driver's own time, as the batch runner wants for reproducible runs).
 """
 
 from dataclasses import dataclass
@@ -65,7 +66,7 @@ class PumpCore:
                  max_injected_m3: float = math.inf,
                  feedback_timeout_s: float = DEFAULT_FEEDBACK_TIMEOUT_S,
                  open_loop: bool = False,
-                 feedback_clock: Callable[[], int] = time.monotonic_ns) -> None:
+                 feedback_clock: Callable[[], int] | None = time.monotonic_ns) -> None:
         """A pump at rest (idle) at the programme's start volume."""
         self.profile = profile
         self.autostart = autostart
@@ -147,7 +148,7 @@ class PumpCore:
             self._running_since = now
             self._started = True
             # The actuator gets a full timeout to answer the first command of this run.
-            self._last_feedback = self._feedback_clock()
+            self._last_feedback = self._feedback_time(now)
             self._set_state(now, 'running')
             return True, 'running'
         if self.state == 'running':
@@ -169,10 +170,13 @@ class PumpCore:
         self._set_state(now, 'stopped', reason)
         return True, self.status
 
-    def _feedback_lost(self) -> bool:
+    def _feedback_time(self, now: int) -> int:
+        return now if self._feedback_clock is None else self._feedback_clock()
+
+    def _feedback_lost(self, now: int) -> bool:
         last = self._last_feedback
         return (last is not None
-                and self._feedback_clock() - last > self.feedback_timeout_s * 1e9)
+                and self._feedback_time(now) - last > self.feedback_timeout_s * 1e9)
 
     def _pause(self, now: int) -> None:
         if self._running_since is not None:
@@ -191,7 +195,7 @@ class PumpCore:
         gauge = value.gauge_pa
         if not math.isfinite(gauge):
             return []
-        self._last_feedback = self._feedback_clock()
+        self._last_feedback = self._feedback_time(now)
         if gauge > self.max_pressure_pa and self.state in ('running', 'held'):
             return self.stop(now, f'gauge pressure {gauge:.6g} Pa exceeds max_pressure_pa '
                                   f'{self.max_pressure_pa:.6g} Pa').outputs
@@ -201,7 +205,7 @@ class PumpCore:
         """The command for ``now``: injected volume and signed flow (and any state change)."""
         if self.autostart and not self._started and self.state == 'idle':
             self._start(now)
-        if self.state == 'running' and not self.open_loop and self._feedback_lost():
+        if self.state == 'running' and not self.open_loop and self._feedback_lost(now):
             self._pause(now)
             self._set_state(now, 'held', f'no pressure from the actuator for '
                                          f'{self.feedback_timeout_s:g} s (feedback_timeout_s); '
