@@ -23,7 +23,7 @@ from softseq_ros.nodes.parameters import ParameterNode
 from softseq_ros.rig import contract
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.throttle import Throttle
-from softseq_ros.rig.values import ERROR, INFO, WARNING, Notice, Output
+from softseq_ros.rig.values import ERROR, INFO, TOPIC_VALUE_TYPES, WARNING, Notice, Output
 from softseq_ros.rig.wire import DECODERS, ENCODERS, InputError
 
 
@@ -95,7 +95,7 @@ class CoreNode(ParameterNode):
     def connect(self, outputs: frozenset[str]) -> None:
         """Publishers and subscriptions of the core's topics (``outputs`` switch them on)."""
         role = self.core.role
-        for kind, _ in ENCODERS.items():
+        for kind in TOPIC_VALUE_TYPES:
             topic = kind.topic
             if topic.producer != role or not contract.enabled(topic, outputs):
                 continue

@@ -102,11 +102,6 @@ CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos(1, reliable=False), 'sim_
               None, 'simulated time')
 
 
-def produced_by(role: str) -> tuple[Topic, ...]:
-    """The topics a core produces."""
-    return tuple(topic for topic in RIG_TOPICS if topic.producer == role)
-
-
 def consumed_by(role: str) -> tuple[Topic, ...]:
     """The topics a core consumes."""
     return tuple(topic for topic in RIG_TOPICS if role in topic.consumers)
@@ -115,11 +110,6 @@ def consumed_by(role: str) -> tuple[Topic, ...]:
 def enabled(topic: Topic, outputs: frozenset[str] | set[str]) -> bool:
     """True when ``outputs`` (scene output names) switch ``topic`` on."""
     return topic.output is None or topic.output in outputs
-
-
-def enabled_topics(outputs: frozenset[str] | set[str]) -> tuple[Topic, ...]:
-    """The rig's topics that the scene outputs ``outputs`` switch on, in contract order."""
-    return tuple(topic for topic in RIG_TOPICS if enabled(topic, outputs))
 
 
 def resolve(name: str, namespace: str = '/') -> str:

@@ -28,10 +28,6 @@ class Router:
             if consumers:
                 self._consumers[kind] = consumers
 
-    def carries(self, role: str) -> bool:
-        """True when the core ``role`` lives in this process."""
-        return role in self.cores
-
     def run(self, outputs: list[Output]) -> list[Output]:
         """
         ``outputs`` and everything their consumers produce, in the order produced.

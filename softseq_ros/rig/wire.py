@@ -13,8 +13,6 @@ import json
 from types import SimpleNamespace
 from typing import Any, Callable
 
-import numpy as np
-
 from softseq_ros.bag.cdr import (
     ENCAPSULATION,
     FixedLayout,
@@ -45,7 +43,6 @@ SYRINGE_JOINT = 'syringe'
 MARKER_WIDTH_M = 0.015  # the paper's 15 x 15 mm section
 LINE_STRIP = 4
 _SYRINGE = (SYRINGE_JOINT,)
-_NONE: tuple[float, ...] = ()
 
 
 class InputError(ValueError):
@@ -256,8 +253,3 @@ DECODERS: dict[str, Callable[[Any], TopicValue]] = {
     SegmentVolumes.topic.name: segment_volumes,
     SegmentCurvatures.topic.name: segment_curvatures,
 }
-
-
-def pose_rows(poses: np.ndarray) -> np.ndarray:
-    """Poses as a C-contiguous float64 (M, 7) array (what the pose layout takes)."""
-    return np.ascontiguousarray(poses, dtype=np.float64)
