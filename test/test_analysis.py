@@ -469,3 +469,12 @@ def test_joint_names_that_change_within_a_recording_are_refused(asymmetric, tmp_
     with pytest.raises(RecordingError, match=r'changes its names or frame id') as error:
         load_recording(copy)
     assert volumes in str(error.value) and '\n' not in str(error.value)
+
+
+def test_an_experiment_saved_as_csv_utf8_with_a_byte_order_mark_is_read(tmp_path):
+    rows = '# pressure: gauge\ninjected_m3,pressure_pa\n0.0,0.0\n1.0e-5,5000.0\n2.0e-5,8000.0\n'
+    plain, marked = tmp_path / 'plain.csv', tmp_path / 'marked.csv'
+    plain.write_text(rows, encoding='utf-8')
+    marked.write_bytes(b'\xef\xbb\xbf' + rows.encode())
+    a, b = read_experiment(plain), read_experiment(marked)
+    assert np.array_equal(a.injected, b.injected) and np.array_equal(a.pressure, b.pressure)

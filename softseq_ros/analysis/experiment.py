@@ -62,10 +62,14 @@ def read_experiment(path: str | os.PathLike) -> Experiment:
     """Read and check an experiment file; absolute pressures become gauge."""
     path = Path(path)
     try:
-        text = path.read_text()
+        # utf-8-sig, as for segment tables: spreadsheets save "CSV UTF-8" with a byte-order mark.
+        text = path.read_text(encoding='utf-8-sig')
     except OSError as err:
         raise ExperimentError(f'{path}: cannot read the experiment file ({err.strerror})') \
             from None
+    except UnicodeDecodeError as err:
+        raise ExperimentError(f'{path}: the experiment file is not UTF-8 text (byte '
+                              f'{err.start}); save it as CSV UTF-8') from None
     lines = text.splitlines()
     directives = _directives(lines)
     rows = [line for line in lines if line.strip() and not line.lstrip().startswith('#')]
