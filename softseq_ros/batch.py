@@ -25,6 +25,7 @@ from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
 from softseq_ros.rig.wire import ENCODERS
+from softseq_ros.stopping import HeldSignals
 
 NS_PER_S = 1_000_000_000
 PROGRESS_PERIOD_S = 0.25
@@ -110,9 +111,10 @@ class BatchRun:
     def run(self) -> BatchResult:
         """Run the scene's pump programme to its end; the bag is complete on return."""
         wall_start = time.perf_counter()
-        with BagWriter(self.out, flush_period_s=None) as writer:
+        # A stop signal ends the run between two steps, never inside a chunk being written.
+        with HeldSignals() as held, BagWriter(self.out, flush_period_s=None) as writer:
             self._open_channels(writer)
-            self._loop(wall_start)
+            self._loop(wall_start, held)
         wall = time.perf_counter() - wall_start
         if self.progress is not None:
             self.progress.write('\n' if _is_terminal(self.progress) else '')
@@ -150,8 +152,9 @@ class BatchRun:
                 # After a progress line that \r keeps rewriting, start on a line of its own.
                 self.log.write(('\n' if _is_terminal(self.progress) else '') + line + '\n')
 
-    def _loop(self, wall_start: float) -> None:
+    def _loop(self, wall_start: float, held: HeldSignals) -> None:
         pump, camera, router = self.pump, self.camera, self._router
+        stop_signals = held.pending
         start = self.start_time_ns
         pump_period = round(NS_PER_S / self.pump_rate_hz)
         camera_period = round(NS_PER_S / camera.rate_hz)
@@ -160,6 +163,8 @@ class BatchRun:
         next_report = wall_start + PROGRESS_PERIOD_S
         self._record(router.run(pump.begin(start)))
         while True:
+            if stop_signals:
+                held.check()
             # The pump goes first at equal times: a frame shows the command of its instant.
             if next_pump <= next_camera:
                 self._now_ns = next_pump

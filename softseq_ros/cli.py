@@ -2,11 +2,12 @@
 
 import argparse
 from datetime import datetime, timezone
-import os
 from pathlib import Path
 import signal
 import sys
 from typing import Callable, Sequence
+
+from softseq_ros.stopping import TerminatedError, raise_terminated
 
 USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
 
@@ -280,22 +281,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class TerminatedError(Exception):
-    """SIGTERM arrived: unwind like an interrupt, so that open bags are closed completely."""
-
-
-_MAIN_PID = os.getpid()
-
-
-def _terminate(signum: int, _frame: object) -> None:
-    if os.getpid() != _MAIN_PID:
-        # A forked worker (the report's figure pool) ends as SIGTERM ends any process.
-        signal.signal(signum, signal.SIG_DFL)
-        os.kill(os.getpid(), signum)
-        return
-    raise TerminatedError()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """
     Run one subcommand; a user's mistake is one line on stderr and exit code 2.
@@ -307,7 +292,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     handler: Callable[[argparse.Namespace], int] = args.handler
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    previous = signal.signal(signal.SIGTERM, raise_terminated)
     try:
         return handler(args)
     except USER_ERRORS as err:

@@ -1,4 +1,4 @@
-"""The recorder node: QoS choices, and a real recording stopped with SIGTERM."""
+"""The recorder node: QoS choices, and a real recording stopped with SIGTERM or SIGINT."""
 
 from datetime import datetime, timezone
 import os
@@ -76,7 +76,8 @@ def _wait_for(condition, what: str) -> None:
 
 
 @pytest.mark.ros
-def test_sigterm_leaves_a_complete_bag(tmp_path, monkeypatch):
+@pytest.mark.parametrize('stop', ['SIGTERM', 'SIGINT'])
+def test_a_stop_signal_leaves_a_complete_bag(tmp_path, monkeypatch, stop):
     monkeypatch.setenv('ROS_DOMAIN_ID', _domain_id())
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env = dict(os.environ)
@@ -106,7 +107,7 @@ def test_sigterm_leaves_a_complete_bag(tmp_path, monkeypatch):
         # The recorder flushes periodically: wait until all messages are on disk.
         _wait_for(lambda: bag_summary(output).message_count == len(volumes) + 1,
                   'all messages in the bag')
-        recorder.send_signal(signal.SIGTERM)
+        recorder.send_signal(getattr(signal, stop))
         log, _ = recorder.communicate(timeout=TIMEOUT_S)
         assert recorder.returncode == 0, log
     finally:

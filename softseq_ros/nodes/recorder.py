@@ -13,6 +13,7 @@ from datetime import datetime, timezone
 from functools import partial
 import importlib
 from pathlib import Path
+import signal
 import sys
 from typing import Any, Sequence
 
@@ -219,8 +220,16 @@ class Recorder(Node):
                 f'closed {self._output} with {self._bag.message_count} messages')
 
 
+def _stop_by_shutdown(_signum: int, _frame: object) -> None:
+    """SIGINT is left to rclpy's shutdown of the context."""
+
+
 def main(args: list[str] | None = None) -> None:
     """Run the recorder until SIGINT/SIGTERM, then close the bag completely."""
+    # On SIGINT rclpy shuts the executor down and then calls Python's handler, whose
+    # KeyboardInterrupt could land inside a chunk being written; the shutdown alone stops the
+    # recording between two callbacks, with every chunk whole.
+    signal.signal(signal.SIGINT, _stop_by_shutdown)
     rclpy.init(args=args)
     node = None
     exit_code = 0
