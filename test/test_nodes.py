@@ -158,11 +158,14 @@ def check_against_solver(emap: EquilibriumMap, commands, pressures, volumes, cur
         return np.array(rows, dtype=int), found
 
     moving = int(np.sum(injected > 0.0))
-    for name, messages in (('volumes', volumes), ('pressure', pressures),
-                           ('curvatures', curvatures)):
+    for topic, messages in ((contract.VOLUMES, volumes), (contract.PRESSURE, pressures),
+                            (contract.CURVATURES, curvatures)):
         rows, _ = paired(messages)
-        assert np.sum(injected[rows] > 0.0) >= 0.9 * moving > 50, \
-            f'only {len(rows)} {name} outputs answer the {len(injected)} commands received'
+        # A latched topic of depth 1 keeps only the latest state: a starved reader may miss
+        # states in between, and what it gets must still be right.
+        share = 0.9 if topic.qos.depth > 1 else 0.2
+        assert np.sum(injected[rows] > 0.0) >= share * moving > 50, \
+            f'only {len(rows)} {topic.name} outputs answer the {len(injected)} commands received'
     rows, found = paired(volumes)
     np.testing.assert_allclose([m.position for m in found], path.volumes[rows], rtol=1e-9,
                                atol=1e-9 * emap.v_scale)
