@@ -94,7 +94,8 @@ class BatchRun:
         pump_settings = {'feedback_clock': None,
                          'open_loop': 'volumes' not in self.actuator.outputs,
                          **overrides.get(contract.PUMP, {})}
-        self.pump, self.pump_rate_hz = pump_core(self.scene, **pump_settings)
+        self.pump, self.pump_rate_hz = pump_core(self.scene, self.actuator.emap,
+                                                  **pump_settings)
         self.camera = camera_core(self.scene, **overrides.get(contract.CAMERA, {}))
         self.cores = {contract.PUMP: self.pump, contract.ACTUATOR: self.actuator,
                       contract.CAMERA: self.camera}

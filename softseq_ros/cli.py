@@ -13,17 +13,26 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
 
 
 def _solve(args: argparse.Namespace) -> int:
-    from softseq_ros.physics.equilibrium import Tracker
+    from softseq_ros.physics.equilibrium import DomainError, Tracker
+    from softseq_ros.physics.reach import beyond_domain, check_scene_reach
     from softseq_ros.physics.scene import load_scene
     from softseq_ros.physics.solve import build_map, read_history, write_path
 
     scene = load_scene(args.scene)
+    emap = build_map(scene.segments, scene.solver.resolution)
     if args.path is not None:
         history = read_history(args.path)
     else:
+        check_scene_reach(scene, emap)
         _, history = scene.pump.profile.sample(scene.pump.rate_hz)
-    emap = build_map(scene.segments, scene.solver.resolution)
-    solved = Tracker(emap).sweep(history)
+    try:
+        solved = Tracker(emap).sweep(history)
+    except DomainError as err:
+        if err.row is None:
+            raise
+        reason = beyond_domain(float(history[err.row]), err, emap, scene.segment_names)
+        raise DomainError(f'{args.path}: injected_m3 in data row {err.row + 1}: {reason}') \
+            from None
     write_path(args.out, solved, scene.segment_names)
     snaps = ', '.join(f'{e.injected * 1e6:.3f} mL' for e in solved.events) or 'none'
     print(f'{scene.name}: {history.size} commanded volumes solved -> {args.out} '
@@ -34,11 +43,14 @@ def _solve(args: argparse.Namespace) -> int:
 def _classify(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.robustness import robustness_lines, scene_features
     from softseq_ros.physics.equilibrium import classify
+    from softseq_ros.physics.reach import check_scene_reach
     from softseq_ros.physics.scene import load_scene
     from softseq_ros.physics.solve import build_map
 
     scene = load_scene(args.scene)
-    verdict = classify(build_map(scene.segments, scene.solver.resolution))
+    emap = build_map(scene.segments, scene.solver.resolution)
+    check_scene_reach(scene, emap)
+    verdict = classify(emap)
     print(f'{scene.name}: {verdict}')
     lines, warnings = robustness_lines(verdict, scene_features(scene))
     for line in lines:

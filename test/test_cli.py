@@ -119,8 +119,9 @@ def test_solve_reports_snaps_on_the_asymmetric_scene(tmp_path):
     ('injected_m3\n0\nabc\n', 'row 2, column injected_m3: not a number'),
     ('injected_m3\n0\nnan\n', 'row 2, column injected_m3: must be finite'),
     ('injected_m3\n', 'no rows below the header'),
-    ('injected_m3\n0\n1.0\n', 'beyond what the segment models cover'),
-    ('injected_m3\n-1e-6\n', 'injected volume'),
+    ('injected_m3\n0\n1.0\n', "data row 2: 1 m^3 is beyond the equilibrium's domain: segment"),
+    ('injected_m3\n-1e-6\n',
+     "data row 1: -1e-06 m^3 is below the equilibrium's domain: it starts at 0 m^3"),
 ])
 def test_bad_history_is_one_line_and_exit_2(linear_scene, tmp_path, history, fragment):
     path = tmp_path / 'history.csv'

@@ -164,7 +164,7 @@ def check_against_solver(emap: EquilibriumMap, commands, pressures, volumes, cur
         # A latched topic of depth 1 keeps only the latest state: a starved reader may miss
         # states in between, and what it gets must still be right.
         share = 0.9 if topic.qos.depth > 1 else 0.2
-        assert np.sum(injected[rows] > 0.0) >= share * moving > 50, \
+        assert moving > 55 and np.sum(injected[rows] > 0.0) >= share * moving, \
             f'only {len(rows)} {topic.name} outputs answer the {len(injected)} commands received'
     rows, found = paired(volumes)
     np.testing.assert_allclose([m.position for m in found], path.volumes[rows], rtol=1e-9,
@@ -321,7 +321,8 @@ def test_parameters_are_validated_with_a_reason(context, tmp_path):
         result, = pump.set_parameters([Parameter('flow_rate_m3_per_s', value=1.0e-6)])
         assert not result.successful and 'read-only' in result.reason
         result, = camera.set_parameters([Parameter('noise_std_m', value=-1.0e-3)])
-        assert not result.successful and result.reason.startswith('noise_std_m: must be >= 0')
+        assert not result.successful and 'noise_std_m' in result.reason \
+            and '-0.001' in result.reason
         result, = camera.set_parameters([Parameter('rate_hz', value=5)])
         assert result.successful and camera._timer.timer_period_ns == 200_000_000
         result, = clock.set_parameters([Parameter('speedup', value=0)])

@@ -22,6 +22,7 @@ from rclpy.node import Parameter
 from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
+from softseq_ros.physics.limits import LIMITS
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import camera_core
 from softseq_ros.rig.camera import FRAME_TRIGGERS
@@ -49,27 +50,29 @@ class CameraNode(CoreNode):
         scene = self.declare_scene()
         cam = scene.camera
         rate_hz = self.declare_number('rate_hz', cam.rate_hz, 'Frame rate [Hz].',
-                                      minimum=0.0, open_minimum=True, maximum=1000.0)
+                                      **LIMITS['camera.rate_hz'].bounds())
         frame_trigger = self.declare_text(
             'frame_trigger', 'timer', 'What takes a frame: timer (free running at rate_hz) or '
             'state (each new actuator/curvatures, at most about rate_hz).', read_only=True,
             check=lambda value: None if value in FRAME_TRIGGERS
             else f'must be timer or state, got {value!r}')
         noise = self.declare_number(
-            'noise_std_m', cam.noise_std_m, 'Gaussian noise on every point [m].', minimum=0.0)
-        seed = self.declare_integer('seed', cam.seed, 'Noise generator seed.', minimum=0,
-                                    read_only=True)
+            'noise_std_m', cam.noise_std_m, 'Gaussian noise on every point [m].',
+            **LIMITS['camera.noise_std_m'].bounds())
+        seed = self.declare_integer('seed', cam.seed, 'Noise generator seed.', read_only=True,
+                                    **LIMITS['camera.seed'].bounds())
         points = self.declare_integer(
             'points_per_segment', cam.points_per_segment, 'Backbone points per segment.',
-            minimum=1, maximum=10000, read_only=True)
+            read_only=True, **LIMITS['camera.points_per_segment'].bounds())
         triggers = self.declare_numbers(
             'trigger_injected_m3', cam.trigger_injected_m3,
             'Injected volumes [m^3] at which a snapshot is taken (increasing).',
             read_only=True, check=_increasing_reason)
         width = self.declare_integer('width', cam.image_width_px, 'Image width [px].',
-                                     minimum=16, maximum=8192, read_only=True)
+                                     read_only=True, **LIMITS['camera.image_width_px'].bounds())
         height = self.declare_integer('height', cam.image_height_px, 'Image height [px].',
-                                      minimum=16, maximum=8192, read_only=True)
+                                      read_only=True,
+                                      **LIMITS['camera.image_height_px'].bounds())
         outputs = self.declare_texts(
             'outputs', sorted(scene.outputs), 'Outputs to publish (scene output names); the '
             'camera serves poses, markers and image.', read_only=True, check=outputs_reason)

@@ -21,6 +21,7 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from softseq_ros.physics.limits import Limit
 from softseq_ros.physics.scene import Scene, load_scene
 from softseq_ros.rig.contract import OUTPUT_NAMES
 
@@ -75,13 +76,9 @@ class _Rule:
             if not all(math.isfinite(float(x)) for x in value):
                 return 'must hold finite numbers only'
         if self.kind in ('float', 'int'):
-            if self.minimum is not None:
-                if self.open_minimum and not value > self.minimum:
-                    return f'must be > {self.minimum:g}, got {value:g}'
-                if not self.open_minimum and not value >= self.minimum:
-                    return f'must be >= {self.minimum:g}, got {value:g}'
-            if self.maximum is not None and not value <= self.maximum:
-                return f'must be <= {self.maximum:g}, got {value:g}'
+            reason = Limit(self.minimum, self.maximum, self.open_minimum).reason(value)
+            if reason is not None:
+                return reason
         if self.check is not None:
             return self.check(value)
         return None

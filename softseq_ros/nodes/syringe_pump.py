@@ -22,9 +22,16 @@ import yaml
 from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
+from softseq_ros.physics.limits import LIMITS
 from softseq_ros.physics.profile import Leg
 from softseq_ros.rig import contract
-from softseq_ros.rig.build import pump_core
+from softseq_ros.rig.build import (
+    check_programme,
+    end_stop,
+    equilibrium_map,
+    pump_core,
+    pump_profile,
+)
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
 
 LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
@@ -60,6 +67,9 @@ def parse_legs(text: str) -> tuple[Leg, ...]:
             raise NodeConfigError(f'{where}.{key}: must be a number, got {amount!r}') from None
         try:
             if key == 'hold_s':
+                reason = LIMITS['pump.legs.hold_s'].reason(number)
+                if reason is not None:
+                    raise ValueError(reason)
                 legs.append(Leg.hold(number))
             elif key == 'inflate_to_m3':
                 legs.append(Leg.inflate(number))
@@ -91,20 +101,20 @@ class SyringePumpNode(CoreNode):
         scene = self.declare_scene()
         default = scene.pump.profile
         self.rate_hz = self.declare_number(
-            'rate_hz', scene.pump.rate_hz, 'Command publishing rate [Hz].', minimum=0.0,
-            open_minimum=True, maximum=10000.0)
+            'rate_hz', scene.pump.rate_hz, 'Command publishing rate [Hz].',
+            **LIMITS['pump.rate_hz'].bounds())
         flow = self.declare_number(
-            'flow_rate_m3_per_s', default.flow_rate, 'Pump flow rate [m^3/s].', minimum=0.0,
-            open_minimum=True, read_only=True)
+            'flow_rate_m3_per_s', default.flow_rate, 'Pump flow rate [m^3/s].',
+            read_only=True, **LIMITS['pump.flow_rate_m3_per_s'].bounds())
         legs_text = self.declare_text(
             'legs', '', 'Programme legs as a YAML list in the scene syntax, e.g. '
             '[{inflate_to_m3: 5.0e-6}, {hold_s: 2}, {deflate_to_m3: 0.0}]; empty: the scene.',
             read_only=True, check=_legs_reason)
         cycles = self.declare_integer('cycles', default.cycles, 'Programme repetitions.',
-                                      minimum=1, read_only=True)
+                                      read_only=True, **LIMITS['pump.cycles'].bounds())
         start = self.declare_number(
             'start_injected_m3', default.start_injected, 'Injected volume at run time 0 [m^3].',
-            minimum=0.0, read_only=True)
+            minimum=0.0, maximum=scene.capacity, read_only=True)
         autostart = self.declare_flag(
             'autostart', True, 'Start running at the first tick (else wait for ~/start).',
             read_only=True)
@@ -112,10 +122,18 @@ class SyringePumpNode(CoreNode):
             'max_pressure_pa', DEFAULT_MAX_PRESSURE_PA,
             'Stop when the actuator gauge pressure exceeds this [Pa].', minimum=0.0,
             open_minimum=True)
+        programme = {'flow_rate_m3_per_s': flow, 'cycles': cycles, 'start_injected_m3': start,
+                     'legs': parse_legs(legs_text) if legs_text else None}
+        # The segments' equilibrium gives the pump its limits: the programme must stay in its
+        # domain, and the end stop defaults to where the inflation ends.
+        emap = equilibrium_map(scene)
+        profile = pump_profile(scene, **programme)
+        check_programme(scene, profile, emap)
         max_injected = self.declare_number(
-            'max_injected_m3', scene.capacity,
+            'max_injected_m3', end_stop(emap, profile),
             'Stop when the commanded injected volume would exceed this [m^3] '
-            '(default: what the segments hold).', minimum=0.0, open_minimum=True)
+            "(default: where the segments' inflation ends).", minimum=0.0,
+            open_minimum=True)
         feedback_timeout = self.declare_number(
             'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
             'Hold when no pressure came from the actuator for this long while running '
@@ -124,9 +142,7 @@ class SyringePumpNode(CoreNode):
             'open_loop', False, 'Run without pressure feedback (no actuator behind the pump): '
             'no relief valve, no feedback timeout.', read_only=True)
         self.core, _ = pump_core(
-            scene, flow_rate_m3_per_s=flow,
-            legs=parse_legs(legs_text) if legs_text else None, cycles=cycles,
-            start_injected_m3=start, autostart=autostart, max_pressure_pa=max_pressure,
+            scene, emap, **programme, autostart=autostart, max_pressure_pa=max_pressure,
             max_injected_m3=max_injected, feedback_timeout_s=feedback_timeout,
             open_loop=open_loop)
         self.connect(scene.outputs)

@@ -48,7 +48,20 @@ __all__ = ['DomainError', 'EquilibriumCurve', 'EquilibriumMap', 'SEQUENCE_TYPES'
 
 
 class DomainError(ValueError):
-    """A commanded volume outside what the segments' models cover."""
+    """
+    A commanded volume outside what the segments' models cover.
+
+    Raised at the end of a branch, it says where: ``edge_injected`` [m^3] and
+    ``edge_volumes`` [m^3], the state at the edge (one segment is at the end of its model).
+    """
+
+    def __init__(self, message: str, edge_injected: float | None = None,
+                 edge_volumes: FloatArray | None = None, row: int | None = None) -> None:
+        """The message, the domain's edge when known, and the history row (a sweep's)."""
+        super().__init__(message)
+        self.edge_injected = edge_injected
+        self.edge_volumes = edge_volumes
+        self.row = row
 
 
 @dataclass(frozen=True)
@@ -212,11 +225,13 @@ class Tracker:
                     # injected_range) is inside it: stay on the edge.
                     self.total = edge
                     return events
+                edge_volumes = emap.read(self.branch, edge).volumes
                 self.branch, self.total = before
                 raise DomainError(
                     f'injected volume {total - emap.total_rest_volume:.6g} m^3 is beyond what '
                     f'the segment models cover on this branch (it ends at '
-                    f'{edge - emap.total_rest_volume:.6g} m^3)')
+                    f'{edge - emap.total_rest_volume:.6g} m^3)',
+                    edge - emap.total_rest_volume, np.array(edge_volumes, dtype=float))
             if end.kind == 'snap':
                 from_v = branch.volumes[-1 if upward else 0]
                 from_p = float(branch.pressure[-1 if upward else 0])
@@ -276,7 +291,11 @@ class Tracker:
                 continue
             j = int(outside[0])
             branch_ids[i:i + j] = self.branch
-            new_events = self._walk(float(totals[i + j]))
+            try:
+                new_events = self._walk(float(totals[i + j]))
+            except DomainError as err:
+                raise DomainError(f'row {i + j}: {err}', err.edge_injected, err.edge_volumes,
+                                  i + j) from None
             if new_events:
                 snap[i + j] = True
                 events.extend(new_events)

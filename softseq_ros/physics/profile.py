@@ -21,6 +21,8 @@ ACTIONS = ('inflate', 'deflate', 'hold')
 
 # 0.05 mL/s, the flow rate of the paper's syringe pump.
 DEFAULT_FLOW_RATE = 5.0e-8
+# A sampled history longer than this would not fit in a workstation's memory (0.8 GB a column).
+MAX_SAMPLES = 10**8
 
 
 def _finite(value: object, what: str) -> float:
@@ -212,6 +214,10 @@ class PumpProfile:
         if rate <= 0.0:
             raise ValueError(f'rate_hz must be > 0, got {rate}')
         end = self.duration()
+        if end * rate > MAX_SAMPLES:
+            raise ValueError(f"{rate:g} Hz over the programme's {end:.6g} s gives "
+                             f'{end * rate:.3g} samples, more than {MAX_SAMPLES:.0e}: '
+                             'lower the rate or shorten the programme')
         # Round so that a duration that is a multiple of the period up to rounding does not
         # produce a sliver of an interval at the end.
         whole = int(math.floor(end * rate + 1e-9))
@@ -221,3 +227,32 @@ class PumpProfile:
         else:
             t[-1] = end
         return t, self.injected_at(t)
+
+
+class ProgrammeError(ValueError):
+    """A programme the segments cannot follow; ``key`` names the leg, ``reason`` says why."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        """``<key>: <reason>``, e.g. ``legs[0].inflate_to_m3: 0.00011 m^3 is beyond ...``."""
+        super().__init__(f'{key}: {reason}')
+        self.key = key
+        self.reason = reason
+
+
+def leg_key(index: int, leg: Leg, prefix: str = '') -> str:
+    """The key of a leg's value, as a scene or a node parameter spells it."""
+    field = 'hold_s' if leg.action == 'hold' else f'{leg.action}_to_m3'
+    return f'{prefix}legs[{index}].{field}'
+
+
+def check_capacity(profile: PumpProfile, capacity: float, prefix: str = '') -> None:
+    """Refuse a start volume or leg beyond ``capacity`` [m^3], what the segments hold."""
+    if profile.start_injected > capacity:
+        raise ProgrammeError(f'{prefix}start_injected_m3',
+                             f'{profile.start_injected:g} m^3 exceeds what the segments hold '
+                             f'({capacity:g} m^3 injected)')
+    for index, leg in enumerate(profile.legs):
+        if leg.action != 'hold' and leg.to_m3 > capacity:
+            raise ProgrammeError(leg_key(index, leg, prefix),
+                                 f'{leg.to_m3:g} m^3 exceeds what the segments hold '
+                                 f'({capacity:g} m^3 injected)')

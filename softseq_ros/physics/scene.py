@@ -47,9 +47,16 @@ from typing import Any
 
 import yaml
 
+from softseq_ros.physics.limits import LIMITS
 from softseq_ros.physics.materials import LAW_NAMES, make_material, material_parameter_names
 from softseq_ros.physics.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
-from softseq_ros.physics.profile import DEFAULT_FLOW_RATE, Leg, PumpProfile
+from softseq_ros.physics.profile import (
+    DEFAULT_FLOW_RATE,
+    Leg,
+    ProgrammeError,
+    PumpProfile,
+    check_capacity,
+)
 from softseq_ros.physics.segments import BalloonSegment, LinearSegment, Segment, TabulatedSegment
 from softseq_ros.physics.smoothing import smooth_table
 
@@ -59,7 +66,6 @@ DEFAULT_PUMP_RATE_HZ = 50.0
 DEFAULT_CAMERA_RATE_HZ = 10.0
 DEFAULT_POINTS_PER_SEGMENT = 20
 DEFAULT_IMAGE_SIZE_PX = (640, 480)
-MIN_SOLVER_RESOLUTION = 16
 
 _SEGMENT_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 _SCENE_NAME = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.-]*$')
@@ -317,6 +323,16 @@ def _integer(ctx: _Context, value: object, key_path: str, *, ge: int | None = No
     return value
 
 
+def _limited(ctx: _Context, value: object, key_path: str, limit_key: str | None = None, *,
+             integer: bool = False) -> float:
+    """A number within its entry of LIMITS (by default the entry of ``key_path`` itself)."""
+    number = _integer(ctx, value, key_path) if integer else _number(ctx, value, key_path)
+    reason = LIMITS[limit_key or key_path].reason(number)
+    if reason is not None:
+        raise ctx.error(key_path, reason)
+    return number
+
+
 def _text(ctx: _Context, value: object, key_path: str) -> str:
     if not isinstance(value, str):
         raise ctx.error(key_path, f'must be text, got {_type_name(value)} {value!r}')
@@ -481,14 +497,11 @@ def _segments(ctx: _Context, value: object) -> tuple[Segment, ...]:
 def _pump(ctx: _Context, value: object, capacity: float) -> PumpSettings:
     raw = _mapping(ctx, value, 'pump', ('legs',),
                    ('flow_rate_m3_per_s', 'rate_hz', 'cycles', 'start_injected_m3'))
-    flow = _number(ctx, raw.get('flow_rate_m3_per_s', DEFAULT_FLOW_RATE),
-                   'pump.flow_rate_m3_per_s', gt=0.0)
-    rate = _number(ctx, raw.get('rate_hz', DEFAULT_PUMP_RATE_HZ), 'pump.rate_hz', gt=0.0)
-    cycles = _integer(ctx, raw.get('cycles', 1), 'pump.cycles', ge=1)
+    flow = _limited(ctx, raw.get('flow_rate_m3_per_s', DEFAULT_FLOW_RATE),
+                    'pump.flow_rate_m3_per_s')
+    rate = _limited(ctx, raw.get('rate_hz', DEFAULT_PUMP_RATE_HZ), 'pump.rate_hz')
+    cycles = int(_limited(ctx, raw.get('cycles', 1), 'pump.cycles', integer=True))
     start = _number(ctx, raw.get('start_injected_m3', 0.0), 'pump.start_injected_m3', ge=0.0)
-    if start > capacity:
-        raise ctx.error('pump.start_injected_m3',
-                        f'{start:g} m^3 exceeds what the segments hold ({capacity:g} m^3)')
     items = _list(ctx, raw['legs'], 'pump.legs')
     if not items:
         raise ctx.error('pump.legs', 'needs at least one leg')
@@ -505,16 +518,14 @@ def _pump(ctx: _Context, value: object, capacity: float) -> PumpSettings:
         (key, amount), = leg.items()
         where = _join(key_path, key)
         if key == 'hold_s':
-            legs.append(Leg.hold(_number(ctx, amount, where, gt=0.0)))
+            legs.append(Leg.hold(_limited(ctx, amount, where, 'pump.legs.hold_s')))
             continue
         target = _number(ctx, amount, where, ge=0.0)
-        if target > capacity:
-            raise ctx.error(where, f'{target:g} m^3 exceeds what the segments hold '
-                                   f'({capacity:g} m^3 injected)')
         legs.append(Leg.inflate(target) if key == 'inflate_to_m3' else Leg.deflate(target))
-    # Walk the programme as the pump will, so a leg that cannot run names its own key.
+    # Walk the programme as the pump will, so a leg that cannot run names its own key. Every
+    # cycle after the first starts where the one before ended, so two cycles show them all.
     now = start
-    for cycle in range(1, cycles + 1):
+    for cycle in range(1, min(cycles, 2) + 1):
         for index, leg in enumerate(legs):
             if leg.action == 'hold':
                 continue
@@ -532,6 +543,10 @@ def _pump(ctx: _Context, value: object, capacity: float) -> PumpSettings:
                               start_injected=start)
     except ValueError as err:
         raise ctx.error('pump', str(err)) from None
+    try:
+        check_capacity(profile, capacity, 'pump.')
+    except ProgrammeError as err:
+        raise ctx.error(err.key, err.reason) from None
     return PumpSettings(profile=profile, rate_hz=rate)
 
 
@@ -542,10 +557,9 @@ def _camera(ctx: _Context, value: object, pump: PumpProfile) -> CameraSettings:
                    ('rate_hz', 'noise_std_m', 'seed', 'trigger_injected_m3', 'points_per_segment',
                     'image_width_px', 'image_height_px'))
     defaults = CameraSettings()
-    rate = _number(ctx, raw.get('rate_hz', defaults.rate_hz), 'camera.rate_hz', gt=0.0)
-    noise = _number(ctx, raw.get('noise_std_m', defaults.noise_std_m), 'camera.noise_std_m',
-                    ge=0.0)
-    seed = _integer(ctx, raw.get('seed', defaults.seed), 'camera.seed', ge=0)
+    rate = _limited(ctx, raw.get('rate_hz', defaults.rate_hz), 'camera.rate_hz')
+    noise = _limited(ctx, raw.get('noise_std_m', defaults.noise_std_m), 'camera.noise_std_m')
+    seed = int(_limited(ctx, raw.get('seed', defaults.seed), 'camera.seed', integer=True))
     triggers = []
     items = _list(ctx, raw.get('trigger_injected_m3', []), 'camera.trigger_injected_m3')
     reach = pump.max_injected()
@@ -559,12 +573,12 @@ def _camera(ctx: _Context, value: object, pump: PumpProfile) -> CameraSettings:
             raise ctx.error(where, f'{trigger:g} m^3 is never reached: the pump goes up to '
                                    f'{reach:g} m^3')
         triggers.append(trigger)
-    points = _integer(ctx, raw.get('points_per_segment', defaults.points_per_segment),
-                      'camera.points_per_segment', ge=1)
-    width = _integer(ctx, raw.get('image_width_px', defaults.image_width_px),
-                     'camera.image_width_px', ge=1)
-    height = _integer(ctx, raw.get('image_height_px', defaults.image_height_px),
-                      'camera.image_height_px', ge=1)
+    points = int(_limited(ctx, raw.get('points_per_segment', defaults.points_per_segment),
+                          'camera.points_per_segment', integer=True))
+    width = int(_limited(ctx, raw.get('image_width_px', defaults.image_width_px),
+                         'camera.image_width_px', integer=True))
+    height = int(_limited(ctx, raw.get('image_height_px', defaults.image_height_px),
+                          'camera.image_height_px', integer=True))
     return CameraSettings(rate_hz=rate, noise_std_m=noise, seed=seed,
                           trigger_injected_m3=tuple(triggers), points_per_segment=points,
                           image_width_px=width, image_height_px=height)
@@ -594,8 +608,8 @@ def _solver(ctx: _Context, value: object) -> SolverSettings:
     resolution = raw.get('resolution')
     if resolution is None:
         return SolverSettings()
-    return SolverSettings(resolution=_integer(ctx, resolution, 'solver.resolution',
-                                              ge=MIN_SOLVER_RESOLUTION))
+    return SolverSettings(resolution=int(_limited(ctx, resolution, 'solver.resolution',
+                                                  integer=True)))
 
 
 # ----------------------------------------------------------------------------------------------

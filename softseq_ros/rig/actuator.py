@@ -25,6 +25,7 @@ import os
 from pathlib import Path
 
 from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, StatePoint, Tracker
+from softseq_ros.physics.reach import beyond_domain
 from softseq_ros.rig import contract
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.rig.values import (
@@ -97,7 +98,8 @@ class ActuatorCore:
         except DomainError as err:
             # The tracker stops at the edge of its branch; keep the state as it was.
             tracker.branch, tracker.total = branch, total
-            return self.refuse('domain', f'command refused: {err}')
+            return self.refuse('domain', 'command refused: '
+                               + beyond_domain(injected, err, self.emap, self.names))
         self.solves += 1
         self._last_command = injected
         self._state = self.emap.read(tracker.branch, tracker.total)

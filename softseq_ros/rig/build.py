@@ -9,7 +9,9 @@ from pathlib import Path
 from typing import Any
 
 from softseq_ros.physics.equilibrium import EquilibriumMap
-from softseq_ros.physics.profile import Leg, PumpProfile
+from softseq_ros.physics.limits import LIMITS
+from softseq_ros.physics.profile import Leg, ProgrammeError, PumpProfile, check_capacity
+from softseq_ros.physics.reach import check_reach, check_scene_reach
 from softseq_ros.physics.scene import Scene
 from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import ActuatorCore
@@ -39,7 +41,7 @@ def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
     """The scene's pump programme with any of its parts replaced."""
     default = scene.pump.profile
     try:
-        return PumpProfile(
+        profile = PumpProfile(
             legs=default.legs if legs is None else tuple(legs),
             flow_rate=default.flow_rate if flow_rate_m3_per_s is None else flow_rate_m3_per_s,
             cycles=default.cycles if cycles is None else cycles,
@@ -47,23 +49,64 @@ def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
                             else start_injected_m3))
     except ValueError as err:
         raise SettingError(f'pump programme (legs, cycles, start_injected_m3): {err}') from None
+    try:
+        check_capacity(profile, scene.capacity)
+    except ProgrammeError as err:
+        raise SettingError(str(err)) from None
+    return profile
 
 
-def pump_core(scene: Scene, **settings: Any) -> tuple[PumpCore, float]:
-    """The scene's pump (settings from PUMP_SETTINGS override it) and its rate [Hz]."""
+def check_programme(scene: Scene, profile: PumpProfile, emap: EquilibriumMap) -> None:
+    """
+    Refuse a programme that leaves the equilibrium's domain (softseq_ros.physics.reach).
+
+    The scene's own programme is refused as a scene error naming the file and the scene key;
+    one the settings changed, naming the setting (``legs[0].inflate_to_m3``).
+    """
+    if profile == scene.pump.profile:
+        check_scene_reach(scene, emap)
+        return
+    try:
+        check_reach(profile, emap, scene.segment_names)
+    except ProgrammeError as err:
+        raise SettingError(str(err)) from None
+
+
+def end_stop(emap: EquilibriumMap, profile: PumpProfile) -> float:
+    """The pump's default end stop [m^3]: where the inflation ends, or the programme's peak."""
+    return max(emap.injected_range[1], profile.max_injected())
+
+
+def pump_core(scene: Scene, emap: EquilibriumMap | None = None,
+              **settings: Any) -> tuple[PumpCore, float]:
+    """
+    The scene's pump (settings from PUMP_SETTINGS override it) and its rate [Hz].
+
+    With the segments' equilibrium map ``emap`` the programme is checked against its domain
+    first, and ``max_injected_m3`` defaults to where the inflation ends (else to what the
+    segments hold).
+    """
     _unknown('pump', settings, PUMP_SETTINGS)
+    rate_hz = float(settings.get('rate_hz', scene.pump.rate_hz))
+    reason = LIMITS['pump.rate_hz'].reason(rate_hz)
+    if reason is not None:
+        raise SettingError(f'pump: rate_hz {reason}')
     profile = pump_profile(scene, flow_rate_m3_per_s=settings.get('flow_rate_m3_per_s'),
                            legs=settings.get('legs'), cycles=settings.get('cycles'),
                            start_injected_m3=settings.get('start_injected_m3'))
+    default_stop = scene.capacity
+    if emap is not None:
+        check_programme(scene, profile, emap)
+        default_stop = end_stop(emap, profile)
     core = PumpCore(
         profile, autostart=settings.get('autostart', True),
         max_pressure_pa=settings.get('max_pressure_pa', DEFAULT_MAX_PRESSURE_PA),
-        max_injected_m3=settings.get('max_injected_m3', scene.capacity),
+        max_injected_m3=settings.get('max_injected_m3', default_stop),
         feedback_timeout_s=settings.get('feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S),
         open_loop=settings.get('open_loop', False),
         **({'feedback_clock': settings['feedback_clock']} if 'feedback_clock' in settings
            else {}))
-    return core, float(settings.get('rate_hz', scene.pump.rate_hz))
+    return core, rate_hz
 
 
 ACTUATOR_SETTINGS = ('outputs', 'ambient_pressure_pa', 'state_file')
