@@ -28,6 +28,7 @@ Parts:
 """
 
 import argparse
+import atexit
 from collections import defaultdict
 from contextlib import contextmanager
 import cProfile
@@ -379,10 +380,20 @@ def part_batch(repeats: int) -> str:
 
 # ------------------------------------------------------------------------------ ROS plumbing
 
+_ROS_HOME = tempfile.mkdtemp(prefix='softseq_bench_ros_home_')
+atexit.register(shutil.rmtree, _ROS_HOME, True)
+
+
 def child_environment(domain_id: int) -> dict[str, str]:
-    """The whole environment (the ROS wheels need it) with this run's domain."""
+    """
+    The whole environment (the ROS wheels need it) with this run's domain.
+
+    The ROS home is a fresh folder: an actuator never resumes from a state file that an
+    earlier run, or the user's rig, left behind.
+    """
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain_id)
+    env['ROS_HOME'] = _ROS_HOME
     env['PYTHONUNBUFFERED'] = '1'
     return env
 

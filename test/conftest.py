@@ -34,6 +34,14 @@ if _venv_bin not in os.environ.get('PATH', '').split(os.pathsep):
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 
+@pytest.fixture(autouse=True)
+def ros_home(tmp_path_factory, monkeypatch):
+    """Every test its own ROS home: an actuator's state file never carries over to another."""
+    home = tmp_path_factory.mktemp('ros_home')
+    monkeypatch.setenv('ROS_HOME', str(home))
+    return home
+
+
 @pytest.fixture
 def ros_env() -> dict[str, str]:
     """Return a fresh copy of the environment for child processes (nodes, the CLI).

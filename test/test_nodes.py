@@ -413,6 +413,22 @@ def test_actuator_resumes_from_the_latched_volumes_of_a_live_publisher(context):
     assert np.max(np.abs(resumed.volumes - inflating)) > 1e-3 * emap.v_scale
 
 
+def test_actuator_state_file_is_in_the_ros_home_per_namespace_unless_off(context, ros_home):
+    scene = Parameter('scene', value='paper')
+    plain = ActuatorNode(context=context, parameter_overrides=[scene])
+    moved = ActuatorNode(context=context, cli_args=['--ros-args', '-r', '__ns:=/lab/rig2'],
+                         parameter_overrides=[scene])
+    off = ActuatorNode(context=context, parameter_overrides=[
+        scene, Parameter('state_file', value='')])
+    try:
+        assert plain.core.state_file == ros_home / 'softseq' / 'actuator.json'
+        assert moved.core.state_file == ros_home / 'softseq' / 'lab' / 'rig2' / 'actuator.json'
+        assert off.core.state_file is None
+    finally:
+        for node in (plain, moved, off):
+            node.destroy_node()
+
+
 def test_camera_refuses_an_unknown_frame_trigger(context, tmp_path):
     with pytest.raises(InvalidParameterValueException, match='must be timer or state'):
         CameraNode(context=context, parameter_overrides=[

@@ -145,11 +145,10 @@ def _hysteresis_scene(tmp_path):
     return str(path), emap, middle
 
 
-def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
+def test_killed_actuator_resumes_on_its_branch(context, ros_env, ros_home, tmp_path):
     scene_path, emap, middle = _hysteresis_scene(tmp_path)
-    state_file = tmp_path / 'actuator_state.json'
-    actuator_params = {'scene': scene_path, 'resume_timeout_s': 0.5,
-                       'state_file': str(state_file)}
+    # No state_file given: the default one, in the ROS home, is what brings it back.
+    actuator_params = {'scene': scene_path, 'resume_timeout_s': 0.5}
     topics = ['pump/command', 'pump/status', 'actuator/volumes', 'actuator/events']
     collector = Collector(topics, context)
     got = collector.received
@@ -170,6 +169,7 @@ def test_killed_actuator_resumes_on_its_branch(context, ros_env, tmp_path):
                  'the actuator to reach the hold inside the loop')
         actuator.send_signal(signal.SIGKILL)
         actuator.wait(timeout=10)
+        assert (ros_home / 'softseq' / 'actuator.json').is_file()
         # A pump with no pressure feedback holds (a real pump must not push on blind) and
         # keeps commanding where it is.
         wait_for(lambda: any(json.loads(m.data)['state'] == 'held'

@@ -9,13 +9,17 @@ per snap-through on ``actuator/events``, each stamped with the command it answer
 
 Resume: on start the node waits up to ``resume_timeout_s`` for a latched ``actuator/volumes``
 from a live publisher and resumes on the branch nearest those volumes; without one it reads
-``state_file`` when set (the core writes it after every change); otherwise it starts at rest.
-Commands that arrive while waiting are answered in order afterwards.
+``state_file`` (the core writes it after every change; by default
+``$ROS_HOME/softseq/<namespace>/actuator.json``, ``$ROS_HOME`` being ``~/.ros`` unless set, so
+an actuator killed with ``kill -9`` comes back on its branch); with none, or ``state_file``
+empty, it starts at rest. Commands that arrive while waiting are answered in order afterwards.
 
 An actuator that hears more than one publisher on its command topic (two pumps, or two rigs
 in one namespace) warns once, naming them.
 """
 
+import os
+from pathlib import Path
 import time
 from typing import Any
 
@@ -55,8 +59,10 @@ class ActuatorNode(CoreNode):
             'to resume from [s]; 0 starts fresh at once.', minimum=0.0, maximum=60.0,
             read_only=True)
         state_file = self.declare_text(
-            'state_file', '', 'File the state is written to after every change and resumed '
-            'from when no actuator/volumes arrives at start; empty: off.', read_only=True)
+            'state_file', str(default_state_file(self.get_namespace(), self.get_name())),
+            'File the state is written to after every change and resumed from when no '
+            'actuator/volumes arrives at start (default: in $ROS_HOME/softseq, one per node '
+            'name and namespace); empty: off, every start at rest.', read_only=True)
         self.core = actuator_core(scene, equilibrium_map(scene), outputs=frozenset(outputs),
                                   ambient_pressure_pa=ambient, state_file=state_file or None)
         self.connect(frozenset(outputs))
@@ -131,6 +137,14 @@ class ActuatorNode(CoreNode):
         for parameter in parameters:
             if parameter.name == 'ambient_pressure_pa':
                 self.core.set_ambient_pressure(float(parameter.value))
+
+
+def default_state_file(namespace: str, node_name: str) -> Path:
+    """``$ROS_HOME/softseq/<namespace>/<node name>.json``; ROS_HOME defaults to ``~/.ros``."""
+    home = os.environ.get('ROS_HOME')
+    root = Path(home).expanduser() if home else Path.home() / '.ros'
+    return root.joinpath('softseq', *[part for part in namespace.split('/') if part],
+                         f'{node_name}.json')
 
 
 def main(args: list[str] | None = None) -> None:

@@ -11,9 +11,9 @@ solved again: the same numbers go out with the new stamp.
 
 Resume: a restarted actuator must stay on the branch its history put it on (hysteresis).
 While :attr:`waiting` (the driver looks for a previous state), commands are buffered and
-answered in order once the wait ends (:meth:`end_wait`). ``state_file`` (default off) makes
-the core write its state there after every change, atomically, and :meth:`resume_from_file`
-read it back.
+answered in order once the wait ends (:meth:`end_wait`). ``state_file`` (None: off; the
+actuator node gives one in the ROS home by default) makes the core write its state there after
+every change, atomically, and :meth:`resume_from_file` read it back.
 
 Bad commands (NaN, negative, volumes outside the segment models) are refused with a throttled
 warning; the state stays where it was.
@@ -60,6 +60,7 @@ class ActuatorCore:
         self.outputs = frozenset(name for name in outputs if name in ACTUATOR_OUTPUTS)
         self.ambient_pressure_pa = ambient_pressure_pa
         self.state_file = state_file
+        self._state_folder_made = False
         self.rejected_commands = 0
         self.solves = 0
         self.waiting = False
@@ -151,6 +152,9 @@ class ActuatorCore:
                            'volumes_m3': self._state.volumes})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
         try:
+            if not self._state_folder_made:
+                self.state_file.parent.mkdir(parents=True, exist_ok=True)
+                self._state_folder_made = True
             temporary.write_text(data, encoding='utf-8')
             os.replace(temporary, self.state_file)
         except OSError as err:
