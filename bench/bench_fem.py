@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from softseq_ros.fem.design import load_design, with_changes  # noqa: E402
+from softseq_ros.physics.design import load_design, with_changes  # noqa: E402
 
 DESIGNS = REPO / 'config' / 'designs'
 RESULTS = REPO / 'bench' / 'fem_results.json'
@@ -170,7 +170,7 @@ def part_materials() -> None:
 def _with_material(design: object, material: dict) -> object:
     from dataclasses import replace
 
-    from softseq_ros.fem.design import Material
+    from softseq_ros.physics.design import Material
 
     return replace(design, material=Material(law=material['law'],
                                              params={k: v for k, v in material.items()

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from softseq_ros.fem.design import load_design, with_changes
 from softseq_ros.fem.segment import build_segment
 from softseq_ros.fem.sphere import (
     neo_hookean_thick_sphere_pressure,
@@ -11,6 +10,7 @@ from softseq_ros.fem.sphere import (
     thick_sphere_pressure,
     thin_mooney_rivlin_pressure,
 )
+from softseq_ros.physics.design import load_design, with_changes
 from softseq_ros.physics.materials import MooneyRivlin
 
 MU = 1.0e4  # Pa

@@ -5,11 +5,13 @@ from pathlib import Path
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import yaml
 
-from softseq_ros.fem.design import DesignError, design_from_dict, load_design, with_changes
 from softseq_ros.fem.segment import build_segment
+from softseq_ros.physics.design import DesignError, design_from_dict, load_design, with_changes
+from softseq_ros.physics.scene import SceneError, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
 TOP = REPO / 'config' / 'designs' / 'paper_top.yaml'
@@ -203,3 +205,43 @@ def test_the_fem_package_is_installed_with_the_rest():
     assert 'softseq_ros.fem' in find_packages(str(REPO), exclude=['test', 'test.*', 'bench',
                                                                   'bench.*'])
     assert (REPO / 'config' / 'designs' / 'paper_top.yaml').is_file()
+
+
+def test_a_scene_naming_a_design_gets_its_table_from_the_cache(tmp_path, monkeypatch):
+    cache = tmp_path / 'cache'
+    monkeypatch.setenv('SOFTSEQ_FEM_CACHE', str(cache))
+    design = yaml.safe_load(TOP.read_text())
+    design['name'] = 'quick_top'
+    design['mesh'].update(element_size_m=0.003, thin_layer_cells=1)
+    design['volume']['max_injected_m3'] = 3e-6
+    (tmp_path / 'designs').mkdir()
+    (tmp_path / 'designs' / 'quick_top.yaml').write_text(yaml.safe_dump(design))
+    bottom = REPO / 'config' / 'segments' / 'paper_bottom.csv'
+    scene = {'name': 'designed', 'segments': [
+        {'name': 'bottom', 'length_m': 0.111, 'table': str(bottom)},
+        {'name': 'top', 'length_m': 0.111, 'design': 'designs/quick_top.yaml'}],
+        'pump': {'legs': [{'inflate_to_m3': 2e-6}, {'deflate_to_m3': 0.0}]}}
+    scene_file = tmp_path / 'designed.yaml'
+    scene_file.write_text(yaml.safe_dump(scene))
+    # Not computed yet: the scene says how to make the table, and starts no FEM itself.
+    with pytest.raises(SceneError) as missing:
+        load_scene(scene_file)
+    assert str(missing.value).startswith(f'{scene_file}: segments[1].design: ')
+    assert 'no FEM table of this design' in str(missing.value)
+    assert 'softseq fem' in str(missing.value) and not cache.exists()
+    made = _softseq(str(tmp_path / 'designs' / 'quick_top.yaml'), '--quiet',
+                    env={**__import__('os').environ, 'OMP_NUM_THREADS': '1'})
+    assert made.returncode == 0, made.stderr
+    cached, = cache.glob('quick_top-*.csv')
+    top = load_scene(scene_file).segments[1]
+    lines = [line for line in cached.read_text().splitlines() if not line.startswith('#')]
+    header, *rows = [line.split(',') for line in lines]
+    columns = {name: np.array([float(row[i]) for row in rows]) for i, name in enumerate(header)}
+    np.testing.assert_array_equal(top.volumes, columns['volume_m3'])
+    np.testing.assert_array_equal(top.pressures, columns['pressure_pa'])
+    # The segment's length is the design's.
+    scene['segments'][1]['length_m'] = 0.2
+    scene_file.write_text(yaml.safe_dump(scene))
+    with pytest.raises(SceneError, match=r'segments\[1\]\.length_m: 0\.2 m differs from the '
+                                         r"design's geometry\.length_m \(0\.111 m\)"):
+        load_scene(scene_file)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from softseq_ros.fem.design import load_design
+from softseq_ros.physics.design import load_design
 from softseq_ros.physics.equilibrium import Tracker
 from softseq_ros.physics.scene import load_scene
 from softseq_ros.physics.solve import build_map

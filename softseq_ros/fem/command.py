@@ -2,31 +2,19 @@
 
 import argparse
 import os
-from pathlib import Path
 import sys
 import time
 from typing import Any
 
 import yaml
 
-from softseq_ros.fem.design import Design, DesignError, load_design, with_changes
-
-
-def design_path(name_or_path: str) -> Path:
-    """A design file, or the shipped design of that bare name (``paper_top``)."""
-    path = Path(name_or_path)
-    if path.is_file():
-        return path
-    if path.suffix == '' and '/' not in name_or_path and os.sep not in name_or_path:
-        from softseq_ros.physics.scene import config_dir
-
-        shipped = config_dir() / 'designs' / f'{name_or_path}.yaml'
-        if shipped.is_file():
-            return shipped
-        known = ', '.join(sorted(p.stem for p in (config_dir() / 'designs').glob('*.yaml')))
-        raise DesignError(f'{name_or_path}: no such design file and no shipped design of that '
-                          f'name (shipped: {known})')
-    raise DesignError(f'{name_or_path}: design file not found')
+from softseq_ros.physics.design import (
+    Design,
+    DesignError,
+    design_path,
+    load_design,
+    with_changes,
+)
 
 
 def _value(text: str) -> Any:

@@ -8,7 +8,6 @@ curvature). The comment lines say where every number comes from.
 """
 
 from dataclasses import dataclass
-import os
 from pathlib import Path
 import shutil
 import sys
@@ -17,7 +16,7 @@ from typing import Callable, TextIO
 
 import numpy as np
 
-from softseq_ros.fem.design import FEM_CODE_VERSION, Design
+from softseq_ros.physics.design import FEM_CODE_VERSION, Design, cache_path
 
 COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m', 'injected_m3', 'cut_curvature_per_m')
 
@@ -49,20 +48,6 @@ class FemResult:
         """Largest pressure [Pa] and the injected volume [m^3] where it is reached."""
         index = int(np.argmax(self.pressures))
         return float(self.pressures[index]), float(self.injected[index])
-
-
-def default_cache_dir() -> Path:
-    """Where tables are cached: $SOFTSEQ_FEM_CACHE, else $XDG_CACHE_HOME/softseq/fem."""
-    explicit = os.environ.get('SOFTSEQ_FEM_CACHE')
-    if explicit:
-        return Path(explicit)
-    base = os.environ.get('XDG_CACHE_HOME') or str(Path.home() / '.cache')
-    return Path(base) / 'softseq' / 'fem'
-
-
-def cache_path(design: Design, cache_dir: Path | None = None) -> Path:
-    """The cache file of a design's table (its name and hash)."""
-    return (cache_dir or default_cache_dir()) / f'{design.name}-{design.digest()}.csv'
 
 
 def run_design(design: Design, progress: Callable[[str], None] | None = None) -> FemResult:

@@ -11,6 +11,8 @@ publish. Every quantity is SI and every key that carries a unit says so in its s
       - name: bottom                  # letters, digits, '_'; unique
         length_m: 0.111
         table: segments/paper_bottom.csv        # CSV relative to this file, or:
+        # design: designs/paper_bottom.yaml     # a segment design (file or shipped name):
+        #                                       # its FEM table from `softseq fem`'s cache
         # smoothing: {noise_std_pa, prominence_pa}  # opt-in, tables only (measured rig data)
         # linear: {rest_volume_m3, stiffness_pa_per_m3, max_volume_m3,
         #          curvature_per_m_per_m3: 0.0}
@@ -74,7 +76,7 @@ _UNIT_TOKENS = frozenset({
     'm', 'mm', 'cm', 'um', 'km', 'm3', 'mm3', 'cm3', 'ml', 'l', 'cc', 'pa', 'kpa', 'mpa', 'gpa',
     'bar', 'mbar', 'psi', 's', 'ms', 'min', 'h', 'hz', 'khz', 'per', 'deg', 'rad', 'px',
 })
-_MODELS = ('table', 'linear', 'balloon')
+_MODELS = ('table', 'design', 'linear', 'balloon')
 _NUMBER = (int, float)
 
 
@@ -417,6 +419,9 @@ def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
             if 'smoothing' not in raw:
                 return segment
             return _smoothed(ctx, raw['smoothing'], _join(key_path, 'smoothing'), segment)
+        if model == 'design':
+            return _designed(ctx, _text(ctx, spec, where), where, name, length,
+                             _join(key_path, 'length_m'))
         gain_key = 'curvature_per_m_per_m3'
         if model == 'linear':
             params = _mapping(ctx, spec, where,
@@ -447,6 +452,25 @@ def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
     except ValueError as err:
         # The segment models check their own consistency; keep their words, add the key path.
         raise ctx.error(where, str(err)) from None
+
+
+def _designed(ctx: _Context, text: str, where: str, name: str, length: float,
+              length_key: str) -> TabulatedSegment:
+    """The segment of a design file (softseq_ros.physics.design): its FEM table, cached."""
+    # Imported here: the design module reads its files with this module's helpers.
+    from softseq_ros.physics.design import DesignError, cached_table, design_path, load_design
+
+    relative = Path(text)
+    beside = relative if relative.is_absolute() else ctx.folder / relative
+    try:
+        design = load_design(beside if beside.is_file() else design_path(text))
+        table = cached_table(design)
+    except DesignError as err:
+        raise ctx.error(where, str(err)) from None
+    if not math.isclose(length, design.geometry.length_m, rel_tol=1e-9):
+        raise ctx.error(length_key, f"{length:g} m differs from the design's geometry.length_m "
+                                    f'({design.geometry.length_m:g} m)')
+    return TabulatedSegment.from_csv(table, name=name, length=length)
 
 
 def _smoothed(ctx: _Context, value: object, key_path: str,

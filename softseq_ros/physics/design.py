@@ -39,8 +39,10 @@ Every mistake raises ``DesignError`` with one line ``<file>: <key path>: <what i
 
 from dataclasses import asdict, dataclass
 import hashlib
+from importlib.metadata import PackageNotFoundError
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +55,7 @@ from softseq_ros.physics.scene import (
     _number,
     _read_yaml,
     _text,
+    config_dir,
 )
 
 WALL_READINGS = ('skin_bands', 'side_walls')
@@ -300,3 +303,52 @@ def with_changes(design: Design, changes: dict[str, Any]) -> Design:
     return design_from_dict(data, shown)
 
 
+def default_cache_dir() -> Path:
+    """Where tables are cached: $SOFTSEQ_FEM_CACHE, else $XDG_CACHE_HOME/softseq/fem."""
+    explicit = os.environ.get('SOFTSEQ_FEM_CACHE')
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get('XDG_CACHE_HOME') or str(Path.home() / '.cache')
+    return Path(base) / 'softseq' / 'fem'
+
+
+def cache_path(design: Design, cache_dir: Path | None = None) -> Path:
+    """The cache file of a design's table (its name and hash)."""
+    return (cache_dir or default_cache_dir()) / f'{design.name}-{design.digest()}.csv'
+
+
+def design_path(name_or_path: str) -> Path:
+    """A design file, or the shipped design of that bare name (``paper_top``)."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    if path.suffix == '' and '/' not in name_or_path and os.sep not in name_or_path:
+        shipped = config_dir() / 'designs' / f'{name_or_path}.yaml'
+        if shipped.is_file():
+            return shipped
+        known = ', '.join(sorted(p.stem for p in (config_dir() / 'designs').glob('*.yaml')))
+        raise DesignError(f'{name_or_path}: no such design file and no shipped design of that '
+                          f'name (shipped: {known})')
+    raise DesignError(f'{name_or_path}: design file not found')
+
+
+def cached_table(design: Design, cache_dir: Path | None = None) -> Path:
+    """
+    The table `softseq fem` made of this design, from the cache; DesignError when there is none.
+
+    A scene that names a design gets its table here without recomputing it; the error says
+    how to make it (the FEM takes minutes and needs the ``fem`` extra, so no scene load
+    starts it).
+    """
+    try:
+        path = cache_path(design, cache_dir)
+    except PackageNotFoundError:
+        raise DesignError(f"{design.path or design.name}: its table's cache key names the FEM "
+                          'library, which is not installed: pip install "softseq_ros[fem]"') \
+            from None
+    if not path.is_file():
+        source = design.path if design.path is not None else design.name
+        raise DesignError(f'{source}: no FEM table of this design in {path.parent} (hash '
+                          f'{path.stem.rsplit("-", 1)[-1]}); make it once with '
+                          f'`softseq fem {source}`')
+    return path
