@@ -105,7 +105,7 @@ BAD_SCENES = [
     (put('segments[0].name', 'top segment'), 'segments[0].name', 'must start with a letter'),
     (put('segments[0].name', 7), 'segments[0].name', 'must be text, got int'),
     (drop('segments[0].linear'), 'segments[0]', 'needs exactly one model key out of table, '
-                                                'linear, balloon; found none'),
+                                                'design, linear, balloon; found none'),
     (put('segments[0].table', 'x.csv'), 'segments[0]', 'found table, linear'),
     (put('segments[0].linear.max_volume_m3', 1e-5), 'segments[0].linear.max_volume_m3',
      'must be > 1e-05, got 1e-05'),
