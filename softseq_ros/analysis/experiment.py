@@ -10,7 +10,6 @@ rises or falls), ``tip_x_m`` and ``tip_z_m`` (per-frame tip positions in ``softs
 optional), anything else is ignored.
 """
 
-import csv
 from dataclasses import dataclass, field
 import math
 import os
@@ -20,10 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.analysis.metrics import Trace, monotone_leg
+from softseq_ros.physics.csv_columns import numeric_columns, read_rows
 
 FloatArray = NDArray[np.float64]
 DEFAULT_AMBIENT_PA = 101325.0
 KINDS = ('gauge', 'absolute')
+REQUIRED = ('injected_m3', 'pressure_pa')
 # Undeclared pressures all between these look like absolute readings of a soft actuator.
 ABSOLUTE_LOOKING_PA = (80e3, 130e3)
 # How far the volume shift is searched, as a share of the model's injected range.
@@ -61,56 +62,29 @@ def _directives(lines: list[str]) -> dict[str, str]:
 def read_experiment(path: str | os.PathLike) -> Experiment:
     """Read and check an experiment file; absolute pressures become gauge."""
     path = Path(path)
-    try:
-        # utf-8-sig, as for segment tables: spreadsheets save "CSV UTF-8" with a byte-order mark.
-        text = path.read_text(encoding='utf-8-sig')
-    except OSError as err:
-        raise ExperimentError(f'{path}: cannot read the experiment file ({err.strerror})') \
-            from None
-    except UnicodeDecodeError as err:
-        raise ExperimentError(f'{path}: the experiment file is not UTF-8 text (byte '
-                              f'{err.start}); save it as CSV UTF-8') from None
-    lines = text.splitlines()
-    directives = _directives(lines)
-    rows = [line for line in lines if line.strip() and not line.lstrip().startswith('#')]
-    if not rows:
-        raise ExperimentError(f'{path}: empty experiment file, expected a header with '
-                              'injected_m3,pressure_pa')
-    reader = csv.reader(rows)
-    header = [name.strip() for name in next(reader)]
-    for required in ('injected_m3', 'pressure_pa'):
+    comments, header, rows = read_rows(path, ExperimentError, 'experiment file', REQUIRED)
+    directives = _directives(comments)
+    for required in REQUIRED:
         if required not in header:
             raise ExperimentError(f'{path}: no column {required} in the header '
-                                  f'({",".join(header)}); expected injected_m3,pressure_pa')
+                                  f'({",".join(header)}); expected {",".join(REQUIRED)}')
     has_tip = 'tip_x_m' in header or 'tip_z_m' in header
     if has_tip and not ('tip_x_m' in header and 'tip_z_m' in header):
         raise ExperimentError(f'{path}: tip positions need both tip_x_m and tip_z_m')
-    numeric = ['injected_m3', 'pressure_pa'] + (['tip_x_m', 'tip_z_m'] if has_tip else [])
-    values: dict[str, list[float]] = {name: [] for name in numeric}
+    if not rows:
+        raise ExperimentError(f'{path}: no rows below the header')
+    tips = ('tip_x_m', 'tip_z_m') if has_tip else ()
+    values = numeric_columns(path, header, rows, REQUIRED + tips, ExperimentError,
+                             allow_nan=tips)
     directions: list[int] = []
-    for number, row in enumerate(reader, start=1):
-        for name in numeric:
-            index = header.index(name)
-            cell = row[index].strip() if index < len(row) else ''
-            try:
-                value = float(cell)
-            except ValueError:
-                raise ExperimentError(f'{path}: row {number}, column {name}: not a number: '
-                                      f'{cell or "<missing>"!r}') from None
-            if not math.isfinite(value) and not (name.startswith('tip') and cell.lower() ==
-                                                 'nan'):
-                raise ExperimentError(f'{path}: row {number}, column {name}: must be finite, '
-                                      f'got {cell}')
-            values[name].append(value)
-        if 'direction' in header:
-            index = header.index('direction')
+    if 'direction' in header:
+        index = header.index('direction')
+        for number, row in enumerate(rows, start=1):
             cell = row[index].strip().lower() if index < len(row) else ''
             if cell not in ('inflation', 'deflation'):
                 raise ExperimentError(f'{path}: row {number}, column direction: must be '
                                       f'inflation or deflation, got {cell or "<missing>"!r}')
             directions.append(1 if cell == 'inflation' else -1)
-    if not values['injected_m3']:
-        raise ExperimentError(f'{path}: no rows below the header')
     injected = np.asarray(values['injected_m3'])
     pressure = np.asarray(values['pressure_pa'])
     if np.any(injected < 0.0):

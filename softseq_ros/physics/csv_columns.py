@@ -15,13 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 
-def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueError],
-                 what: str) -> dict[str, NDArray[np.float64]]:
+def read_rows(path: str | Path, error: type[ValueError], what: str,
+              expected: Sequence[str]) -> tuple[list[str], list[str], list[list[str]]]:
     """
-    The named columns of a CSV file as float arrays, in file order.
+    A CSV file of the common format: its comment lines, header (stripped) and data rows.
 
-    ``error`` is the exception class to raise and ``what`` names the file's role in messages
-    ("segment table", "volume history"). Values must be finite; at least one row is needed.
+    ``expected`` names the columns shown in the message for an empty file.
     """
     path = Path(path)
     try:
@@ -32,19 +31,28 @@ def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueErro
     except UnicodeDecodeError as err:
         raise error(f'{path}: the {what} is not UTF-8 text (byte {err.start}); save it as '
                     'CSV UTF-8') from None
-    lines = [line for line in text.splitlines()
-             if line.strip() and not line.lstrip().startswith('#')]
-    if not lines:
-        raise error(f'{path}: empty {what}, expected a header with {",".join(columns)}')
-    reader = csv.reader(lines)
+    lines = text.splitlines()
+    comments = [line for line in lines if line.lstrip().startswith('#')]
+    data = [line for line in lines if line.strip() and not line.lstrip().startswith('#')]
+    if not data:
+        raise error(f'{path}: empty {what}, expected a header with {",".join(expected)}')
+    reader = csv.reader(data)
     header = [name.strip() for name in next(reader)]
-    missing = [name for name in columns if name not in header]
-    if missing:
-        raise error(f'{path}: no column {", ".join(missing)} in the header '
-                    f'({",".join(header)}); expected {",".join(columns)}')
+    return comments, header, list(reader)
+
+
+def numeric_columns(path: str | Path, header: list[str], rows: list[list[str]],
+                    columns: Sequence[str], error: type[ValueError],
+                    allow_nan: Sequence[str] = ()) -> dict[str, NDArray[np.float64]]:
+    """
+    The named columns (all in ``header``) of ``rows`` as float arrays.
+
+    Values must be finite, except a literal ``nan`` in a column of ``allow_nan`` (a frame
+    without a measurement); the message names the row and the column.
+    """
     index = {name: header.index(name) for name in columns}
     values: dict[str, list[float]] = {name: [] for name in columns}
-    for row_number, row in enumerate(reader, start=1):
+    for row_number, row in enumerate(rows, start=1):
         for name, i in index.items():
             cell = row[i].strip() if i < len(row) else ''
             try:
@@ -52,10 +60,26 @@ def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueErro
             except ValueError:
                 raise error(f'{path}: row {row_number}, column {name}: not a number: '
                             f'{cell or "<missing>"!r}') from None
-            if not math.isfinite(value):
+            if not math.isfinite(value) and not (name in allow_nan and cell.lower() == 'nan'):
                 raise error(f'{path}: row {row_number}, column {name}: must be finite, '
                             f'got {cell}') from None
             values[name].append(value)
-    if not values[columns[0]]:
-        raise error(f'{path}: no rows below the header')
     return {name: np.asarray(column, dtype=float) for name, column in values.items()}
+
+
+def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueError],
+                 what: str) -> dict[str, NDArray[np.float64]]:
+    """
+    The named columns of a CSV file as float arrays, in file order.
+
+    ``error`` is the exception class to raise and ``what`` names the file's role in messages
+    ("segment table", "volume history"). Values must be finite; at least one row is needed.
+    """
+    _, header, rows = read_rows(path, error, what, columns)
+    missing = [name for name in columns if name not in header]
+    if missing:
+        raise error(f'{path}: no column {", ".join(missing)} in the header '
+                    f'({",".join(header)}); expected {",".join(columns)}')
+    if not rows:
+        raise error(f'{path}: no rows below the header')
+    return numeric_columns(path, header, rows, columns, error)
