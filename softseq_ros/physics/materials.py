@@ -9,11 +9,13 @@ pascals. The membrane tension (force per unit current length) is
 ``N = H / (2 * lambda) * dW/dlambda`` for a reference thickness ``H``.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from softseq_ros.physics.identity import exact, exact_list
 
 
 class Material(Protocol):
@@ -292,3 +294,22 @@ def make_material(law: str, params: dict[str, object]) -> Material:
         return Ogden(mus, alphas)
     values = [float(params[n]) for n in names if n in params]
     return cls(*values)
+
+
+def material_definition(material: Material) -> dict[str, object]:
+    """
+    The law and its parameters as a scene file names them (``{'law': 'gent', 'jm': 30.0, ...}``).
+
+    Exact values, JSON-able (Ogden's terms as lists): what defines the material, for digests.
+    Raises TypeError for a material that is not one of these laws.
+    """
+    for law, (cls, names) in _LAWS.items():
+        if type(material) is cls:
+            values = [getattr(material, f.name) for f in fields(cls)]
+            definition: dict[str, object] = {'law': law}
+            for name, value in zip(names, values):
+                definition[name] = (exact_list(value) if isinstance(value, tuple)
+                                    else exact(value))
+            return definition
+    raise TypeError(f'material {type(material).__name__} is none of the laws '
+                    f'{", ".join(LAW_NAMES)}: it cannot say what defines it')

@@ -497,8 +497,7 @@ def _smoothed(ctx: _Context, value: object, key_path: str,
         raise
     except ValueError as err:
         raise ctx.error(key_path, str(err)) from None
-    return TabulatedSegment(segment.name, segment.length, segment.volumes, pressures,
-                            segment.curvatures, source=f'{segment.source} (smoothed)')
+    return segment.smoothed(pressures, noise_std_pa=noise, prominence_pa=prominence)
 
 
 def _segments(ctx: _Context, value: object) -> tuple[Segment, ...]:

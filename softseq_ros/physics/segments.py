@@ -19,7 +19,8 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
 from softseq_ros.physics.csv_columns import read_columns
-from softseq_ros.physics.materials import Material
+from softseq_ros.physics.identity import exact, exact_list
+from softseq_ros.physics.materials import Material, material_definition
 
 FloatArray = NDArray[np.float64]
 
@@ -116,6 +117,21 @@ class Segment(ABC):
     def knots(self) -> FloatArray:
         """Volumes where the model is less smooth than elsewhere (a table's rows)."""
         return np.empty(0)
+
+    def definition(self) -> dict[str, object]:
+        """
+        What defines this segment, as exact JSON-able values (floats round-trip through JSON).
+
+        Its name, its length and its model's data: a table's rows as read, a model's
+        parameters; never curves sampled from them (a transcendental function may differ in
+        the last bit between machines). :mod:`softseq_ros.physics.identity` hashes it.
+        """
+        raise NotImplementedError(f'segment {self.name!r} ({type(self).__name__}) does not '
+                                  'say what defines it: give it a definition() method')
+
+    def _named(self, model: str, **data: object) -> dict[str, object]:
+        """A definition: name, length [m], model and its data."""
+        return {'name': self.name, 'length_m': exact(self.length), 'model': model, **data}
 
     def monotone_pieces(self) -> list[Piece]:
         """Split the PV curve into rising, falling and flat pieces, base to top."""
@@ -246,6 +262,10 @@ class TabulatedSegment(Segment):
         self.volumes = vol
         self.pressures = prs
         self.curvatures = cur
+        # What the table was made from when its pressures are not the rows as read: the
+        # pressures read and each smoothing's options (see :meth:`smoothed`).
+        self.table_pressures = prs
+        self.smoothing: tuple[dict[str, float | None], ...] = ()
         self._p = PchipInterpolator(vol, prs, extrapolate=False)
         self._dp = self._p.derivative()
         self._e = self._p.antiderivative()
@@ -264,6 +284,32 @@ class TabulatedSegment(Segment):
                       columns['curvature_per_m'], source=str(path))
         _check_si(path, segment.volumes, segment.pressures)
         return segment
+
+    def smoothed(self, pressures: ArrayLike, *, noise_std_pa: float | None = None,
+                 prominence_pa: float | None = None) -> 'TabulatedSegment':
+        """
+        This table with its pressures replaced by smoothed ones, the other columns kept.
+
+        ``noise_std_pa`` and ``prominence_pa`` are the smoothing's options as given (None:
+        estimated, default). The result is still defined by the rows as read and these
+        options (:meth:`definition`), not by the smoothed numbers, which come out of a fit.
+        """
+        segment = TabulatedSegment(self.name, self.length, self.volumes, pressures,
+                                   self.curvatures, source=f'{self.source} (smoothed)')
+        segment.table_pressures = self.table_pressures
+        segment.smoothing = (*self.smoothing, {
+            'noise_std_pa': None if noise_std_pa is None else exact(noise_std_pa),
+            'prominence_pa': None if prominence_pa is None else exact(prominence_pa)})
+        return segment
+
+    def definition(self) -> dict[str, object]:
+        """Name, length and the rows as read (and the smoothing options, when smoothed)."""
+        data = self._named('table', volume_m3=exact_list(self.volumes),
+                           pressure_pa=exact_list(self.table_pressures),
+                           curvature_per_m=exact_list(self.curvatures))
+        if self.smoothing:
+            data['smoothing'] = [dict(options) for options in self.smoothing]
+        return data
 
     def knots(self) -> FloatArray:
         """The table's volumes: PCHIP is only once differentiable there."""
@@ -331,6 +377,13 @@ class LinearSegment(_SmoothSegment):
         self.k = float(stiffness)
         self.curvature_gain = float(curvature_gain)
 
+    def definition(self) -> dict[str, object]:
+        """Name, length and the scene's ``linear`` parameters."""
+        return self._named('linear', rest_volume_m3=exact(self.rest_volume),
+                           stiffness_pa_per_m3=exact(self.k),
+                           max_volume_m3=exact(self.max_volume),
+                           curvature_per_m_per_m3=exact(self.curvature_gain))
+
     def pressure(self, v: ArrayLike) -> FloatArray:
         """Gauge pressure, in Pa."""
         return self.k * (np.asarray(v, dtype=float) - self.rest_volume)
@@ -377,7 +430,15 @@ class BalloonSegment(_SmoothSegment):
         self.material = material
         self.radius = float(radius)
         self.thickness = float(thickness)
+        self.max_stretch = float(max_stretch)
         self.curvature_gain = float(curvature_gain)
+
+    def definition(self) -> dict[str, object]:
+        """Name, length and the scene's ``balloon`` parameters (the material's law too)."""
+        return self._named('balloon', material=material_definition(self.material),
+                           radius_m=exact(self.radius), thickness_m=exact(self.thickness),
+                           max_stretch=exact(self.max_stretch),
+                           curvature_per_m_per_m3=exact(self.curvature_gain))
 
     def stretch(self, v: ArrayLike) -> FloatArray:
         """Equibiaxial stretch of the membrane at volume v."""

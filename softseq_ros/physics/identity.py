@@ -1,0 +1,60 @@
+"""
+The identity of a scene's segments: a digest of what defines them, the same on every machine.
+
+A bag records which scene made it (as ROS records a robot's ``robot_description``): the scene's
+name, its segment names and this digest. The digest hashes each segment's definition
+(:meth:`softseq_ros.physics.segments.Segment.definition`: name, length and the model's data, a
+table's rows as read or a model's parameters), base to tip, as JSON with sorted keys, with
+SHA-256. Floats go into JSON as their shortest round-trip text, so equal numbers give equal
+bytes everywhere; curves sampled from the models are never hashed, because a transcendental
+function may round differently on another machine. What does not change the physics does not
+change the digest: a table's file name, comment lines, line endings, byte-order mark, column
+order or extra columns. A changed row, parameter, length or segment name does.
+
+No ROS and no numerics here: the rig's actuator publishes the digest, the analysis compares it.
+"""
+
+import hashlib
+import json
+from typing import Iterable, Protocol, Sequence
+
+SHORT_LENGTH = 12
+
+
+class Defined(Protocol):
+    """A segment model that can say what defines it."""
+
+    def definition(self) -> dict[str, object]:
+        """Exact JSON-able values: name, length, model and its data."""
+        ...
+
+
+def exact(value: float) -> float:
+    """A number as a Python float, -0.0 as 0.0: one spelling of one value in a definition."""
+    return float(value) + 0.0
+
+
+def exact_list(values: Iterable[float]) -> list[float]:
+    """Numbers as Python floats (see :func:`exact`)."""
+    return [exact(value) for value in values]
+
+
+def segments_definition(segments: Sequence[Defined]) -> list[dict[str, object]]:
+    """Each segment's definition, base to tip."""
+    return [segment.definition() for segment in segments]
+
+
+def canonical_json(segments: Sequence[Defined]) -> str:
+    """The text that is hashed: the definitions as JSON with sorted keys, no NaN or inf."""
+    return json.dumps(segments_definition(segments), sort_keys=True, allow_nan=False,
+                      ensure_ascii=True, separators=(',', ':'))
+
+
+def segments_sha256(segments: Sequence[Defined]) -> str:
+    """The hex SHA-256 of the segments' definitions (64 characters)."""
+    return hashlib.sha256(canonical_json(segments).encode('ascii')).hexdigest()
+
+
+def short(digest: str) -> str:
+    """The first characters of a digest, as messages show it."""
+    return digest[:SHORT_LENGTH]
