@@ -162,7 +162,8 @@ class BatchRun:
         duration = pump.duration_s
         next_pump = next_camera = start
         next_report = wall_start + PROGRESS_PERIOD_S
-        self._record(router.run(pump.begin(start)))
+        # The actuator names its scene first, then the pump gives its status.
+        self._record(router.run(self.actuator.begin(start) + pump.begin(start)))
         while True:
             if stop_signals:
                 held.check()

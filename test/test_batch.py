@@ -24,6 +24,7 @@ from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.physics.identity import segments_sha256
 from softseq_ros.physics.scene import load_scene
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core
@@ -123,6 +124,11 @@ def test_batch_bag_is_deterministic_and_matches_the_solver(fast_scene, tmp_path)
     statuses = [json.loads(m.data) for m in messages(bag, '/pump/status')]
     assert [s['state'] for s in statuses] == ['idle', 'running', 'finished']
     assert statuses[-1]['stamp_ns'] == START_NS + 5 * 10**9
+    # The bag names the scene and the digest of its segments, once, at the start.
+    identity, = [json.loads(m.data) for m in messages(bag, '/actuator/scene')]
+    assert identity == {'scene': 'fast_asymmetric', 'segments': ['bottom', 'top'],
+                        'segments_sha256': segments_sha256(load_scene(fast_scene).segments),
+                        'stamp_ns': START_NS}
 
 
 def test_a_batch_bag_without_snaps_still_has_its_events_topic_and_starts_now(tmp_path):
@@ -208,6 +214,12 @@ def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, 
         np.testing.assert_allclose(theirs['to_volumes_m3'], ours['to_volumes_m3'], rtol=1e-9)
     assert len(messages(dds_bag, '/camera/snapshots')) == \
         len(messages(batch_bag, '/camera/snapshots'))
+    # Both name the same scene and segments; only the instant the actuator started differs.
+    # The actuator said it before the recorder existed: the latched sample reached it.
+    batch_scene, = [json.loads(m.data) for m in messages(batch_bag, '/actuator/scene')]
+    dds_scene, = [json.loads(m.data) for m in messages(dds_bag, '/actuator/scene')]
+    assert batch_scene.pop('stamp_ns') == START_NS and dds_scene.pop('stamp_ns') > 0
+    assert dds_scene == batch_scene
     # Both runs end where the programme ends: back at rest.
     for bag in (batch_bag, dds_bag):
         recording = load_recording(bag)

@@ -157,6 +157,9 @@ def test_the_rig_values_encode_byte_for_byte_as_rclpy_serialises_the_messages():
          header(JointState(name=list(names), position=[0.5, -12.0]))),
         (values.PumpStatus(stamp, 'stopped', 'requested'),
          String(data='{"state": "stopped", "reason": "requested", "stamp_ns": %d}' % stamp)),
+        (values.SceneIdentity(stamp, 'paper', names, 'ab' * 32),
+         String(data='{"scene": "paper", "segments": ["bottom", "top"], "segments_sha256": '
+                     '"%s", "stamp_ns": %d}' % ('ab' * 32, stamp))),
         (values.Backbone(stamp, poses), pose_msg),
         (values.Snapshot(stamp, poses), pose_msg),
         (values.Markers(stamp, lines), marker_msg),

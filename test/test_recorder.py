@@ -31,6 +31,8 @@ def test_default_output_is_a_utc_stamped_directory_under_bags():
     assert default_output_directory(when) == Path('bags/rig_2025_03_04-05_06_07')
     # Relative: a recorder started in a rig's namespace records that rig.
     assert RIG_TOPICS and not any(topic.startswith('/') for topic in RIG_TOPICS)
+    # By default every bag names the scene that made it.
+    assert 'actuator/scene' in RIG_TOPICS
 
 
 def test_request_is_reliable_and_latched_only_when_every_publisher_offers_it():

@@ -15,6 +15,7 @@ import pytest
 from scenes import FAST_SCENE, inside_the_hysteresis_loop, write_scene
 
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.physics.identity import segments_sha256
 from softseq_ros.physics.kinematics import backbone_batch
 from softseq_ros.physics.profile import Leg
 from softseq_ros.physics.scene import load_scene
@@ -28,6 +29,7 @@ from softseq_ros.rig.values import (
     Notice,
     PumpCommand,
     PumpStatus,
+    SceneIdentity,
     SegmentCurvatures,
     SegmentVolumes,
     Snapshot,
@@ -253,6 +255,16 @@ def test_actuator_repeats_its_outputs_without_solving_and_stamps_them(tmp_path):
     assert volumes[2].volumes_m3 != volumes[3].volumes_m3
     # Only the listed outputs are given.
     assert {type(v) for v in sent} == {SegmentVolumes, SegmentCurvatures}
+
+
+def test_actuator_names_its_scene_once_at_start_whatever_its_outputs(tmp_path):
+    scene = load_scene(write_scene(tmp_path))
+    actuator = actuator_core(scene, outputs=frozenset({'volumes'}))
+    identity, = actuator.begin(7)
+    assert identity == SceneIdentity(7, 'fast_symmetric', ('bottom', 'top'),
+                                     segments_sha256(scene.segments))
+    # Commands never repeat it: it is said once, on a latched topic.
+    assert not topic_values(actuator.handle(command(1.0e-5), 8), SceneIdentity)
 
 
 def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path):

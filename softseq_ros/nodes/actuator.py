@@ -5,7 +5,8 @@ Each ``pump/command`` moves the equilibrium to the commanded injected volume; th
 publishes the outputs the ``outputs`` parameter lists (default: the scene's):
 ``actuator/pressure`` (absolute: gauge + ``ambient_pressure_pa``), ``actuator/volumes``
 (position = volumes, effort = gauge pressure), ``actuator/curvatures`` and one JSON object
-per snap-through on ``actuator/events``, each stamped with the command it answers.
+per snap-through on ``actuator/events``, each stamped with the command it answers; once at
+start, latched, ``actuator/scene``: which scene's segments it runs (name and digest).
 
 Resume: on start the node waits up to ``resume_timeout_s`` for a latched ``actuator/volumes``
 from a live publisher and resumes on the branch nearest those volumes; without one it reads
@@ -66,6 +67,7 @@ class ActuatorNode(CoreNode):
         self.core = actuator_core(scene, equilibrium_map(scene), outputs=frozenset(outputs),
                                   ambient_pressure_pa=ambient, state_file=state_file or None)
         self.connect(frozenset(outputs))
+        self.send(self.core.begin(self.now_ns()))  # the scene it runs, latched
         self._warned_publishers: frozenset[str] = frozenset()
         command = self.subscription(contract.PUMP_COMMAND)
         if command is not None:

@@ -9,6 +9,9 @@ pressure (absolute: gauge + ``ambient_pressure_pa``), volumes (with the gauge pr
 curvatures, and one :class:`SnapThrough` per snap. A command equal to the previous one is not
 solved again: the same numbers go out with the new stamp.
 
+At start (:meth:`begin`) it says once which scene's segments it runs (name, segment names,
+the SHA-256 of their definitions), on a latched topic, so every recording can name its physics.
+
 Resume: a restarted actuator must stay on the branch its history put it on (hysteresis).
 While :attr:`waiting` (the driver looks for a previous state), commands are buffered and
 answered in order once the wait ends (:meth:`end_wait`). ``state_file`` (None: off; the
@@ -25,6 +28,7 @@ import os
 from pathlib import Path
 
 from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, StatePoint, Tracker
+from softseq_ros.physics.identity import segments_sha256
 from softseq_ros.physics.reach import beyond_domain
 from softseq_ros.rig import contract
 from softseq_ros.rig.throttle import Throttle
@@ -35,6 +39,7 @@ from softseq_ros.rig.values import (
     Output,
     Pressure,
     PumpCommand,
+    SceneIdentity,
     SegmentCurvatures,
     SegmentVolumes,
     SnapThrough,
@@ -52,11 +57,14 @@ class ActuatorCore:
     def __init__(self, emap: EquilibriumMap, names: tuple[str, ...], *,
                  outputs: frozenset[str] = frozenset(ACTUATOR_OUTPUTS),
                  ambient_pressure_pa: float = contract.DEFAULT_AMBIENT_PRESSURE_PA,
-                 state_file: Path | None = None) -> None:
+                 state_file: Path | None = None, scene_name: str = '') -> None:
         """An actuator at rest; ``outputs`` are scene output names (others are ignored)."""
         self.emap = emap
         self.tracker = Tracker(emap)
         self.names = tuple(names)
+        self.scene_name = scene_name
+        # The digest of the segments the map was assembled from: what this actuator runs.
+        self.segments_sha256 = segments_sha256(emap.segments)
         self.outputs = frozenset(name for name in outputs if name in ACTUATOR_OUTPUTS)
         self.ambient_pressure_pa = ambient_pressure_pa
         self.state_file = state_file
@@ -72,6 +80,10 @@ class ActuatorCore:
         self._send_volumes = 'volumes' in self.outputs
         self._send_curvatures = 'curvature' in self.outputs
         self._send_events = 'events' in self.outputs
+
+    def begin(self, now: int) -> list[Output]:
+        """What the actuator says once at start: which scene's segments it runs."""
+        return [SceneIdentity(now, self.scene_name, self.names, self.segments_sha256)]
 
     # ---------------------------------------------------------------- commands
 

@@ -129,7 +129,7 @@ def actuator_core(scene: Scene, emap: EquilibriumMap | None = None,
         outputs=frozenset(settings.get('outputs', scene.outputs)),
         ambient_pressure_pa=settings.get('ambient_pressure_pa',
                                          contract.DEFAULT_AMBIENT_PRESSURE_PA),
-        state_file=Path(state_file) if state_file else None)
+        state_file=Path(state_file) if state_file else None, scene_name=scene.name)
 
 
 CAMERA_SETTINGS = ('rate_hz', 'frame_trigger', 'noise_std_m', 'seed', 'points_per_segment',

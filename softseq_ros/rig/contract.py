@@ -77,6 +77,12 @@ CURVATURES = Topic(
 EVENTS = Topic(
     'actuator/events', 'std_msgs/msg/String', Qos(100, latched=True), ACTUATOR, (), 'events',
     'JSON per snap-through: injected_m3, from/to_volumes_m3, from/to_pressure_pa (gauge)')
+# Which scene's segments the actuator runs, as ROS keeps a robot's description: latched, so
+# a recorder that starts later still gets it, and every bag can name the physics behind it.
+SCENE = Topic(
+    'actuator/scene', 'std_msgs/msg/String', Qos(1, latched=True), ACTUATOR, (), None,
+    'JSON {"scene", "segments", "segments_sha256", "stamp_ns"}: the scene name, its segments '
+    'base to tip and the SHA-256 of their definitions (softseq_ros.physics.identity)')
 BACKBONE = Topic(
     'camera/backbone', 'geometry_msgs/msg/PoseArray', Qos(10), CAMERA, (), 'poses',
     'backbone points in softseq_base at the camera rate')
@@ -94,7 +100,8 @@ IMAGE = Topic(
     'rgb8 side view, rendered only while someone subscribes')
 
 RIG_TOPICS: tuple[Topic, ...] = (PUMP_COMMAND, PUMP_STATUS, PRESSURE, VOLUMES, CURVATURES,
-                                 EVENTS, BACKBONE, SNAPSHOTS, SNAPSHOT_STEPS, MARKERS, IMAGE)
+                                 EVENTS, SCENE, BACKBONE, SNAPSHOTS, SNAPSHOT_STEPS, MARKERS,
+                                 IMAGE)
 TOPICS_BY_NAME: dict[str, Topic] = {topic.name: topic for topic in RIG_TOPICS}
 
 # The simulated clock is ROS's own (absolute by convention); QoS as rclpy's TimeSource takes it.

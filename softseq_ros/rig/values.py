@@ -86,6 +86,17 @@ class SnapThrough:
 
 
 @dataclass(slots=True)
+class SceneIdentity:
+    """The scene the actuator runs: its name, segment names and the segments' SHA-256."""
+
+    topic: ClassVar[Topic] = contract.SCENE
+    stamp_ns: int
+    scene: str
+    segments: tuple[str, ...]
+    segments_sha256: str
+
+
+@dataclass(slots=True)
 class Backbone:
     """A camera frame: poses (M, 7) as (x, y, z, qx, qy, qz, qw) in ``softseq_base``."""
 
@@ -151,7 +162,9 @@ class Notice:
 
 
 TOPIC_VALUE_TYPES = (PumpCommand, PumpStatus, Pressure, SegmentVolumes, SegmentCurvatures,
-                     SnapThrough, Backbone, Snapshot, SnapshotStep, Markers, SideImage)
+                     SnapThrough, SceneIdentity, Backbone, Snapshot, SnapshotStep, Markers,
+                     SideImage)
 TopicValue = (PumpCommand | PumpStatus | Pressure | SegmentVolumes | SegmentCurvatures
-              | SnapThrough | Backbone | Snapshot | SnapshotStep | Markers | SideImage)
+              | SnapThrough | SceneIdentity | Backbone | Snapshot | SnapshotStep | Markers
+              | SideImage)
 Output = TopicValue | Notice

@@ -29,6 +29,7 @@ from softseq_ros.rig.values import (
     Pressure,
     PumpCommand,
     PumpStatus,
+    SceneIdentity,
     SegmentCurvatures,
     SegmentVolumes,
     SideImage,
@@ -116,6 +117,16 @@ def _snap_through(value: SnapThrough) -> bytes:
         'to_pressure_pa': value.to_pressure_pa}))
 
 
+def scene_identity_json(value: SceneIdentity) -> str:
+    """The JSON text ``actuator/scene`` carries."""
+    return json.dumps({'scene': value.scene, 'segments': list(value.segments),
+                       'segments_sha256': value.segments_sha256, 'stamp_ns': value.stamp_ns})
+
+
+def _scene_identity(value: SceneIdentity) -> bytes:
+    return string_cdr(scene_identity_json(value))
+
+
 def _snapshot_step(value: SnapshotStep) -> bytes:
     return string_cdr(json.dumps({
         'step': value.step, 'trigger_injected_m3': value.trigger_injected_m3,
@@ -191,6 +202,7 @@ ENCODERS: dict[type, Callable[[Any], bytes]] = {
     SegmentVolumes: _volumes,
     SegmentCurvatures: _curvatures,
     SnapThrough: _snap_through,
+    SceneIdentity: _scene_identity,
     Backbone: _pose_array,
     Snapshot: _pose_array,
     SnapshotStep: _snapshot_step,
