@@ -12,11 +12,12 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 import yaml
 
 from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
-from softseq_ros.analysis.recording import RecordingError, load_recording
-from softseq_ros.analysis.report import recording_trace, write_report
+from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_recording
+from softseq_ros.analysis.report import SceneMismatchError, recording_trace, write_report
 from softseq_ros.bag.arrays import JointStateDecoder, open_bag
 from softseq_ros.batch import run_scene
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.physics.identity import segments_sha256
 from softseq_ros.physics.scene import load_scene
 from softseq_ros.rig import contract
 
@@ -221,14 +222,20 @@ def test_bad_experiment_files_are_one_line(tmp_path, content, message):
 # ------------------------------------------------------------------------ other bags
 
 
-def _copy_bag(source: Path, target: Path, rename=lambda topic: topic, extra=()) -> None:
-    """Rewrite a bag with rosbags (an independent writer): renamed topics, extra messages."""
+def _copy_bag(source: Path, target: Path, rename=lambda topic: topic, extra=(),
+              drop=()) -> None:
+    """
+    Rewrite a bag with rosbags (an independent writer): renamed topics, extra messages.
+
+    ``drop`` names topics left out (as an older bag or another recorder would).
+    """
     with AnyReader([source]) as reader, \
             Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connections = {}
         for c in reader.connections:
-            connections[c.topic] = writer.add_connection(
-                rename(c.topic), c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest)
+            if c.topic not in drop:
+                connections[c.topic] = writer.add_connection(
+                    rename(c.topic), c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest)
         extras = list(extra)
         for c in {e[0] for e in extras} - set(connections):
             connections[c] = writer.add_connection(
@@ -237,7 +244,8 @@ def _copy_bag(source: Path, target: Path, rename=lambda topic: topic, extra=()) 
             while extras and extras[0][1] <= timestamp:
                 topic, when, data = extras.pop(0)
                 writer.write(connections[topic], when, data)
-            writer.write(connections[c.topic], timestamp, raw)
+            if c.topic not in drop:
+                writer.write(connections[c.topic], timestamp, raw)
 
 
 def _string_cdr(text: str) -> bytes:
@@ -478,3 +486,130 @@ def test_an_experiment_saved_as_csv_utf8_with_a_byte_order_mark_is_read(tmp_path
     marked.write_bytes(b'\xef\xbb\xbf' + rows.encode())
     a, b = read_experiment(plain), read_experiment(marked)
     assert np.array_equal(a.injected, b.injected) and np.array_equal(a.pressure, b.pressure)
+
+
+# ------------------------------------------------------------------------ the scene that made it
+
+SCENE_TOPIC = contract.resolve(contract.SCENE.name, '/')
+
+
+def test_the_bag_names_its_scene_and_a_scene_with_other_segments_is_refused(asymmetric,
+                                                                           tmp_path):
+    scene, bag = asymmetric
+    recorded = segments_sha256(load_scene(scene).segments)
+    recording = load_recording(bag)
+    assert recording.scene == RecordedScene('fast_asymmetric', ('bottom', 'top'), recorded,
+                                            recording.scene.stamp_ns)
+    # fig1_symmetric has segments named bottom and top too: only the digest tells them apart.
+    other = segments_sha256(load_scene('fig1_symmetric').segments)
+    assert other != recorded
+    out = tmp_path / 'report'
+    result = _cli('report', str(bag), '--scene', 'fig1_symmetric', '--out', str(out))
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip() == (
+        f"softseq report: error: {bag}: recorded by scene 'fast_asymmetric' (segments sha256 "
+        f"{recorded[:12]}), not by scene 'fig1_symmetric' (segments sha256 {other[:12]}): "
+        'their segments differ')
+    assert result.stdout == '' and not out.exists()
+    with pytest.raises(SceneMismatchError):
+        write_report(bag, out, 'fig1_symmetric', figures=False)
+    assert not out.exists()
+
+
+def test_the_same_segments_under_another_scene_name_are_accepted_with_a_note(asymmetric,
+                                                                           tmp_path):
+    _, bag = asymmetric
+    # The bag's scene is fig1_asymmetric with a faster pump, saved as fast_asymmetric.
+    metrics, text = write_report(bag, tmp_path, 'fig1_asymmetric', figures=False)
+    digest = segments_sha256(load_scene('fig1_asymmetric').segments)
+    assert metrics['recorded_scene']['segments_sha256'] == digest
+    assert metrics['recorded_scene']['scene'] == 'fast_asymmetric'
+    assert metrics['notes'] == [f"recorded as scene 'fast_asymmetric', which has the same "
+                                f"segments as scene 'fig1_asymmetric' (sha256 {digest[:12]})"]
+    assert f'note: {metrics["notes"][0]}' in text
+    assert f'scene: fast_asymmetric (segments bottom, top, sha256 {digest[:12]}; checked' in text
+    assert json.loads((tmp_path / 'metrics.json').read_text())['recorded_scene'] == \
+        metrics['recorded_scene']
+
+
+def test_a_bag_without_the_scene_topic_is_reported_with_a_note_that_it_was_not_checked(
+        asymmetric, tmp_path):
+    _, bag = asymmetric
+    older = tmp_path / 'older'
+    _copy_bag(bag, older, drop={SCENE_TOPIC})
+    assert load_recording(older).scene is None
+    result = _cli('report', str(older), '--scene', 'fig1_symmetric', '--no-svg',
+                  '--out', str(tmp_path / 'report'))
+    assert result.returncode == 0, result.stderr
+    assert (f'note: the bag records no {SCENE_TOPIC} (an older bag, or another recorder): '
+            "whether scene 'fig1_symmetric' made it could not be checked") in result.stdout
+    metrics = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
+    assert metrics['recorded_scene'] is None and len(metrics['notes']) == 1
+    # Without a scene there is nothing to check and nothing to say.
+    metrics, text = write_report(older, tmp_path / 'plain', figures=False)
+    assert metrics['notes'] == [] and 'scene:' not in text
+
+
+def test_an_actuator_restarted_on_other_segments_is_a_warning(asymmetric, tmp_path):
+    _, bag = asymmetric
+    other = segments_sha256(load_scene('fig1_symmetric').segments)
+    first = load_recording(bag).start_ns
+    second = {'scene': 'fig1_symmetric', 'segments': ['bottom', 'top'],
+              'segments_sha256': other, 'stamp_ns': first + 10**9}
+    copy = tmp_path / 'restarted'
+    _copy_bag(bag, copy, extra=[(SCENE_TOPIC, first + 10**9, _string_cdr(json.dumps(second)))])
+    recording = load_recording(copy)
+    assert [s.scene for s in recording.scenes] == ['fast_asymmetric', 'fig1_symmetric']
+    metrics, _ = write_report(copy, tmp_path / 'report', 'fig1_symmetric', figures=False)
+    assert any('restarted on other segments' in w for w in metrics['warnings'])
+
+
+def _wrong_type_bag(path: Path, namespace: str = '', wrong: str = 'pump/command') -> Path:
+    """A bag with the rig's topics, one of them of another type than the contract's."""
+    from softseq_ros.bag.writer import BagWriter
+    from softseq_ros.rig.values import PumpCommand, SegmentVolumes
+    from softseq_ros.rig.wire import encode
+
+    values = [PumpCommand(1, 0.0, 0.0), SegmentVolumes(1, ('bottom', 'top'), [1e-6, 1e-6], 0.0)]
+    with BagWriter(path) as writer:
+        for value in values:
+            topic = f'{namespace}/{value.topic.name}'
+            if value.topic.name == wrong:
+                writer.add_topic(topic, 'std_msgs/msg/String')
+                writer.write(topic, _string_cdr('not a command'), 1)
+            else:
+                writer.add_topic(topic, value.topic.type_name)
+                writer.write(topic, encode(value), 1)
+        if wrong == 'actuator/scene':
+            topic = f'{namespace}/{wrong}'
+            writer.add_topic(topic, 'sensor_msgs/msg/JointState')
+            writer.write(topic, encode(values[1]), 1)
+    return path
+
+
+@pytest.mark.parametrize('namespace, wrong, expected', [
+    ('', 'pump/command', 'std_msgs/msg/String, expected sensor_msgs/msg/JointState'),
+    ('/rig2', 'pump/command', 'std_msgs/msg/String, expected sensor_msgs/msg/JointState'),
+    ('', 'actuator/volumes', 'std_msgs/msg/String, expected sensor_msgs/msg/JointState'),
+    ('', 'actuator/scene', 'sensor_msgs/msg/JointState, expected std_msgs/msg/String'),
+])
+def test_a_topic_of_another_type_is_one_line(tmp_path, namespace, wrong, expected):
+    bag = _wrong_type_bag(tmp_path / 'bag', namespace, wrong)
+    for scene in ((), ('--scene', 'fig1_none')):
+        result = _cli('report', str(bag), *scene, '--out', str(tmp_path / 'out'))
+        assert result.returncode == 2, result.stderr
+        assert result.stderr == (f'softseq report: error: {bag}: topic {namespace}/{wrong} '
+                                 f'has type {expected}\n')
+        assert not (tmp_path / 'out').exists()
+
+
+def test_a_scene_message_that_is_no_identity_is_one_line(asymmetric, tmp_path):
+    _, bag = asymmetric
+    copy = tmp_path / 'garbled'
+    first = load_recording(bag).start_ns
+    _copy_bag(bag, copy, extra=[(SCENE_TOPIC, first, _string_cdr('{"scene": "paper"}'))])
+    result = _cli('report', str(copy), '--out', str(tmp_path / 'out'))
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        f"softseq report: error: {SCENE_TOPIC}: message 1 is not a scene identity (JSON with "
+        "scene, segments, segments_sha256): '{\"scene\": \"paper\"}'")

@@ -8,7 +8,9 @@ found from the bag's topics. Only the topics the analysis needs are read, straig
 
 What belongs to this run: the run starts at the first pump command. A latched message stamped
 before it (an actuator state, a snapshot, a snap-through event kept by a transient-local
-publisher from an earlier run) is left out and counted in ``ignored``.
+publisher from an earlier run) is left out and counted in ``ignored``. The scene the actuator
+said it runs (``actuator/scene``, published once when it starts, so usually before the first
+command) is kept whenever it was said: it describes the actuator, not one run.
 """
 
 from dataclasses import dataclass, field
@@ -58,6 +60,21 @@ class Snapshot:
         return self.points[-1]
 
 
+@dataclass(frozen=True)
+class RecordedScene:
+    """The scene an actuator said it runs: name, segments base to tip, their SHA-256."""
+
+    scene: str
+    segments: tuple[str, ...]
+    segments_sha256: str
+    stamp_ns: int = 0
+
+    def as_dict(self) -> dict:
+        """The identity as metrics.json holds it."""
+        return {'scene': self.scene, 'segments': list(self.segments),
+                'segments_sha256': self.segments_sha256, 'stamp_ns': self.stamp_ns}
+
+
 @dataclass
 class Recording:
     """Time series of one rig run (times in s from the first pump command)."""
@@ -85,6 +102,14 @@ class Recording:
     start_ns: int = 0
     # Rows a snap-through lands on, when already known (a thinned copy keeps the original's).
     snap_rows: NDArray[np.intp] | None = None
+    # The distinct scenes the actuator said it runs, in the order said (none in older bags;
+    # more than one when an actuator was restarted on other segments during the recording).
+    scenes: list[RecordedScene] = field(default_factory=list)
+
+    @property
+    def scene(self) -> RecordedScene | None:
+        """The scene the recording was made with (the first said), None when not recorded."""
+        return self.scenes[0] if self.scenes else None
 
     @property
     def inflating(self) -> NDArray[np.bool_]:
@@ -131,8 +156,9 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     for spec, topic in names.items():
         info = bag.channels.get(topic)
         if info is not None and info.type_name != spec.type_name:
-            raise RecordingError(f'{path}: topic {topic} is {info.type_name}, the rig publishes '
-                                 f'{spec.type_name} there')
+            raise RecordingError(f'{path}: topic {topic} has type '
+                                 f'{info.type_name or "none (no schema)"}, expected '
+                                 f'{spec.type_name}')
     if names[contract.VOLUMES] not in bag.channels:
         raise RecordingError(f'{path}: no {names[contract.VOLUMES]} topic: the actuator did not '
                              'run or its volumes were not recorded')
@@ -149,7 +175,8 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
                           (contract.PRESSURE, lambda t: FluidPressureDecoder(t, AMBIENT_SAMPLES)),
                           (contract.EVENTS, StringDecoder), (contract.PUMP_STATUS, StringDecoder),
                           (contract.SNAPSHOTS, PoseArrayDecoder),
-                          (contract.SNAPSHOT_STEPS, StringDecoder)):
+                          (contract.SNAPSHOT_STEPS, StringDecoder),
+                          (contract.SCENE, StringDecoder)):
         if names[spec] in bag.channels:
             optional[spec] = decoder(names[spec])
             decoders.append(optional[spec])
@@ -235,6 +262,8 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
             optional[contract.SNAPSHOTS].messages, steps.messages if steps else None,
             names[contract.SNAPSHOT_STEPS], pump_stamp, pump_u, flow_sign, t0, ignored,
             names[contract.SNAPSHOTS])
+    if contract.SCENE in optional:
+        recording.scenes = _scenes(optional[contract.SCENE].messages, names[contract.SCENE])
     recording.pump_time_s = _seconds(pump_stamp, t0, in_place=True)
     return recording
 
@@ -324,6 +353,31 @@ def _events(messages: list[tuple[int, str]], topic: str, t0: int,
             continue
         events.append(event)
     return events
+
+
+def _scenes(messages: list[tuple[int, str]], topic: str) -> list[RecordedScene]:
+    """The distinct scene identities of ``actuator/scene``, in the order said."""
+    scenes: list[RecordedScene] = []
+    for number, (log_time, text) in enumerate(messages, start=1):
+        try:
+            value = json.loads(text)
+            segments = value['segments']
+            scene = RecordedScene(str(value['scene']), tuple(str(s) for s in segments),
+                                  str(value['segments_sha256']),
+                                  int(value.get('stamp_ns', log_time)))
+            if not isinstance(segments, list) or len(scene.segments_sha256) != 64:
+                raise ValueError
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError):
+            raise RecordingError(f'{topic}: message {number} is not a scene identity (JSON '
+                                 f'with scene, segments, segments_sha256): {text[:60]!r}') \
+                from None
+        if not any(_same_scene(scene, seen) for seen in scenes):
+            scenes.append(scene)
+    return scenes
+
+
+def _same_scene(a: RecordedScene, b: RecordedScene) -> bool:
+    return (a.scene, a.segments, a.segments_sha256) == (b.scene, b.segments, b.segments_sha256)
 
 
 def _snapshots(shots: list, steps: list[tuple[int, str]] | None, steps_topic: str,

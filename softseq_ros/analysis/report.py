@@ -3,6 +3,13 @@ The report of a rig bag: metrics.json, report.md, summary.txt and the figures.
 
 ``metrics.json`` holds every number in SI (m^3, Pa gauge, J, m, s); ``report.md`` and the
 summary show the same numbers in mL, kPa and mm for people.
+
+A scene given for the report must be the one that made the bag: when the bag records the
+scene its actuator ran (``actuator/scene``), a scene whose segments have another digest is
+refused (:class:`SceneMismatchError`) before anything is written or assembled. A bag that
+records no scene (older bags, other recorders) is reported as before, with a note that the
+scene could not be checked. Without a scene the report names the recorded one but does not
+load it: the report stays a function of its arguments, and as fast.
 """
 
 import json
@@ -15,6 +22,8 @@ import yaml
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import Trace, analyse, segment_limits
 from softseq_ros.analysis.recording import Recording, load_recording
+from softseq_ros.physics.identity import segments_sha256, short
+from softseq_ros.rig import contract
 
 ML = 1e6
 KPA = 1e-3
@@ -23,6 +32,41 @@ MM = 1e3
 
 class ReferenceFileError(ValueError):
     """A reference file that cannot be used."""
+
+
+class SceneMismatchError(ValueError):
+    """A scene given for a bag that a scene with other segments made."""
+
+
+def _named(scene_name: str, digest: str) -> str:
+    return f'scene {scene_name!r} (segments sha256 {short(digest)})'
+
+
+def check_scene(recording: Recording, scene: object) -> list[str]:
+    """
+    Notes on whether ``scene`` made ``recording``; SceneMismatchError when it cannot have.
+
+    The recorded identity names the segments by their digest
+    (:func:`softseq_ros.physics.identity.segments_sha256`): another digest is other physics,
+    whatever the names. The same digest under another scene name is the same physics (a
+    renamed or copied scene file): a note says so.
+    """
+    digest = segments_sha256(scene.segments)
+    recorded = recording.scenes
+    if not recorded:
+        topic = contract.resolve(contract.SCENE.name, recording.namespace)
+        return [f'the bag records no {topic} (an older bag, or another recorder): whether '
+                f'scene {scene.name!r} made it could not be checked']
+    if not any(r.segments_sha256 == digest for r in recorded):
+        said = ', '.join(_named(r.scene, r.segments_sha256) for r in recorded)
+        raise SceneMismatchError(f'{recording.path}: recorded by {said}, not by '
+                                 f'{_named(scene.name, digest)}: their segments differ')
+    match = next(r for r in recorded if r.segments_sha256 == digest)
+    notes = []
+    if match.scene != scene.name:
+        notes.append(f'recorded as scene {match.scene!r}, which has the same segments as '
+                     f'scene {scene.name!r} (sha256 {short(digest)})')
+    return notes
 
 
 def recording_trace(recording: Recording) -> Trace:
@@ -55,6 +99,7 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         'message_counts': dict(sorted(recording.counts.items())),
         'ignored_from_before_the_first_pump_command': recording.ignored,
         'ambient_pressure_pa': recording.ambient_pressure_pa,
+        'recorded_scene': recording.scene.as_dict() if recording.scene else None,
         **result,
         'peak_injection': {'injected_m3': float(recording.state_injected[top]),
                            'pressure_pa': float(recording.pressure[top]),
@@ -67,7 +112,13 @@ def recording_metrics(recording: Recording, scene: object | None = None,
                    'trigger_injected_m3': s.trigger_injected, 'time_s': s.time_s,
                    'tip_m': [float(x) for x in s.tip]} for s in recording.snapshots],
         'warnings': [],
+        'notes': [],
     }
+    if len(recording.scenes) > 1:
+        metrics['warnings'].append(
+            'the actuator was restarted on other segments during the recording: '
+            + ', '.join(_named(r.scene, r.segments_sha256) for r in recording.scenes)
+            + '; recorded_scene is the first')
     if recording.ignored:
         metrics['warnings'].append(
             'left out, stamped before the first pump command (latched from an earlier run): '
@@ -173,15 +224,21 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     scene = emap = None
     if scene_name is not None:
         from softseq_ros.physics.scene import load_scene
-        from softseq_ros.physics.solve import build_map
 
         scene = load_scene(scene_name)
-        emap = build_map(scene.segments, scene.solver.resolution)
     recording = load_recording(bag, namespace)
-    if scene is not None and scene.segment_names != recording.segment_names:
-        raise ValueError(f'{bag}: the bag\'s segments {", ".join(recording.segment_names)} are '
-                         f'not the scene\'s {", ".join(scene.segment_names)}')
+    notes = []
+    if scene is not None:
+        # Before the equilibrium set is assembled and before anything is written.
+        notes = check_scene(recording, scene)
+        if scene.segment_names != recording.segment_names:
+            raise ValueError(f'{bag}: the bag\'s segments {", ".join(recording.segment_names)} '
+                             f'are not the scene\'s {", ".join(scene.segment_names)}')
+        from softseq_ros.physics.solve import build_map
+
+        emap = build_map(scene.segments, scene.solver.resolution)
     metrics = recording_metrics(recording, scene, emap)
+    metrics['notes'].extend(notes)
     if experiment is not None:
         metrics['warnings'].extend(experiment.warnings)
         metrics['experiment'] = compare(recording_trace(recording), experiment,
@@ -220,9 +277,17 @@ def _kpa(value: float | None, digits: int = 2) -> str:
 
 def summary_text(metrics: dict) -> str:
     """A few lines a researcher reads first."""
-    lines = [f'recording: {metrics["bag"]} (namespace {metrics["namespace"]})',
-             f'duration: {metrics["duration_s"]:.1f} s of rig time, injected '
-             f'{_ml(metrics["injected_range_m3"][0])} to {_ml(metrics["injected_range_m3"][1])}']
+    lines = [f'recording: {metrics["bag"]} (namespace {metrics["namespace"]})']
+    recorded = metrics.get('recorded_scene')
+    if recorded:
+        checked = (f'checked against scene {metrics["scene"]}' if metrics.get('scene') else
+                   'as recorded; no scene given to check it against')
+        lines.append(f'scene: {recorded["scene"]} (segments '
+                     f'{", ".join(recorded["segments"])}, sha256 '
+                     f'{short(recorded["segments_sha256"])}; {checked})')
+    lines.append(f'duration: {metrics["duration_s"]:.1f} s of rig time, injected '
+                 f'{_ml(metrics["injected_range_m3"][0])} to '
+                 f'{_ml(metrics["injected_range_m3"][1])}')
     scene_type = metrics.get('sequence_type_of_scene')
     lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording)'
                  + (f'; scene: {scene_type}' if scene_type else ''))
@@ -272,6 +337,8 @@ def summary_text(metrics: dict) -> str:
     if reference:
         lines.append(f'against {reference["source"]}:')
         lines.extend('  ' + _check_text(check) for check in reference['checks'])
+    for note in metrics.get('notes', []):
+        lines.append(f'note: {note}')
     for warning in metrics['warnings']:
         lines.append(f'warning: {warning}')
     return '\n'.join(lines)
@@ -300,6 +367,10 @@ def markdown(metrics: dict) -> str:
              'Pressures are gauge; the numbers in SI are in `metrics.json`.', '',
              '| quantity | value |', '|---|---|',
              f'| sequence type (recording) | {metrics["sequence_type"]} |']
+    recorded = metrics.get('recorded_scene')
+    if recorded:
+        lines.insert(-1, f'| scene (recorded) | `{recorded["scene"]}`, segments sha256 '
+                         f'`{short(recorded["segments_sha256"])}` |')
     if metrics.get('sequence_type_of_scene'):
         lines.append(f'| sequence type (scene `{metrics["scene"]}`) | '
                      f'{metrics["sequence_type_of_scene"]} |')
@@ -351,6 +422,9 @@ def markdown(metrics: dict) -> str:
     if reference:
         lines += ['', f'## Against {reference["source"]}', '']
         lines.extend(f'- {_check_text(check)}' for check in reference['checks'])
+    if metrics.get('notes'):
+        lines += ['', '## Notes', '']
+        lines.extend(f'- {note}' for note in metrics['notes'])
     if metrics['warnings']:
         lines += ['', '## Warnings', '']
         lines.extend(f'- {warning}' for warning in metrics['warnings'])
@@ -360,5 +434,6 @@ def markdown(metrics: dict) -> str:
     return '\n'.join(lines) + '\n'
 
 
-__all__ = ['Experiment', 'against_reference', 'load_reference', 'markdown',
-           'recording_metrics', 'recording_trace', 'summary_text', 'write_report']
+__all__ = ['Experiment', 'SceneMismatchError', 'against_reference', 'check_scene',
+           'load_reference', 'markdown', 'recording_metrics', 'recording_trace', 'summary_text',
+           'write_report']
