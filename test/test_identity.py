@@ -191,8 +191,8 @@ def test_a_smoothed_table_is_defined_by_its_rows_and_options_not_by_the_fit(tmp_
 
 def test_a_fem_table_rewritten_with_other_provenance_keeps_its_digest(tmp_path):
     pytest.importorskip('felupe')
-    from softseq_ros.fem.design import load_design
     from softseq_ros.fem.table import FemResult, write_table
+    from softseq_ros.physics.design import load_design
 
     committed = load_scene('paper_fem')
     table = committed.segments[1]
@@ -218,6 +218,46 @@ def test_a_fem_table_rewritten_with_other_provenance_keeps_its_digest(tmp_path):
     write_table(result(bumped, 999), folder / 'paper_fem_top.csv')
     assert segments_sha256(load_scene(scene_file).segments) != \
         segments_sha256(committed.segments)
+
+
+def test_a_segment_named_by_its_design_is_defined_by_the_design_not_the_fem_rows(
+        tmp_path, monkeypatch):
+    pytest.importorskip('felupe')  # the table's cache key names the FEM library's version
+    from softseq_ros.physics.design import cache_path, load_design
+
+    monkeypatch.setenv('SOFTSEQ_FEM_CACHE', str(tmp_path / 'cache'))
+    committed = load_scene('paper_fem').segments[1]
+    (tmp_path / 'designs').mkdir()
+    scene = yaml.safe_load((CONFIG / 'paper_fem.yaml').read_text())
+    scene['segments'][0]['table'] = str(CONFIG / scene['segments'][0]['table'])
+    scene['segments'][1] = {'name': 'top', 'length_m': 0.111, 'design': 'designs/top.yaml'}
+    scene_file = tmp_path / 'designed.yaml'
+    scene_file.write_text(yaml.safe_dump(scene))
+
+    def digest(geometry: dict, pressure_factor: float = 1.0) -> str:
+        design = yaml.safe_load((CONFIG / 'designs' / 'paper_top.yaml').read_text())
+        design['geometry'].update(geometry)
+        path = tmp_path / 'designs' / 'top.yaml'
+        path.write_text(yaml.safe_dump(design))
+        # The table `softseq fem` would have cached, its rows as some machine rounds them.
+        table = cache_path(load_design(path))
+        table.parent.mkdir(parents=True, exist_ok=True)
+        pressures = (committed.pressures * pressure_factor).tolist()
+        table.write_text('volume_m3,pressure_pa,curvature_per_m\n' + ''.join(
+            f'{v!r},{p!r},{k!r}\n' for v, p, k in zip(
+                committed.volumes.tolist(), pressures, committed.curvatures.tolist())))
+        loaded = load_scene(scene_file)
+        assert loaded.segments[1].definition()['model'] == 'design'
+        assert loaded.segments[1].pressures.tolist() == pressures
+        return segments_sha256(loaded.segments)
+
+    reference = digest({})
+    # Another machine's FEM rounds the rows otherwise: the same design, the same digest.
+    assert digest({}, pressure_factor=1.0 + 1e-15) == reference
+    # Another design (a thicker top membrane) is other physics.
+    assert digest({'membrane_thickness_m': 0.0006}) != reference
+    # The committed copy of a FEM table is a table: its rows define it.
+    assert reference != segments_sha256(load_scene('paper_fem').segments)
 
 
 def test_a_table_built_in_memory_is_defined_by_its_arrays():

@@ -470,7 +470,7 @@ def _designed(ctx: _Context, text: str, where: str, name: str, length: float,
     if not math.isclose(length, design.geometry.length_m, rel_tol=1e-9):
         raise ctx.error(length_key, f"{length:g} m differs from the design's geometry.length_m "
                                     f'({design.geometry.length_m:g} m)')
-    return TabulatedSegment.from_csv(table, name=name, length=length)
+    return TabulatedSegment.from_csv(table, name=name, length=length, design=design.identity())
 
 
 def _smoothed(ctx: _Context, value: object, key_path: str,

@@ -266,6 +266,10 @@ class TabulatedSegment(Segment):
         # pressures read and each smoothing's options (see :meth:`smoothed`).
         self.table_pressures = prs
         self.smoothing: tuple[dict[str, float | None], ...] = ()
+        # The identity of the segment design whose FEM table this is (geometry, material,
+        # mesh, volume range, code versions), when it is one: the segment is defined by that,
+        # not by rows that a FEM run on another machine may round otherwise.
+        self.design: dict[str, object] | None = None
         self._p = PchipInterpolator(vol, prs, extrapolate=False)
         self._dp = self._p.derivative()
         self._e = self._p.antiderivative()
@@ -273,9 +277,14 @@ class TabulatedSegment(Segment):
         self._dk = self._k.derivative()
 
     @classmethod
-    def from_csv(cls, path: str | Path, name: str | None = None,
-                 length: float | None = None) -> 'TabulatedSegment':
-        """Read a table with header volume_m3,pressure_pa,curvature_per_m."""
+    def from_csv(cls, path: str | Path, name: str | None = None, length: float | None = None,
+                 design: dict[str, object] | None = None) -> 'TabulatedSegment':
+        """
+        Read a table with header volume_m3,pressure_pa,curvature_per_m.
+
+        ``design``: the identity of the segment design whose FEM table this is (see
+        :attr:`design`), when it is one.
+        """
         path = Path(path)
         columns = read_columns(path, TABLE_COLUMNS, TableError, 'segment table')
         if length is None:
@@ -283,6 +292,7 @@ class TabulatedSegment(Segment):
         segment = cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],
                       columns['curvature_per_m'], source=str(path))
         _check_si(path, segment.volumes, segment.pressures)
+        segment.design = design
         return segment
 
     def smoothed(self, pressures: ArrayLike, *, noise_std_pa: float | None = None,
@@ -297,16 +307,26 @@ class TabulatedSegment(Segment):
         segment = TabulatedSegment(self.name, self.length, self.volumes, pressures,
                                    self.curvatures, source=f'{self.source} (smoothed)')
         segment.table_pressures = self.table_pressures
+        segment.design = self.design
         segment.smoothing = (*self.smoothing, {
             'noise_std_pa': None if noise_std_pa is None else exact(noise_std_pa),
             'prominence_pa': None if prominence_pa is None else exact(prominence_pa)})
         return segment
 
     def definition(self) -> dict[str, object]:
-        """Name, length and the rows as read (and the smoothing options, when smoothed)."""
-        data = self._named('table', volume_m3=exact_list(self.volumes),
-                           pressure_pa=exact_list(self.table_pressures),
-                           curvature_per_m=exact_list(self.curvatures))
+        """
+        Name, length and the rows as read (and the smoothing options, when smoothed).
+
+        A segment design's FEM table is defined by the design's identity instead: the same
+        design gives the same digest on every machine, though each machine's FEM may round
+        the last digits of its rows differently.
+        """
+        if self.design is not None:
+            data = self._named('design', design=self.design)
+        else:
+            data = self._named('table', volume_m3=exact_list(self.volumes),
+                               pressure_pa=exact_list(self.table_pressures),
+                               curvature_per_m=exact_list(self.curvatures))
         if self.smoothing:
             data['smoothing'] = [dict(options) for options in self.smoothing]
         return data
