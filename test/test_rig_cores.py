@@ -292,6 +292,13 @@ def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path)
     assert np.max(np.abs(np.array(answered[0].volumes_m3) - inflating)) > 1e-3 * emap.v_scale
     wrong, notices = second.resume_from(['a', 'b'], [1e-6, 1e-6], 'a test')
     assert not wrong and 'does not fit this scene' in notices[0].text
+    # The same segment names with other curves (a scene changed between runs): at rest.
+    other = load_scene('fig1_symmetric')
+    assert other.segment_names == scene.segment_names
+    third = actuator_core(other, state_file=str(state_file))
+    resumed, notices = third.resume_from_file()
+    assert not resumed and 'written for other segments' in notices[0].text
+    assert third.tracker.state.injected == 0.0
 
 
 # ------------------------------------------------------------------------- camera

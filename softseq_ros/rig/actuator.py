@@ -160,8 +160,8 @@ class ActuatorCore:
 
     def _save(self, injected: float, outputs: list[Output]) -> None:
         """Write the state atomically, so a kill mid-write leaves the previous one."""
-        data = json.dumps({'names': list(self.names), 'injected_m3': injected,
-                           'volumes_m3': self._state.volumes})
+        data = json.dumps({'names': list(self.names), 'segments_sha256': self.segments_sha256,
+                           'injected_m3': injected, 'volumes_m3': self._state.volumes})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
         try:
             if not self._state_folder_made:
@@ -215,6 +215,12 @@ class ActuatorCore:
         except (OSError, ValueError, KeyError, TypeError) as err:
             return False, [Notice(self.role, WARNING, f'state_file {self.state_file}: '
                                                       f'unreadable ({err}); starting at rest')]
+        written_for = saved.get('segments_sha256')
+        if written_for is not None and written_for != self.segments_sha256:
+            # Same segment names, other curves: the saved volumes mean nothing here.
+            return False, [Notice(self.role, WARNING, f'state_file {self.state_file} was '
+                                  f'written for other segments (sha256 {str(written_for)[:12]}, '
+                                  f'these are {self.segments_sha256[:12]}); starting at rest')]
         return self.resume_from(names, volumes, f'state_file {self.state_file}')
 
     def resume(self, injected: float, volumes: list[float]) -> None:
