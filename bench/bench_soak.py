@@ -51,6 +51,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from mcap.reader import make_reader  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
@@ -129,6 +130,17 @@ def shared_machine_note(load_before: str, load_after: str, other_share: float | 
 
 def mb(value: float) -> str:
     return f'{value / MB:.1f}'
+
+
+def mcap_chunks(bag: Path) -> tuple[int, int]:
+    """Chunks of a bag's MCAP files and their uncompressed bytes, from the summary."""
+    count = size = 0
+    for file in sorted(bag.glob('*.mcap')):
+        with open(file, 'rb') as stream:
+            indexes = make_reader(stream).get_summary().chunk_indexes
+        count += len(indexes)
+        size += sum(index.uncompressed_size for index in indexes)
+    return count, size
 
 
 # ------------------------------------------------------------------------------ part 1: batch
@@ -236,6 +248,7 @@ def part_batch(cycles: int, keep_bag: bool) -> str:
             info = json.loads(child.stdout.strip().splitlines()[-1])
             summary = bag_summary(out)
             bag_bytes = sum(f.stat().st_size for f in out.iterdir() if f.is_file())
+            chunks, raw_bytes = mcap_chunks(out)
             kept = None
             if keep_bag:
                 kept = ROOT / 'bags' / f'soak_batch_{time.strftime("%Y%m%d_%H%M%S")}'
@@ -273,6 +286,15 @@ def part_batch(cycles: int, keep_bag: bool) -> str:
     early = _window_rate(samples, first[2], first[2] + window)
     late = _window_rate(samples, total - window, total)
     rss_values = [s[3] for s in samples[1:]] or [start[3]]
+    later = ''
+    if len(rows) > 1:
+        growth = rows[-1][4] - rows[0][4]
+        chunks_later = chunks * (len(rows) - 1) / len(rows)
+        later = (f' After the first cycle: {growth / MB:+.1f} MB over {len(rows) - 1} cycles '
+                 f'({growth / (len(rows) - 1) / 1024:+.0f} KB per cycle, '
+                 f'{growth / max(chunks_later, 1):+.0f} bytes per chunk written then), Python '
+                 f'blocks {rows[-1][5] - rows[0][5]:+,} '
+                 f'({(rows[-1][5] - rows[0][5]) / max(chunks_later, 1):+.1f} per chunk).')
 
     lines = [
         '## 1. Batch soak (`softseq_ros.batch.BatchRun`, one process, no rclpy)', '',
@@ -287,7 +309,8 @@ def part_batch(cycles: int, keep_bag: bool) -> str:
         f'**{total:,} messages** in {info["wall_s"]:.0f} s wall '
         f'({info["sim_s"] / info["wall_s"]:.0f}x real time; target >= '
         f'{BATCH_TARGET_MESSAGES:,}: {"met" if total >= BATCH_TARGET_MESSAGES else "**not met**"}'
-        f'). Bag: {bag_bytes / 1e9:.2f} GB, `bag_summary`: complete = {summary.complete}, '
+        f'). Bag: {bag_bytes / 1e9:.2f} GB in {chunks:,} chunks ({raw_bytes / 1e9:.2f} GB '
+        f'uncompressed), `bag_summary`: complete = {summary.complete}, '
         f'{summary.message_count:,} messages, per-topic counts '
         f'{"equal to" if counts_agree else "**differ from**"} the run\'s; pump state at the end '
         f'`{info["pump_state"]}`. '
@@ -307,7 +330,7 @@ def part_batch(cycles: int, keep_bag: bool) -> str:
         f'| peak (VmHWM) | | {mb(info["hwm"])} | |', '',
         f'**End / start: RSS {end[3] / first[3]:.3f}** (end / 10 %: {end[3] / tenth[3]:.3f}); '
         f'Python blocks {end[4] / max(first[4], 1):.3f} (end / 10 %: '
-        f'{end[4] / max(tenth[4], 1):.3f}).', '',
+        f'{end[4] / max(tenth[4], 1):.3f}).' + later, '',
         f'**Messages per wall second**: first cycle {rate_first:,.0f}, last cycle '
         f'{rate_last:,.0f}, **last / first {rate_last / rate_first:.2f}**; first 10 % of the '
         f'messages {early:,.0f}, last 10 % {late:,.0f} ({late / early:.2f}). CPU per message '
@@ -581,6 +604,7 @@ def part_realtime(seconds: float, camera_hz: float, keep_bag: bool) -> str:
         answer_topics = ['/actuator/volumes', '/actuator/pressure', '/actuator/curvatures']
         in_bag = _bag_stamps(bag, ['/pump/command', *answer_topics])
         bag_bytes = sum(f.stat().st_size for f in bag.iterdir() if f.is_file())
+        chunks, _ = mcap_chunks(bag)
         kept = None
         if keep_bag:
             kept = ROOT / 'bags' / f'soak_realtime_{time.strftime("%Y%m%d_%H%M%S")}'
@@ -699,7 +723,8 @@ def part_realtime(seconds: float, camera_hz: float, keep_bag: bool) -> str:
     lines += [
         f'- Answers whose volumes differ from their command: {mismatched}. Pump holds '
         f'(no pressure feedback for 2 s, restarted by the benchmark): {run["holds"]}.',
-        f'- Bag: {bag_bytes / 1e6:.0f} MB, complete = {summary.complete}, '
+        f'- Bag: {bag_bytes / 1e6:.0f} MB in {chunks:,} chunks (the recorder closes a chunk '
+        f'at every flush, at least every 0.5 s), complete = {summary.complete}, '
         f'{summary.message_count:,} messages ('
         + ', '.join(f'{t} {s.message_count:,}' for t, s in sorted(summary.topics.items()))
         + ')' + (f'; kept at `{kept.relative_to(ROOT)}`.' if kept else '; removed.'), '']
@@ -725,6 +750,14 @@ def part_realtime(seconds: float, camera_hz: float, keep_bag: bool) -> str:
             f'| {name} | {mb(first[1])} | {mb(settled[1])} | {mb(last[1])} | '
             f'**{last[1] / first[1]:.3f}** | {last[1] / settled[1]:.3f} | {slope:+.1f} | '
             f'{mb(last[2])} | {100 * cpu_first:.0f} / {100 * cpu_last:.0f} |')
+    recorder = samples.rows['recorder']
+    if recorder:
+        growth = recorder[-1][1] - samples.at('recorder', window)[1]
+        chunks_later = chunks * (duration - window) / duration
+        per_chunk = growth / max(chunks_later, 1)
+        lines += ['', f'Recorder after {window:.0f} s: {growth / MB:+.1f} MB for about '
+                  f'{chunks_later:,.0f} chunks written then ({per_chunk:+,.0f} bytes per '
+                  'chunk).']
     names = [name for name, rows in samples.rows.items() if rows]
     lines += ['', 'Resident memory [MB] at the end of each minute (the sample nearest to it):',
               '', '| minute | ' + ' | '.join(names) + ' |',
@@ -754,6 +787,8 @@ def machine_facts() -> dict[str, str]:
 def write_results(path: Path, sections: dict[str, str]) -> None:
     """Replace this run's sections in the results file and keep the others."""
     existing = path.read_text(encoding='utf-8') if path.is_file() else ''
+    # What the numbers mean is written by hand between these markers and kept as it is.
+    notes = re.search(r'<!-- notes -->\n.*?<!-- /notes -->\n', existing, re.S)
     kept = {}
     for part in PARTS:
         match = re.search(rf'<!-- part:{part} -->\n(.*?)<!-- /part:{part} -->', existing,
@@ -766,9 +801,10 @@ def write_results(path: Path, sections: dict[str, str]) -> None:
     header = [
         '# Soak benchmarks', '',
         'Generated by `python bench/bench_soak.py` (see its docstring); a part re-run alone '
-        'replaces only its section. Benchmarks, not tests: nothing is asserted.', '',
+        'replaces only its section; the notes between `<!-- notes -->` markers are written by '
+        'hand and kept. Benchmarks, not tests: nothing is asserted.', '',
         '| machine | |', '|---|---|', *[f'| {k} | {v} |' for k, v in machine_facts().items()],
-        '']
+        '', *([notes.group(0)] if notes else [])]
     body = []
     for part in PARTS:
         if part in kept:
