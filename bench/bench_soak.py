@@ -453,11 +453,11 @@ class ProcessSamples:
 
 def pick_domain(context_of) -> tuple[int, object]:  # noqa: ANN001
     """A ROS domain with nobody else on it (a test run may be using its own)."""
+    import rclpy
     first = 1 + os.getpid() % 100
     for attempt in range(8):
         domain = 1 + (first - 1 + 13 * attempt) % 100
         context = context_of(domain)
-        import rclpy
         node = rclpy.create_node('soak_domain_check', context=context)
         time.sleep(3.0)
         others = [n for n, _ in node.get_node_names_and_namespaces()
