@@ -557,3 +557,32 @@ def test_recorder_start_up_mistakes_are_one_line(tmp_path, params, expected):
     assert 'Traceback' not in result.stderr
     lines = [line for line in result.stderr.splitlines() if line.startswith('recorder: ')]
     assert len(lines) == 1 and expected in lines[0], result.stderr
+
+
+def test_a_long_recording_keeps_a_few_hundred_bytes_per_chunk_for_its_summary(tmp_path):
+    # A recorder closes a chunk at every flush, several a second: what it keeps per chunk for
+    # the summary's index is what its memory grows by over a day.
+    import tracemalloc
+
+    chunks = 3000
+    message = serialize(Float64(data=1.0))
+    with BagWriter(tmp_path / 'bag', flush_period_s=None, compression=None) as bag:
+        bag.add_topic('/a', 'std_msgs/msg/Float64')
+        bag.add_topic('/b', 'std_msgs/msg/Float64')
+        for i in range(100):    # warm up, so lazy first-time allocations are not counted
+            bag.write('/a', message, T0 + i)
+            bag.flush()
+        tracemalloc.start()
+        before, _ = tracemalloc.get_traced_memory()
+        for i in range(chunks):
+            bag.write('/a', message, T0 + 100 + i)
+            bag.write('/b', message, T0 + 100 + i)
+            bag.flush()
+        after, _ = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+    assert (after - before) / chunks < 300
+    summary = bag_summary(tmp_path / 'bag')
+    assert summary.complete and summary.message_count == 100 + 2 * chunks
+    # Every chunk is indexed: an independent reader finds every message through the index.
+    with Reader(tmp_path / 'bag') as reader:
+        assert sum(1 for _ in reader.messages()) == 100 + 2 * chunks
