@@ -13,6 +13,7 @@ second to import), and long recordings are thinned to a few thousand points per 
 every snap-through, which is what a figure can show anyway.
 """
 
+from dataclasses import dataclass
 import os
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.analysis.metrics import snap_rows
-from softseq_ros.analysis.recording import DEFLATION, INFLATION, Recording
+from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
 
 ML = 1e6
 KPA = 1e-3
@@ -30,6 +31,33 @@ STYLE = {INFLATION: {'color': 'tab:blue', 'ls': '-'},
          DEFLATION: {'color': 'tab:orange', 'ls': '--'}}
 GAUGE = 'gauge pressure [kPa]'
 INJECTED = 'injected volume [mL]'
+
+
+@dataclass(frozen=True)
+class ModelCurves:
+    """
+    What the figures draw of a scene's model, as plain arrays.
+
+    Built from the equilibrium map in the process that has it (:meth:`from_map`), so a figure
+    worker gets arrays and never unpickles the map: that would import scipy there, on the
+    report's critical path.
+    """
+
+    names: tuple[str, ...]
+    rest_volumes: FloatArray                          # (N,) m^3
+    segment_curves: tuple[tuple[FloatArray, FloatArray], ...]    # added volume m^3, Pa
+    equilibria: tuple[tuple[FloatArray, NDArray[np.bool_]], ...]  # volumes (n, N), stable
+
+    @classmethod
+    def from_map(cls, emap: object, samples: int = 600) -> 'ModelCurves':
+        """Each segment's curve alone and the equilibrium set, from an EquilibriumMap."""
+        curves = []
+        for segment in emap.segments:
+            v = np.linspace(segment.rest_volume, segment.max_volume, samples)
+            curves.append((v - segment.rest_volume, np.asarray(segment.pressure(v))))
+        return cls(tuple(s.name for s in emap.segments), np.asarray(emap.rest_volumes),
+                   tuple(curves), tuple((np.asarray(c.volumes), np.asarray(c.stable))
+                                        for c in emap.equilibrium_set()))
 
 
 def _figure(width: float, height: float, rows: int = 1, cols: int = 1,  # noqa: ANN201
@@ -118,20 +146,19 @@ def _x_limits(ax: object, *ranges: tuple[float, float]) -> None:
     ax.set_xlim(lo - pad, hi + pad)
 
 
-def plot_pv(recording: Recording, emap: object | None, out: Path, experiment: object | None = None,
-            svg: bool = True) -> list[Path]:
+def plot_pv(recording: Recording, model: ModelCurves | None, out: Path,
+            experiment: object | None = None, svg: bool = True) -> list[Path]:
     """Gauge pressure against injected volume, inflation and deflation apart, snaps marked."""
     fig, axes = _figure(6.4, 4.6)
     ax = axes[0, 0]
     u = recording.state_injected * ML
     ranges = [(float(u.min()), float(u.max()))]
-    if emap is not None:
-        for segment in emap.segments:
-            v = np.linspace(segment.rest_volume, segment.max_volume, 600)
-            dv = (v - segment.rest_volume) * ML
+    if model is not None:
+        for name, (added, pressure) in zip(model.names, model.segment_curves):
+            dv = added * ML
             shown = dv <= max(u.max() * 1.2, 1e-9)
-            ax.plot(dv[shown], segment.pressure(v[shown]) * KPA, ':', lw=1,
-                    label=f'segment {segment.name} alone (vs its own added volume)')
+            ax.plot(dv[shown], pressure[shown] * KPA, ':', lw=1,
+                    label=f'segment {name} alone (vs its own added volume)')
     _draw_legs(ax, recording, u, recording.pressure * KPA, label='actuator, ')
     if experiment is not None:
         for direction, marker in ((1, 'o'), (-1, 's')):
@@ -176,7 +203,7 @@ def plot_segments(recording: Recording, out: Path, svg: bool = True) -> list[Pat
     return _save(fig, out, svg)
 
 
-def plot_volume_split(recording: Recording, emap: object | None, out: Path,
+def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path,
                       svg: bool = True) -> list[Path]:
     """v1 against v2 (added volumes): equilibria, constant total volume, the recorded path."""
     fig, axes = _figure(5.8, 5.6, margins={'left': 0.13, 'bottom': 0.1, 'top': 0.93})
@@ -184,15 +211,15 @@ def plot_volume_split(recording: Recording, emap: object | None, out: Path,
     names = recording.segment_names
     if len(names) != 2:
         return _segments_instead(fig, recording, out, svg)
-    rest = emap.rest_volumes if emap is not None else recording.volumes[0]
+    rest = model.rest_volumes if model is not None else recording.volumes[0]
     dv = (recording.volumes - rest) * ML
     limit = float(np.nanmax(dv)) * 1.1 or 1.0
-    if emap is not None:
+    if model is not None:
         shown = set()
-        for curve in emap.equilibrium_set():
-            cv = (curve.volumes - rest) * ML
-            for mask, colour, label in ((curve.stable, 'k', 'stable equilibria'),
-                                        (~curve.stable, 'tab:red', 'unstable equilibria')):
+        for volumes, stable in model.equilibria:
+            cv = (volumes - rest) * ML
+            for mask, colour, label in ((stable, 'k', 'stable equilibria'),
+                                        (~stable, 'tab:red', 'unstable equilibria')):
                 if mask.any():
                     ax.plot(np.where(mask, cv[:, 0], np.nan), np.where(mask, cv[:, 1], np.nan),
                             color=colour, lw=0.9, alpha=0.6,
@@ -409,9 +436,10 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
     """
     directory.mkdir(parents=True, exist_ok=True)
     recording = thinned(recording)
-    jobs = [('pv', (recording, emap, directory / 'pv.png', experiment, svg)),
+    model = ModelCurves.from_map(emap) if emap is not None else None
+    jobs = [('pv', (recording, model, directory / 'pv.png', experiment, svg)),
             ('segments', (recording, directory / 'segments.png', svg)),
-            ('volume_split', (recording, emap, directory / 'volume_split.png', svg)),
+            ('volume_split', (recording, model, directory / 'volume_split.png', svg)),
             ('shapes', (recording, directory / 'shapes.png', svg)),
             ('timeseries', (recording, directory / 'timeseries.png', svg))]
     if workers is None:
