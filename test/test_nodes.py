@@ -108,9 +108,6 @@ class Collector(Node):
     def matched(self, topic: str) -> bool:
         return self.subscriptions_by_topic[topic].get_publisher_count() > 0
 
-    def unsubscribe(self, topic: str) -> None:
-        self.destroy_subscription(self.subscriptions_by_topic.pop(topic))
-
 
 def rclpy_spin_once(node: Node) -> None:
     """Handle what is ready for ``node`` (a node no executor spins), waiting at most 0.1 s."""
@@ -124,15 +121,17 @@ def rclpy_spin_once(node: Node) -> None:
 
 
 def call_trigger(node: Node, service: str) -> Trigger.Response:
-    """Call a std_srvs/Trigger service from a node that an executor is spinning."""
+    """
+    Call a std_srvs/Trigger service from a node that an executor is spinning.
+
+    The client stays until the node is destroyed: destroying it here, while the executor's
+    thread may be adding it to a wait set, can kill that thread (rclpy's InvalidHandle).
+    """
     client = node.create_client(Trigger, service)
-    try:
-        assert client.wait_for_service(timeout_sec=TIMEOUT_S), f'{service} not available'
-        future = client.call_async(Trigger.Request())
-        wait_for(future.done, f'the answer of {service}')
-        return future.result()
-    finally:
-        node.destroy_client(client)
+    assert client.wait_for_service(timeout_sec=TIMEOUT_S), f'{service} not available'
+    future = client.call_async(Trigger.Request())
+    wait_for(future.done, f'the answer of {service}')
+    return future.result()
 
 
 def check_against_solver(emap: EquilibriumMap, commands, pressures, volumes, curvatures):
@@ -276,19 +275,23 @@ def test_rig_in_one_process_matches_the_solver(context, tmp_path):
         assert [m.type for m in markers] == [4, 4]          # LINE_STRIP per segment
         assert len(markers[0].points) == scene.camera.points_per_segment + 1
 
-        # The image is rendered only while someone subscribes.
+        # The image is rendered only while someone subscribes: a viewer node of its own,
+        # spun here, so that destroying it never races the executor thread of the others.
         images = []
-        subscription = collector.create_subscription(
-            message_class(contract.IMAGE.type_name), '/camera/image', images.append,
-            qos_profile(contract.IMAGE.qos))
-        wait_for(lambda: len(images) >= 2, 'camera images')
+        viewer = Node('viewer', context=context)
+        viewer.create_subscription(message_class(contract.IMAGE.type_name), '/camera/image',
+                                   images.append, qos_profile(contract.IMAGE.qos))
+        deadline = time.monotonic() + TIMEOUT_S
+        while len(images) < 2:
+            assert time.monotonic() < deadline, 'timed out waiting for camera images'
+            rclpy_spin_once(viewer)
         image = images[-1]
         assert (image.encoding, image.width, image.height, image.step) == (
             'rgb8', 640, 480, 3 * 640)
         pixels = np.frombuffer(bytes(image.data), np.uint8).reshape(480, 640, 3)
         for colour in SEGMENT_RGB[:2]:
             assert np.all(pixels == colour, axis=2).sum() > 100
-        collector.destroy_subscription(subscription)
+        viewer.destroy_node()
         image_publisher = camera.publisher(contract.IMAGE)
         wait_for(lambda: image_publisher.get_subscription_count() == 0, 'the image unsubscribe')
         # A frame in progress may still have seen the subscriber: count from the next one.
