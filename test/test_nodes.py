@@ -55,11 +55,18 @@ def spinning(context, *nodes):
     for node in nodes:
         executor.add_node(node)
 
+    stopping = threading.Event()
+
     def spin() -> None:
         try:
             executor.spin()
         except ExternalShutdownException:
             pass
+        except Exception:
+            # The shutdown below destroys the executor's guard condition, and a callback just
+            # finishing may still trigger it (rclpy's InvalidHandle): the end of the spin.
+            if not stopping.is_set():
+                raise
 
     thread = threading.Thread(target=spin, daemon=True)
     thread.start()
@@ -68,6 +75,7 @@ def spinning(context, *nodes):
     finally:
         # Order matters: a node destroyed (or a context shut down) while the executor thread
         # still waits on it can abort the process. Stop the executor, join, then destroy.
+        stopping.set()
         executor.shutdown(timeout_sec=10.0)
         thread.join(timeout=10.0)
         for node in nodes:
