@@ -25,13 +25,7 @@ from softseq_ros.nodes.runner import run_node
 from softseq_ros.physics.limits import LIMITS
 from softseq_ros.physics.profile import Leg
 from softseq_ros.rig import contract
-from softseq_ros.rig.build import (
-    check_programme,
-    end_stop,
-    equilibrium_map,
-    pump_core,
-    pump_profile,
-)
+from softseq_ros.rig.build import equilibrium_map, pump_core
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
 
 LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
@@ -122,18 +116,6 @@ class SyringePumpNode(CoreNode):
             'max_pressure_pa', DEFAULT_MAX_PRESSURE_PA,
             'Stop when the actuator gauge pressure exceeds this [Pa].', minimum=0.0,
             open_minimum=True)
-        programme = {'flow_rate_m3_per_s': flow, 'cycles': cycles, 'start_injected_m3': start,
-                     'legs': parse_legs(legs_text) if legs_text else None}
-        # The segments' equilibrium gives the pump its limits: the programme must stay in its
-        # domain, and the end stop defaults to where the inflation ends.
-        emap = equilibrium_map(scene)
-        profile = pump_profile(scene, **programme)
-        check_programme(scene, profile, emap)
-        max_injected = self.declare_number(
-            'max_injected_m3', end_stop(emap, profile),
-            'Stop when the commanded injected volume would exceed this [m^3] '
-            "(default: where the segments' inflation ends).", minimum=0.0,
-            open_minimum=True)
         feedback_timeout = self.declare_number(
             'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
             'Hold when no pressure came from the actuator for this long while running '
@@ -141,10 +123,18 @@ class SyringePumpNode(CoreNode):
         open_loop = self.declare_flag(
             'open_loop', False, 'Run without pressure feedback (no actuator behind the pump): '
             'no relief valve, no feedback timeout.', read_only=True)
+        # The segments' equilibrium gives the pump its limits: the programme must stay in its
+        # domain, and the end stop defaults to where the inflation ends.
         self.core, _ = pump_core(
-            scene, emap, **programme, autostart=autostart, max_pressure_pa=max_pressure,
-            max_injected_m3=max_injected, feedback_timeout_s=feedback_timeout,
-            open_loop=open_loop)
+            scene, equilibrium_map(scene), flow_rate_m3_per_s=flow, cycles=cycles,
+            start_injected_m3=start, legs=parse_legs(legs_text) if legs_text else None,
+            autostart=autostart, max_pressure_pa=max_pressure,
+            feedback_timeout_s=feedback_timeout, open_loop=open_loop)
+        self.core.max_injected_m3 = self.declare_number(
+            'max_injected_m3', self.core.max_injected_m3,
+            'Stop when the commanded injected volume would exceed this [m^3] '
+            "(default: where the segments' inflation ends).", minimum=0.0,
+            open_minimum=True)
         self.connect(scene.outputs)
         for name, request in (('start', self.core.start), ('stop', self.core.stop),
                               ('hold', self.core.hold), ('reset', self.core.reset)):
