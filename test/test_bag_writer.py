@@ -586,3 +586,39 @@ def test_a_long_recording_keeps_a_few_hundred_bytes_per_chunk_for_its_summary(tm
     # Every chunk is indexed: an independent reader finds every message through the index.
     with Reader(tmp_path / 'bag') as reader:
         assert sum(1 for _ in reader.messages()) == 100 + 2 * chunks
+
+
+def test_bulk_topics_fill_chunks_of_their_own_which_readers_merge_in_time(tmp_path):
+    # A reader of the small state topics then decompresses none of the camera frames' bytes.
+    directory = tmp_path / 'bag'
+    with BagWriter(directory, chunk_size=4096, flush_period_s=None) as bag:
+        bag.add_topic('/small', 'std_msgs/msg/Float64')
+        bag.add_topic('/frames', 'std_msgs/msg/String')
+        written = []
+        for i in range(300):
+            bag.write('/small', serialize(Float64(data=float(i))), T0 + 1000 * i)
+            written.append(('/small', T0 + 1000 * i))
+            if i % 4 == 0:
+                bag.write('/frames', serialize(String(data=f'{i:04d}' * 400)), T0 + 1000 * i + 1)
+                written.append(('/frames', T0 + 1000 * i + 1))
+    with open(bag.mcap_path, 'rb') as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        ids = {c.topic: c.id for c in summary.channels.values()}
+        lanes = [set(index.message_index_offsets) for index in summary.chunk_indexes]
+        assert all(lane in ({ids['/small']}, {ids['/frames']}) for lane in lanes)
+        assert lanes.count({ids['/small']}) > 1 and lanes.count({ids['/frames']}) > 1
+        ordered = [(c.topic, m.log_time) for _, c, m in reader.iter_messages(log_time_order=True)]
+    assert ordered == written
+    with AnyReader([directory]) as reader:
+        assert [(c.topic, t) for c, t, _ in reader.messages()] == written
+    # Read in file order (as recovery does), each channel record comes before its messages.
+    seen, first_message = set(), {}
+    with open(bag.mcap_path, 'rb') as stream:
+        for record in StreamReader(stream).records:
+            kind = type(record).__name__
+            if kind == 'Channel':
+                seen.add(record.id)
+            elif kind == 'Message':
+                first_message.setdefault(record.channel_id, record.channel_id in seen)
+    assert first_message == {ids['/small']: True, ids['/frames']: True}

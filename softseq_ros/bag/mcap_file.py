@@ -9,6 +9,15 @@ bytes and the message indexes are built for all its messages at once with numpy.
 classes, so the layout stays the library's: schemas and channels inside the chunks, then a summary
 with schemas, channels, statistics, chunk, attachment and metadata indexes, and summary offsets.
 
+Messages go to one of two chunks open at a time, by the size of their channel's first message:
+bulk channels (camera frames, marker arrays: a kilobyte or more) fill chunks of their own, so a
+reader of the small state topics (pump, pressure, volumes, curvatures) decompresses only the
+chunks that hold them, a quarter of a rig bag's bytes. MCAP allows chunks whose time ranges
+overlap, and indexed readers (mcap's, rosbags', Foxglove's, rosbag2's) merge them by log time;
+each channel's messages stay in one chunk sequence, in order, and schema and channel records
+travel in whichever chunk is written first after they are registered, so they precede every
+message of theirs in the file.
+
 Compression runs on a worker thread (zstd and lz4 release the GIL), so on a machine with two cores
 the next chunk is filled while the last one is compressed; records still reach the file in order.
 """
@@ -57,6 +66,8 @@ _MESSAGE_RECORD = np.dtype([('opcode', 'u1'), ('length', '<u8'), ('channel', '<u
                             ('sequence', '<u4'), ('log_time', '<u8'),
                             ('publish_time', '<u8')])
 _MESSAGE_HEADER_SIZE = _MESSAGE_RECORD.itemsize  # 31 bytes
+# A channel whose first message has at least this many bytes fills the bulk chunks.
+BULK_MESSAGE_BYTES = 1024
 
 
 class _OpenChunk:
@@ -92,7 +103,10 @@ class ChunkedMcapWriter:
             if self._compress is not None else None
         self._pending: Future | None = None
         self._pending_chunk: tuple[_OpenChunk, bytes] | None = None
-        self._chunk = _OpenChunk()
+        # Open chunks: [0] small messages, [1] bulk ones; each channel keeps to one of them.
+        self._lanes = [_OpenChunk(), _OpenChunk()]
+        self._lane_of: dict[int, int] = {}
+        self._prefix = bytearray()  # schema and channel records not yet in a written chunk
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
         # The summary's chunk index, kept as the bytes it is written as: a recording closes a
@@ -110,15 +124,15 @@ class ChunkedMcapWriter:
     @property
     def message_count(self) -> int:
         """Messages added so far."""
-        return self._message_count + self._chunk.count
+        return self._message_count + sum(lane.count for lane in self._lanes)
 
     @property
     def time_range(self) -> tuple[int, int] | None:
         """Earliest and latest log time of the messages so far; None before the first."""
         ranges = [(self._start, self._end)] if self._message_count else []
-        if self._chunk.count:
-            times = self._chunk.log_times
-            ranges.append((min(times), max(times)))
+        for lane in self._lanes:
+            if lane.count:
+                ranges.append((min(lane.log_times), max(lane.log_times)))
         if not ranges:
             return None
         return min(r[0] for r in ranges), max(r[1] for r in ranges)
@@ -139,9 +153,7 @@ class ChunkedMcapWriter:
         self._write_record(Header(profile=profile, library=library))
 
     def _append_to_chunk(self, record: Any) -> None:
-        record_bytes = _record_bytes(record)
-        self._chunk.prefix += record_bytes
-        self._chunk.size += len(record_bytes)
+        self._prefix += _record_bytes(record)
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         """Add a schema (written into the chunk in progress, as mcap does); return its id."""
@@ -163,8 +175,11 @@ class ChunkedMcapWriter:
 
     def add_message(self, channel_id: int, data: bytes, log_time: int,
                     publish_time: int) -> None:
-        """Add one message to the chunk in progress; its sequence number counts its channel."""
-        chunk = self._chunk
+        """Add one message to its channel's open chunk; the sequence number counts the channel."""
+        lane = self._lane_of.get(channel_id)
+        if lane is None:
+            lane = self._lane_of[channel_id] = int(len(data) >= BULK_MESSAGE_BYTES)
+        chunk = self._lanes[lane]
         counts = self._channel_counts
         chunk.channels.append(channel_id)
         chunk.sequences.append(counts[channel_id])
@@ -174,15 +189,15 @@ class ChunkedMcapWriter:
         chunk.data.append(data)
         chunk.size += _MESSAGE_HEADER_SIZE + len(data)
         if chunk.size > self._chunk_size:
-            self._close_chunk()
+            self._close_chunk(lane)
 
     def channel_message_count(self, channel_id: int) -> int:
         """Messages added to one channel so far."""
         return self._channel_counts[channel_id]
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        """Write a metadata record (after the chunk in progress) and index it."""
-        self._close_chunk()
+        """Write a metadata record (after the chunks in progress) and index it."""
+        self._close_chunks()
         self._drain()
         record = _record_bytes(Metadata(name=name, metadata=data))
         self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record),
@@ -191,11 +206,18 @@ class ChunkedMcapWriter:
 
     # ---------------------------------------------------------------- chunks
 
-    def _close_chunk(self) -> None:
-        chunk = self._chunk
+    def _close_chunks(self) -> None:
+        """Close both open chunks, the one with the older first message first."""
+        for lane in sorted((i for i, chunk in enumerate(self._lanes) if chunk.count),
+                           key=lambda i: self._lanes[i].log_times[0]):
+            self._close_chunk(lane)
+
+    def _close_chunk(self, lane: int) -> None:
+        chunk = self._lanes[lane]
         if not chunk.count:
             return  # schemas and channels alone stay for the next chunk, as in mcap
-        self._chunk = _OpenChunk()
+        self._lanes[lane] = _OpenChunk()
+        chunk.prefix, self._prefix = self._prefix, bytearray()
         records, data = _assemble(chunk)
         start, end = int(records['log_time'].min()), int(records['log_time'].max())
         self._message_count += chunk.count
@@ -241,8 +263,8 @@ class ChunkedMcapWriter:
             uncompressed_size=len(data)))
 
     def flush(self) -> None:
-        """Close the chunk in progress and write everything to the stream."""
-        self._close_chunk()
+        """Close the chunks in progress and write everything to the stream."""
+        self._close_chunks()
         self._drain()
         self._stream.flush()
 
@@ -250,7 +272,7 @@ class ChunkedMcapWriter:
 
     def finish(self) -> None:
         """Write the data end, the summary, the footer and the closing magic."""
-        self._close_chunk()
+        self._close_chunks()
         self._drain()
         if self._worker is not None:
             self._worker.shutdown()
