@@ -92,11 +92,27 @@ class _Decoder:
         raise NotImplementedError
 
 
-def _gather(chunk: NDArray[np.uint8], starts: NDArray[np.int64], size: int) -> NDArray[np.uint8]:
-    """The ``size`` bytes at each start as a (len(starts), size) matrix."""
-    # int32 indices: a chunk is far below 2 GiB, and half the index bytes is half the traffic.
-    index = starts.astype(np.int32)[:, None] + np.arange(size, dtype=np.int32)[None, :]
-    return np.take(chunk, index)
+def _gather_bytes(chunk: NDArray[np.uint8], starts: NDArray[np.int64],
+                  offsets: NDArray[np.int64]) -> NDArray[np.uint8]:
+    """The bytes at ``offsets`` from each start as a (len(starts), len(offsets)) matrix."""
+    return np.take(chunk, starts.astype(np.int32)[:, None] + offsets.astype(np.int32))
+
+
+def _words_at_every_byte(chunk: NDArray[np.uint8]) -> NDArray[np.uint64]:
+    """
+    The chunk as overlapping little-endian 8-byte words, one starting at each byte (a view).
+
+    Messages start at any byte of a chunk; gathering eight bytes per index instead of one is
+    an eighth of the index arrays, which is most of the cost of gathering.
+    """
+    return np.ndarray((max(chunk.size - 7, 0),), dtype='<u8', buffer=chunk, strides=(1,))
+
+
+def _gather_words(chunk: NDArray[np.uint8], starts: NDArray[np.int64],
+                  count: int) -> NDArray[np.uint64]:
+    """``count`` consecutive 8-byte words from each start, as a (len(starts), count) matrix."""
+    index = starts.astype(np.int32)[:, None] + np.arange(0, 8 * count, 8, dtype=np.int32)
+    return _words_at_every_byte(chunk)[index]
 
 
 class _Cursor:
@@ -230,8 +246,7 @@ class FixedLayoutDecoder(_Decoder):
 
     def _add_group(self, chunk: Bytes, starts: Ints, size: int, log_times: Ints,
                    where: str) -> None:
-        matrix = _gather(chunk, starts, size)
-        first = bytes(matrix[0])
+        first = chunk[int(starts[0]):int(starts[0]) + size].tobytes()
         cursor = _Cursor(first, where)
         text, fields = self._layout(cursor)
         if self.text is None:
@@ -239,21 +254,28 @@ class FixedLayoutDecoder(_Decoder):
         elif text != self.text:
             raise BagArrayError(f'{where}: {self.topic} changes its names or frame id from '
                                 f'{self.text!r} to {text!r} within the recording')
+        # XCDR1 aligns a float64 to 8 bytes counted from the end of the 4-byte encapsulation
+        # header, so 8-byte words from byte 4 on hold the stamp (word 0) and each float64 whole.
+        count_words = (size - 4) // 8
+        data_words = np.zeros(count_words, dtype=bool)
+        data_words[0] = True
+        for _, offset, count in fields:
+            data_words[(offset - 4) // 8:(offset - 4) // 8 + count] = True
+        words = _gather_words(chunk, starts + 4, count_words)
+        edges = _gather_bytes(chunk, starts, np.r_[0:4, 4 + 8 * count_words:size])
         # Every byte outside the stamp and the float64 fields must equal the first message's:
         # then each message has the first one's layout, names and lengths.
-        fixed = np.ones(size, dtype=bool)
-        fixed[4:12] = False
-        for _, offset, count in fields:
-            fixed[offset:offset + 8 * count] = False
-        if not np.array_equal(matrix[:, fixed], np.broadcast_to(matrix[0, fixed],
-                                                                 (matrix.shape[0],
-                                                                  int(fixed.sum())))):
+        text_words = ~data_words
+        if not (np.array_equal(words[:, text_words],
+                               np.broadcast_to(words[0, text_words],
+                                               (words.shape[0], int(text_words.sum()))))
+                and np.array_equal(edges, np.broadcast_to(edges[0], edges.shape))):
             # Same size, different layout (rare): decode those messages one by one.
-            for row in range(matrix.shape[0]):
+            for row in range(words.shape[0]):
                 self._add_group(chunk, starts[row:row + 1], size, log_times[row:row + 1],
                                 where)
             return
-        n = matrix.shape[0]
+        n = words.shape[0]
         shapes = {'stamp_ns': ((), np.int64)}
         if self.log_times:
             shapes['log_time_ns'] = ((), np.int64)
@@ -269,16 +291,16 @@ class FixedLayoutDecoder(_Decoder):
                 raise BagArrayError(f'{where}: {self.topic}.{name} changes length '
                                     f'(now {count} values)')
         at = slice(columns.used, columns.used + n)
-        stamps = np.ascontiguousarray(matrix[:, 4:12]).view('<i4').reshape(n, 2)
-        columns.arrays['stamp_ns'][at] = (stamps[:, 0].astype(np.int64) * 1_000_000_000
-                                          + stamps[:, 1].view('<u4').astype(np.int64))
+        stamp = words[:, 0]
+        seconds = (stamp & 0xFFFFFFFF).astype(np.uint32).view(np.int32).astype(np.int64)
+        columns.arrays['stamp_ns'][at] = seconds * 1_000_000_000 + (stamp >> 32).astype(np.int64)
         if self.log_times:
             columns.arrays['log_time_ns'][at] = log_times
         for name, offset, count in fields:
-            block = np.ascontiguousarray(matrix[:, offset:offset + 8 * count])
-            values = block.view('<f8').reshape(n, count)
             if not count:
                 continue
+            first_word = (offset - 4) // 8
+            values = words[:, first_word:first_word + count].view('<f8')
             if name in self.signs:
                 columns.arrays[name][at] = np.sign(values[:, :1])
             elif name in self.mean:
@@ -391,6 +413,8 @@ class BagArrays:
     path: Path
     files: list[Path]
     channels: dict[str, ChannelInfo] = field(default_factory=dict)
+    # Each file's summary section as mcap parsed it on opening, kept for reading.
+    summaries: dict[Path, Any] = field(default_factory=dict, repr=False)
 
     @property
     def topics(self) -> list[str]:
@@ -411,7 +435,7 @@ class BagArrays:
             decoder.reserve(self.channels[topic].message_count)
         for file in self.files:
             with open(file, 'rb') as stream:
-                _read_file(stream, file, wanted, validate_crcs)
+                _read_file(stream, file, self.summaries.get(file), wanted, validate_crcs)
         for decoder in wanted.values():
             expected = self.channels[decoder.topic].message_count
             if expected and decoder.count != expected:
@@ -423,7 +447,9 @@ def _mcap_files(path: Path) -> list[Path]:
     metadata = path / 'metadata.yaml'
     if metadata.is_file():
         try:
-            info = yaml.safe_load(metadata.read_text(encoding='utf-8'))[
+            # libyaml's loader where it is built in: a tenth of a report's reading otherwise.
+            info = yaml.load(metadata.read_text(encoding='utf-8'),
+                             Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))[
                 'rosbag2_bagfile_information']
             names = info.get('relative_file_paths') or []
         except (yaml.YAMLError, KeyError, TypeError) as err:
@@ -451,7 +477,9 @@ def open_bag(directory: str | os.PathLike) -> BagArrays:
         raise BagArrayError(f'{path}: no such bag directory or file')
     bag = BagArrays(root, files)
     for file in files:
-        for info in _channels_of(file):
+        with open(file, 'rb') as stream:
+            bag.summaries[file] = _summary(stream, file)
+        for info in _channels_of(file, bag.summaries[file]):
             known = bag.channels.get(info.topic)
             if known is not None and known.type_name != info.type_name:
                 raise BagArrayError(f'{file}: topic {info.topic} is {info.type_name} here and '
@@ -478,9 +506,7 @@ def _summary(stream: BinaryIO, file: Path) -> Any:
     return summary
 
 
-def _channels_of(file: Path) -> list[ChannelInfo]:
-    with open(file, 'rb') as stream:
-        summary = _summary(stream, file)
+def _channels_of(file: Path, summary: Any) -> list[ChannelInfo]:
     counts = summary.statistics.channel_message_counts if summary.statistics else {}
     result = []
     for channel in summary.channels.values():
@@ -495,9 +521,10 @@ def _channels_of(file: Path) -> list[ChannelInfo]:
     return result
 
 
-def _read_file(stream: BinaryIO, file: Path, wanted: dict[str, _Decoder],
+def _read_file(stream: BinaryIO, file: Path, summary: Any, wanted: dict[str, _Decoder],
                validate_crcs: bool) -> None:
-    summary = _summary(stream, file)
+    if summary is None:
+        summary = _summary(stream, file)
     by_channel = {channel.id: wanted[channel.topic] for channel in summary.channels.values()
                   if channel.topic in wanted}
     if not by_channel:
@@ -507,6 +534,7 @@ def _read_file(stream: BinaryIO, file: Path, wanted: dict[str, _Decoder],
         return
     # The next chunk decompresses on a worker thread (zstd and lz4 release the GIL) while this
     # one is decoded: on two cores the reader then waits for neither.
+    batch = _Batch(by_channel)
     with ThreadPoolExecutor(1, thread_name_prefix='mcap-read') as worker:
         pending = None
         for index in sorted(summary.chunk_indexes, key=lambda c: (c.message_start_time,
@@ -521,25 +549,79 @@ def _read_file(stream: BinaryIO, file: Path, wanted: dict[str, _Decoder],
             job = (worker.submit(_chunk_bytes, record, index.compression, where, validate_crcs),
                    index, indexes, present, where)
             if pending is not None:
-                _decode_chunk(*pending, by_channel)
+                batch.add(*_chunk_messages(*pending, by_channel))
             pending = job
         if pending is not None:
-            _decode_chunk(*pending, by_channel)
+            batch.add(*_chunk_messages(*pending, by_channel))
+        batch.flush()
 
 
-def _decode_chunk(chunk_future: Future, index: Any, indexes: bytes, present: list[int],
-                  where: str, by_channel: dict[int, _Decoder]) -> None:
+class _Batch:
+    """
+    Consecutive chunks decoded as one: a few large numpy operations instead of many small ones.
+
+    A chunk holds a few hundred messages of each channel, so decoding chunk by chunk is mostly
+    the fixed cost of each numpy call; a batch of about BATCH_BYTES of decompressed chunks
+    keeps that cost small and the memory bounded.
+    """
+
+    BATCH_BYTES = 8 << 20
+
+    def __init__(self, by_channel: dict[int, '_Decoder']) -> None:
+        self.by_channel = by_channel
+        self.chunks: list[NDArray[np.uint8]] = []
+        self.messages: list[dict[int, tuple[np.ndarray, np.ndarray]]] = []
+        self.wheres: list[str] = []
+        self.size = 0
+
+    def add(self, chunk: NDArray[np.uint8], messages: dict[int, tuple[np.ndarray, np.ndarray]],
+            where: str) -> None:
+        self.chunks.append(chunk)
+        self.messages.append(messages)
+        self.wheres.append(where)
+        self.size += chunk.size
+        if self.size >= self.BATCH_BYTES:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.chunks:
+            return
+        if len(self.chunks) == 1:
+            data, bases = self.chunks[0], [0]
+            where = self.wheres[0]
+        else:
+            data = np.concatenate(self.chunks)
+            bases = np.cumsum([0] + [c.size for c in self.chunks[:-1]]).tolist()
+            where = f'{self.wheres[0]} or one of the {len(self.chunks) - 1} chunks after it'
+        for channel_id, decoder in self.by_channel.items():
+            parts = [(messages[channel_id], base, base + chunk.size) for messages, base, chunk
+                     in zip(self.messages, bases, self.chunks) if channel_id in messages]
+            if not parts:
+                continue
+            offsets = np.concatenate([o + base for (o, _), base, _ in parts])
+            log_times = np.concatenate([t for (_, t), _, _ in parts])
+            ends = np.concatenate([np.full(o.size, end) for (o, _), _, end in parts])
+            _deliver(data, offsets, log_times, decoder, where, ends)
+        self.chunks, self.messages, self.wheres, self.size = [], [], [], 0
+
+
+def _chunk_messages(chunk_future: Future, index: Any, indexes: bytes, present: list[int],
+                    where: str, by_channel: dict[int, '_Decoder']
+                    ) -> tuple[NDArray[np.uint8], dict[int, tuple[np.ndarray, np.ndarray]], str]:
+    """A chunk's bytes and, for each wanted channel in it, its messages' offsets and log times."""
     chunk = chunk_future.result()
     if index.message_index_offsets:
         base = index.chunk_start_offset + index.chunk_length
-        for channel_id in present:
-            offsets, log_times = _message_index(
-                indexes, index.message_index_offsets[channel_id] - base, where)
-            _deliver(chunk, offsets, log_times, by_channel[channel_id], where)
+        messages = {channel_id: _message_index(
+            indexes, index.message_index_offsets[channel_id] - base, where)
+            for channel_id in present}
     else:
-        for channel_id, (offsets, log_times) in _scan_chunk(chunk, where).items():
-            if channel_id in by_channel:
-                _deliver(chunk, offsets, log_times, by_channel[channel_id], where)
+        messages = {channel_id: found for channel_id, found in _scan_chunk(chunk, where).items()
+                    if channel_id in by_channel}
+    for offsets, _ in messages.values():
+        if offsets.size and (offsets.min() < 0 or offsets.max() >= chunk.size):
+            raise BagArrayError(f'{where}: a message index points at no message record')
+    return chunk, messages, where
 
 
 def _chunk_bytes(record: bytes, compression: str, where: str,
@@ -603,17 +685,21 @@ def _scan_chunk(chunk: NDArray[np.uint8], where: str) -> dict[int, tuple[list, l
 
 
 def _deliver(chunk: NDArray[np.uint8], offsets: np.ndarray, log_times: np.ndarray,
-             decoder: _Decoder, where: str) -> None:
+             decoder: _Decoder, where: str, ends: np.ndarray | int | None = None) -> None:
+    """Hand a decoder its messages at ``offsets``; ``ends``: where each one's chunk ends."""
     if not offsets.size:
         return
+    ends = chunk.size if ends is None else ends
     order = np.argsort(offsets, kind='stable')
     offsets, log_times = offsets[order], log_times[order]
-    if offsets[-1] + _MESSAGE_DATA_START > chunk.size or np.any(chunk[offsets] != _OP_MESSAGE):
+    if not np.isscalar(ends):
+        ends = ends[order]
+    if np.any(offsets + _MESSAGE_DATA_START > ends) or np.any(chunk[offsets] != _OP_MESSAGE):
         raise BagArrayError(f'{where}: a message index points at no message record')
-    lengths = _gather(chunk, offsets + 1, 8).view('<u8').reshape(-1).astype(np.int64)
+    lengths = _words_at_every_byte(chunk)[offsets + 1].astype(np.int64)
     sizes = lengths - _MESSAGE_FIELDS_AFTER_LENGTH
     starts = offsets + _MESSAGE_DATA_START
-    if np.any(sizes < 0) or np.any(starts + sizes > chunk.size):
+    if np.any(sizes < 0) or np.any(starts + sizes > ends):
         raise BagArrayError(f'{where}: a message record runs past its chunk')
     decoder.add(chunk, starts, sizes, log_times, f'{where}: {decoder.topic}')
 
