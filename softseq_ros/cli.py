@@ -91,17 +91,26 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report',
-                  reference=args.reference, namespace=args.namespace, svg=not args.no_svg)
+    from softseq_ros.analysis.figure_workers import start_workers, stop_workers
+
+    # Before anything else is imported: the worker loads matplotlib while the bag is read.
+    workers = start_workers(args.svg)
+    try:
+        _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report',
+                      reference=args.reference, namespace=args.namespace, svg=args.svg,
+                      workers=workers)
+    finally:
+        stop_workers(workers)
     return 0
 
 
 def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None,
                   out: Path, reference: Path | None = None, namespace: str | None = None,
-                  svg: bool = True) -> None:
+                  svg: bool = False, workers: object | None = None) -> None:
     from softseq_ros.analysis.report import write_report
 
-    _, text = write_report(bag, out, scene_name, experiment_csv, reference, namespace, svg)
+    _, text = write_report(bag, out, scene_name, experiment_csv, reference, namespace, svg,
+                           workers=workers)
     print(text)
     print(f'report: {out / "report.md"}, {out / "metrics.json"}, figures in {out}')
 
@@ -216,7 +225,12 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument('--reference', type=Path, help='YAML of what a paper reports (e.g. '
                         'config/reference/milana2018.yaml): each fact beside the recording')
     report.add_argument('--namespace', help='rig namespace when the bag holds several rigs')
-    report.add_argument('--no-svg', action='store_true', help='PNG figures only')
+    svg = report.add_mutually_exclusive_group()
+    # SVG takes as long again as PNG to draw: asked for, not the default.
+    svg.add_argument('--svg', action='store_true', help='SVG figures too (for print), beside '
+                     'the PNGs')
+    svg.add_argument('--no-svg', action='store_false', dest='svg',
+                     help='PNG figures only (the default)')
     report.add_argument('--out', type=Path, help='folder for the report (default BAG/report)')
     report.set_defaults(handler=_report)
 

@@ -14,7 +14,7 @@ import yaml
 from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
 from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_recording
 from softseq_ros.analysis.report import SceneMismatchError, recording_trace, write_report
-from softseq_ros.bag.arrays import JointStateDecoder, open_bag
+from softseq_ros.bag.arrays import BagArrayError, JointStateDecoder, open_bag
 from softseq_ros.batch import run_scene
 from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.physics.identity import segments_sha256
@@ -83,6 +83,68 @@ def test_array_reader_matches_rosbags_message_for_message(asymmetric):
     np.testing.assert_array_equal(ours['position'], [m.position for _, m in theirs])
     np.testing.assert_array_equal(ours['effort'], [m.effort for _, m in theirs])
     assert decoder.names == tuple(theirs[0][1].name)
+
+
+def _joint_state_bag(directory: Path, count: int) -> Path:
+    from sensor_msgs.msg import JointState
+
+    from softseq_ros.bag.forms import serialize
+    from softseq_ros.bag.writer import BagWriter
+
+    with BagWriter(directory, chunk_size=2048, compression=None, flush_period_s=None) as bag:
+        bag.add_topic('/actuator/volumes', 'sensor_msgs/msg/JointState')
+        for i in range(count):
+            msg = JointState(name=['bottom', 'top'], position=[1e-6 * i, 2e-6 * i],
+                             effort=[float(i), float(i)])
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 1000 + i // 10, (i % 10) * 10**8
+            bag.write('/actuator/volumes', serialize(msg), 10**18 + 10**8 * i)
+    return directory
+
+
+def test_the_reader_reads_every_message_across_many_small_chunks(tmp_path):
+    bag = _joint_state_bag(tmp_path / 'bag', 500)
+    decoder = JointStateDecoder('/actuator/volumes')
+    opened = open_bag(bag)
+    opened.read([decoder], validate_crcs=True)
+    result = decoder.result()
+    assert len(opened.summaries[bag / 'bag_0.mcap'].chunk_indexes) > 20
+    i = np.arange(500)
+    np.testing.assert_array_equal(result['position'], np.c_[1e-6 * i, 2e-6 * i])
+    np.testing.assert_array_equal(result['stamp_ns'], (1000 + i // 10) * 10**9
+                                  + (i % 10) * 10**8)
+    np.testing.assert_array_equal(result['log_time_ns'], 10**18 + 10**8 * i)
+
+
+def test_a_message_record_running_past_its_chunk_is_named(tmp_path):
+    # Chunks are read in batches: a record must still end inside its own chunk.
+    from mcap.reader import make_reader
+
+    bag = _joint_state_bag(tmp_path / 'bag', 200)
+    path = bag / 'bag_0.mcap'
+    raw = bytearray(path.read_bytes())
+    with open(path, 'rb') as stream:
+        first = sorted(make_reader(stream).get_summary().chunk_indexes,
+                       key=lambda c: c.chunk_start_offset)[0]
+    # The first chunk's last message: with no compression its records follow the chunk's
+    # 49-byte header (opcode, length, times, size, crc, empty compression name, data length).
+    last = max(int(i) for i in _record_offsets(raw, first))
+    at = first.chunk_start_offset + 49 + last + 1
+    length = int.from_bytes(raw[at:at + 8], 'little')
+    raw[at:at + 8] = (length + 40).to_bytes(8, 'little')
+    path.write_bytes(bytes(raw))
+    with pytest.raises(BagArrayError, match=r'bag_0.mcap \(chunk at byte \d+\).*runs past '
+                       'its chunk'):
+        open_bag(bag).read([JointStateDecoder('/actuator/volumes')])
+
+
+def _record_offsets(raw: bytes, index: object) -> list[int]:
+    """Message record offsets in a chunk, from its message index records."""
+    offsets = []
+    for position in index.message_index_offsets.values():
+        length = int.from_bytes(raw[position + 11:position + 15], 'little')
+        entries = np.frombuffer(bytes(raw[position + 15:position + 15 + length]), '<u8')
+        offsets.extend(entries[1::2].tolist())
+    return offsets
 
 
 # ------------------------------------------------------------------------ metrics vs solver
@@ -398,13 +460,24 @@ def test_thinned_figures_keep_every_snap_and_invent_none(asymmetric, monkeypatch
 
 def test_report_writes_every_figure_as_png_and_svg(asymmetric, tmp_path):
     scene_path, bag = asymmetric
-    metrics, _ = write_report(bag, tmp_path, scene_name=str(scene_path))
+    metrics, _ = write_report(bag, tmp_path, scene_name=str(scene_path), svg=True)
     names = {'pv', 'segments', 'volume_split', 'shapes', 'timeseries'}
     assert set(metrics['figures']) == {f'{n}.{ext}' for n in names for ext in ('png', 'svg')}
     for name in metrics['figures']:
         data = (tmp_path / name).read_bytes()
         assert data.startswith(b'\x89PNG') if name.endswith('.png') else b'<svg' in data[:400]
     assert '![pv.png](pv.png)' in (tmp_path / 'report.md').read_text()
+
+
+def test_the_report_command_writes_svg_only_when_asked(asymmetric, tmp_path):
+    _, bag = asymmetric
+    names = {'pv', 'segments', 'volume_split', 'shapes', 'timeseries'}
+    for flags, svgs in (((), set()), (('--svg',), {f'{n}.svg' for n in names})):
+        out = tmp_path / ('svg' if flags else 'png')
+        result = _cli('report', str(bag), *flags, '--out', str(out))
+        assert result.returncode == 0, result.stderr
+        assert {p.name for p in out.glob('*.png')} == {f'{n}.png' for n in names}
+        assert {p.name for p in out.glob('*.svg')} == svgs
 
 
 @pytest.mark.parametrize('layout', ['lz4, chunk indexes only', 'no chunks', 'no indexes'])

@@ -198,21 +198,29 @@ def against_reference(metrics: dict, reference: dict) -> dict:
 def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str | None = None,
                  experiment_csv: str | os.PathLike | None = None,
                  reference_file: str | os.PathLike | None = None, namespace: str | None = None,
-                 svg: bool = True, figures: bool = True) -> tuple[dict, str]:
-    """Read the bag, write metrics.json, report.md, summary.txt and figures; return both."""
-    out = Path(out)
-    workers = None
-    if figures:
-        from softseq_ros.analysis.figures import start_workers
+                 svg: bool = False, figures: bool = True,
+                 workers: object | None = None) -> tuple[dict, str]:
+    """
+    Read the bag, write metrics.json, report.md, summary.txt and figures; return both.
 
-        workers = start_workers()
+    Figures are PNG, and SVG as well with ``svg`` (drawing them takes as long again). A
+    command that started a figure worker early (:mod:`softseq_ros.analysis.figure_workers`)
+    passes it as ``workers`` and ends it itself; otherwise one is started here.
+    """
+    out = Path(out)
+    own = None
+    if figures and workers is None:
+        from softseq_ros.analysis.figure_workers import start_workers
+
+        workers = own = start_workers(svg)
     try:
         return _write_report(bag, out, scene_name, experiment_csv, reference_file, namespace,
                              svg, figures, workers)
     finally:
-        if workers is not None:
-            workers.terminate()
-            workers.join()
+        if own is not None:
+            from softseq_ros.analysis.figure_workers import stop_workers
+
+            stop_workers(own)
 
 
 def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
