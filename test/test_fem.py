@@ -185,3 +185,31 @@ def test_contact_is_seen_where_a_membrane_reaches_its_neighbours_mid_plane(coars
         wall_x = x[segment.wall_cuts[0], 0].mean()
         x[point, 0] = wall_x + 1e-4
         assert segment.contact(x, q)
+
+
+def test_arc_length_follows_two_spheres_on_one_syringe_through_their_snap_back():
+    # A thin small sphere and a thick large one on one fluid volume: past the small one's
+    # peak the large one gives up more fluid than the small one takes, so the total volume
+    # turns back (the path a segment's membranes take when one of them runs away).
+    from softseq_ros.fem.sphere import sphere_pair
+
+    small, large = (0.010, 0.011), (0.060, 0.072)
+    pair = sphere_pair(small, large, 'neo_hookean', {'shear_modulus_pa': MU})
+    model = pair.model
+    v0 = model.rest_volume
+    result = model.trace_path(1.5 * v0, first_step=0.004 * v0, max_step=0.04 * v0,
+                              min_step=1e-6 * v0)
+    assert result.stop_reason == 'reached the requested volume'
+    assert result.states[-1].volume == pytest.approx(1.5 * v0, rel=1e-12)
+    volumes = np.array([s.volume for s in result.states]) / v0
+    (turn,) = result.volume_turns
+    # The volume falls well back before it grows again: a snap-back, not a wiggle.
+    assert volumes[turn:].min() < volumes[turn] - 0.05
+    # Every state, before, in and after the snap-back, is an equilibrium of both spheres.
+    for state in result.states[1:]:
+        first, second = pair.stretches(state.q)
+        for stretch, (inner, outer) in ((first, small), (second, large)):
+            exact = MU * neo_hookean_thick_sphere_pressure(stretch, inner, outer)
+            assert state.pressure == pytest.approx(exact, rel=0.005)
+    # The small sphere went over its peak and far down its falling branch.
+    assert pair.stretches(result.states[-1].q)[0] > 2.0

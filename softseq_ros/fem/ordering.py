@@ -34,18 +34,21 @@ def nested_dissection(matrix: sp.spmatrix) -> NDArray[np.int64]:
 class SparseSolver:
     """Solves systems that share one sparsity pattern, reusing its ordering."""
 
-    def __init__(self) -> None:
+    def __init__(self, border: int = 1) -> None:
+        """``border``: the last unknowns (multipliers, path parameters) kept last, in order."""
         self._permutation: NDArray[np.int64] | None = None
         self._size = -1
+        self._border = border
 
     def solve(self, matrix: sp.spmatrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """Solution of ``matrix @ x = rhs``; raises RuntimeError on an exactly singular matrix."""
         matrix = matrix.tocsr()
         size = matrix.shape[0]
         if self._permutation is None or self._size != size:
-            # The last unknown (a border, when there is one) stays last.
-            head = nested_dissection(matrix[:size - 1, :size - 1])
-            self._permutation = np.concatenate([head, [size - 1]])
+            # The border unknowns stay last.
+            inner = size - self._border
+            head = nested_dissection(matrix[:inner, :inner])
+            self._permutation = np.concatenate([head, np.arange(inner, size)])
             self._size = size
         perm = self._permutation
         permuted = matrix[perm][:, perm].tocsc()

@@ -12,6 +12,13 @@ by Newton's method on the bordered system [[A, -b], [-b^T, 0]] [dq, dp] = [-R, C
 A = J^T (K - p d2V/dx2) J + (second-order term of the map) and b = J^T dV/dx. The bordered matrix
 stays regular at a pressure peak, where A alone is singular and pressure control stops.
 
+Where the volume itself turns back along the path (a snap-back: a membrane of several on one
+cavity bulges while the others shrink back, and the fluid they give up is more than it takes),
+volume control is singular in turn. :meth:`InflationModel.trace_path` then follows the path by
+its arc length in the (volume, pressure) plane instead (pseudo-arc-length continuation): the
+volume becomes an unknown and a third row [0, t_p, t_V] keeps each step a given distance along
+the last secant, so the path goes on through both kinds of turning point.
+
 felupe's nearly-incompressible solid updates its cell-wise pressure and dilatation each time it
 is handed the field: the vector is assembled with the field exactly once per iteration and the
 matrix without it, which keeps the tangent consistent (quadratic convergence).
@@ -51,6 +58,12 @@ class PathResult:
     stop_reason: str = 'reached the requested volume'
     newton_iterations: int = 0
 
+    @property
+    def volume_turns(self) -> list[int]:
+        """Indices of states where the volume stops growing and turns back (snap-backs)."""
+        v = np.array([state.volume for state in self.states])
+        return [i for i in range(1, v.size - 1) if v[i] > v[i - 1] and v[i + 1] < v[i]]
+
 
 class InflationModel:
     """
@@ -60,6 +73,9 @@ class InflationModel:
     one displacement field); ``force_scale`` [N] sets the residual tolerance (shear modulus times
     a length squared of the model).
     """
+
+    # Path following: the cosine of the largest turn of the path within one step (about 37 deg).
+    MAX_TURN_COSINE = 0.8
 
     def __init__(self, solid: Any, field: Any, space: ReducedSpace, cavity: Cavity,
                  force_scale: float, length_scale: float) -> None:
@@ -73,6 +89,7 @@ class InflationModel:
         self.rest_volume = cavity.volume(self.reference)
         self._bordered_solver = SparseSolver()
         self._tangent_solver = SparseSolver()
+        self._arc_solver = SparseSolver(border=2)
 
     def positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Deformed point positions [m]."""
@@ -128,6 +145,136 @@ class InflationModel:
             if np.max(np.abs(step[:-1])) > 0.5 * self.length_scale:
                 raise ConvergenceError('Newton step larger than half the model size')
         raise ConvergenceError(f'no convergence in {max_iterations} iterations')
+
+    def solve_arc(self, start: State, direction: tuple[float, float], distance: float,
+                  guess: State, scales: tuple[float, float], max_iterations: int = 25,
+                  tolerance: float = 1e-6) -> State:
+        """
+        The equilibrium ``distance`` along ``direction`` from ``start`` in the scaled plane.
+
+        ``direction`` is a unit vector (dV / volume scale, dp / pressure scale) and ``scales``
+        those two scales; the step lands where the path crosses the line through
+        start + distance * direction normal to ``direction``. Newton's method starts from
+        ``guess``.
+        """
+        volume_scale, pressure_scale = scales
+        t_v, t_p = direction
+        q, p, volume = guess.q.copy(), float(guess.pressure), float(guess.volume)
+        for iteration in range(1, max_iterations + 1):
+            # A trial state beyond a sharp turn may invert cells: felupe's energy is then NaN,
+            # and the non-finite step below rejects it (a shorter step follows).
+            with np.errstate(invalid='ignore', divide='ignore'):
+                x, residual, tangent, b = self._system(q, p)
+            constraint = self.cavity.volume(x) - volume
+            arc = (t_v * (volume - start.volume) / volume_scale
+                   + t_p * (p - start.pressure) / pressure_scale - distance)
+            n = b.size
+            column = sp.csc_matrix((np.array([1.0, t_v / volume_scale]),
+                                    (np.array([n, n + 1]), np.zeros(2, dtype=int))),
+                                   shape=(n + 2, 1))
+            matrix = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None],
+                              [None, sp.csc_matrix([[t_p / pressure_scale]])]], format='csc')
+            matrix = sp.hstack([matrix, column], format='csc')
+            rhs = np.concatenate([-residual, [constraint, -arc]])
+            try:
+                step = self._arc_solver.solve(matrix, rhs)
+            except RuntimeError as err:
+                raise ConvergenceError(f'singular path-following matrix ({err})') from None
+            if not np.all(np.isfinite(step)):
+                raise ConvergenceError('non-finite Newton step')
+            q += step[:n]
+            p += step[n]
+            volume += step[n + 1]
+            small_step = np.max(np.abs(step[:n])) <= tolerance * self.length_scale
+            if (small_step and np.linalg.norm(residual) <= 1e3 * tolerance * self.force_scale
+                    and abs(constraint) <= tolerance * self.rest_volume
+                    and abs(arc) <= tolerance):
+                return State(volume=volume, pressure=p, q=q, iterations=iteration)
+            if np.max(np.abs(step[:n])) > 0.5 * self.length_scale:
+                raise ConvergenceError('Newton step larger than half the model size')
+        raise ConvergenceError(f'no convergence in {max_iterations} iterations')
+
+    def trace_path(self, max_volume: float, first_step: float, max_step: float,
+                   min_step: float,
+                   on_state: Callable[[State], str | None] | None = None,
+                   max_states: int = 5000) -> PathResult:
+        """
+        Inflate from rest to ``max_volume`` [m^3], following the path by its arc length.
+
+        The same path as :meth:`ramp_volume` where the volume grows, and on through points
+        where it turns back and grows again. Steps are measured in the (volume, pressure)
+        plane, volumes scaled by the requested range and pressures by the material's stiffness
+        (``force_scale / length_scale**2``), so ``first_step``, ``max_step`` and ``min_step``
+        [m^3] mean what they mean for :meth:`ramp_volume` where the pressure is flat. Each step
+        starts from the secant extrapolation of the last two states. The last state is at
+        ``max_volume`` exactly when the path gets there.
+        """
+        q = np.zeros(self.space.size)
+        self.reset_to(q)
+        rest = State(volume=self.rest_volume, pressure=0.0, q=q.copy())
+        result = PathResult(states=[rest])
+        if on_state is not None:
+            on_state(rest)
+        volume_scale = max_volume - self.rest_volume
+        pressure_scale = self.force_scale / self.length_scale**2
+        scales = (volume_scale, pressure_scale)
+        step = first_step / volume_scale
+        current = self.solve_volume(rest.q, 0.0, rest.volume + first_step)
+        result.newton_iterations += current.iterations
+        previous = rest
+        result.states.append(current)
+        if on_state is not None and (reason := on_state(current)):
+            result.stop_reason = reason
+            return result
+        while len(result.states) < max_states:
+            secant = np.array([(current.volume - previous.volume) / volume_scale,
+                               (current.pressure - previous.pressure) / pressure_scale])
+            length = float(np.hypot(*secant))
+            direction = (float(secant[0] / length), float(secant[1] / length))
+            ratio = step / length
+            if (direction[0] > 0 and current.volume + step * direction[0] * volume_scale
+                    >= max_volume):
+                try:
+                    final = self.solve_volume(current.q, current.pressure, max_volume)
+                except ConvergenceError:
+                    final = None
+                if final is not None:
+                    result.newton_iterations += final.iterations
+                    result.states.append(final)
+                    if on_state is not None and (reason := on_state(final)):
+                        result.stop_reason = reason
+                    return result
+                self.reset_to(current.q)
+            guess = State(volume=current.volume + ratio * (current.volume - previous.volume),
+                          pressure=current.pressure
+                          + ratio * (current.pressure - previous.pressure),
+                          q=current.q + ratio * (current.q - previous.q))
+            try:
+                state = self.solve_arc(current, direction, step, guess, scales)
+                # The step's projection on the last direction is ``step``; a chord much longer
+                # than that turned sharply, and may have landed on another part of the path
+                # (the line it is solved on crosses the path again beyond a turn).
+                chord = np.hypot((state.volume - current.volume) / volume_scale,
+                                 (state.pressure - current.pressure) / pressure_scale)
+                if chord * self.MAX_TURN_COSINE > step:
+                    raise ConvergenceError('the path turned by more than the step allows')
+            except ConvergenceError as err:
+                self.reset_to(current.q)
+                step *= 0.5
+                if step * volume_scale < min_step:
+                    result.stop_reason = f'no convergence beyond the last state ({err})'
+                    return result
+                continue
+            result.newton_iterations += state.iterations
+            previous, current = current, state
+            result.states.append(state)
+            if on_state is not None and (reason := on_state(state)):
+                result.stop_reason = reason
+                return result
+            if state.iterations <= 6:
+                step = min(step * 1.5, max_step / volume_scale)
+        result.stop_reason = f'stopped after {max_states} states'
+        return result
 
     def solve_pressure(self, q0: NDArray[np.float64], pressure: float,
                        max_iterations: int = 25, tolerance: float = 1e-6) -> State:
