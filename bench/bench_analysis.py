@@ -3,23 +3,29 @@ Playback analysis: our array reader against rosbags and mcap-ros2-support, repor
 
     python bench/bench_analysis.py [--big BAG_OR_NOTHING] [--repeat 3]
 
-Makes the paper bag (`softseq run paper`) in bags/bench_paper if missing and, with --big, an
-18-cycle paper bag (10.3 million messages) in bags/bench_paper18. In one run it measures:
+Makes the paper bag (`softseq run paper`) in bags/bench_paper and, with --big, an 18-cycle
+paper bag (10.3 million messages) in bags/bench_paper18, anew each run (so they have the current
+writer's layout). In one run it measures:
 
 - reading the columns the analysis uses (pump command, actuator volumes, curvatures: stamps and
   values) with our reader, with rosbags and with mcap-ros2-support; the three results are
   checked to be identical before any time is reported;
-- the whole report (read, metrics, five figures as PNG and SVG), in-process and as the
-  `softseq report` command (Python start-up included);
+- our reader on a copy of the bag in one sequence of chunks, as mcap's writer (and rosbag2)
+  lay it out, against the bag itself, whose camera frames fill chunks of their own;
+- the whole report (read, metrics, five figures), in-process and as the `softseq report`
+  command (Python start-up included), PNG only (the default) and with SVG, the commands taken
+  in turn so that a slower minute of the machine falls on both;
 - the peak memory (max RSS) of `softseq report` on the paper bag and on the big bag.
 
-Writes bench/analysis_results.md. Times are the best of --repeat runs: on a shared machine the
-best run is the one least disturbed by others.
+Writes bench/analysis_results.md. In-process times are the best of --repeat runs (the run least
+disturbed by others on a shared machine); command times are the median, minimum and maximum of
+--commands runs of each.
 """
 
 import argparse
 from pathlib import Path
 import platform
+import resource
 import subprocess
 import sys
 import time
@@ -37,9 +43,10 @@ TOPICS = {contract.PUMP_COMMAND: ('position', 'velocity'),
           contract.CURVATURES: ('position',)}
 
 
-def ensure_bag(path: Path, cycles: int) -> Path:
-    if (path / 'metadata.yaml').is_file():
-        return path
+def make_bag(path: Path, cycles: int) -> Path:
+    import shutil
+
+    shutil.rmtree(path, ignore_errors=True)
     scene = REPO / 'config' / 'paper.yaml'
     if cycles != 1:
         import yaml
@@ -111,12 +118,56 @@ def read_mcap_ros2(bag: Path) -> dict:
     return _columns(rows)
 
 
+def one_chunk_sequence_copy(bag: Path, copy: Path) -> Path:
+    """The bag rewritten by mcap's own writer: one sequence of chunks, every topic mixed."""
+    import shutil
+
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    shutil.rmtree(copy, ignore_errors=True)
+    copy.mkdir(parents=True)
+    source_file = next(bag.glob('*.mcap'))
+    with open(source_file, 'rb') as source, open(copy / source_file.name, 'wb') as target:
+        reader = make_reader(source)
+        writer = Writer(target, chunk_size=768 * 1024)
+        writer.start(profile='ros2', library='bench')
+        summary = reader.get_summary()
+        schemas = {s.id: writer.register_schema(s.name, s.encoding, s.data)
+                   for s in summary.schemas.values()}
+        channels = {c.id: writer.register_channel(c.topic, c.message_encoding,
+                                                  schemas[c.schema_id], c.metadata)
+                    for c in summary.channels.values()}
+        for _, channel, message in reader.iter_messages(log_time_order=True):
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time, message.sequence)
+        writer.finish()
+    return copy
+
+
 def check_same(a: dict, b: dict, what: str) -> None:
     for topic, columns in a.items():
         for key, values in columns.items():
             other = np.asarray(b[topic][key]).reshape(values.shape)
             if not np.array_equal(values, other):
                 raise SystemExit(f'{what}: {topic}.{key} differs')
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process so far, every thread (the reader decompresses on a second)."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def best_with_cpu(function, repeat: int) -> tuple[float, float, object]:
+    """Best wall time [s], the CPU time [s] of that run, and the result."""
+    runs, result = [], None
+    for _ in range(repeat):
+        cpu, start = cpu_seconds(), time.perf_counter()
+        result = function()
+        runs.append((time.perf_counter() - start, cpu_seconds() - cpu))
+    wall, cpu = min(runs)
+    return wall, cpu, result
 
 
 def best(function, repeat: int) -> tuple[float, object]:
@@ -126,6 +177,20 @@ def best(function, repeat: int) -> tuple[float, object]:
         result = function()
         times.append(time.perf_counter() - start)
     return min(times), result
+
+
+def commands_in_turn(commands: dict[str, list[str]], runs: int) -> dict[str, list[tuple]]:
+    """Each command ``runs`` times, taken in turn: (wall s, max RSS kB) of every run."""
+    results: dict[str, list[tuple]] = {name: [] for name in commands}
+    for _ in range(runs):
+        for name, args in commands.items():
+            results[name].append(command(args))
+    return results
+
+
+def spread(values: list[float]) -> str:
+    return (f'{float(np.median(values)):.2f} s ({min(values):.2f} to {max(values):.2f}, '
+            f'{len(values)} runs)')
 
 
 def command(args: list[str]) -> tuple[float, int]:
@@ -139,40 +204,52 @@ def command(args: list[str]) -> tuple[float, int]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--repeat', type=int, default=3)
+    parser.add_argument('--commands', type=int, default=9, help='runs of each command')
     parser.add_argument('--big', action='store_true', help='also the 18-cycle bag (10^7 msgs)')
     parser.add_argument('--out', type=Path, default=REPO / 'bench' / 'analysis_results.md')
     args = parser.parse_args()
     bags = REPO / 'bags'
     bags.mkdir(exist_ok=True)
-    paper = ensure_bag(bags / 'bench_paper', 1)
+    paper = make_bag(bags / 'bench_paper', 1)
     count = open_bag(paper).channels
     messages = sum(c.message_count for c in count.values())
     read = sum(count[t].message_count for t in names().values())
 
-    ours_s, ours = best(lambda: read_ours(paper), args.repeat)
+    ours_s, ours_cpu, ours = best_with_cpu(lambda: read_ours(paper), args.repeat)
     rosbags_s, theirs = best(lambda: read_rosbags(paper), 1)
     check_same(ours, theirs, 'rosbags')
     mcap_s, theirs = best(lambda: read_mcap_ros2(paper), 1)
     check_same(ours, theirs, 'mcap-ros2-support')
+    mixed = one_chunk_sequence_copy(paper, bags / 'bench_paper_mixed')
+    mixed_s, mixed_cpu, theirs = best_with_cpu(lambda: read_ours(mixed), args.repeat)
+    check_same(ours, theirs, 'the one-chunk-sequence copy')
     del theirs
+    # As in a report, where the figure worker holds the second core while the bag is read.
+    busy = subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+    try:
+        busy_s, _, _ = best_with_cpu(lambda: read_ours(paper), args.repeat)
+        busy_mixed_s, _, _ = best_with_cpu(lambda: read_ours(mixed), args.repeat)
+    finally:
+        busy.kill()
+        busy.wait()
 
     from softseq_ros.analysis.report import write_report
 
     out = bags / 'bench_report'
-    report_s, _ = best(lambda: write_report(paper, out, svg=True), args.repeat)
-    png_s, _ = best(lambda: write_report(paper, out, svg=False), args.repeat)
-    scene_s, _ = best(lambda: write_report(paper, out, scene_name='paper', svg=True), 1)
-    softseq = [sys.executable, '-m', 'softseq_ros.cli', 'report']
-    cli = [command([*softseq, str(paper), '--out', str(out)]) for _ in range(args.repeat)]
-    cli_s = min(c[0] for c in cli)
-    cli_rss = max(c[1] for c in cli)
+    png_s, _ = best(lambda: write_report(paper, out), args.repeat)
+    svg_s, _ = best(lambda: write_report(paper, out, svg=True), args.repeat)
+    scene_s, _ = best(lambda: write_report(paper, out, scene_name='paper'), args.repeat)
+    softseq = [sys.executable, '-m', 'softseq_ros.cli', 'report', str(paper), '--out', str(out)]
+    cli = commands_in_turn({'png': softseq, 'svg': [*softseq, '--svg'],
+                            'scene': [*softseq, '--scene', 'paper']}, args.commands)
+    cli_rss = max(rss for _, rss in cli['png'])
     rows = [('paper bag', messages, cli_rss)]
     big_line = ''
     if args.big:
-        big = ensure_bag(bags / 'bench_paper18', 18)
+        big = make_bag(bags / 'bench_paper18', 18)
         big_messages = sum(c.message_count for c in open_bag(big).channels.values())
-        wall, rss = command([*softseq, str(big), '--out', str(bags / 'bench_report18'),
-                             '--no-svg'])
+        wall, rss = command([sys.executable, '-m', 'softseq_ros.cli', 'report', str(big),
+                             '--out', str(bags / 'bench_report18')])
         rows.append(('18-cycle paper bag', big_messages, rss))
         big_line = f'`softseq report` of the 18-cycle bag: {wall:.1f} s'
 
@@ -186,18 +263,25 @@ def main() -> None:
         '',
         '| reading pump command, volumes, curvatures (stamps, values) | time | vs ours |',
         '|---|---:|---:|',
-        f'| ours (`softseq_ros.bag.arrays`) | {ours_s:.2f} s | 1x |',
+        f'| ours (`softseq_ros.bag.arrays`) | {ours_s:.2f} s (CPU {ours_cpu:.2f} s) | 1x |',
         f'| rosbags 0.11 (`AnyReader.deserialize`) | {rosbags_s:.2f} s | '
         f'{rosbags_s / ours_s:.0f}x |',
         f'| mcap-ros2-support 0.6 (`iter_decoded_messages`) | {mcap_s:.2f} s | '
         f'{mcap_s / ours_s:.0f}x |',
+        f"| ours, on a copy in one sequence of chunks (mcap's writer) | {mixed_s:.2f} s (CPU "
+        f'{mixed_cpu:.2f} s) | {mixed_s / ours_s:.1f}x |',
+        f'| ours, the other core busy | {busy_s:.2f} s | {busy_s / ours_s:.1f}x |',
+        f'| ours on the copy, the other core busy | {busy_mixed_s:.2f} s | '
+        f'{busy_mixed_s / ours_s:.1f}x |',
         '',
         '| whole report of the paper bag | time |', '|---|---:|',
-        f'| in-process: read, metrics, 5 figures as PNG and SVG | {report_s:.2f} s |',
-        f'| in-process, PNG only | {png_s:.2f} s |',
-        f'| in-process, with `--scene paper` (equilibrium set, PNG and SVG) | {scene_s:.2f} s |',
-        f'| `softseq report BAG` command (Python and ROS wheel start-up included) | '
-        f'{cli_s:.2f} s |',
+        f'| in-process: read, metrics, 5 figures as PNG | {png_s:.2f} s |',
+        f'| in-process, PNG and SVG | {svg_s:.2f} s |',
+        f'| in-process, with `--scene paper` (equilibrium set) | {scene_s:.2f} s |',
+        '| `softseq report BAG` command (Python and ROS wheel start-up included), median | '
+        f'{spread([w for w, _ in cli["png"]])} |',
+        f'| the command with `--svg` | {spread([w for w, _ in cli["svg"]])} |',
+        f'| the command with `--scene paper` | {spread([w for w, _ in cli["scene"]])} |',
         '',
         '| peak memory of `softseq report` (max RSS) | messages | MB |', '|---|---:|---:|',
         *[f'| {name} | {n:,} | {rss / 1024:.0f} |' for name, n, rss in rows],
