@@ -74,6 +74,17 @@ def test_shipped_designs_are_table_i():
     (lambda d: d['volume'].update(first_step_m3=1.0),
      'x.yaml: volume.first_step_m3: must not exceed max_injected_m3'),
     (lambda d: d.update(extra=1), 'x.yaml: extra: unknown key'),
+    (lambda d: d['geometry'].update(membrane_thickness_factors=[1.0] * 11),
+     'x.yaml: geometry.membrane_thickness_factors: only for mesh.model whole_segment'),
+    (lambda d: (d['mesh'].update(model='whole_segment'),
+                d['geometry'].update(membrane_thickness_factors=[1.0] * 10)),
+     'x.yaml: geometry.membrane_thickness_factors: must be a list of 11 numbers'),
+    (lambda d: (d['mesh'].update(model='whole_segment'),
+                d['geometry'].update(membrane_thickness_factors=[1.0] * 10 + [2.0])),
+     'x.yaml: geometry.membrane_thickness_factors[10]: must be <= 1.5'),
+    (lambda d: (d['mesh'].update(model='whole_segment'),
+                d['geometry'].update(membrane_thickness_factors=[0.2] + [1.0] * 10)),
+     'x.yaml: geometry.membrane_thickness_factors[0]: must be >= 0.5, got 0.2'),
 ])
 def test_bad_designs_are_refused_with_one_line_naming_the_key(edit, expected):
     data = _raw()
@@ -105,6 +116,26 @@ def test_design_hash_follows_what_decides_the_result():
     for change in ({'geometry.membrane_thickness_m': 0.0006}, {'material.c1_pa': 8000.0},
                    {'mesh.element_size_m': 0.001}, {'volume.max_injected_m3': 6e-5}):
         assert with_changes(top, change).digest() != top.digest()
+
+
+def test_membrane_thickness_factors_thin_one_membrane_and_change_only_that_designs_hash():
+    coarse = {'mesh.element_size_m': 0.002, 'mesh.thin_layer_cells': 1,
+              'mesh.model': 'whole_segment'}
+    even = with_changes(load_design(TOP), coarse)
+    factors = [1.0] * 5 + [0.9] + [1.0] * 5
+    odd = with_changes(even, {'geometry.membrane_thickness_factors': factors})
+    assert odd.geometry.membrane_thickness_factors == tuple(factors)
+    assert odd.digest() != even.digest()
+    # A design without factors keeps the hash it had before they existed.
+    assert 'membrane_thickness_factors' not in load_design(TOP).identity()['geometry']
+    g = even.geometry
+    base, thinned = build_segment(even), build_segment(odd)
+    # The sixth membrane's skin is 10 % thinner: the cavity grows by that sliver of fluid.
+    sliver = 0.1 * g.membrane_thickness_m * g.membrane_length_m * g.cavity_width_m / 2
+    assert (thinned.model.rest_volume - base.model.rest_volume
+            == pytest.approx(sliver, rel=1e-9))
+    # The outer surface stays flat.
+    assert thinned.model.reference[:, 2].max() == pytest.approx(g.height_m, abs=1e-15)
 
 
 def test_both_models_mesh_the_table_i_cavity():

@@ -176,6 +176,12 @@ def build_segment(design: Design) -> SegmentModel:
     renumber = np.full(grid_points.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
     points = grid_points[used]
+    if g.membrane_thickness_factors is not None:
+        # Each membrane's skin scaled through its thickness (the outer surface stays flat).
+        skin = points[:, 2] >= top_membrane - 1e-9
+        for (lo, hi), factor in zip(membranes, g.membrane_thickness_factors):
+            over = skin & (points[:, 0] >= lo - 1e-9) & (points[:, 0] <= hi + 1e-9)
+            points[over, 2] = g.height_m - (g.height_m - points[over, 2]) * factor
     mesh = fem.Mesh(points, renumber[cells], 'hexahedron')
 
     # Cavity faces: between a fluid cell and a solid neighbour, normal toward the solid.

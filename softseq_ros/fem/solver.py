@@ -15,9 +15,10 @@ stays regular at a pressure peak, where A alone is singular and pressure control
 Where the volume itself turns back along the path (a snap-back: a membrane of several on one
 cavity bulges while the others shrink back, and the fluid they give up is more than it takes),
 volume control is singular in turn. :meth:`InflationModel.trace_path` then follows the path by
-its arc length in the (volume, pressure) plane instead (pseudo-arc-length continuation): the
-volume becomes an unknown and a third row [0, t_p, t_V] keeps each step a given distance along
-the last secant, so the path goes on through both kinds of turning point.
+its arc length over the whole state (pseudo-arc-length continuation): the volume becomes an
+unknown and one more row [t_q, t_p, t_V] keeps each step a given distance along the last secant
+of (displacements, pressure, volume), so the path goes on through both kinds of turning point,
+and through the exchange of fluid between membranes at almost constant volume and pressure.
 
 felupe's nearly-incompressible solid updates its cell-wise pressure and dilatation each time it
 is handed the field: the vector is assembled with the field exactly once per iteration and the
@@ -146,34 +147,35 @@ class InflationModel:
                 raise ConvergenceError('Newton step larger than half the model size')
         raise ConvergenceError(f'no convergence in {max_iterations} iterations')
 
-    def solve_arc(self, start: State, direction: tuple[float, float], distance: float,
-                  guess: State, scales: tuple[float, float], max_iterations: int = 25,
+    def solve_arc(self, start: State, direction: NDArray[np.float64], distance: float,
+                  guess: State, scales: tuple[float, float, float], max_iterations: int = 25,
                   tolerance: float = 1e-6) -> State:
         """
-        The equilibrium ``distance`` along ``direction`` from ``start`` in the scaled plane.
+        The equilibrium ``distance`` along ``direction`` from ``start``, in scaled states.
 
-        ``direction`` is a unit vector (dV / volume scale, dp / pressure scale) and ``scales``
-        those two scales; the step lands where the path crosses the line through
-        start + distance * direction normal to ``direction``. Newton's method starts from
-        ``guess``.
+        A state scales to (q / q scale, V / volume scale, p / pressure scale) with ``scales``
+        (q, volume, pressure); ``direction`` is a unit vector in that space. The step lands
+        where the path crosses the hyperplane through start + distance * direction normal to
+        ``direction``. Newton's method starts from ``guess``.
         """
-        volume_scale, pressure_scale = scales
-        t_v, t_p = direction
+        q_scale, volume_scale, pressure_scale = scales
+        t_q, t_v, t_p = direction[:-2], float(direction[-2]), float(direction[-1])
         q, p, volume = guess.q.copy(), float(guess.pressure), float(guess.volume)
+        n = q.size
+        border = sp.csr_matrix(np.concatenate([t_q / q_scale, [t_p / pressure_scale]])[None, :])
+        column = sp.csc_matrix((np.array([1.0, t_v / volume_scale]),
+                                (np.array([n, n + 1]), np.zeros(2, dtype=int))),
+                               shape=(n + 2, 1))
         for iteration in range(1, max_iterations + 1):
             # A trial state beyond a sharp turn may invert cells: felupe's energy is then NaN,
             # and the non-finite step below rejects it (a shorter step follows).
             with np.errstate(invalid='ignore', divide='ignore'):
                 x, residual, tangent, b = self._system(q, p)
             constraint = self.cavity.volume(x) - volume
-            arc = (t_v * (volume - start.volume) / volume_scale
+            arc = (t_q @ (q - start.q) / q_scale + t_v * (volume - start.volume) / volume_scale
                    + t_p * (p - start.pressure) / pressure_scale - distance)
-            n = b.size
-            column = sp.csc_matrix((np.array([1.0, t_v / volume_scale]),
-                                    (np.array([n, n + 1]), np.zeros(2, dtype=int))),
-                                   shape=(n + 2, 1))
-            matrix = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None],
-                              [None, sp.csc_matrix([[t_p / pressure_scale]])]], format='csc')
+            matrix = sp.vstack([sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]]),
+                                border])
             matrix = sp.hstack([matrix, column], format='csc')
             rhs = np.concatenate([-residual, [constraint, -arc]])
             try:
@@ -202,12 +204,14 @@ class InflationModel:
         Inflate from rest to ``max_volume`` [m^3], following the path by its arc length.
 
         The same path as :meth:`ramp_volume` where the volume grows, and on through points
-        where it turns back and grows again. Steps are measured in the (volume, pressure)
-        plane, volumes scaled by the requested range and pressures by the material's stiffness
-        (``force_scale / length_scale**2``), so ``first_step``, ``max_step`` and ``min_step``
-        [m^3] mean what they mean for :meth:`ramp_volume` where the pressure is flat. Each step
-        starts from the secant extrapolation of the last two states. The last state is at
-        ``max_volume`` exactly when the path gets there.
+        where it turns back and grows again. The arc length is measured over the whole state:
+        the displacements (root mean square, over the model's size), the volume (over the
+        requested range) and the pressure (over the material's stiffness,
+        ``force_scale / length_scale**2``). Near a turn the volume and the pressure barely
+        move while the membranes exchange fluid: the displacements carry the path there.
+        ``first_step``, ``max_step`` and ``min_step`` [m^3] are volume steps where the path
+        runs along the volume. Each step starts from the secant extrapolation of the last two
+        states. The last state is at ``max_volume`` exactly when the path gets there.
         """
         q = np.zeros(self.space.size)
         self.reset_to(q)
@@ -216,33 +220,37 @@ class InflationModel:
         if on_state is not None:
             on_state(rest)
         volume_scale = max_volume - self.rest_volume
-        pressure_scale = self.force_scale / self.length_scale**2
-        scales = (volume_scale, pressure_scale)
-        step = first_step / volume_scale
+        scales = (self.length_scale * np.sqrt(q.size), volume_scale,
+                  self.force_scale / self.length_scale**2)
+
+        def scaled(state: State) -> NDArray[np.float64]:
+            return np.concatenate([state.q / scales[0],
+                                   [state.volume / scales[1], state.pressure / scales[2]]])
+
         current = self.solve_volume(rest.q, 0.0, rest.volume + first_step)
-        result.newton_iterations += current.iterations
         previous = rest
-        result.states.append(current)
-        if on_state is not None and (reason := on_state(current)):
-            result.stop_reason = reason
+        if self._accepted(result, current, on_state):
             return result
+        # Steps in arc length; the first one's volume step is ``first_step``.
+        secant = scaled(current) - scaled(previous)
+        per_volume = float(np.linalg.norm(secant)) / (first_step / volume_scale)
+        step, largest, smallest = (first_step / volume_scale * per_volume,
+                                   max_step / volume_scale * per_volume,
+                                   min_step / volume_scale * per_volume)
         while len(result.states) < max_states:
-            secant = np.array([(current.volume - previous.volume) / volume_scale,
-                               (current.pressure - previous.pressure) / pressure_scale])
-            length = float(np.hypot(*secant))
-            direction = (float(secant[0] / length), float(secant[1] / length))
+            secant = scaled(current) - scaled(previous)
+            length = float(np.linalg.norm(secant))
+            direction = secant / length
             ratio = step / length
-            if (direction[0] > 0 and current.volume + step * direction[0] * volume_scale
-                    >= max_volume):
+            growing = direction[-2] > 0
+            if growing and current.volume + ratio * (current.volume - previous.volume) \
+                    >= max_volume:
                 try:
                     final = self.solve_volume(current.q, current.pressure, max_volume)
                 except ConvergenceError:
                     final = None
                 if final is not None:
-                    result.newton_iterations += final.iterations
-                    result.states.append(final)
-                    if on_state is not None and (reason := on_state(final)):
-                        result.stop_reason = reason
+                    self._accepted(result, final, on_state)
                     return result
                 self.reset_to(current.q)
             guess = State(volume=current.volume + ratio * (current.volume - previous.volume),
@@ -253,28 +261,43 @@ class InflationModel:
                 state = self.solve_arc(current, direction, step, guess, scales)
                 # The step's projection on the last direction is ``step``; a chord much longer
                 # than that turned sharply, and may have landed on another part of the path
-                # (the line it is solved on crosses the path again beyond a turn).
-                chord = np.hypot((state.volume - current.volume) / volume_scale,
-                                 (state.pressure - current.pressure) / pressure_scale)
+                # (the plane it is solved on crosses the path again beyond a turn).
+                chord = float(np.linalg.norm(scaled(state) - scaled(current)))
                 if chord * self.MAX_TURN_COSINE > step:
                     raise ConvergenceError('the path turned by more than the step allows')
             except ConvergenceError as err:
-                self.reset_to(current.q)
-                step *= 0.5
-                if step * volume_scale < min_step:
-                    result.stop_reason = f'no convergence beyond the last state ({err})'
+                step = self._shorter(current, step, smallest, err, result)
+                if step is None:
                     return result
                 continue
-            result.newton_iterations += state.iterations
             previous, current = current, state
-            result.states.append(state)
-            if on_state is not None and (reason := on_state(state)):
-                result.stop_reason = reason
+            if self._accepted(result, state, on_state):
                 return result
             if state.iterations <= 6:
-                step = min(step * 1.5, max_step / volume_scale)
+                step = min(step * 1.5, largest)
         result.stop_reason = f'stopped after {max_states} states'
         return result
+
+    @staticmethod
+    def _accepted(result: PathResult, state: State,
+                  on_state: Callable[[State], str | None] | None) -> bool:
+        """Record a converged state; True when ``on_state`` gives a reason to stop (kept)."""
+        result.newton_iterations += state.iterations
+        result.states.append(state)
+        if on_state is not None and (reason := on_state(state)):
+            result.stop_reason = reason
+            return True
+        return False
+
+    def _shorter(self, current: State, step: float, smallest: float, error: Exception,
+                 result: PathResult) -> float | None:
+        """After a failed step: back at ``current`` with half the step, None below ``smallest``."""
+        self.reset_to(current.q)
+        step *= 0.5
+        if step < smallest:
+            result.stop_reason = f'no convergence beyond the last state ({error})'
+            return None
+        return step
 
     def solve_pressure(self, q0: NDArray[np.float64], pressure: float,
                        max_iterations: int = 25, tolerance: float = 1e-6) -> State:
@@ -333,20 +356,13 @@ class InflationModel:
             try:
                 state = self.solve_volume(q_guess, p_guess, target)
             except ConvergenceError as err:
-                self.reset_to(current.q)
-                step *= 0.5
-                if step < min_step:
-                    result.stop_reason = f'no convergence beyond the last state ({err})'
+                step = self._shorter(current, step, min_step, err, result)
+                if step is None:
                     return result
                 continue
-            result.newton_iterations += state.iterations
             previous, current = current, state
-            result.states.append(state)
-            if on_state is not None:
-                reason = on_state(state)
-                if reason:
-                    result.stop_reason = reason
-                    return result
+            if self._accepted(result, state, on_state):
+                return result
             if state.iterations <= 6:
                 step = min(step * 1.5, max_step)
         return result

@@ -148,6 +148,9 @@ def _provenance(result: FemResult) -> list[str]:
         f'Peak pressure {peak_p:.1f} Pa at {peak_v * 1e6:.2f} mL injected. SI units; '
         'pressures are gauge.',
     ]
+    if d.geometry.membrane_thickness_factors is not None:
+        lines.append('Membrane thickness factors, base to tip: '
+                     + ', '.join(f'{f:g}' for f in d.geometry.membrane_thickness_factors) + '.')
     return [line for line in lines if line is not None]
 
 

@@ -17,6 +17,7 @@ Schema (SI units; optional keys show their defaults)::
       wall_thickness_m: 0.002               # d (what it is depends on wall_reading)
       wall_reading: skin_bands              # or side_walls
       # skin_band_thickness_m: ...          # side_walls only: skin between the membranes
+      # membrane_thickness_factors: [1.0, 0.98, ...]   # whole_segment only: one per membrane
     material: {law: yeoh, c1_pa: 7830.0, c2_pa: 103.0, c3_pa: -1.0}   # as in scenes
     mesh:
       model: unit_cell                      # or whole_segment
@@ -33,6 +34,11 @@ skin between the membranes (thickness d from the flat outer surface into the cav
 walls are then (w - g) / 2 thick. ``side_walls`` reads d as the side walls' thickness, so the
 cavity is w - 2 d wide (the file's cavity_width_m must say so) and the skin between membranes
 needs its own ``skin_band_thickness_m``. docs/fem.md explains the choice.
+
+``membrane_thickness_factors`` (whole segment only) scales each membrane's thickness, base to
+tip: real membranes are never quite equal, and eleven equal ones on one cavity reach their
+pressure peak together, a bifurcation no path can be followed through; a 1 % scatter picks the
+membranes that run away, as in the experiment.
 
 Every mistake raises ``DesignError`` with one line ``<file>: <key path>: <what is wrong>``.
 """
@@ -83,6 +89,7 @@ class Geometry:
     wall_thickness_m: float
     wall_reading: str = 'skin_bands'
     skin_band_thickness_m: float = 0.0
+    membrane_thickness_factors: tuple[float, ...] | None = None  # base to tip; None: all 1
 
     @property
     def side_wall_thickness_m(self) -> float:
@@ -149,7 +156,10 @@ class Design:
         """What decides the FEM result: geometry, material, mesh, volume range, code versions."""
         from importlib.metadata import version
 
-        return {'geometry': asdict(self.geometry), 'material': asdict(self.material),
+        geometry = asdict(self.geometry)
+        if geometry['membrane_thickness_factors'] is None:
+            del geometry['membrane_thickness_factors']  # designs without it keep their hash
+        return {'geometry': geometry, 'material': asdict(self.material),
                 'mesh': asdict(self.mesh), 'volume': asdict(self.volume),
                 'fem_code': FEM_CODE_VERSION, 'felupe': version('felupe')}
 
@@ -166,7 +176,7 @@ _GEOMETRY_KEYS = ('length_m', 'height_m', 'width_m', 'beam_thickness_m', 'cavity
 
 def _geometry(ctx: _Context, value: object) -> Geometry:
     raw = _mapping(ctx, value, 'geometry', _GEOMETRY_KEYS,
-                   ('wall_reading', 'skin_band_thickness_m'))
+                   ('wall_reading', 'skin_band_thickness_m', 'membrane_thickness_factors'))
     dims = {key: _number(ctx, raw[key], f'geometry.{key}', gt=0.0) for key in _GEOMETRY_KEYS}
     reading = _text(ctx, raw.get('wall_reading', 'skin_bands'), 'geometry.wall_reading')
     if reading not in WALL_READINGS:
@@ -203,6 +213,21 @@ def _geometry(ctx: _Context, value: object) -> Geometry:
         raise ctx.error('geometry.length_m',
                         f'{geometry.length_m:g} m holds no end caps around {geometry.membranes} '
                         f'membranes of pitch {geometry.pitch_m:g} m')
+    factors = raw.get('membrane_thickness_factors')
+    if factors is not None:
+        key = 'geometry.membrane_thickness_factors'
+        if not isinstance(factors, (list, tuple)) or len(factors) != geometry.membranes:
+            raise ctx.error(key, f'must be a list of {geometry.membranes} numbers (one per '
+                                 f'membrane, base to tip), got {factors!r}')
+        values = tuple(_number(ctx, f, f'{key}[{i}]', ge=0.5) for i, f in enumerate(factors))
+        for i, factor in enumerate(values):
+            if factor > 1.5:
+                raise ctx.error(f'{key}[{i}]', f'must be <= 1.5 (a scatter of the thickness, '
+                                               f'not another design), got {factor:g}')
+            if not factor * dims['membrane_thickness_m'] < room:
+                raise ctx.error(f'{key}[{i}]', f'{factor:g} x membrane_thickness_m leaves no '
+                                               f'cavity (room {room:g} m)')
+        geometry = Geometry(**{**asdict(geometry), 'membrane_thickness_factors': values})
     return geometry
 
 
@@ -260,6 +285,10 @@ def design_from_dict(data: object, path: str | Path | None = None) -> Design:
         material = Material(law=raw['material']['law'],
                             params={k: v for k, v in raw['material'].items() if k != 'law'})
         mesh = _mesh(ctx, raw.get('mesh'), geometry)
+        if geometry.membrane_thickness_factors is not None and mesh.model != 'whole_segment':
+            raise ctx.error('geometry.membrane_thickness_factors',
+                            'only for mesh.model whole_segment (a unit cell has one membrane, '
+                            'repeated)')
         volume = _volume(ctx, raw['volume'])
     except DesignError:
         raise
@@ -281,6 +310,10 @@ def load_design(path: str | Path) -> Design:
     return design_from_dict(data, path)
 
 
+# Keys a design may leave out that a change may still set.
+_OPTIONAL_KEYS = ('geometry.membrane_thickness_factors', 'geometry.skin_band_thickness_m')
+
+
 def with_changes(design: Design, changes: dict[str, Any]) -> Design:
     """A copy of a design with dotted keys replaced (``geometry.membrane_thickness_m``)."""
     data = {'name': design.name, 'description': design.description,
@@ -289,6 +322,8 @@ def with_changes(design: Design, changes: dict[str, Any]) -> Design:
             'mesh': asdict(design.mesh), 'volume': asdict(design.volume)}
     if data['geometry']['wall_reading'] == 'skin_bands':
         data['geometry'].pop('skin_band_thickness_m')
+    if data['geometry']['membrane_thickness_factors'] is None:
+        data['geometry'].pop('membrane_thickness_factors')
     for dotted, value in changes.items():
         node = data
         *parents, leaf = dotted.split('.')
@@ -296,7 +331,7 @@ def with_changes(design: Design, changes: dict[str, Any]) -> Design:
             if not isinstance(node.get(key), dict):
                 raise DesignError(f'{design.path or "<design>"}: {dotted}: no such key')
             node = node[key]
-        if leaf not in node and parents != ['material']:
+        if leaf not in node and parents != ['material'] and dotted not in _OPTIONAL_KEYS:
             raise DesignError(f'{design.path or "<design>"}: {dotted}: no such key')
         node[leaf] = value
     shown = f'{design.path or "<design>"} with {", ".join(f"{k}={v}" for k, v in changes.items())}'
