@@ -187,6 +187,28 @@ def test_contact_is_seen_where_a_membrane_reaches_its_neighbours_mid_plane(coars
         assert segment.contact(x, q)
 
 
+def test_membrane_heights_see_one_membrane_bulge_however_the_segment_bends(coarse_top_cell):
+    segment = build_segment(with_changes(coarse_top_cell.design,
+                                         {'mesh.model': 'whole_segment'}))
+    g = segment.design.geometry
+    x = segment.model.reference.copy()
+    # At rest every membrane's outer skin stands h - e/2 from the beam's mid-line.
+    rest = segment.membrane_heights(x)
+    assert rest.shape == (g.membranes,)
+    assert rest == pytest.approx(g.height_m - g.beam_thickness_m / 2, rel=1e-12)
+    # Push the fourth membrane's skin out by a bump; then bend the whole segment far.
+    skin = segment.top_points[segment.membrane_of_top == 3]
+    centre = x[skin, 0].mean()
+    bump = 2e-3 * np.cos(np.pi * (x[skin, 0] - centre) / g.membrane_length_m)
+    x[skin, 2] += bump
+    for angle in (0.0, 0.6 * np.pi):
+        c, s = np.cos(angle), np.sin(angle)
+        turned = x @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+        heights = segment.membrane_heights(turned)
+        assert heights[3] - rest[3] == pytest.approx(bump.max(), rel=1e-9)
+        assert np.delete(heights, 3) == pytest.approx(np.delete(rest, 3), rel=1e-9)
+
+
 def test_arc_length_follows_two_spheres_on_one_syringe_through_their_snap_back():
     # A thin small sphere and a thick large one on one fluid volume: past the small one's
     # peak the large one gives up more fluid than the small one takes, so the total volume
@@ -213,3 +235,115 @@ def test_arc_length_follows_two_spheres_on_one_syringe_through_their_snap_back()
             assert state.pressure == pytest.approx(exact, rel=0.005)
     # The small sphere went over its peak and far down its falling branch.
     assert pair.stretches(result.states[-1].q)[0] > 2.0
+
+
+def _pair_closed_form(pair, state):
+    """Each sphere's stretch, closed-form pressure [Pa] and stiffness dp/dv [Pa/m^3]."""
+    reference = pair.model.reference
+    out = []
+    for stretch, (inner, outer), cavity in zip(pair.stretches(state.q), pair.radii,
+                                               pair.cavities):
+        rest = cavity.volume(reference)
+        h = 1e-6 * stretch
+        slope = MU * (neo_hookean_thick_sphere_pressure(stretch + h, inner, outer)
+                      - neo_hookean_thick_sphere_pressure(stretch - h, inner, outer)) / (2 * h)
+        out.append((stretch, MU * neo_hookean_thick_sphere_pressure(stretch, inner, outer),
+                    slope / (3 * rest * stretch**2)))
+    return out
+
+
+def _stable_pair_states(pair, volume):
+    """Closed-form stable equilibria (stretches) of the two spheres sharing ``volume``."""
+    from scipy.optimize import brentq
+
+    (a1, b1), (a2, b2) = pair.radii
+    rest1, rest2 = (c.volume(pair.model.reference) for c in pair.cavities)
+
+    def second(l1):
+        return np.cbrt((volume - rest1 * l1**3) / rest2)
+
+    def mismatch(l1):
+        return (neo_hookean_thick_sphere_pressure(l1, a1, b1)
+                - neo_hookean_thick_sphere_pressure(second(l1), a2, b2))
+
+    top = np.cbrt((volume - rest2) / rest1)  # the second sphere back at rest
+    grid = np.linspace(1.0 + 1e-9, top - 1e-9, 4000)
+    values = mismatch(grid)
+    stable = []
+    for lo, hi, f_lo, f_hi in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+        if f_lo * f_hi < 0:
+            l1 = brentq(mismatch, lo, hi, xtol=1e-13)
+            l2 = second(l1)
+            h = 1e-6
+            k = [(neo_hookean_thick_sphere_pressure(lam + h, a, b)
+                  - neo_hookean_thick_sphere_pressure(lam - h, a, b)) / (2 * h)
+                 / (3 * rest * lam**2)
+                 for lam, a, b, rest in ((l1, a1, b1, rest1), (l2, a2, b2, rest2))]
+            # Fluid moved from one to the other at a fixed total: stable if k1 + k2 > 0.
+            if k[0] + k[1] > 0:
+                stable.append((l1, l2))
+    return stable
+
+
+def _check_volume_controlled_pair(pair, result):
+    states = result.states
+    volumes = np.array([s.volume for s in states])
+    assert np.all(np.diff(volumes) > 0)
+    for state in states[1:]:
+        spheres = _pair_closed_form(pair, state)
+        for _, exact, _ in spheres:
+            assert state.pressure == pytest.approx(exact, rel=0.005)
+        # Every state the syringe passes through is stable, by the FEM's own count and by
+        # the closed forms' stiffnesses.
+        assert state.stable is True
+        assert spheres[0][2] + spheres[1][2] > 0
+
+
+def test_volume_control_snaps_through_where_two_spheres_volume_turns_back():
+    # The path of the arc-length test above, under volume control: a syringe cannot follow the
+    # snap-back, so at the turning volume the spheres snap at constant volume onto the far
+    # branch, where the small one holds most of the fluid.
+    from softseq_ros.fem.sphere import sphere_pair
+
+    small, large = (0.010, 0.011), (0.060, 0.072)
+    pair = sphere_pair(small, large, 'neo_hookean', {'shear_modulus_pa': MU})
+    model = pair.model
+    v0 = model.rest_volume
+    result = model.ramp_volume(1.5 * v0, first_step=0.004 * v0, max_step=0.04 * v0,
+                               min_step=1e-6 * v0)
+    assert result.stop_reason == 'reached the requested volume'
+    assert result.states[-1].volume == pytest.approx(1.5 * v0, rel=1e-12)
+    _check_volume_controlled_pair(pair, result)
+    (snap,) = result.snaps
+    before, after = result.states[snap.index - 1], result.states[snap.index]
+    assert after.volume - before.volume <= 2e-6 * v0
+    assert snap.pressure_after < 0.6 * snap.pressure_before
+    # It landed where the closed forms have their stable state of largest small sphere.
+    l1, l2 = max(_stable_pair_states(pair, after.volume))
+    assert pair.stretches(after.q) == pytest.approx((l1, l2), rel=0.01)
+    assert pair.stretches(before.q)[0] < 0.5 * l1
+
+
+def test_volume_control_leaves_the_unstable_uniform_inflation_of_two_equal_spheres():
+    # Two equal spheres on one syringe: past their common peak inflating both alike is an
+    # equilibrium, but unstable (a perfect bifurcation, like equal membranes of a segment).
+    # Volume control finds it, sees it unstable, and settles on the stable unequal state.
+    from softseq_ros.fem.sphere import sphere_pair
+
+    pair = sphere_pair((A, B), (A, B), 'neo_hookean', {'shear_modulus_pa': MU})
+    model = pair.model
+    v0 = model.rest_volume
+    result = model.ramp_volume(6 * v0, first_step=0.05 * v0, max_step=0.5 * v0,
+                               min_step=1e-4 * v0)
+    assert result.stop_reason == 'reached the requested volume'
+    _check_volume_controlled_pair(pair, result)
+    (snap,) = result.snaps
+    assert snap.cause == 'the equilibrium at the next volume is unstable'
+    for state in result.states[:snap.index]:
+        first, second = pair.stretches(state.q)
+        assert first == pytest.approx(second, rel=1e-6)
+    for state in result.states[snap.index:]:
+        stretches = sorted(pair.stretches(state.q))
+        closed = [sorted(s) for s in _stable_pair_states(pair, state.volume)]
+        assert any(np.allclose(stretches, c, rtol=0.01) for c in closed)
+        assert stretches[1] - stretches[0] > 0.2

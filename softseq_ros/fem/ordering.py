@@ -6,6 +6,10 @@ for 10,000 unknowns). METIS' nested dissection of the matrix graph, applied symm
 that by half and, without partial pivoting (the matrices are symmetric and the border row of the
 volume constraint comes last), the factorization by a factor of five. Every solution is refined
 once and checked by its backward error; a poor one is redone with SuperLU's pivoting LU.
+
+An unpivoted LU of a symmetric matrix is its L D L^T factorization (U = D L^T), so it also gives
+the matrix's inertia (Sylvester: as many negative eigenvalues as negative pivots) for
+the price of the solve: whether an equilibrium is stable.
 """
 
 import numpy as np
@@ -39,6 +43,7 @@ class SparseSolver:
         self._permutation: NDArray[np.int64] | None = None
         self._size = -1
         self._border = border
+        self._factor = None  # the last solve's unpivoted factorization, when it was trusted
 
     def solve(self, matrix: sp.spmatrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """Solution of ``matrix @ x = rhs``; raises RuntimeError on an exactly singular matrix."""
@@ -53,6 +58,7 @@ class SparseSolver:
         perm = self._permutation
         permuted = matrix[perm][:, perm].tocsc()
         solution = np.empty(size)
+        self._factor = None
         try:
             lu = splu(permuted, permc_spec='NATURAL', diag_pivot_thresh=0.0,
                       options={'SymmetricMode': True})
@@ -64,7 +70,28 @@ class SparseSolver:
             scale = (abs(matrix).sum(axis=1).max() * np.abs(solution).max()
                      + np.abs(rhs).max())
             if np.isfinite(residual) and residual <= _BACKWARD_ERROR_LIMIT * scale:
+                if np.array_equal(lu.perm_r, np.arange(size)):
+                    self._factor = lu
                 return solution
         except RuntimeError:
             pass
         return splu(matrix.tocsc()).solve(rhs)
+
+    def negative_pivots(self) -> int | None:
+        """
+        Negative eigenvalues of the last matrix solved, if symmetric (None: not known).
+
+        Known when the last solve kept its unpivoted factorization (no row was exchanged).
+        """
+        if self._factor is None:
+            return None
+        return int(np.count_nonzero(self._factor.U.diagonal() < 0))
+
+    def solve_again(self, rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """Solution with the last trusted factorization, unrefined (None: there is none)."""
+        if self._factor is None:
+            return None
+        perm = self._permutation
+        solution = np.empty(rhs.size)
+        solution[perm] = self._factor.solve(rhs[perm])
+        return solution

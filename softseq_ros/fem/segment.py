@@ -79,6 +79,20 @@ class SegmentModel:
         slope = np.polyfit(s_ref, angle, 1)[0]
         return float(-slope)
 
+    def membrane_heights(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """
+        Each membrane's bulge [m], base to tip.
+
+        The farthest its outer skin stands from the beam's mid-line, in the bending plane: a
+        measure that bending alone leaves alone.
+        """
+        line = x[self.neutral_line][:, [0, 2]]
+        top = x[self.top_points][:, [0, 2]]
+        distance = np.min(np.linalg.norm(top[:, None, :] - line[None, :, :], axis=-1), axis=1)
+        heights = np.zeros(int(self.membrane_of_top.max()) + 1)
+        np.maximum.at(heights, self.membrane_of_top, distance)
+        return heights
+
     def contact(self, x: NDArray[np.float64], q: NDArray[np.float64]) -> bool:
         """Whether a membrane has reached the mid-plane between it and its neighbour."""
         if self.design.mesh.model == 'unit_cell':

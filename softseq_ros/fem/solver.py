@@ -20,6 +20,13 @@ unknown and one more row [t_q, t_p, t_V] keeps each step a given distance along 
 of (displacements, pressure, volume), so the path goes on through both kinds of turning point,
 and through the exchange of fluid between membranes at almost constant volume and pressure.
 
+Every state under volume control knows whether it is stable: the bordered matrix is factored
+without pivoting, an L D L^T factorization whose negative pivots count its negative eigenvalues,
+and a stable state has one only (the constraint's). Where the ramp can go no further, or only
+through unstable states, the solid snaps through at constant volume as a syringe-driven one
+does: :meth:`InflationModel.settle_at_volume` follows that snap as a damped motion until it comes
+to rest on a stable state, and the ramp goes on from there.
+
 felupe's nearly-incompressible solid updates its cell-wise pressure and dilatation each time it
 is handed the field: the vector is assembled with the field exactly once per iteration and the
 matrix without it, which keeps the tangent consistent (quadratic convergence).
@@ -41,6 +48,10 @@ class ConvergenceError(RuntimeError):
     """Newton's method did not converge for one load level."""
 
 
+class MotionStoppedError(RuntimeError):
+    """A snap-through's motion reached a state the caller stops at (contact, for example)."""
+
+
 @dataclass
 class State:
     """One converged equilibrium: volume [m^3], gauge pressure [Pa], reduced coordinates."""
@@ -49,6 +60,20 @@ class State:
     pressure: float
     q: NDArray[np.float64]
     iterations: int = 0
+    # Under volume control: a local minimum of the energy among states of this volume (None:
+    # not known, e.g. a state of a pressure-controlled or arc-length run).
+    stable: bool | None = None
+
+
+@dataclass(frozen=True)
+class Snap:
+    """A snap-through at constant volume: the path ended, the solid settled on another one."""
+
+    index: int               # of the state it landed in, in PathResult.states
+    volume: float            # [m^3] where it snapped (the landing state's volume)
+    pressure_before: float   # [Pa] gauge, the last state before it
+    pressure_after: float    # [Pa] gauge, the state it settled in
+    cause: str
 
 
 @dataclass
@@ -58,6 +83,7 @@ class PathResult:
     states: list[State] = field(default_factory=list)
     stop_reason: str = 'reached the requested volume'
     newton_iterations: int = 0
+    snaps: list[Snap] = field(default_factory=list)
 
     @property
     def volume_turns(self) -> list[int]:
@@ -77,6 +103,12 @@ class InflationModel:
 
     # Path following: the cosine of the largest turn of the path within one step (about 37 deg).
     MAX_TURN_COSINE = 0.8
+    # The farthest a point may move in one step of a snap-through, over the model's size: the
+    # solid moves continuously, and so must its path.
+    MAX_MOVE = 0.05
+    # A volume step whose largest motion per volume is this many times the last step's has
+    # jumped off the path, not followed it.
+    MAX_PACE_JUMP = 10.0
 
     def __init__(self, solid: Any, field: Any, space: ReducedSpace, cavity: Cavity,
                  force_scale: float, length_scale: float) -> None:
@@ -120,11 +152,22 @@ class InflationModel:
         return x, jac.T @ force, tangent.tocsc(), jac.T @ grad
 
     def solve_volume(self, q0: NDArray[np.float64], p0: float, target: float,
-                     max_iterations: int = 25, tolerance: float = 1e-6) -> State:
-        """Equilibrium at the fluid volume ``target`` [m^3], starting from (q0, p0)."""
+                     max_iterations: int = 25, tolerance: float = 1e-6,
+                     damping: NDArray[np.float64] | None = None) -> State:
+        """
+        Equilibrium at the fluid volume ``target`` [m^3], starting from (q0, p0).
+
+        With ``damping`` (one coefficient per unknown), one implicit Euler step of the damped
+        motion ``damping * dq/dt = -R`` of unit time from q0 instead: the residual gains
+        ``damping * (q - q0)`` and the matrix its diagonal, which makes it regular where the
+        static equilibrium is unstable or absent.
+        """
         q, p = q0.copy(), float(p0)
         for iteration in range(1, max_iterations + 1):
             x, residual, tangent, b = self._system(q, p)
+            if damping is not None:
+                residual = residual + damping * (q - q0)
+                tangent = (tangent + sp.diags(damping)).tocsc()
             constraint = self.cavity.volume(x) - target
             bordered = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]], format='csc')
             rhs = np.concatenate([-residual, [constraint]])
@@ -132,6 +175,9 @@ class InflationModel:
                 step = self._bordered_solver.solve(bordered, rhs)
             except RuntimeError as err:  # an exactly singular matrix
                 raise ConvergenceError(f'singular bordered matrix ({err})') from None
+            if damping is not None and self._stable() is False:
+                # A damped step this long no longer goes downhill (see settle_at_volume).
+                raise ConvergenceError('the damped matrix is indefinite at constant volume')
             if not np.all(np.isfinite(step)):
                 raise ConvergenceError('non-finite Newton step')
             q += step[:-1]
@@ -142,10 +188,198 @@ class InflationModel:
             small_step = np.max(np.abs(step[:-1])) <= tolerance * self.length_scale
             if (small_step and np.linalg.norm(residual) <= 1e3 * tolerance * self.force_scale
                     and abs(constraint) <= tolerance * self.rest_volume):
-                return State(volume=target, pressure=p, q=q, iterations=iteration)
+                self._check_orientation(q)
+                return State(volume=target, pressure=p, q=q, iterations=iteration,
+                             stable=self._stable() if damping is None else None)
             if np.max(np.abs(step[:-1])) > 0.5 * self.length_scale:
                 raise ConvergenceError('Newton step larger than half the model size')
         raise ConvergenceError(f'no convergence in {max_iterations} iterations')
+
+    def _check_orientation(self, q: NDArray[np.float64]) -> None:
+        """
+        Refuse a solution with cells turned inside out (det F <= 0 somewhere).
+
+        Newton's method may converge there from a poor start beyond a sharp turn of the path
+        (a balloon pushed through its own centre): an equilibrium of the equations, not of a
+        solid.
+        """
+        self._load(q)
+        gradient = self.field.extract()[0]
+        if not np.all(np.linalg.det(np.moveaxis(gradient, (0, 1), (-2, -1))) > 0):
+            raise ConvergenceError('cells turned inside out')
+
+    def largest_stretch(self, q: NDArray[np.float64]) -> float:
+        """The largest principal stretch anywhere in the solid (at its quadrature points)."""
+        self._load(q)
+        gradient = np.moveaxis(self.field.extract()[0], (0, 1), (-2, -1))
+        return float(np.sqrt(np.linalg.eigvalsh(
+            np.swapaxes(gradient, -1, -2) @ gradient)[..., -1].max()))
+
+    def _stable(self) -> bool | None:
+        """
+        Whether the state of the last bordered solve is stable under volume control.
+
+        The bordered matrix has one negative eigenvalue from the constraint itself and one
+        more for every direction of falling energy among the states of the same volume.
+        """
+        negatives = self._bordered_solver.negative_pivots()
+        return None if negatives is None else negatives <= 1
+
+    def _falling_direction(self, damping: NDArray[np.float64], shift: float = 0.0,
+                           iterations: int = 12) -> tuple | None:
+        """
+        The mode of falling energy at constant volume, and its rate (None: none found).
+
+        It uses the last bordered factorization, of [[A + shift D, -b], [-b^T, 0]]: its
+        solutions for a right-hand side [D z, 0] keep the volume, so inverse iteration converges
+        to the mode of A z = lambda D z at constant volume whose lambda lies nearest -shift:
+        the one that just went unstable with no shift, the most unstable one with a shift just
+        beyond it.
+        Returns the unit mode and lambda (negative) [1 / unit time of the damped motion].
+        """
+        n = self.space.size
+        z = np.random.default_rng(0).standard_normal(n)
+        image = z
+        for _ in range(iterations):
+            z = image / np.linalg.norm(image)
+            solution = self._bordered_solver.solve_again(np.concatenate([damping * z, [0.0]]))
+            if solution is None or not np.all(np.isfinite(solution)):
+                return None
+            image = solution[:n]
+        rate = float(z @ (damping * z)) / float(z @ (damping * image)) - shift
+        return (z, rate) if rate < 0 else None
+
+    def _factor(self, q: NDArray[np.float64], p: float, target: float,
+                damping: NDArray[np.float64] | None = None) -> None:
+        """Factor the (damped) bordered matrix at (q, p), for :meth:`_falling_direction`."""
+        x, residual, tangent, b = self._system(q, p)
+        if damping is not None:
+            tangent = tangent + sp.diags(damping)
+        bordered = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]], format='csc')
+        self._bordered_solver.solve(bordered, np.concatenate(
+            [-residual, [self.cavity.volume(x) - target]]))
+        self.reset_to(q)
+
+    def _lumped_damping(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """
+        Damping coefficients of the unknowns [N/m per unit time], lumped like a mass.
+
+        Each point's share of the solid's volume times the shear modulus over the model size
+        squared. Soft thin parts move as freely as the stiff ones; the stiffness' own diagonal
+        would not do (on the cavity's faces the pressure term can cancel it).
+        """
+        region = self.field[0].region
+        cells = region.mesh.cells
+        shares = np.zeros(self.reference.shape[0])
+        np.add.at(shares, cells, (region.dV.sum(axis=0) / cells.shape[1])[:, None])
+        jac = self.space.jacobian(q)
+        modulus = self.force_scale / self.length_scale**2
+        per_unknown = jac.multiply(jac).T @ np.repeat(shares, 3)
+        return modulus / self.length_scale**2 * np.maximum(per_unknown, 1e-12 * per_unknown.max())
+
+    def _kick(self, q: NDArray[np.float64], p: float, falling: tuple, kick: float) -> tuple:
+        """Push the solid off a saddle along its falling mode; the time step that lets it grow."""
+        direction, rate = falling
+        q = q + kick * self.length_scale * direction / np.abs(direction).max()
+        self.reset_to(q)
+        # The mode grows by 1 / (1 - |rate| dt) per implicit Euler step: at least twice while
+        # dt stays below 1 / (2 |rate|).
+        return q, p, 0.5 / abs(rate)
+
+    def settle_at_volume(self, start: State, target: float, max_steps: int = 1000,
+                         tolerance: float = 1e-6, kick: float = 1e-3,
+                         on_motion: Callable[[NDArray[np.float64]], str | None] | None = None
+                         ) -> State:
+        """
+        The stable equilibrium at the volume ``target`` [m^3] that the solid comes to rest in.
+
+        Where the quasi-static path ends (the volume turns back: a snap-back) or goes on only
+        unstably (past a bifurcation), the syringe still pushes: the solid snaps through at
+        constant volume. This follows that snap as a damped motion, ``D dq/dt = -R(q, p)``
+        with the volume held at ``target``, by implicit Euler steps (``D`` lumped like a
+        mass, :meth:`_lumped_damping`). The time step doubles while Newton's method converges
+        easily, and is cut where it does not, where a point would move too far, or where the damped
+        matrix turns indefinite at constant volume (its inertia, from the factorization):
+        longer steps would no longer follow the motion downhill. When the forces left are
+        small a static Newton solve finds the equilibrium. If that is unstable (the motion
+        came to rest on a saddle, or started on one), the solid is pushed off it by ``kick``
+        times the model size along the mode of falling energy, and the time step is held
+        short enough for that mode to grow (implicit Euler with long steps damps growing modes
+        too) until the solid is well away. This is the way a slowly pushed solid settles, not
+        a dynamic simulation (no inertia, no flow resistance). ``on_motion`` sees the
+        coordinates after every step and may give a reason to stop (:class:`MotionStoppedError`).
+        """
+        q, p = start.q.copy(), float(start.pressure)
+        self.reset_to(q)
+        damping = self._lumped_damping(q)
+        time_step, kicks, iterations = 1.0, 0, 0
+        saddle: NDArray[np.float64] | None = None  # where the last kick pushed off from
+        longest = np.inf                            # time step allowed while leaving it
+        failed_at = np.inf  # the forces left when a static solve last failed
+        good_step: float | None = None  # the last time step whose damped solve succeeded
+        for _ in range(max_steps):
+            try:
+                step = self.solve_volume(q, p, target, max_iterations=12,
+                                         damping=damping / time_step)
+                if np.max(np.abs(step.q - q)) > self.MAX_MOVE * self.length_scale:
+                    raise ConvergenceError('too far in one step')
+            except ConvergenceError:
+                self.reset_to(q)
+                time_step *= 0.25
+                if time_step >= 1e-6:
+                    continue
+                # Stalled on a saddle: the falling mode is not there to grow, and any longer
+                # step runs up the others'. Push off it along its most unstable mode.
+                stalled = (f'the damped motion stalled, largest stretch '
+                           f'{self.largest_stretch(q):.2f}')
+                if kicks == 3 or good_step is None:
+                    raise ConvergenceError(stalled) from None
+                self._factor(q, p, target, damping / good_step)
+                if (falling := self._falling_direction(damping, 1.0 / good_step)) is None:
+                    raise ConvergenceError(stalled) from None
+                q, p, longest = self._kick(q, p, falling, kick)
+                saddle, time_step, kicks = q.copy(), min(1.0, longest), kicks + 1
+                continue
+            iterations += step.iterations
+            good_step = time_step
+            motion = np.max(np.abs(step.q - q))
+            forces = np.linalg.norm(damping * (step.q - q)) / time_step
+            q, p = step.q, step.pressure
+            if on_motion is not None and (reason := on_motion(q)):
+                raise MotionStoppedError(reason)
+            if step.iterations <= 4:
+                time_step = min(2.0 * time_step, longest)
+            if saddle is not None:
+                if np.max(np.abs(q - saddle)) < 10 * kick * self.length_scale:
+                    continue
+                saddle, longest = None, np.inf
+            # At rest: the forces left are small, and so is the last step (with a long time
+            # step the first alone says little).
+            if (forces > min(1e-3 * self.force_scale, 0.1 * failed_at)
+                    or motion > 1e-3 * self.length_scale):
+                continue
+            try:
+                # Near an equilibrium Newton's method needs a few iterations; more means
+                # there is none yet (a slow passage past where one vanished).
+                final = self.solve_volume(q, p, target, max_iterations=8, tolerance=tolerance)
+                if np.max(np.abs(final.q - q)) > 1e-2 * self.length_scale:
+                    raise ConvergenceError('not the equilibrium the motion came to')
+            except ConvergenceError:
+                self.reset_to(q)
+                failed_at = forces
+                continue
+            failed_at = np.inf
+            iterations += final.iterations
+            if final.stable is not False:
+                final.iterations = iterations
+                return final
+            falling = self._falling_direction(damping)
+            if kicks == 3 or falling is None:
+                raise ConvergenceError('the damped motion came to rest on an unstable state')
+            saddle = final.q
+            q, p, longest = self._kick(final.q, final.pressure, falling, kick)
+            time_step, kicks = min(1.0, longest), kicks + 1
+        raise ConvergenceError(f'the damped motion did not come to rest in {max_steps} steps')
 
     def solve_arc(self, start: State, direction: NDArray[np.float64], distance: float,
                   guess: State, scales: tuple[float, float, float], max_iterations: int = 25,
@@ -191,6 +425,7 @@ class InflationModel:
             if (small_step and np.linalg.norm(residual) <= 1e3 * tolerance * self.force_scale
                     and abs(constraint) <= tolerance * self.rest_volume
                     and abs(arc) <= tolerance):
+                self._check_orientation(q)
                 return State(volume=volume, pressure=p, q=q, iterations=iteration)
             if np.max(np.abs(step[:n])) > 0.5 * self.length_scale:
                 raise ConvergenceError('Newton step larger than half the model size')
@@ -324,7 +559,10 @@ class InflationModel:
     def ramp_volume(self, max_volume: float, first_step: float, max_step: float,
                     min_step: float,
                     on_state: Callable[[State], str | None] | None = None,
-                    predictor: bool = False) -> PathResult:
+                    predictor: bool = False, snaps: bool = True,
+                    max_snaps: int = 50,
+                    on_motion: Callable[[NDArray[np.float64]], str | None] | None = None
+                    ) -> PathResult:
         """
         Inflate from rest to ``max_volume`` [m^3] with adaptive volume steps [m^3].
 
@@ -334,6 +572,13 @@ class InflationModel:
         ``predictor`` starts each step from the secant extrapolation of the last two states
         instead of the last state; on the segments it cost a third more Newton iterations, so
         it is off by default (the bordered system passes extrema without it).
+
+        With ``snaps`` the ramp goes on, as a syringe does, where the quasi-static path ends
+        (no equilibrium near the next volume, however small the step) or goes on unstably:
+        the solid settles at ``min_step`` beyond the last state, or at the unstable state's
+        own volume (:meth:`settle_at_volume`), and the ramp continues from there. Each such
+        snap-through is recorded in ``PathResult.snaps``; ``on_motion`` watches the motion of
+        each (it may stop the ramp, as ``on_state`` does).
         """
         q = np.zeros(self.space.size)
         self.reset_to(q)
@@ -343,6 +588,7 @@ class InflationModel:
             on_state(rest)
         step = first_step
         previous: State | None = None
+        pace: float | None = None  # the last step's largest motion per volume
         current = rest
         while current.volume < max_volume * (1 - 1e-12):
             step = min(step, max_volume - current.volume)
@@ -353,17 +599,58 @@ class InflationModel:
                 ratio = step / (current.volume - previous.volume)
                 q_guess = current.q + ratio * (current.q - previous.q)
                 p_guess = current.pressure + ratio * (current.pressure - previous.pressure)
+            cause = None
             try:
                 state = self.solve_volume(q_guess, p_guess, target)
+                move = np.max(np.abs(state.q - current.q)) / step
+                if pace is not None and move > self.MAX_PACE_JUMP * pace:
+                    # Much farther per volume than the last step: beyond a turn Newton's
+                    # method may find another part of the path, or an equilibrium of the
+                    # equations that no solid reaches (a balloon pushed through its centre).
+                    raise ConvergenceError('the step left the path')
             except ConvergenceError as err:
-                step = self._shorter(current, step, min_step, err, result)
-                if step is None:
+                shorter = self._shorter(current, step, min_step, err, result)
+                if shorter is not None:
+                    step = shorter
+                    continue
+                if not snaps or len(result.snaps) == max_snaps:
                     return result
-                continue
-            previous, current = current, state
+                cause = f'no equilibrium near the next volume ({err})'
+                start, target = current, min(current.volume + min_step, max_volume)
+            else:
+                if snaps and state.stable is False and len(result.snaps) < max_snaps:
+                    cause = 'the equilibrium at the next volume is unstable'
+                    start = state
+            if cause is not None:
+                try:
+                    state = self.settle_at_volume(start, target, on_motion=on_motion)
+                except MotionStoppedError as stop:
+                    self.reset_to(current.q)
+                    result.stop_reason = (f'{stop} during the snap-through at '
+                                          'the next volume')
+                    return result
+                except ConvergenceError as err:
+                    self.reset_to(current.q)
+                    result.stop_reason = (f'no equilibrium beyond the last state, and no '
+                                          f'snap-through found ({err})')
+                    return result
+                result.stop_reason = 'reached the requested volume'
+                moved = np.max(np.abs(state.q - start.q)) > 0.01 * self.length_scale
+                if not (moved or cause.startswith('the equilibrium')):
+                    # It settled next to the path: a hard step, not a snap-through.
+                    move, step, cause = (np.max(np.abs(state.q - current.q))
+                                         / (state.volume - current.volume), min_step, None)
+            if cause is None:
+                previous, pace = current, move
+            else:
+                result.snaps.append(Snap(index=len(result.states), volume=state.volume,
+                                         pressure_before=current.pressure,
+                                         pressure_after=state.pressure, cause=cause))
+                previous, pace, step = None, None, first_step
+            current = state
             if self._accepted(result, state, on_state):
                 return result
-            if state.iterations <= 6:
+            if cause is None and state.iterations <= 6:
                 step = min(step * 1.5, max_step)
         return result
 

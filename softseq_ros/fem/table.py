@@ -7,7 +7,7 @@ unit cell, ``cut_curvature_per_m`` (from the turning of the mid-wall cut, a chec
 curvature). The comment lines say where every number comes from.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 import shutil
 import sys
@@ -37,6 +37,9 @@ class FemResult:
     points: int
     newton_iterations: int
     wall_s: float
+    # Snap-throughs at constant volume: (row, the membrane that bulged, by how much [m]), the
+    # row being the first state after it.
+    snaps: list[tuple[int, int, float]] = field(default_factory=list)
 
     @property
     def injected(self) -> np.ndarray:
@@ -59,6 +62,7 @@ def run_design(design: Design, progress: Callable[[str], None] | None = None) ->
     model = segment.model
     factor = segment.volume_factor
     rows: list[tuple[float, float, float, float]] = []
+    heights: list[np.ndarray] = []
     contact = {'hit': False}
     pitch = design.geometry.pitch_m
 
@@ -71,6 +75,7 @@ def run_design(design: Design, progress: Callable[[str], None] | None = None) ->
                     f'(contact is not modelled)')
         cut = -2.0 * model.space.plane_angle(state.q) / pitch if model.space.has_plane else 0.0
         rows.append((state.volume * factor, state.pressure, segment.curvature(x), cut))
+        heights.append(segment.membrane_heights(x))
         if progress is not None:
             injected = (state.volume - model.rest_volume) * factor
             progress(f'{design.name}: {injected * 1e6:6.2f} mL injected, '
@@ -78,23 +83,34 @@ def run_design(design: Design, progress: Callable[[str], None] | None = None) ->
                      f'({time.perf_counter() - start:5.1f} s)')
         return None
 
+    def on_motion(q: np.ndarray) -> str | None:
+        if segment.contact(model.positions(q), q):
+            contact['hit'] = True
+            return 'neighbouring membranes touch (contact is not modelled)'
+        return None
+
     volume = design.volume
     result = model.ramp_volume(
         max_volume=model.rest_volume + volume.max_injected_m3 / factor,
         first_step=volume.first_step_m3 / factor, max_step=volume.max_step_m3 / factor,
-        min_step=volume.first_step_m3 / factor / 256, on_state=on_state)
+        min_step=volume.first_step_m3 / factor / 256, on_state=on_state, on_motion=on_motion)
     data = np.array(rows)
+    snaps = []
+    for snap in result.snaps:
+        if snap.index < len(rows):  # not the state where contact stopped the run
+            growth = heights[snap.index] - heights[snap.index - 1]
+            snaps.append((snap.index, int(np.argmax(growth)), float(np.max(growth))))
     stop_reason = result.stop_reason
-    if stop_reason.startswith('no convergence beyond the last state'):
-        # Where, in the table's terms; a perfect model may stop at a bifurcation (see docs).
-        stop_reason = stop_reason.replace(
-            'the last state', f'{(data[-1, 0] - data[0, 0]) * 1e6:.2f} mL injected')
+    # Where, in the table's terms.
+    reached = f'{(data[-1, 0] - data[0, 0]) * 1e6:.2f} mL injected'
+    stop_reason = stop_reason.replace('the last state', reached).replace(
+        'at the next volume', f'just beyond {reached}')
     return FemResult(design=design, volumes=data[:, 0], pressures=data[:, 1],
                      curvatures=data[:, 2], cut_curvatures=data[:, 3],
                      stop_reason=stop_reason, contact=contact['hit'], dofs=segment.dofs,
                      cells=segment.mesh.ncells, points=segment.mesh.npoints,
                      newton_iterations=result.newton_iterations,
-                     wall_s=time.perf_counter() - start)
+                     wall_s=time.perf_counter() - start, snaps=snaps)
 
 
 def _provenance(result: FemResult) -> list[str]:
@@ -148,6 +164,17 @@ def _provenance(result: FemResult) -> list[str]:
         f'Peak pressure {peak_p:.1f} Pa at {peak_v * 1e6:.2f} mL injected. SI units; '
         'pressures are gauge.',
     ]
+    if result.snaps:
+        lines.append('Snap-throughs at constant volume (the quasi-static path ends or goes on '
+                     'only unstably; the')
+        lines.append('  solid settles, damped, on a stable state of the same volume):')
+        for row, membrane, growth in result.snaps:
+            which = ('every membrane (a unit cell)' if d.mesh.model == 'unit_cell' else
+                     f'membrane {membrane + 1} of {g.membranes} (from the base)')
+            lines.append(
+                f'  at {result.injected[row] * 1e6:.3f} mL injected, '
+                f'{result.pressures[row - 1]:.1f} -> {result.pressures[row]:.1f} Pa; {which} '
+                f'bulges {growth * mm:.2f} mm more.')
     if d.geometry.membrane_thickness_factors is not None:
         lines.append('Membrane thickness factors, base to tip: '
                      + ', '.join(f'{f:g}' for f in d.geometry.membrane_thickness_factors) + '.')
