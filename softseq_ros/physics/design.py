@@ -67,7 +67,7 @@ from softseq_ros.physics.scene import (
 WALL_READINGS = ('skin_bands', 'side_walls')
 MODELS = ('unit_cell', 'whole_segment')
 # Bump when a change to the FEM code changes its results, so cached tables are recomputed.
-FEM_CODE_VERSION = '2'
+FEM_CODE_VERSION = '3'
 
 
 class DesignError(SceneError):
