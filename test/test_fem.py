@@ -209,16 +209,22 @@ def test_membrane_heights_see_one_membrane_bulge_however_the_segment_bends(coars
         assert np.delete(heights, 3) == pytest.approx(np.delete(rest, 3), rel=1e-9)
 
 
-def test_arc_length_follows_two_spheres_on_one_syringe_through_their_snap_back():
+SMALL_THIN, LARGE_THICK = (0.010, 0.011), (0.060, 0.072)  # spheres' (inner, outer) radii [m]
+
+
+def _snapping_pair():
     # A thin small sphere and a thick large one on one fluid volume: past the small one's
     # peak the large one gives up more fluid than the small one takes, so the total volume
     # turns back (the path a segment's membranes take when one of them runs away).
     from softseq_ros.fem.sphere import sphere_pair
 
-    small, large = (0.010, 0.011), (0.060, 0.072)
-    pair = sphere_pair(small, large, 'neo_hookean', {'shear_modulus_pa': MU})
-    model = pair.model
-    v0 = model.rest_volume
+    pair = sphere_pair(SMALL_THIN, LARGE_THICK, 'neo_hookean', {'shear_modulus_pa': MU})
+    return pair, pair.model, pair.model.rest_volume
+
+
+def test_arc_length_follows_two_spheres_on_one_syringe_through_their_snap_back():
+    pair, model, v0 = _snapping_pair()
+    small, large = SMALL_THIN, LARGE_THICK
     result = model.trace_path(1.5 * v0, first_step=0.004 * v0, max_step=0.04 * v0,
                               min_step=1e-6 * v0)
     assert result.stop_reason == 'reached the requested volume'
@@ -303,12 +309,7 @@ def test_volume_control_snaps_through_where_two_spheres_volume_turns_back():
     # The path of the arc-length test above, under volume control: a syringe cannot follow the
     # snap-back, so at the turning volume the spheres snap at constant volume onto the far
     # branch, where the small one holds most of the fluid.
-    from softseq_ros.fem.sphere import sphere_pair
-
-    small, large = (0.010, 0.011), (0.060, 0.072)
-    pair = sphere_pair(small, large, 'neo_hookean', {'shear_modulus_pa': MU})
-    model = pair.model
-    v0 = model.rest_volume
+    pair, model, v0 = _snapping_pair()
     result = model.ramp_volume(1.5 * v0, first_step=0.004 * v0, max_step=0.04 * v0,
                                min_step=1e-6 * v0)
     assert result.stop_reason == 'reached the requested volume'
