@@ -276,3 +276,25 @@ def test_a_scene_naming_a_design_gets_its_table_from_the_cache(tmp_path, monkeyp
     with pytest.raises(SceneError, match=r'segments\[1\]\.length_m: 0\.2 m differs from the '
                                          r"design's geometry\.length_m \(0\.111 m\)"):
         load_scene(scene_file)
+
+
+def test_a_table_with_a_snap_through_says_where_and_reads_as_a_segment(tmp_path):
+    from softseq_ros.fem.table import FemResult, write_table
+    from softseq_ros.physics.segments import TabulatedSegment
+
+    design = with_changes(load_design(TOP), {'mesh.model': 'whole_segment'})
+    # A ramp that snaps between rows 3 and 4: the pressure drops over one tiny volume step.
+    injected = np.array([0.0, 5.0, 10.0, 15.0, 15.002, 20.0]) * 1e-6
+    pressures = np.array([0.0, 1500.0, 2300.0, 2400.0, 1900.0, 2100.0])
+    result = FemResult(design, 2e-5 + injected, pressures, np.linspace(0.0, 30.0, 6),
+                       np.zeros(6), 'reached the requested volume', False, 7354, 1545, 2656,
+                       200, 60.0, snaps=[(4, 5, 0.0031)])
+    path = write_table(result, tmp_path / 'snapped.csv')
+    comments = [line for line in path.read_text().splitlines() if line.startswith('#')]
+    (line,) = [c for c in comments if '15.002 mL injected' in c]
+    assert '2400.0 -> 1900.0 Pa' in line and 'membrane 6 of 11 (from the base)' in line
+    assert 'bulges 3.10 mm more' in line
+    segment = TabulatedSegment.from_csv(path, length=design.geometry.length_m)
+    # A scene reads the snap as a fall over that tiny volume step, without overshoot.
+    assert segment.pressure(2e-5 + 15.001e-6) == pytest.approx(2150.0, rel=0.05)
+    assert float(segment.stiffness(2e-5 + 15.001e-6)) < -1e10
