@@ -337,8 +337,9 @@ class InflationModel:
                 self._factor(q, p, target, damping / good_step)
                 if (falling := self._falling_direction(damping, 1.0 / good_step)) is None:
                     raise ConvergenceError(stalled) from None
+                saddle = q
                 q, p, longest = self._kick(q, p, falling, kick)
-                saddle, time_step, kicks = q.copy(), min(1.0, longest), kicks + 1
+                time_step, kicks = min(1.0, longest), kicks + 1
                 continue
             iterations += step.iterations
             good_step = time_step
