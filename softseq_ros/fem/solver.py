@@ -449,14 +449,9 @@ class InflationModel:
         runs along the volume. Each step starts from the secant extrapolation of the last two
         states. The last state is at ``max_volume`` exactly when the path gets there.
         """
-        q = np.zeros(self.space.size)
-        self.reset_to(q)
-        rest = State(volume=self.rest_volume, pressure=0.0, q=q.copy())
-        result = PathResult(states=[rest])
-        if on_state is not None:
-            on_state(rest)
+        rest, result = self._start(on_state)
         volume_scale = max_volume - self.rest_volume
-        scales = (self.length_scale * np.sqrt(q.size), volume_scale,
+        scales = (self.length_scale * np.sqrt(rest.q.size), volume_scale,
                   self.force_scale / self.length_scale**2)
 
         def scaled(state: State) -> NDArray[np.float64]:
@@ -513,6 +508,16 @@ class InflationModel:
                 step = min(step * 1.5, largest)
         result.stop_reason = f'stopped after {max_states} states'
         return result
+
+    def _start(self, on_state: Callable[[State], str | None] | None = None
+               ) -> tuple[State, PathResult]:
+        """The solid back at rest, and a path that begins there (``on_state`` sees it)."""
+        q = np.zeros(self.space.size)
+        self.reset_to(q)
+        rest = State(volume=self.rest_volume, pressure=0.0, q=q.copy())
+        if on_state is not None:
+            on_state(rest)
+        return rest, PathResult(states=[rest])
 
     @staticmethod
     def _accepted(result: PathResult, state: State,
@@ -581,12 +586,7 @@ class InflationModel:
         snap-through is recorded in ``PathResult.snaps``; ``on_motion`` watches the motion of
         each (it may stop the ramp, as ``on_state`` does).
         """
-        q = np.zeros(self.space.size)
-        self.reset_to(q)
-        rest = State(volume=self.rest_volume, pressure=0.0, q=q.copy())
-        result = PathResult(states=[rest])
-        if on_state is not None:
-            on_state(rest)
+        rest, result = self._start(on_state)
         step = first_step
         previous: State | None = None
         pace: float | None = None  # the last step's largest motion per volume
@@ -657,9 +657,7 @@ class InflationModel:
 
     def ramp_pressure(self, pressures: NDArray[np.float64]) -> PathResult:
         """Load control through the given increasing pressures [Pa]; stops where Newton fails."""
-        q = np.zeros(self.space.size)
-        self.reset_to(q)
-        result = PathResult(states=[State(volume=self.rest_volume, pressure=0.0, q=q.copy())])
+        _, result = self._start()
         for pressure in pressures:
             try:
                 state = self.solve_pressure(result.states[-1].q, float(pressure))
