@@ -249,11 +249,7 @@ def part_batch(cycles: int, keep_bag: bool) -> str:
             summary = bag_summary(out)
             bag_bytes = sum(f.stat().st_size for f in out.iterdir() if f.is_file())
             chunks, raw_bytes = mcap_chunks(out)
-            kept = None
-            if keep_bag:
-                kept = ROOT / 'bags' / f'soak_batch_{time.strftime("%Y%m%d_%H%M%S")}'
-                kept.parent.mkdir(exist_ok=True)
-                shutil.move(str(out), kept)
+            kept = _keep_bag(out, 'batch') if keep_bag else None
     finally:
         scene.unlink(missing_ok=True)
     samples = info['samples']
@@ -471,6 +467,14 @@ def pick_domain(context_of) -> tuple[int, object]:  # noqa: ANN001
     raise RuntimeError('no free ROS domain found')
 
 
+def _keep_bag(bag: Path, kind: str) -> Path:
+    """Move a soak's bag into bags/, named by its kind and the time."""
+    kept = ROOT / 'bags' / f'soak_{kind}_{time.strftime("%Y%m%d_%H%M%S")}'
+    kept.parent.mkdir(exist_ok=True)
+    shutil.move(str(bag), kept)
+    return kept
+
+
 def _latency_row(values_ms: list[float]) -> str:
     data = np.array(values_ms)
     if data.size == 0:
@@ -605,11 +609,7 @@ def part_realtime(seconds: float, camera_hz: float, keep_bag: bool) -> str:
         in_bag = _bag_stamps(bag, ['/pump/command', *answer_topics])
         bag_bytes = sum(f.stat().st_size for f in bag.iterdir() if f.is_file())
         chunks, _ = mcap_chunks(bag)
-        kept = None
-        if keep_bag:
-            kept = ROOT / 'bags' / f'soak_realtime_{time.strftime("%Y%m%d_%H%M%S")}'
-            kept.parent.mkdir(exist_ok=True)
-            shutil.move(str(bag), kept)
+        kept = _keep_bag(bag, 'realtime') if keep_bag else None
     received, samples = run['received'], run['samples']
     start_ns, end_ns = run['start_ns'], run['end_ns']
     duration = (end_ns - start_ns) * 1e-9
