@@ -169,7 +169,7 @@ class InflationModel:
                 residual = residual + damping * (q - q0)
                 tangent = (tangent + sp.diags(damping)).tocsc()
             constraint = self.cavity.volume(x) - target
-            bordered = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]], format='csc')
+            bordered = self._bordered(tangent, b)
             rhs = np.concatenate([-residual, [constraint]])
             try:
                 step = self._bordered_solver.solve(bordered, rhs)
@@ -194,6 +194,11 @@ class InflationModel:
             if np.max(np.abs(step[:-1])) > 0.5 * self.length_scale:
                 raise ConvergenceError('Newton step larger than half the model size')
         raise ConvergenceError(f'no convergence in {max_iterations} iterations')
+
+    @staticmethod
+    def _bordered(tangent: sp.spmatrix, b: NDArray[np.float64]) -> sp.csc_matrix:
+        """The volume-controlled system's matrix [[A, -b], [-b^T, 0]]."""
+        return sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]], format='csc')
 
     def _check_orientation(self, q: NDArray[np.float64]) -> None:
         """
@@ -255,8 +260,7 @@ class InflationModel:
         x, residual, tangent, b = self._system(q, p)
         if damping is not None:
             tangent = tangent + sp.diags(damping)
-        bordered = sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]], format='csc')
-        self._bordered_solver.solve(bordered, np.concatenate(
+        self._bordered_solver.solve(self._bordered(tangent, b), np.concatenate(
             [-residual, [self.cavity.volume(x) - target]]))
         self.reset_to(q)
 
@@ -277,14 +281,14 @@ class InflationModel:
         per_unknown = jac.multiply(jac).T @ np.repeat(shares, 3)
         return modulus / self.length_scale**2 * np.maximum(per_unknown, 1e-12 * per_unknown.max())
 
-    def _kick(self, q: NDArray[np.float64], p: float, falling: tuple, kick: float) -> tuple:
+    def _kick(self, q: NDArray[np.float64], falling: tuple, kick: float) -> tuple:
         """Push the solid off a saddle along its falling mode; the time step that lets it grow."""
         direction, rate = falling
         q = q + kick * self.length_scale * direction / np.abs(direction).max()
         self.reset_to(q)
         # The mode grows by 1 / (1 - |rate| dt) per implicit Euler step: at least twice while
         # dt stays below 1 / (2 |rate|).
-        return q, p, 0.5 / abs(rate)
+        return q, 0.5 / abs(rate)
 
     def settle_at_volume(self, start: State, target: float, max_steps: int = 1000,
                          tolerance: float = 1e-6, kick: float = 1e-3,
@@ -338,7 +342,7 @@ class InflationModel:
                 if (falling := self._falling_direction(damping, 1.0 / good_step)) is None:
                     raise ConvergenceError(stalled) from None
                 saddle = q
-                q, p, longest = self._kick(q, p, falling, kick)
+                q, longest = self._kick(q, falling, kick)
                 time_step, kicks = min(1.0, longest), kicks + 1
                 continue
             iterations += step.iterations
@@ -378,7 +382,8 @@ class InflationModel:
             if kicks == 3 or falling is None:
                 raise ConvergenceError('the damped motion came to rest on an unstable state')
             saddle = final.q
-            q, p, longest = self._kick(final.q, final.pressure, falling, kick)
+            q, longest = self._kick(final.q, falling, kick)
+            p = final.pressure
             time_step, kicks = min(1.0, longest), kicks + 1
         raise ConvergenceError(f'the damped motion did not come to rest in {max_steps} steps')
 
@@ -409,7 +414,7 @@ class InflationModel:
             constraint = self.cavity.volume(x) - volume
             arc = (t_q @ (q - start.q) / q_scale + t_v * (volume - start.volume) / volume_scale
                    + t_p * (p - start.pressure) / pressure_scale - distance)
-            matrix = sp.vstack([sp.bmat([[tangent, -b[:, None]], [-b[None, :], None]]),
+            matrix = sp.vstack([self._bordered(tangent, b),
                                 border])
             matrix = sp.hstack([matrix, column], format='csc')
             rhs = np.concatenate([-residual, [constraint, -arc]])
@@ -600,7 +605,7 @@ class InflationModel:
                 ratio = step / (current.volume - previous.volume)
                 q_guess = current.q + ratio * (current.q - previous.q)
                 p_guess = current.pressure + ratio * (current.pressure - previous.pressure)
-            cause = None
+            cause, unstable = None, False
             try:
                 state = self.solve_volume(q_guess, p_guess, target)
                 move = np.max(np.abs(state.q - current.q)) / step
@@ -621,7 +626,7 @@ class InflationModel:
             else:
                 if snaps and state.stable is False and len(result.snaps) < max_snaps:
                     cause = 'the equilibrium at the next volume is unstable'
-                    start = state
+                    start, unstable = state, True
             if cause is not None:
                 try:
                     state = self.settle_at_volume(start, target, on_motion=on_motion)
@@ -637,7 +642,7 @@ class InflationModel:
                     return result
                 result.stop_reason = 'reached the requested volume'
                 moved = np.max(np.abs(state.q - start.q)) > 0.01 * self.length_scale
-                if not (moved or cause.startswith('the equilibrium')):
+                if not (moved or unstable):
                     # It settled next to the path: a hard step, not a snap-through.
                     move, step, cause = (np.max(np.abs(state.q - current.q))
                                          / (state.volume - current.volume), min_step, None)
