@@ -31,7 +31,8 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from softseq_ros.physics.design import load_design, with_changes  # noqa: E402
+from softseq_ros.scene.design import load_design, with_changes  # noqa: E402
+from softseq_ros.scene.tables import read_table  # noqa: E402
 
 DESIGNS = REPO / 'config' / 'designs'
 RESULTS = REPO / 'bench' / 'fem_results.json'
@@ -178,7 +179,7 @@ def part_materials() -> None:
 def _with_material(design: object, material: dict) -> object:
     from dataclasses import replace
 
-    from softseq_ros.physics.design import Material
+    from softseq_ros.scene.design import Material
 
     return replace(design, material=Material(law=material['law'],
                                              params={k: v for k, v in material.items()
@@ -187,12 +188,11 @@ def _with_material(design: object, material: dict) -> object:
 
 def _pair_summary(bottom: Path, top: Path) -> dict:
     """Sequence type and path numbers of the two tables on one syringe (0 -> 65 mL)."""
-    from softseq_ros.physics.equilibrium import Tracker, classify
-    from softseq_ros.physics.segments import TabulatedSegment
-    from softseq_ros.physics.solve import build_map
+    from softseq_ros.quasistatic.equilibrium import Tracker, classify
+    from softseq_ros.quasistatic.solve import build_map
 
-    segments = (TabulatedSegment.from_csv(bottom, name='bottom', length=0.111),
-                TabulatedSegment.from_csv(top, name='top', length=0.111))
+    segments = (read_table(bottom, name='bottom', length=0.111),
+                read_table(top, name='top', length=0.111))
     out = {'bottom_peak_pa': round(float(segments[0].pressures.max()), 1),
            'top_peak_pa': round(float(segments[1].pressures.max()), 1)}
     capacity = sum(s.max_volume - s.rest_volume for s in segments)
@@ -254,7 +254,6 @@ def write_figures() -> None:
     import matplotlib.pyplot as plt
 
     from softseq_ros.fem.segment import build_segment
-    from softseq_ros.physics.segments import TabulatedSegment
 
     top = with_changes(load_design(DESIGNS / 'paper_top.yaml'), {'mesh.element_size_m': 0.001})
     segment = build_segment(top)
@@ -285,7 +284,7 @@ def write_figures() -> None:
     segs = REPO / 'config' / 'segments'
     for name, colour in (('bottom', 'tab:blue'), ('top', 'tab:red')):
         for kind, style in (('paper_fem', '-'), ('paper', ':')):
-            table = TabulatedSegment.from_csv(segs / f'{kind}_{name}.csv', name=name,
+            table = read_table(segs / f'{kind}_{name}.csv', name=name,
                                               length=0.111)
             injected = (table.volumes - table.volumes[0]) * 1e6
             label = f'{name}, {"FEM" if kind == "paper_fem" else "stand-in"}'
@@ -300,7 +299,7 @@ def write_figures() -> None:
             path = materials / f'{name}__{slug}.csv'
             if not path.is_file():
                 continue
-            table = TabulatedSegment.from_csv(path, name=name, length=0.111)
+            table = read_table(path, name=name, length=0.111)
             axes[2].plot((table.volumes - table.volumes[0]) * 1e6, table.pressures / 1e3, style,
                          color=f'C{index}', label=f'{label}' if name == 'top' else None)
     axes[2].set_ylabel('gauge pressure [kPa] (top solid, bottom dashed)')

@@ -57,7 +57,7 @@ import yaml  # noqa: E402
 
 from softseq_ros.bag.reader import bag_summary, read_bag  # noqa: E402
 from softseq_ros.batch import BatchRun  # noqa: E402
-from softseq_ros.physics.scene import config_dir, load_scene  # noqa: E402
+from softseq_ros.scene.loader import config_dir, load_scene  # noqa: E402
 
 # rclpy (and bench_rig, which imports it) are imported in the real-time part only: the batch
 # child runs this file and must carry no more than `softseq run` does.

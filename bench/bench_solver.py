@@ -37,11 +37,12 @@ from reference_solvers import (  # noqa: E402
     polish_states,
 )
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker  # noqa: E402
-from softseq_ros.physics.materials import Gent  # noqa: E402
-from softseq_ros.physics.scene import load_scene  # noqa: E402
-from softseq_ros.physics.segments import BalloonSegment, TabulatedSegment  # noqa: E402
-from softseq_ros.physics.smoothing import smooth_table  # noqa: E402
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker  # noqa: E402
+from softseq_ros.scene.loader import load_scene  # noqa: E402
+from softseq_ros.scene.tables import read_table  # noqa: E402
+from softseq_ros.segments.materials import Gent  # noqa: E402
+from softseq_ros.segments.models import BalloonSegment, TabulatedSegment  # noqa: E402
+from softseq_ros.segments.smoothing import smooth_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESOLUTIONS = (250, 500, 1000, 2000, 4000)
@@ -283,7 +284,7 @@ def _alarm(*_):
 
 def noise_study(quick):
     """Spurious snap-throughs on the paper's partial-sequence tables with Gaussian noise."""
-    base = [TabulatedSegment.from_csv(ROOT / 'config' / 'segments' / f'paper_{n}.csv',
+    base = [read_table(ROOT / 'config' / 'segments' / f'paper_{n}.csv',
                                       length=0.111) for n in ('bottom', 'top')]
     levels = (1e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2)
     seeds = range(3 if quick else 5)

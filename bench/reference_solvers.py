@@ -1,5 +1,5 @@
 """
-Independent solvers the benchmark measures softseq_ros.physics.equilibrium against.
+Independent solvers the benchmark measures softseq_ros.quasistatic.equilibrium against.
 
 None of them imports the equilibrium module; they ask the segments for ``pressure(v)``,
 ``stiffness(v)``, ``rest_volume`` and ``max_volume`` only.

@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 if TYPE_CHECKING:
     from softseq_ros.batch import BatchResult
-    from softseq_ros.physics.equilibrium import SolvedPath
-    from softseq_ros.physics.scene import Scene
+    from softseq_ros.quasistatic.equilibrium import SolvedPath
+    from softseq_ros.scene.loader import Scene
 
 __version__ = '0.1.0'
 __all__ = ['load_scene', 'run', 'solve']
@@ -26,8 +26,8 @@ __all__ = ['load_scene', 'run', 'solve']
 
 def load_scene(scene: 'str | os.PathLike | Scene') -> 'Scene':
     """A validated scene from a YAML file or a shipped scene's name (a Scene is returned as is)."""
-    from softseq_ros.physics.scene import Scene
-    from softseq_ros.physics.scene import load_scene as _load
+    from softseq_ros.scene.loader import Scene
+    from softseq_ros.scene.loader import load_scene as _load
 
     return scene if isinstance(scene, Scene) else _load(scene)
 
@@ -41,8 +41,8 @@ def solve(scene: 'str | os.PathLike | Scene', injected: Sequence[float],
     result holds per row the injected volume, the gauge pressure [Pa], the segment volumes
     [m^3] and curvatures [1/m], and the snap-throughs on the way (``events``).
     """
-    from softseq_ros.physics.equilibrium import Tracker
-    from softseq_ros.physics.solve import build_map
+    from softseq_ros.quasistatic.equilibrium import Tracker
+    from softseq_ros.quasistatic.solve import build_map
 
     loaded = load_scene(scene)
     emap = build_map(loaded.segments, resolution or loaded.solver.resolution)
@@ -60,7 +60,7 @@ def run(scene: 'str | os.PathLike | Scene', out: str | os.PathLike, *,
     ``{'camera': {'rate_hz': 30.0}}``.
     """
     from softseq_ros.batch import BatchRun
-    from softseq_ros.physics.scene import Scene
+    from softseq_ros.scene.loader import Scene
 
     if isinstance(scene, Scene):
         if scene.path is None:

@@ -19,12 +19,12 @@ from typing import Any, Callable, TextIO
 
 from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.writer import BagWriter
-from softseq_ros.physics.scene import load_scene, scene_path
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
 from softseq_ros.rig.wire import ENCODERS
+from softseq_ros.scene.loader import load_scene, scene_path
 from softseq_ros.stopping import HeldSignals
 
 NS_PER_S = 1_000_000_000

@@ -13,10 +13,10 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
 
 
 def _solve(args: argparse.Namespace) -> int:
-    from softseq_ros.physics.equilibrium import DomainError, Tracker
-    from softseq_ros.physics.reach import beyond_domain, check_scene_reach
-    from softseq_ros.physics.scene import load_scene
-    from softseq_ros.physics.solve import build_map, read_history, write_path
+    from softseq_ros.quasistatic.equilibrium import DomainError, Tracker
+    from softseq_ros.quasistatic.reach import beyond_domain, check_scene_reach
+    from softseq_ros.quasistatic.solve import build_map, read_history, write_path
+    from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
     emap = build_map(scene.segments, scene.solver.resolution)
@@ -42,10 +42,10 @@ def _solve(args: argparse.Namespace) -> int:
 
 def _classify(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.robustness import robustness_lines, scene_features
-    from softseq_ros.physics.equilibrium import classify
-    from softseq_ros.physics.reach import check_scene_reach
-    from softseq_ros.physics.scene import load_scene
-    from softseq_ros.physics.solve import build_map
+    from softseq_ros.quasistatic.equilibrium import classify
+    from softseq_ros.quasistatic.reach import check_scene_reach
+    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
     emap = build_map(scene.segments, scene.solver.resolution)
@@ -170,7 +170,7 @@ def _fem(args: argparse.Namespace) -> int:
 
 
 def _scenes(args: argparse.Namespace) -> int:
-    from softseq_ros.physics.scene import config_dir, shipped_scenes
+    from softseq_ros.scene.loader import config_dir, shipped_scenes
 
     print(f'shipped scenes in {config_dir()}:')
     for name in shipped_scenes():

@@ -1,7 +1,7 @@
 """
 A slow, simple reference for quasi-static volume sharing between inflatable segments.
 
-It shares no code with softseq_ros.physics.equilibrium and asks the segments for nothing but
+It shares no code with softseq_ros.quasistatic.equilibrium and asks the segments for nothing but
 ``pressure(v)``, ``rest_volume`` and ``max_volume``: stored energies come from its own Simpson
 tables of the pressure, and the state follows the history by discrete steepest descent of the
 total energy E(v) = sum_i E_i(v_i) on the plane sum_i v_i = V, starting from the previous state.

@@ -46,7 +46,7 @@ def inside_the_hysteresis_loop(emap, samples: int = 1001):
     """
     import numpy as np
 
-    from softseq_ros.physics.equilibrium import Tracker
+    from softseq_ros.quasistatic.equilibrium import Tracker
 
     grid = np.linspace(0.0, 0.98 * emap.injected_range[1], samples)
     inflating = Tracker(emap).sweep(grid)

@@ -16,10 +16,10 @@ from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_r
 from softseq_ros.analysis.report import SceneMismatchError, recording_trace, write_report
 from softseq_ros.bag.arrays import BagArrayError, JointStateDecoder, open_bag
 from softseq_ros.batch import run_scene
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.identity import segments_sha256
-from softseq_ros.physics.scene import load_scene
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.rig import contract
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.identity import segments_sha256
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 ML = 1e-6

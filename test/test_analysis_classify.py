@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from softseq_ros.analysis.robustness import NOISE_FACTOR, robustness_lines, smallest_features
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker, classify
-from softseq_ros.physics.segments import TabulatedSegment
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, classify
+from softseq_ros.scene.tables import read_table
 
 SEGMENTS = Path(__file__).resolve().parents[1] / 'config' / 'segments'
 
@@ -49,8 +49,8 @@ pump:
     # Monotone curves: the verdict rests on no peak or valley, so nothing more is said.
     assert result.stdout.splitlines() == ['pair: partial'] and not result.stderr
     # The edge itself, reached by the solver's own range, is inside the domain both ways.
-    segments = [TabulatedSegment.from_csv(top, 'soft', 0.111),
-                TabulatedSegment.from_csv(stiffer, 'stiff', 0.111)]
+    segments = [read_table(top, 'soft', 0.111),
+                read_table(stiffer, 'stiff', 0.111)]
     emap = EquilibriumMap(segments)
     lo, hi = emap.injected_range
     up = Tracker(emap).sweep(np.linspace(lo, hi, 101))
@@ -66,7 +66,7 @@ def test_a_verdict_on_noise_wiggles_is_flagged(tmp_path):
     noise = 50.0
     noisy = _table(tmp_path / 'noisy.csv', SEGMENTS / 'paper_top.csv', noise_pa=noise, every=6,
                    seed=3)
-    segment = TabulatedSegment.from_csv(noisy, 'top', 0.111)
+    segment = read_table(noisy, 'top', 0.111)
     features = smallest_features([segment])
     assert len(features) == 1
     feature = features[0]
@@ -77,12 +77,12 @@ def test_a_verdict_on_noise_wiggles_is_flagged(tmp_path):
     assert len(warnings) == 1 and 'may be noise' in warnings[0] and 'top' in warnings[0]
     declared = _table(tmp_path / 'declared.csv', SEGMENTS / 'paper_top.csv', noise_pa=noise,
                       every=6, declare=noise, seed=3)
-    feature = smallest_features([TabulatedSegment.from_csv(declared, 'top', 0.111)])[0]
+    feature = smallest_features([read_table(declared, 'top', 0.111)])[0]
     assert feature.noise_source == 'declared' and feature.noise_pa == noise
 
 
 def test_a_real_peak_is_not_flagged():
-    from softseq_ros.physics.scene import load_scene
+    from softseq_ros.scene.loader import load_scene
 
     scene = load_scene('fig1_asymmetric')
     verdict = classify(EquilibriumMap(scene.segments))

@@ -6,9 +6,9 @@ from pathlib import Path
 import pytest
 
 from softseq_ros.analysis.library import LibraryError, library_entries, write_library
-from softseq_ros.physics.equilibrium import classify
-from softseq_ros.physics.scene import load_scene
-from softseq_ros.physics.solve import build_map
+from softseq_ros.quasistatic.equilibrium import classify
+from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.scene.loader import load_scene
 
 LIBRARY = Path(__file__).resolve().parents[1] / 'config' / 'library'
 

@@ -5,8 +5,8 @@ import pytest
 
 import softseq_ros
 from softseq_ros.bag.reader import bag_summary, read_bag
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.scene import load_scene
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.scene.loader import load_scene
 
 
 def test_solve_follows_the_history_as_the_tracker_does():

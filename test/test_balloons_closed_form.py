@@ -13,7 +13,7 @@ import pytest
 from scipy.integrate import quad
 from scipy.optimize import minimize_scalar
 
-from softseq_ros.physics.materials import (
+from softseq_ros.segments.materials import (
     ArrudaBoyce,
     Gent,
     MooneyRivlin,
@@ -21,7 +21,7 @@ from softseq_ros.physics.materials import (
     Ogden,
     Yeoh,
 )
-from softseq_ros.physics.segments import BalloonSegment, LinearSegment
+from softseq_ros.segments.models import BalloonSegment, LinearSegment
 
 R = 0.006
 H = 0.6e-3

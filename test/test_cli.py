@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from softseq_ros.cli import build_parser
-from softseq_ros.physics.scene import load_scene
+from softseq_ros.scene.loader import load_scene
 
 LINEAR_SCENE = """
 name: linear_pair

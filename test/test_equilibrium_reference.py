@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker, classify
-from softseq_ros.physics.materials import Gent, NeoHookean, Ogden
-from softseq_ros.physics.scene import load_scene
-from softseq_ros.physics.segments import BalloonSegment, LinearSegment, TabulatedSegment
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, classify
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.materials import Gent, NeoHookean, Ogden
+from softseq_ros.segments.models import BalloonSegment, LinearSegment, TabulatedSegment
 
 sys.path.insert(0, str(Path(__file__).parent))
 from reference import ReferenceTracker  # noqa: E402

@@ -10,8 +10,8 @@ from softseq_ros.fem.sphere import (
     thick_sphere_pressure,
     thin_mooney_rivlin_pressure,
 )
-from softseq_ros.physics.design import load_design, with_changes
-from softseq_ros.physics.materials import MooneyRivlin
+from softseq_ros.scene.design import load_design, with_changes
+from softseq_ros.segments.materials import MooneyRivlin
 
 MU = 1.0e4  # Pa
 A, B = 0.010, 0.012  # inner and outer radius of the thick sphere [m]

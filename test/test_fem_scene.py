@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import yaml
 
-from softseq_ros.physics.design import load_design
-from softseq_ros.physics.equilibrium import Tracker
-from softseq_ros.physics.scene import load_scene
-from softseq_ros.physics.solve import build_map
+from softseq_ros.quasistatic.equilibrium import Tracker
+from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.scene.design import load_design
+from softseq_ros.scene.loader import load_scene
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 

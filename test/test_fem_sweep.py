@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from softseq_ros.fem.sweep import run_sweep, sweep_cases
-from softseq_ros.physics.design import load_design, with_changes
+from softseq_ros.scene.design import load_design, with_changes
 
 REPO = Path(__file__).resolve().parents[1]
 QUICK = {'mesh.element_size_m': 0.003, 'mesh.thin_layer_cells': 1,

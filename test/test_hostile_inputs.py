@@ -11,13 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, Tracker
-from softseq_ros.physics.materials import NeoHookean
-from softseq_ros.physics.segments import (
+from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.scene.tables import read_table
+from softseq_ros.segments.materials import NeoHookean
+from softseq_ros.segments.models import (
     BalloonSegment,
     LinearSegment,
     TableError,
-    TabulatedSegment,
 )
 
 HEADER = 'volume_m3,pressure_pa,curvature_per_m\n'
@@ -32,7 +32,7 @@ def write_table(tmp_path, name, text):
 
 def assert_table_error(path, *words):
     with pytest.raises(TableError) as info:
-        TabulatedSegment.from_csv(path, length=0.1)
+        read_table(path, length=0.1)
     message = str(info.value)
     assert message.startswith(str(path)), message
     assert '\n' not in message
@@ -69,7 +69,7 @@ def test_missing_file_names_the_path(tmp_path):
 
 def test_a_good_table_loads_and_interpolates_its_rows(tmp_path):
     path = write_table(tmp_path, 'good.csv', '# a comment\n' + HEADER + '\n'.join(GOOD_ROWS))
-    segment = TabulatedSegment.from_csv(path, length=0.1)
+    segment = read_table(path, length=0.1)
     np.testing.assert_allclose(segment.pressure([1e-6, 2e-6, 3e-6, 4e-6]),
                                [0.0, 1000.0, 2000.0, 2500.0], atol=1e-9)
 
@@ -161,31 +161,31 @@ def test_fewer_than_two_segments_are_refused():
 
 
 def test_tables_in_other_units_are_refused_naming_the_column_and_the_fix(tmp_path):
-    from softseq_ros.physics.segments import TableError, TabulatedSegment
+    from softseq_ros.segments.models import TableError
 
     header = 'volume_m3,pressure_pa,curvature_per_m\n'
     in_ml = tmp_path / 'in_ml.csv'
     in_ml.write_text(header + '11.0,0,0\n30.0,9000,1\n60.0,9500,2\n')
     with pytest.raises(TableError, match=r'in_ml\.csv: column volume_m3: .*in mL\?'):
-        TabulatedSegment.from_csv(in_ml, length=0.1)
+        read_table(in_ml, length=0.1)
     in_mpa = tmp_path / 'in_mpa.csv'
     in_mpa.write_text(header + '1.1e-5,0,0\n3.0e-5,0.009,1\n6.0e-5,0.0095,2\n')
     with pytest.raises(TableError, match=r'in_mpa\.csv: column pressure_pa: .*kPa or MPa\?'):
-        TabulatedSegment.from_csv(in_mpa, length=0.1)
+        read_table(in_mpa, length=0.1)
 
 
 def test_a_table_saved_as_csv_utf8_with_a_byte_order_mark_is_read(tmp_path):
-    from softseq_ros.physics.segments import TableError, TabulatedSegment
+    from softseq_ros.segments.models import TableError
 
     rows = 'volume_m3,pressure_pa,curvature_per_m\n1.1e-5,0,0\n3.0e-5,9000,1\n6.0e-5,9500,2\n'
     plain, marked = tmp_path / 'plain.csv', tmp_path / 'marked.csv'
     plain.write_text(rows, encoding='utf-8')
     marked.write_bytes(b'\xef\xbb\xbf' + rows.encode())
-    a, b = TabulatedSegment.from_csv(plain, length=0.1), TabulatedSegment.from_csv(marked,
+    a, b = read_table(plain, length=0.1), read_table(marked,
                                                                                    length=0.1)
     assert a.volumes.tolist() == b.volumes.tolist()
     assert a.pressures.tolist() == b.pressures.tolist()
     latin = tmp_path / 'latin.csv'
     latin.write_bytes('# Druck in Pa, gemessen am Prüfstand\n'.encode('latin-1') + rows.encode())
     with pytest.raises(TableError, match='latin.csv: the segment table is not UTF-8'):
-        TabulatedSegment.from_csv(latin, length=0.1)
+        read_table(latin, length=0.1)

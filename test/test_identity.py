@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 import yaml
 
-from softseq_ros.physics import identity
-from softseq_ros.physics.identity import segments_sha256, short
-from softseq_ros.physics.materials import Gent, Ogden, Yeoh, material_definition
-from softseq_ros.physics.scene import load_scene
-from softseq_ros.physics.segments import BalloonSegment, LinearSegment, TabulatedSegment
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments import identity
+from softseq_ros.segments.identity import segments_sha256, short
+from softseq_ros.segments.materials import Gent, Ogden, Yeoh, material_definition
+from softseq_ros.segments.models import BalloonSegment, LinearSegment, TabulatedSegment
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
@@ -88,8 +88,8 @@ def test_the_shipped_balloon_scene_is_hashed_by_the_numbers_in_its_file():
 
 
 def test_the_digest_is_the_same_in_another_process_with_another_hash_seed():
-    code = ('from softseq_ros.physics.identity import segments_sha256; '
-            'from softseq_ros.physics.scene import load_scene; '
+    code = ('from softseq_ros.segments.identity import segments_sha256; '
+            'from softseq_ros.scene.loader import load_scene; '
             'print(segments_sha256(load_scene("paper").segments))')
     digests = set()
     for seed in ('0', '12345'):
@@ -185,7 +185,7 @@ def test_a_smoothed_table_is_defined_by_its_rows_and_options_not_by_the_fit(tmp_
                                                   'prominence_pa': 500.0}]
     assert not np.array_equal(segment.pressures, pressures)
     # A fit that rounds one bit differently (another machine's LAPACK) leaves the digest.
-    import softseq_ros.physics.scene as scene_module
+    import softseq_ros.scene.loader as scene_module
 
     original = scene_module.smooth_table
     monkeypatch.setattr(scene_module, 'smooth_table',
@@ -198,7 +198,7 @@ def test_a_smoothed_table_is_defined_by_its_rows_and_options_not_by_the_fit(tmp_
 def test_a_fem_table_rewritten_with_other_provenance_keeps_its_digest(tmp_path):
     pytest.importorskip('felupe')
     from softseq_ros.fem.table import FemResult, write_table
-    from softseq_ros.physics.design import load_design
+    from softseq_ros.scene.design import load_design
 
     committed = load_scene('paper_fem')
     table = committed.segments[1]
@@ -229,7 +229,7 @@ def test_a_fem_table_rewritten_with_other_provenance_keeps_its_digest(tmp_path):
 def test_a_segment_named_by_its_design_is_defined_by_the_design_not_the_fem_rows(
         tmp_path, monkeypatch):
     pytest.importorskip('felupe')  # the table's cache key names the FEM library's version
-    from softseq_ros.physics.design import cache_path, load_design
+    from softseq_ros.scene.design import cache_path, load_design
 
     monkeypatch.setenv('SOFTSEQ_FEM_CACHE', str(tmp_path / 'cache'))
     committed = load_scene('paper_fem').segments[1]

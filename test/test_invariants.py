@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.materials import Gent, NeoHookean, Ogden
-from softseq_ros.physics.scene import load_scene
-from softseq_ros.physics.segments import BalloonSegment, LinearSegment
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.materials import Gent, NeoHookean, Ogden
+from softseq_ros.segments.models import BalloonSegment, LinearSegment
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 SCENES = sorted(CONFIG.glob('*.yaml'))

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from softseq_ros.physics.kinematics import (
+from softseq_ros.segments.kinematics import (
     backbone,
     backbone_batch,
     orientation_quaternions,

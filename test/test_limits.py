@@ -10,8 +10,8 @@ import yaml
 
 from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
-from softseq_ros.physics.limits import LIMITS
-from softseq_ros.physics.scene import SceneError, load_scene
+from softseq_ros.scene.limits import LIMITS
+from softseq_ros.scene.loader import SceneError, load_scene
 
 # (node, parameter, scene section, scene key): the same setting under its two names.
 SETTINGS = [

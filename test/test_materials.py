@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from softseq_ros.physics.materials import (
+from softseq_ros.segments.materials import (
     ArrudaBoyce,
     Gent,
     MooneyRivlin,

@@ -27,11 +27,11 @@ from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.core_node import message_class, qos_profile
 from softseq_ros.nodes.sim_clock import SimClockNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.kinematics import backbone_batch
-from softseq_ros.physics.render import SEGMENT_RGB, SideViewRenderer
-from softseq_ros.physics.scene import load_scene
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.rig import contract
+from softseq_ros.rig.render import SEGMENT_RGB, SideViewRenderer
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.kinematics import backbone_batch
 
 TIMEOUT_S = 15.0
 AMBIENT = 101325.0

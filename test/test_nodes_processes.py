@@ -28,8 +28,8 @@ from test_nodes import (
 )
 import yaml
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.scene import config_dir, load_scene
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.scene.loader import config_dir, load_scene
 
 pytestmark = pytest.mark.ros
 

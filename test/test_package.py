@@ -31,10 +31,19 @@ ROS_MODULES = {
     'std_msgs', 'std_srvs', 'geometry_msgs', 'sensor_msgs', 'visualization_msgs', 'nav_msgs',
     'rosgraph_msgs', 'launch', 'launch_ros',
 }
-# Data flows scene -> physics -> rig core -> node or batch -> topic -> bag -> analysis: physics
-# imports none of the later layers, and the rig's cores none of their drivers.
+# Data flows scene -> segment models -> quasi-static solver -> rig core -> node or batch ->
+# topic -> bag -> analysis: the physics imports none of the later layers, and the rig's cores
+# none of their drivers.
+PHYSICS_LAYERS = ('segments', 'scene', 'quasistatic')
 DOWNSTREAM_LAYERS = {f'{PACKAGE}.{layer}' for layer in (
     'rig', 'nodes', 'batch', 'bag', 'analysis', 'cli', 'fem')}
+# Within the physics: segment models never read a user's file and know no solver; the user's
+# inputs know no solver.
+PHYSICS_DOWNSTREAM = {
+    'segments': DOWNSTREAM_LAYERS | {f'{PACKAGE}.scene', f'{PACKAGE}.quasistatic'},
+    'scene': DOWNSTREAM_LAYERS | {f'{PACKAGE}.quasistatic'},
+    'quasistatic': DOWNSTREAM_LAYERS,
+}
 RIG_DRIVERS = {f'{PACKAGE}.{layer}' for layer in ('nodes', 'batch', 'analysis', 'cli', 'fem')}
 
 
@@ -250,10 +259,10 @@ def test_import_scanner_catches_every_way_of_importing_ros():
         def late():
             from rclpy.qos import QoSProfile
     """)
-    found = forbidden_imports(imported_modules(source, f'{PACKAGE}.physics.example'))
+    found = forbidden_imports(imported_modules(source, f'{PACKAGE}.quasistatic.example'))
     assert {'rclpy.node', 'std_msgs.msg', f'{PACKAGE}.nodes', f'{PACKAGE}.bag',
             'geometry_msgs.msg', 'rclpy.qos'} <= found
-    assert not any(name.startswith(('numpy', f'{PACKAGE}.physics')) for name in found)
+    assert not any(name.startswith(('numpy', f'{PACKAGE}.quasistatic')) for name in found)
 
 
 def layer_offenders(folder: str, layers: set[str]) -> dict[str, list[str]]:
@@ -270,8 +279,9 @@ def layer_offenders(folder: str, layers: set[str]) -> dict[str, list[str]]:
     return offenders
 
 
-def test_physics_sources_import_no_ros_and_no_downstream_layer():
-    assert layer_offenders('physics', DOWNSTREAM_LAYERS) == {}
+@pytest.mark.parametrize('layer', PHYSICS_LAYERS)
+def test_physics_sources_import_no_ros_and_no_downstream_layer(layer):
+    assert layer_offenders(layer, PHYSICS_DOWNSTREAM[layer]) == {}
 
 
 def test_rig_cores_import_no_ros_and_none_of_their_drivers():
@@ -294,14 +304,15 @@ def test_readme_layout_names_every_package_and_module_of_the_top_level():
 
 
 def test_physics_imports_without_rclpy_at_run_time(ros_env):
-    # Catches what a scan of physics/ cannot see: softseq_ros/__init__.py or a helper
-    # module outside physics/ pulling rclpy in.
+    # Catches what a scan of the physics folders cannot see: softseq_ros/__init__.py or a
+    # helper module outside them pulling rclpy in.
     script = textwrap.dedent(f"""
         import importlib, pkgutil, sys
         sys.modules['rclpy'] = None  # any attempt to import rclpy now raises ImportError
-        import softseq_ros.physics as physics
-        for info in pkgutil.walk_packages(physics.__path__, 'softseq_ros.physics.'):
-            importlib.import_module(info.name)
+        for layer in {PHYSICS_LAYERS!r}:
+            package = importlib.import_module('softseq_ros.' + layer)
+            for info in pkgutil.walk_packages(package.__path__, package.__name__ + '.'):
+                importlib.import_module(info.name)
         ros = set({sorted(ROS_MODULES)!r})
         loaded = sorted(m for m, mod in sys.modules.items() if mod and m.split('.')[0] in ros)
         assert not loaded, f'physics loaded ROS modules: {{loaded}}'

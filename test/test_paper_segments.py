@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from softseq_ros.physics.bulge import (
+from softseq_ros.segments.bulge import (
     BulgeModelError,
     SegmentGeometry,
     cap_energy,
@@ -19,7 +19,7 @@ from softseq_ros.physics.bulge import (
     cap_stretch,
     cap_volume,
 )
-from softseq_ros.physics.materials import NeoHookean, Ogden
+from softseq_ros.segments.materials import NeoHookean, Ogden
 
 REPO = Path(__file__).resolve().parents[1]
 TABLES = REPO / 'config' / 'segments'

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from softseq_ros.physics.profile import Leg, PumpProfile
+from softseq_ros.scene.programme import Leg, PumpProfile
 
 ML = 1e-6  # m^3 per mL
 

@@ -8,12 +8,12 @@ import pytest
 from scenes import write_scene
 import yaml
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.profile import Leg, ProgrammeError, PumpProfile
-from softseq_ros.physics.reach import check_reach
-from softseq_ros.physics.scene import load_scene
-from softseq_ros.physics.segments import LinearSegment
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.quasistatic.reach import check_reach
 from softseq_ros.rig.build import SettingError, pump_core
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile
+from softseq_ros.segments.models import LinearSegment
 
 # Two linear segments: p = k (v - rest). The stiffer-at-its-end one, the top, is full first:
 # its pressure at max volume is 2e8 * 3e-5 = 6 kPa, the bottom's 1e8 * 8e-5 = 8 kPa.

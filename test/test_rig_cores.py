@@ -14,11 +14,7 @@ import numpy as np
 import pytest
 from scenes import FAST_SCENE, inside_the_hysteresis_loop, write_scene
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.physics.identity import segments_sha256
-from softseq_ros.physics.kinematics import backbone_batch
-from softseq_ros.physics.profile import Leg
-from softseq_ros.physics.scene import load_scene
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import SettingError, actuator_core, camera_core, pump_core
 from softseq_ros.rig.routing import Router
@@ -36,6 +32,10 @@ from softseq_ros.rig.values import (
     SnapshotStep,
 )
 from softseq_ros.rig.wire import InputError, pump_command
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.scene.programme import Leg
+from softseq_ros.segments.identity import segments_sha256
+from softseq_ros.segments.kinematics import backbone_batch
 
 AMBIENT = 101325.0
 

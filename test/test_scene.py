@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from softseq_ros.physics.equilibrium import EquilibriumMap, classify
-from softseq_ros.physics.scene import (
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, classify
+from softseq_ros.scene.loader import (
     Scene,
     SceneError,
     config_dir,
@@ -18,7 +18,7 @@ from softseq_ros.physics.scene import (
     scene_path,
     shipped_scenes,
 )
-from softseq_ros.physics.segments import BalloonSegment, LinearSegment, TabulatedSegment
+from softseq_ros.segments.models import BalloonSegment, LinearSegment, TabulatedSegment
 
 ML = 1e-6
 SHIPPED = ('paper', 'fig1_none', 'fig1_partial', 'fig1_symmetric', 'fig1_asymmetric',
@@ -309,7 +309,7 @@ def test_config_dir_is_the_checkout_folder_and_bare_names_resolve():
 
 
 def test_installed_layout_is_found(tmp_path, monkeypatch):
-    import softseq_ros.physics.scene as scene_module
+    import softseq_ros.scene.loader as scene_module
     share = tmp_path / 'share' / 'softseq_ros' / 'config'
     share.mkdir(parents=True)
     (share / 'paper.yaml').write_text('name: paper\n')
@@ -443,7 +443,7 @@ def noisy_scene(tmp_path, smoothing=None):
 
 
 def test_opt_in_smoothing_removes_the_spurious_snaps_of_noisy_rig_data(tmp_path):
-    from softseq_ros.physics.equilibrium import Tracker
+    from softseq_ros.quasistatic.equilibrium import Tracker
 
     raw_path, clean, v = noisy_scene(tmp_path)
     raw = load_scene(raw_path)

@@ -25,9 +25,10 @@ from hypothesis import strategies as st
 import numpy as np
 import pytest
 
-from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, Tracker
-from softseq_ros.physics.segments import TabulatedSegment
-from softseq_ros.physics.smoothing import estimate_noise, smooth_table
+from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.scene.tables import read_table
+from softseq_ros.segments.models import TabulatedSegment
+from softseq_ros.segments.smoothing import estimate_noise, smooth_table
 
 # Tolerances stated in the module docstring.
 SUM_TOL = 1e-12
@@ -324,7 +325,7 @@ def paper_tables(rows):
     folder = Path(__file__).resolve().parent.parent / 'config' / 'segments'
     tables = []
     for name in ('bottom', 'top'):
-        segment = TabulatedSegment.from_csv(folder / f'paper_{name}.csv', length=0.111)
+        segment = read_table(folder / f'paper_{name}.csv', length=0.111)
         v = np.linspace(segment.rest_volume, segment.max_volume, rows)
         tables.append((v, segment.pressure(v), segment.curvature(v)))
     return tables
@@ -396,7 +397,7 @@ def test_snapping_scenes_hold_the_invariants_on_every_step(build):
     if build == 'peak_valley_pair':
         segments = peak_valley_pair()
     else:
-        from softseq_ros.physics.scene import load_scene, scene_path
+        from softseq_ros.scene.loader import load_scene, scene_path
         try:
             segments = list(load_scene(scene_path(build)).segments)
         except ValueError:

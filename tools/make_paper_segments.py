@@ -4,7 +4,7 @@ Regenerate config/segments/paper_{bottom,top}.csv: calibrated stand-ins for the 
     python tools/make_paper_segments.py            write both tables
     python tools/make_paper_segments.py --check    exit 1 if the committed tables differ
 
-The model is softseq_ros.physics.bulge (membranes bulging as spherical caps + linear side walls).
+The model is softseq_ros.segments.bulge (membranes bulging as spherical caps + linear side walls).
 Two factors are calibrated by root finding and rounded, so the output is deterministic.
 """
 
@@ -19,8 +19,8 @@ from scipy.optimize import brentq
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from softseq_ros.physics.bulge import BulgeSegment, SegmentGeometry  # noqa: E402
-from softseq_ros.physics.materials import Ogden  # noqa: E402
+from softseq_ros.segments.bulge import BulgeSegment, SegmentGeometry  # noqa: E402
+from softseq_ros.segments.materials import Ogden  # noqa: E402
 
 MM = 1e-3
 ML = 1e-6
@@ -114,7 +114,7 @@ def render(name: str, seg: BulgeSegment, wall_factor: float, curvature_transfer:
     lines = [
         f'# paper_{name}.csv: CALIBRATED STAND-IN for the {name} segment of Milana et al. 2018',
         "# (bi-segmented soft actuator). NOT the paper's Abaqus curves, which are unavailable.",
-        '# Regenerate: python tools/make_paper_segments.py (model: softseq_ros.physics.bulge)',
+        '# Regenerate: python tools/make_paper_segments.py (model: softseq_ros.segments.bulge)',
         '# Model: each membrane bulges as a clamped spherical cap (bulge test), uniform',
         '#   equibiaxial stretch lam = sqrt(1 + (h/a)^2), tension N = H/(2 lam) dW/dlam,',
         '#   p = 2N/R_cap; volume = cavity + n caps + linear side-wall swelling C_w p;',

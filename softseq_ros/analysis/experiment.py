@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.analysis.metrics import Trace, monotone_leg
-from softseq_ros.physics.csv_columns import numeric_columns, read_rows
+from softseq_ros.scene.csv_columns import numeric_columns, read_rows
 
 FloatArray = NDArray[np.float64]
 DEFAULT_AMBIENT_PA = 101325.0
@@ -237,7 +237,7 @@ def synthetic_experiment(trace: Trace, shift_m3: float, scale: float, rows: int 
     absolute with ``absolute_ambient_pa`` added and declared). With ``lengths`` the file carries
     the tip of the same shifted state (the model's tip at u - shift), moved by ``tip_offset_m``.
     """
-    from softseq_ros.physics.kinematics import backbone_batch
+    from softseq_ros.segments.kinematics import backbone_batch
 
     up, down = trace.legs()
     legs = [(1, up)] + ([(-1, down)] if down is not None else [])

@@ -4,10 +4,11 @@ The segment library: simulate each segment once, assemble every combination on o
 ``softseq library DIR`` takes a folder of segment tables (CSV as in the README; a ``# length_m:``
 comment line gives a table's length, else ``--length-m``) or a scene file listing segments, and
 assembles every ordered pair (base, tip), and with ``--triples`` every ordered triple. Each
-assembly is classified by the solver (:func:`softseq_ros.physics.equilibrium.classify`) and swept
-quasi-statically over its whole range and back; the sweep is measured with the same metrics as a
-recording (:mod:`softseq_ros.analysis.metrics`): switch and snap volumes, pressure range,
-hysteresis and how far the tip reaches. More than a handful of assemblies run on a process pool.
+assembly is classified by the solver (:func:`softseq_ros.quasistatic.equilibrium.classify`)
+and swept quasi-statically over its whole range and back; the sweep is measured with the same
+metrics as a recording (:mod:`softseq_ros.analysis.metrics`): switch and snap volumes, pressure
+range, hysteresis and how far the tip reaches. More than a handful of assemblies run on a
+process pool.
 """
 
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -23,6 +24,7 @@ from typing import TextIO
 import numpy as np
 
 from softseq_ros.analysis.metrics import Trace, analyse
+from softseq_ros.scene.tables import read_table
 
 SWEEP_POINTS = 2001
 POOL_FROM = 5  # assemblies; below this a pool costs more than it saves
@@ -48,7 +50,7 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None) ->
     """The segments of a folder of tables or of a scene file."""
     path = Path(source)
     if path.is_file():
-        from softseq_ros.physics.scene import load_scene
+        from softseq_ros.scene.loader import load_scene
 
         scene = load_scene(path)
         return [Entry(s.name, None, s.length, str(path), i) for i, s in enumerate(scene.segments)]
@@ -70,18 +72,17 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None) ->
 
 def _segment(entry: Entry) -> object:
     if entry.table is not None:
-        from softseq_ros.physics.segments import TabulatedSegment
 
-        return TabulatedSegment.from_csv(entry.table, entry.name, entry.length_m)
-    from softseq_ros.physics.scene import load_scene
+        return read_table(entry.table, entry.name, entry.length_m)
+    from softseq_ros.scene.loader import load_scene
 
     return load_scene(entry.scene).segments[entry.index]
 
 
 def assemble(entries: tuple[Entry, ...]) -> dict:
     """Classify and sweep one assembly (base to tip); every number SI, pressures gauge."""
-    from softseq_ros.physics.equilibrium import EquilibriumMap, Tracker, classify
-    from softseq_ros.physics.kinematics import backbone_batch
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, classify
+    from softseq_ros.segments.kinematics import backbone_batch
 
     segments = []
     for k, entry in enumerate(entries):

@@ -22,7 +22,7 @@ SHARE_BINS = 200
 SWITCH_WINDOW_BINS = SHARE_BINS // 10
 # A share change smaller than this over the whole leg names no switch.
 MIN_SWITCH_CHANGE = 0.05
-# The paper's sequence rules, as softseq_ros.physics.equilibrium.classify applies them.
+# The paper's sequence rules, as softseq_ros.quasistatic.equilibrium.classify applies them.
 SYMMETRIC_SHARE = -0.02
 PARTIAL_SHARE_CHANGE = 0.25
 # Inflation and deflation paths that differ by more than this share of the range: hysteresis.

@@ -22,8 +22,8 @@ import yaml
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import Trace, analyse, segment_limits
 from softseq_ros.analysis.recording import Recording, load_recording
-from softseq_ros.physics.identity import segments_sha256, short
 from softseq_ros.rig import contract
+from softseq_ros.segments.identity import segments_sha256, short
 
 ML = 1e6
 KPA = 1e-3
@@ -47,7 +47,7 @@ def check_scene(recording: Recording, scene: object) -> list[str]:
     Notes on whether ``scene`` made ``recording``; SceneMismatchError when it cannot have.
 
     The recorded identity names the segments by their digest
-    (:func:`softseq_ros.physics.identity.segments_sha256`): another digest is other physics,
+    (:func:`softseq_ros.segments.identity.segments_sha256`): another digest is other physics,
     whatever the names. The same digest under another scene name is the same physics (a
     renamed or copied scene file): a note says so.
     """
@@ -124,7 +124,7 @@ def recording_metrics(recording: Recording, scene: object | None = None,
             'left out, stamped before the first pump command (latched from an earlier run): '
             + ', '.join(f'{topic} {n}' for topic, n in sorted(recording.ignored.items())))
     if scene is not None and emap is not None:
-        from softseq_ros.physics.equilibrium import classify
+        from softseq_ros.quasistatic.equilibrium import classify
 
         metrics['scene'] = scene.name
         metrics['sequence_type_of_scene'] = classify(emap)
@@ -231,7 +231,7 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     reference = load_reference(reference_file) if reference_file is not None else None
     scene = emap = None
     if scene_name is not None:
-        from softseq_ros.physics.scene import load_scene
+        from softseq_ros.scene.loader import load_scene
 
         scene = load_scene(scene_name)
     recording = load_recording(bag, namespace)
@@ -242,7 +242,7 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
         if scene.segment_names != recording.segment_names:
             raise ValueError(f'{bag}: the bag\'s segments {", ".join(recording.segment_names)} '
                              f'are not the scene\'s {", ".join(scene.segment_names)}')
-        from softseq_ros.physics.solve import build_map
+        from softseq_ros.quasistatic.solve import build_map
 
         emap = build_map(scene.segments, scene.solver.resolution)
     metrics = recording_metrics(recording, scene, emap)

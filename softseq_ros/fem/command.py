@@ -8,7 +8,7 @@ from typing import Any
 
 import yaml
 
-from softseq_ros.physics.design import (
+from softseq_ros.scene.design import (
     Design,
     DesignError,
     design_path,
@@ -18,7 +18,7 @@ from softseq_ros.physics.design import (
 
 
 def _value(text: str) -> Any:
-    from softseq_ros.physics.scene import _SceneLoader
+    from softseq_ros.scene.loader import _SceneLoader
 
     try:
         # The scene files' reading of numbers, so 3e-6 is a number here too.

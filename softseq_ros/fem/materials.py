@@ -1,7 +1,7 @@
 """
 Hyperelastic laws for the FEM, built from the material block that scenes and designs share.
 
-The names and units are those of :mod:`softseq_ros.physics.materials` (``law`` plus parameters
+The names and units are those of :mod:`softseq_ros.segments.materials` (``law`` plus parameters
 in Pa), so a design's material can be checked against the membrane models. Each law gives felupe
 the distortional (isochoric) part of the strain energy only; the volumetric part is the
 nearly-incompressible solid's (``bulk`` modulus on a cell-wise constant dilatation).
@@ -25,7 +25,7 @@ def _gent(C: Any, mu: float, jm: float) -> Any:  # noqa: N803 (C is the tensor's
 
 def initial_shear_modulus(law: str, params: dict[str, Any]) -> float:
     """Initial shear modulus [Pa] of a law, to scale the bulk modulus and the tolerances."""
-    from softseq_ros.physics.materials import make_material
+    from softseq_ros.segments.materials import make_material
 
     return float(make_material(law, params).shear_modulus)
 

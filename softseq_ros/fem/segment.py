@@ -30,7 +30,7 @@ from softseq_ros.fem.cavity import Cavity
 from softseq_ros.fem.constraints import ReducedSpace
 from softseq_ros.fem.materials import initial_shear_modulus, make_umat
 from softseq_ros.fem.solver import InflationModel
-from softseq_ros.physics.design import Design
+from softseq_ros.scene.design import Design
 
 
 def _subdivide(lines: list[float], size: float, thin_cells: int, thin_below: float) -> NDArray:

@@ -17,7 +17,7 @@ import re
 import tempfile
 from typing import Any, Callable
 
-from softseq_ros.physics.design import Design, DesignError, with_changes
+from softseq_ros.scene.design import Design, DesignError, with_changes
 
 SUMMARY_COLUMNS = ('table', 'design', 'parameters', 'peak_pressure_pa', 'peak_injected_m3',
                    'final_pressure_pa', 'final_injected_m3', 'final_curvature_per_m',

@@ -16,7 +16,7 @@ from typing import Callable, TextIO
 
 import numpy as np
 
-from softseq_ros.physics.design import FEM_CODE_VERSION, Design, cache_path
+from softseq_ros.scene.design import FEM_CODE_VERSION, Design, cache_path
 
 COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m', 'injected_m3', 'cut_curvature_per_m')
 

@@ -22,10 +22,10 @@ from rclpy.node import Parameter
 from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
-from softseq_ros.physics.limits import LIMITS
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import camera_core
 from softseq_ros.rig.camera import FRAME_TRIGGERS
+from softseq_ros.scene.limits import LIMITS
 
 # How often a state-triggered camera looks whether anyone wants its image.
 IMAGE_CHECK_S = 0.05

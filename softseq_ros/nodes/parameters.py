@@ -21,9 +21,9 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from softseq_ros.physics.limits import Limit
-from softseq_ros.physics.scene import Scene, load_scene
 from softseq_ros.rig.contract import OUTPUT_NAMES
+from softseq_ros.scene.limits import Limit
+from softseq_ros.scene.loader import Scene, load_scene
 
 
 class NodeConfigError(ValueError):

@@ -15,8 +15,8 @@ from rclpy.node import Node
 
 from softseq_ros.nodes.core_node import LocalCores
 from softseq_ros.nodes.parameters import NodeConfigError
-from softseq_ros.physics.scene import SceneError
 from softseq_ros.rig.build import SettingError
+from softseq_ros.scene.loader import SceneError
 
 
 def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> None:

@@ -22,11 +22,11 @@ import yaml
 from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
-from softseq_ros.physics.limits import LIMITS
-from softseq_ros.physics.profile import Leg
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import equilibrium_map, pump_core
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
+from softseq_ros.scene.limits import LIMITS
+from softseq_ros.scene.programme import Leg
 
 LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
 

@@ -27,9 +27,8 @@ import math
 import os
 from pathlib import Path
 
-from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, StatePoint, Tracker
-from softseq_ros.physics.identity import segments_sha256
-from softseq_ros.physics.reach import beyond_domain
+from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, StatePoint, Tracker
+from softseq_ros.quasistatic.reach import beyond_domain
 from softseq_ros.rig import contract
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.rig.values import (
@@ -44,6 +43,7 @@ from softseq_ros.rig.values import (
     SegmentVolumes,
     SnapThrough,
 )
+from softseq_ros.segments.identity import segments_sha256
 
 ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events')
 MAX_BUFFERED_COMMANDS = 100_000

@@ -8,15 +8,15 @@ both build the same cores from the same scene the same way.
 from pathlib import Path
 from typing import Any
 
-from softseq_ros.physics.equilibrium import EquilibriumMap
-from softseq_ros.physics.limits import LIMITS
-from softseq_ros.physics.profile import Leg, ProgrammeError, PumpProfile, check_capacity
-from softseq_ros.physics.reach import check_reach, check_scene_reach
-from softseq_ros.physics.scene import Scene
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap
+from softseq_ros.quasistatic.reach import check_reach, check_scene_reach
 from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.camera import CameraCore
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, PumpCore
+from softseq_ros.scene.limits import LIMITS
+from softseq_ros.scene.loader import Scene
+from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile, check_capacity
 
 
 class SettingError(ValueError):
@@ -58,7 +58,7 @@ def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
 
 def check_programme(scene: Scene, profile: PumpProfile, emap: EquilibriumMap) -> None:
     """
-    Refuse a programme that leaves the equilibrium's domain (softseq_ros.physics.reach).
+    Refuse a programme that leaves the equilibrium's domain (softseq_ros.quasistatic.reach).
 
     The scene's own programme is refused as a scene error naming the file and the scene key;
     one the settings changed, naming the setting (``legs[0].inflate_to_m3``).

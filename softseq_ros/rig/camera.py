@@ -3,7 +3,7 @@ The camera's core: the actuator's backbone as a side camera sees it.
 
 It keeps the latest segment curvatures and, at each frame, gives the backbone poses, one line
 per segment for markers and (when wanted) an rgb8 side view. Pose convention (as
-softseq_ros.physics.kinematics): the base is the origin, the unbent actuator points along +x
+softseq_ros.segments.kinematics): the base is the origin, the unbent actuator points along +x
 and bends in the x-z plane (y = 0). Each pose's position is a backbone point; its orientation
 is the frame whose +x axis is the backbone tangent (cos theta, 0, sin theta), theta measured
 from +x toward +z: a rotation by -theta about +y, quaternion (0, -sin(theta/2), 0,
@@ -32,9 +32,8 @@ from typing import Sequence
 
 import numpy as np
 
-from softseq_ros.physics.kinematics import PoseSampler, segment_end_indices
-from softseq_ros.physics.render import SideViewRenderer
 from softseq_ros.rig import contract
+from softseq_ros.rig.render import SideViewRenderer
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.rig.values import (
     WARNING,
@@ -48,6 +47,7 @@ from softseq_ros.rig.values import (
     Snapshot,
     SnapshotStep,
 )
+from softseq_ros.segments.kinematics import PoseSampler, segment_end_indices
 
 CAMERA_OUTPUTS = ('poses', 'markers', 'image')
 FRAME_TRIGGERS = ('timer', 'state')

@@ -13,8 +13,8 @@ that the nodes turn into rclpy profiles and the bag writer into rosbag2's QoS YA
 from dataclasses import dataclass
 
 # A light module (no numpy, no scipy): the contract is read by quick commands too.
-from softseq_ros.physics.outputs import DEFAULT_OUTPUTS as SCENE_DEFAULT_OUTPUTS
-from softseq_ros.physics.outputs import OUTPUT_NAMES as SCENE_OUTPUT_NAMES
+from softseq_ros.scene.outputs import DEFAULT_OUTPUTS as SCENE_DEFAULT_OUTPUTS
+from softseq_ros.scene.outputs import OUTPUT_NAMES as SCENE_OUTPUT_NAMES
 
 # Core roles and the names of the ROS nodes that host them.
 PUMP = 'pump'
@@ -25,7 +25,7 @@ NODE_NAMES: dict[str, str] = {PUMP: 'syringe_pump', ACTUATOR: 'actuator', CAMERA
 FRAME_ID = 'softseq_base'
 DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
 
-# The outputs a scene may list are the scene's business (physics.outputs); which topics
+# The outputs a scene may list are the scene's business (scene.outputs); which topics
 # each switches on is the contract's (Topic.output).
 OUTPUT_NAMES = SCENE_OUTPUT_NAMES
 DEFAULT_OUTPUTS = SCENE_DEFAULT_OUTPUTS
@@ -82,7 +82,7 @@ EVENTS = Topic(
 SCENE = Topic(
     'actuator/scene', 'std_msgs/msg/String', Qos(1, latched=True), ACTUATOR, (), None,
     'JSON {"scene", "segments", "segments_sha256", "stamp_ns"}: the scene name, its segments '
-    'base to tip and the SHA-256 of their definitions (softseq_ros.physics.identity)')
+    'base to tip and the SHA-256 of their definitions (softseq_ros.segments.identity)')
 BACKBONE = Topic(
     'camera/backbone', 'geometry_msgs/msg/PoseArray', Qos(10), CAMERA, (), 'poses',
     'backbone points in softseq_base at the camera rate')

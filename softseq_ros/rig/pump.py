@@ -27,7 +27,6 @@ import math
 import time
 from typing import Callable
 
-from softseq_ros.physics.profile import PumpProfile
 from softseq_ros.rig import contract
 from softseq_ros.rig.values import (
     INFO,
@@ -38,6 +37,7 @@ from softseq_ros.rig.values import (
     PumpStatus,
     SegmentVolumes,
 )
+from softseq_ros.scene.programme import PumpProfile
 
 # Gauge pressure above which the pump stops by default: several times the highest pressure
 # of the shipped segment models (about 20 kPa), far below what the silicone survives.

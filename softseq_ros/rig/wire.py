@@ -21,8 +21,8 @@ from softseq_ros.bag.cdr import (
     joint_state_packer,
     string_cdr,
 )
-from softseq_ros.physics.render import SEGMENT_RGB
 from softseq_ros.rig.contract import FRAME_ID
+from softseq_ros.rig.render import SEGMENT_RGB
 from softseq_ros.rig.values import (
     Backbone,
     Markers,

@@ -6,9 +6,9 @@ volumes add up to the total V. Each segment's PV curve splits into monotone piec
 piece per segment (a *configuration*) makes every volume a function of the common pressure p, so
 the equilibrium set is a union of curves parametrised by p. This is the paper's "assembling
 algorithm", done once per scene in :class:`EquilibriumMap` from three stages: assembly of the
-stable branches (softseq_ros.physics.assembly), how each branch ends and where a snap lands
-(softseq_ros.physics.branch_ends), and reading states off the branches
-(softseq_ros.physics.states).
+stable branches (softseq_ros.quasistatic.assembly), how each branch ends and where a snap lands
+(softseq_ros.quasistatic.branch_ends), and reading states off the branches
+(softseq_ros.quasistatic.states).
 
 Stability is the positive definiteness of the Hessian of the stored energy, diag(dp_i/dv_i),
 restricted to sum(dv_i) = 0. With k_i = dp_i/dv_i it holds exactly when at most one k_i is negative
@@ -31,16 +31,16 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from softseq_ros.physics.assembly import (
+from softseq_ros.quasistatic.assembly import (
     Assembly,
     Branch,
     EquilibriumCurve,
     FloatArray,
     SegmentNumerics,
 )
-from softseq_ros.physics.branch_ends import BranchEnds
-from softseq_ros.physics.segments import Segment
-from softseq_ros.physics.states import StatePoint, StateReader, StateRows
+from softseq_ros.quasistatic.branch_ends import BranchEnds
+from softseq_ros.quasistatic.states import StatePoint, StateReader, StateRows
+from softseq_ros.segments.models import Segment
 
 SEQUENCE_TYPES = ('none', 'partial', 'symmetric', 'asymmetric')
 __all__ = ['DomainError', 'EquilibriumCurve', 'EquilibriumMap', 'SEQUENCE_TYPES', 'SnapEvent',

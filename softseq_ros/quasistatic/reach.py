@@ -2,7 +2,7 @@
 Whether a pump programme stays in the equilibrium's domain, checked before anything runs.
 
 For the pump node, ``softseq run``, ``classify`` and ``solve`` alike (the scene loader checks
-the cheaper bound, what the segments hold: softseq_ros.physics.profile.check_capacity).
+the cheaper bound, what the segments hold: softseq_ros.scene.programme.check_capacity).
 :func:`check_reach` walks the programme on the equilibrium set: the inflation ends where the
 first segment reaches the end of its model, which is often well below the sum of what the
 segments hold (the paper's pair holds 120 mL, its inflation ends at 106 mL), and depends on the
@@ -14,9 +14,9 @@ from typing import Sequence
 
 import numpy as np
 
-from softseq_ros.physics.equilibrium import DomainError, EquilibriumMap, Tracker
-from softseq_ros.physics.profile import ProgrammeError, PumpProfile, leg_key
-from softseq_ros.physics.scene import Scene, SceneError
+from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.scene.loader import Scene, SceneError
+from softseq_ros.scene.programme import ProgrammeError, PumpProfile, leg_key
 
 
 def check_reach(profile: PumpProfile, emap: EquilibriumMap, names: Sequence[str],

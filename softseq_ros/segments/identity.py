@@ -3,7 +3,7 @@ The identity of a scene's segments: a digest of what defines them, the same on e
 
 A bag records which scene made it (as ROS records a robot's ``robot_description``): the scene's
 name, its segment names and this digest. The digest hashes each segment's definition
-(:meth:`softseq_ros.physics.segments.Segment.definition`: name, length and the model's data, a
+(:meth:`softseq_ros.segments.models.Segment.definition`: name, length and the model's data, a
 table's rows as read or a model's parameters), base to tip, as JSON with sorted keys, with
 SHA-256. Floats go into JSON as their shortest round-trip text, so equal numbers give equal
 bytes everywhere; curves sampled from the models are never hashed, because a transcendental

@@ -34,7 +34,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from softseq_ros.physics.materials import Material
+from softseq_ros.segments.materials import Material
 
 
 class BulgeModelError(ValueError):

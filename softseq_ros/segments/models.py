@@ -11,42 +11,19 @@ assembles.
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 import math
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
-from softseq_ros.physics.csv_columns import read_columns
-from softseq_ros.physics.identity import exact, exact_list
-from softseq_ros.physics.materials import Material, material_definition
+from softseq_ros.segments.identity import exact, exact_list
+from softseq_ros.segments.materials import Material, material_definition
 
 FloatArray = NDArray[np.float64]
 
-TABLE_COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m')
-
-
 class TableError(ValueError):
     """A segment table that cannot be used; the message starts with the file name."""
-
-
-# Beyond these a table is almost surely in other units: a segment holding more than a cubic
-# metre of fluid, or one whose pressures all stay within a pascal of zero.
-MAX_PLAUSIBLE_VOLUME_M3 = 1.0
-MIN_PLAUSIBLE_PRESSURE_PA = 1.0
-
-
-def _check_si(path: Path, volumes: FloatArray, pressures: FloatArray) -> None:
-    """Refuse a table whose numbers are implausible in SI units, naming the likely fix."""
-    if volumes.size and volumes[0] > MAX_PLAUSIBLE_VOLUME_M3:
-        raise TableError(f'{path}: column volume_m3: the rest volume is {volumes[0]:.6g} m^3, '
-                         f'more than {MAX_PLAUSIBLE_VOLUME_M3:g} m^3: is the table in mL? '
-                         'Volumes are in m^3 (1 mL = 1e-6 m^3)')
-    if pressures.size and np.max(np.abs(pressures)) < MIN_PLAUSIBLE_PRESSURE_PA:
-        raise TableError(f'{path}: column pressure_pa: every pressure is within '
-                         f'{MIN_PLAUSIBLE_PRESSURE_PA:g} Pa of zero: is the table in kPa or MPa? '
-                         'Pressures are gauge, in Pa (1 kPa = 1000 Pa)')
 
 
 @dataclass(frozen=True)
@@ -124,7 +101,7 @@ class Segment(ABC):
 
         Its name, its length and its model's data: a table's rows as read, a model's
         parameters; never curves sampled from them (a transcendental function may differ in
-        the last bit between machines). :mod:`softseq_ros.physics.identity` hashes it.
+        the last bit between machines). :mod:`softseq_ros.segments.identity` hashes it.
         """
         raise NotImplementedError(f'segment {self.name!r} ({type(self).__name__}) does not '
                                   'say what defines it: give it a definition() method')
@@ -275,25 +252,6 @@ class TabulatedSegment(Segment):
         self._e = self._p.antiderivative()
         self._k = PchipInterpolator(vol, cur, extrapolate=False)
         self._dk = self._k.derivative()
-
-    @classmethod
-    def from_csv(cls, path: str | Path, name: str | None = None, length: float | None = None,
-                 design: dict[str, object] | None = None) -> 'TabulatedSegment':
-        """
-        Read a table with header volume_m3,pressure_pa,curvature_per_m.
-
-        ``design``: the identity of the segment design whose FEM table this is (see
-        :attr:`design`), when it is one.
-        """
-        path = Path(path)
-        columns = read_columns(path, TABLE_COLUMNS, TableError, 'segment table')
-        if length is None:
-            raise TableError(f'{path}: the segment length must be given (m)')
-        segment = cls(name or path.stem, length, columns['volume_m3'], columns['pressure_pa'],
-                      columns['curvature_per_m'], source=str(path))
-        _check_si(path, segment.volumes, segment.pressures)
-        segment.design = design
-        return segment
 
     def smoothed(self, pressures: ArrayLike, *, noise_std_pa: float | None = None,
                  prominence_pa: float | None = None) -> 'TabulatedSegment':

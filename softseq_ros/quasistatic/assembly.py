@@ -7,7 +7,7 @@ is a union of curves parametrised by p (the paper's "assembling algorithm"). Alo
 stretch the total volume is strictly monotone in p, so each stable stretch is stored as a
 :class:`Branch`: Hermite cubics of the state in the total volume V, checked against the exact
 state and refined where they miss. How branches end (continue, snap, limit) is decided
-afterwards (softseq_ros.physics.branch_ends).
+afterwards (softseq_ros.quasistatic.branch_ends).
 """
 
 from dataclasses import dataclass, field
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import PPoly
 from scipy.optimize import brentq
 
-from softseq_ros.physics.segments import Piece, Segment
+from softseq_ros.segments.models import Piece, Segment
 
 FloatArray = NDArray[np.float64]
 

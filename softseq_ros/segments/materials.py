@@ -15,7 +15,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from softseq_ros.physics.identity import exact, exact_list
+from softseq_ros.segments.identity import exact, exact_list
 
 
 class Material(Protocol):

@@ -52,7 +52,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from softseq_ros.physics.scene import (
+from softseq_ros.scene.loader import (
     _SCENE_NAME,
     SceneError,
     _Context,

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from softseq_ros.physics.assembly import (
+from softseq_ros.quasistatic.assembly import (
     Branch,
     BranchEnd,
     FloatArray,
@@ -21,7 +21,7 @@ from softseq_ros.physics.assembly import (
     cofactor_sum,
     soft_direction,
 )
-from softseq_ros.physics.states import StateReader
+from softseq_ros.quasistatic.states import StateReader
 
 
 class BranchEnds:

@@ -13,9 +13,9 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.physics.csv_columns import read_columns
-from softseq_ros.physics.equilibrium import EquilibriumMap, SolvedPath
-from softseq_ros.physics.segments import Segment
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
+from softseq_ros.scene.csv_columns import read_columns
+from softseq_ros.segments.models import Segment
 
 INJECTED_COLUMN = 'injected_m3'
 

@@ -49,18 +49,19 @@ from typing import Any
 
 import yaml
 
-from softseq_ros.physics.limits import LIMITS
-from softseq_ros.physics.materials import LAW_NAMES, make_material, material_parameter_names
-from softseq_ros.physics.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
-from softseq_ros.physics.profile import (
+from softseq_ros.scene.limits import LIMITS
+from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
+from softseq_ros.scene.programme import (
     DEFAULT_FLOW_RATE,
     Leg,
     ProgrammeError,
     PumpProfile,
     check_capacity,
 )
-from softseq_ros.physics.segments import BalloonSegment, LinearSegment, Segment, TabulatedSegment
-from softseq_ros.physics.smoothing import smooth_table
+from softseq_ros.scene.tables import read_table
+from softseq_ros.segments.materials import LAW_NAMES, make_material, material_parameter_names
+from softseq_ros.segments.models import BalloonSegment, LinearSegment, Segment, TabulatedSegment
+from softseq_ros.segments.smoothing import smooth_table
 
 PACKAGE = 'softseq_ros'
 
@@ -415,7 +416,7 @@ def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
             table = (ctx.folder / relative) if not Path(relative).is_absolute() else Path(relative)
             if not table.is_file():
                 raise ctx.error(where, f'file not found: {table}')
-            segment = TabulatedSegment.from_csv(table, name=name, length=length)
+            segment = read_table(table, name=name, length=length)
             if 'smoothing' not in raw:
                 return segment
             return _smoothed(ctx, raw['smoothing'], _join(key_path, 'smoothing'), segment)
@@ -456,9 +457,9 @@ def _segment(ctx: _Context, value: object, key_path: str) -> Segment:
 
 def _designed(ctx: _Context, text: str, where: str, name: str, length: float,
               length_key: str) -> TabulatedSegment:
-    """The segment of a design file (softseq_ros.physics.design): its FEM table, cached."""
+    """The segment of a design file (softseq_ros.scene.design): its FEM table, cached."""
     # Imported here: the design module reads its files with this module's helpers.
-    from softseq_ros.physics.design import DesignError, cached_table, design_path, load_design
+    from softseq_ros.scene.design import DesignError, cached_table, design_path, load_design
 
     relative = Path(text)
     beside = relative if relative.is_absolute() else ctx.folder / relative
@@ -470,7 +471,7 @@ def _designed(ctx: _Context, text: str, where: str, name: str, length: float,
     if not math.isclose(length, design.geometry.length_m, rel_tol=1e-9):
         raise ctx.error(length_key, f"{length:g} m differs from the design's geometry.length_m "
                                     f'({design.geometry.length_m:g} m)')
-    return TabulatedSegment.from_csv(table, name=name, length=length, design=design.identity())
+    return read_table(table, name=name, length=length, design=design.identity())
 
 
 def _smoothed(ctx: _Context, value: object, key_path: str,
@@ -478,7 +479,7 @@ def _smoothed(ctx: _Context, value: object, key_path: str,
     """
     A measured table with its noise smoothed (opt-in: ``smoothing: {}`` or with parameters).
 
-    See :func:`softseq_ros.physics.smoothing.smooth_table`: ``noise_std_pa`` (estimated from
+    See :func:`softseq_ros.segments.smoothing.smooth_table`: ``noise_std_pa`` (estimated from
     the rows when absent) and ``prominence_pa``, the smallest peak or valley kept (6 noise
     deviations when absent).
     """

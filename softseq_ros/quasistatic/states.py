@@ -12,7 +12,7 @@ from typing import NamedTuple, overload
 
 import numpy as np
 
-from softseq_ros.physics.assembly import Branch, FloatArray, SegmentNumerics
+from softseq_ros.quasistatic.assembly import Branch, FloatArray, SegmentNumerics
 
 
 class StatePoint(NamedTuple):

@@ -1,1 +1,0 @@
-"""Pure physics: segment models, equilibrium tracking, kinematics, scenes. No ROS imports here."""
