@@ -55,16 +55,12 @@ def run(scene: 'str | os.PathLike | Scene', out: str | os.PathLike, *,
     """
     Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
 
-    The same cores as the ROS nodes, stepped on a simulated clock that starts at
-    ``start_time_ns`` (default: now); ``overrides`` replace core settings by role, e.g.
-    ``{'camera': {'rate_hz': 30.0}}``.
+    A loaded scene runs as it is in memory (``dataclasses.replace`` a part to change it); a
+    path or shipped name is loaded first. The same cores as the ROS nodes, stepped on a
+    simulated clock that starts at ``start_time_ns`` (default: now); ``overrides`` replace
+    core settings by role, e.g. ``{'camera': {'rate_hz': 30.0}}``.
     """
     from softseq_ros.batch import BatchRun
-    from softseq_ros.scene.loader import Scene
 
-    if isinstance(scene, Scene):
-        if scene.path is None:
-            raise ValueError('run: the scene has no file; give its path or shipped name')
-        scene = scene.path
     return BatchRun(scene, out, overrides=overrides, start_time_ns=start_time_ns,
                     namespace=namespace).run()

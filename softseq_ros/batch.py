@@ -2,9 +2,10 @@
 Batch runs: the rig's cores in one process, in lock-step simulated time, recorded to a bag.
 
 The pump, actuator and camera cores (softseq_ros.rig) are built from the scene as the nodes
-build them; this runner ticks the pump and the camera at their rates on a simulated clock,
-routes every value to the cores that consume it (softseq_ros.rig.routing) and writes each one,
-encoded exactly as the nodes publish it (softseq_ros.rig.wire), into the bag. No rclpy and no
+build them; this runner ticks every core that has a rate (the pump, the camera, and the
+actuator when its model moves between commands) on a simulated clock, routes every value to
+the cores that consume it (softseq_ros.rig.routing) and writes each one, encoded exactly as the
+nodes publish it (softseq_ros.rig.wire), into the bag. No rclpy and no
 DDS: a run is as fast as the machine allows and deterministic (the same scene and start time
 give the same bag, byte for byte). The simulated clock starts at the run's start time (wall
 clock, or ``start_time_ns`` for reproducible bags), so a batch bag is dated like a recording.
@@ -24,7 +25,7 @@ from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
 from softseq_ros.rig.wire import ENCODERS
-from softseq_ros.scene.loader import load_scene, scene_path
+from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.stopping import HeldSignals
 
 NS_PER_S = 1_000_000_000
@@ -66,23 +67,37 @@ class _Channel:
     count: int = 0
 
 
+Stage = Callable[..., Any]
+
+
 class BatchRun:
     """
     One lock-step run of a scene into the bag directory ``out``.
 
-    ``overrides`` replace core settings by role (``{'camera': {'rate_hz': 1.0}}``; the names
-    of softseq_ros.rig.build). ``namespace`` is the rig's namespace in the bag's topic names.
-    ``progress`` gets a progress line, ``log`` the cores' warnings (also kept in the result).
+    ``scene`` is a loaded :class:`Scene` (run as it is in memory, changes included) or a scene
+    file or shipped name. ``overrides`` replace core settings by role
+    (``{'camera': {'rate_hz': 1.0}}``; the names of softseq_ros.rig.build). ``namespace`` is
+    the rig's namespace in the bag's topic names. ``progress`` gets a progress line, ``log``
+    the cores' warnings (also kept in the result).
+
+    ``wrap`` lets a benchmark or a profiler see every stage of the run without touching the
+    runner: it is called once per stage as ``wrap(label, function)`` before the run starts and
+    returns the function to call instead (the same one, or one that times or counts it). The
+    stages and their labels are in :data:`STAGES`.
     """
 
-    def __init__(self, scene: str | os.PathLike, out: str | os.PathLike, *,
+    STAGES = ('pump.tick', 'pump.handle', 'actuator.tick', 'actuator.handle',
+              'actuator.model.command', 'camera.tick', 'camera.handle', 'encode', 'append')
+
+    def __init__(self, scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
                  overrides: dict[str, dict[str, Any]] | None = None,
                  progress: TextIO | None = None, log: TextIO | None = None,
-                 start_time_ns: int | None = None, namespace: str = '/') -> None:
-        """Resolve the scene and build the cores; the bag directory must not exist yet."""
-        self.scene_path = scene_path(scene)
-        self.scene = load_scene(self.scene_path)
+                 start_time_ns: int | None = None, namespace: str = '/',
+                 wrap: Callable[[str, Stage], Stage] | None = None) -> None:
+        """Load the scene (unless given loaded) and build the cores; ``out`` must not exist."""
+        self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.out = Path(out)
+        self.wrap = wrap
         overrides = overrides or {}
         unknown = sorted(set(overrides) - set(contract.NODE_NAMES))
         if unknown:
@@ -94,7 +109,7 @@ class BatchRun:
         pump_settings = {'feedback_clock': None,
                          'open_loop': 'volumes' not in self.actuator.outputs,
                          **overrides.get(contract.PUMP, {})}
-        self.pump, self.pump_rate_hz = pump_core(self.scene, self.actuator.emap,
+        self.pump, self.pump_rate_hz = pump_core(self.scene, self.actuator.model,
                                                   **pump_settings)
         self.camera = camera_core(self.scene, **overrides.get(contract.CAMERA, {}))
         self.cores = {contract.PUMP: self.pump, contract.ACTUATOR: self.actuator,
@@ -105,9 +120,19 @@ class BatchRun:
         self.namespace = namespace
         self.start_time_ns = time.time_ns() if start_time_ns is None else int(start_time_ns)
         self._now_ns = self.start_time_ns
+        if wrap is not None:
+            self._wrap_cores(wrap)
         self._router = Router(self.cores, lambda: self._now_ns)
         self._channels: dict[type, _Channel] = {}
         self.warnings: list[str] = []
+
+    def _wrap_cores(self, wrap: Callable[[str, Stage], Stage]) -> None:
+        # Instance attributes shadow the methods: the router and the loop call the wrappers.
+        for role, core in self.cores.items():
+            for method in ('tick', 'handle'):
+                setattr(core, method, wrap(f'{role}.{method}', getattr(core, method)))
+        model = self.actuator.model
+        model.command = wrap('actuator.model.command', model.command)
 
     def run(self) -> BatchResult:
         """Run the scene's pump programme to its end; the bag is complete on return."""
@@ -132,7 +157,10 @@ class BatchRun:
                 continue
             name = contract.resolve(topic.name, self.namespace)
             writer.add_topic(name, topic.type_name, qos_yaml(topic.qos))
-            self._channels[kind] = _Channel(name, ENCODERS[kind], writer.appender(name))
+            encode, append = ENCODERS[kind], writer.appender(name)
+            if self.wrap is not None:
+                encode, append = self.wrap('encode', encode), self.wrap('append', append)
+            self._channels[kind] = _Channel(name, encode, append)
 
     def _record(self, values: list) -> None:
         channels = self._channels
@@ -154,31 +182,33 @@ class BatchRun:
                 self.log.write(('\n' if _is_terminal(self.progress) else '') + line + '\n')
 
     def _loop(self, wall_start: float, held: HeldSignals) -> None:
-        pump, camera, router = self.pump, self.camera, self._router
+        pump, router = self.pump, self._router
         stop_signals = held.pending
         start = self.start_time_ns
-        pump_period = round(NS_PER_S / self.pump_rate_hz)
-        camera_period = round(NS_PER_S / camera.rate_hz)
+        # [next tick, order, core, period] for every core with a rate. At equal times the pump
+        # goes first (a frame shows the command of its instant), then the actuator's model.
+        rates = ((pump, self.pump_rate_hz), (self.actuator, self.actuator.rate_hz),
+                 (self.camera, self.camera.rate_hz))
+        clocks = [[start, order, core, round(NS_PER_S / rate)]
+                  for order, (core, rate) in enumerate(rates) if rate is not None]
         duration = pump.duration_s
-        next_pump = next_camera = start
         next_report = wall_start + PROGRESS_PERIOD_S
         # The actuator names its scene first, then the pump gives its status.
         self._record(router.run(self.actuator.begin(start) + pump.begin(start)))
         while True:
             if stop_signals:
                 held.check()
-            # The pump goes first at equal times: a frame shows the command of its instant.
-            if next_pump <= next_camera:
-                self._now_ns = next_pump
-                self._record(router.run(pump.tick(next_pump)))
-                next_pump += pump_period
-                if pump.state in ('finished', 'stopped'):
-                    self._record(router.run(camera.tick(self._now_ns)))
-                    return
-            else:
-                self._now_ns = next_camera
-                self._record(router.run(camera.tick(next_camera)))
-                next_camera += camera_period
+            clock = min(clocks)
+            now, _, core, period = clock
+            self._now_ns = now
+            self._record(router.run(core.tick(now)))
+            clock[0] = now + period
+            if core is pump and pump.state in ('finished', 'stopped'):
+                # Every other core shows the last state once more, at the pump's last instant.
+                for other in clocks:
+                    if other is not clock:
+                        self._record(router.run(other[2].tick(now)))
+                return
             if self.progress is not None and time.perf_counter() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
@@ -186,7 +216,7 @@ class BatchRun:
     def _report(self, wall_start: float, duration: float) -> None:
         sim = (self._now_ns - self.start_time_ns) / NS_PER_S
         wall = time.perf_counter() - wall_start
-        text = (f'{self.scene_path.stem}: {sim:8.1f} / {duration:.1f} s simulated '
+        text = (f'{self.scene.name}: {sim:8.1f} / {duration:.1f} s simulated '
                 f'({100.0 * sim / max(duration, 1e-9):3.0f} %), {sim / max(wall, 1e-9):6.0f}x '
                 'real time')
         if _is_terminal(self.progress):
@@ -200,7 +230,8 @@ def _is_terminal(stream: TextIO | None) -> bool:
     return bool(stream is not None and getattr(stream, 'isatty', lambda: False)())
 
 
-def run_scene(scene: str | os.PathLike, out: str | os.PathLike, show_progress: bool = True,
+def run_scene(scene: 'Scene | str | os.PathLike', out: str | os.PathLike,
+              show_progress: bool = True,
               start_time_ns: int | None = None) -> BatchResult:
     """Run a scene in batch mode into the bag directory ``out``."""
     return BatchRun(scene, out, progress=sys.stderr if show_progress else None,

@@ -7,9 +7,12 @@ import signal
 import sys
 from typing import Callable, Sequence
 
+from softseq_ros.errors import UserError
 from softseq_ros.stopping import TerminatedError, raise_terminated
 
-USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError)
+# A user's input that cannot be used, or a file the system cannot read or write: one line.
+# Anything else is a bug and keeps its traceback.
+USER_ERRORS: tuple[type[BaseException], ...] = (UserError, OSError)
 
 
 def _solve(args: argparse.Namespace) -> int:
@@ -170,7 +173,7 @@ def _fem(args: argparse.Namespace) -> int:
 
 
 def _scenes(args: argparse.Namespace) -> int:
-    from softseq_ros.scene.loader import config_dir, shipped_scenes
+    from softseq_ros.scene.paths import config_dir, shipped_scenes
 
     print(f'shipped scenes in {config_dir()}:')
     for name in shipped_scenes():

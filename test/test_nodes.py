@@ -416,7 +416,7 @@ def test_actuator_resumes_from_the_latched_volumes_of_a_live_publisher(context):
         Parameter('scene', value='fig1_asymmetric'), Parameter('resume_timeout_s', value=10.0)])
     with spinning(context, keeper, actuator):
         wait_for(lambda: not actuator.resuming, 'the resume')
-        resumed = actuator.core.tracker.state
+        resumed = actuator.core.model.tracker.state
     assert resumed.injected == pytest.approx(middle, rel=1e-9)
     np.testing.assert_allclose(resumed.volumes, held_volumes, rtol=1e-9,
                                atol=1e-9 * emap.v_scale)

@@ -29,7 +29,8 @@ from test_nodes import (
 import yaml
 
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.scene.loader import config_dir, load_scene
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.scene.paths import config_dir
 
 pytestmark = pytest.mark.ros
 

@@ -11,6 +11,7 @@ import yaml
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import check_reach
 from softseq_ros.rig.build import SettingError, pump_core
+from softseq_ros.rig.model import QuasiStaticModel
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile
 from softseq_ros.segments.models import LinearSegment
@@ -94,14 +95,15 @@ def test_run_classify_and_solve_refuse_it_with_the_same_line(tmp_path, command):
 def test_the_pump_takes_its_limits_from_the_segments(tmp_path):
     scene = load_scene(write_scene(tmp_path))
     emap = EquilibriumMap(scene.segments)
-    core, _ = pump_core(scene, emap)
+    model = QuasiStaticModel(emap, scene.segment_names)
+    core, _ = pump_core(scene, model)
     # The end stop is where the inflation ends, not the sum of what the segments hold.
     assert core.max_injected_m3 == pytest.approx(emap.injected_range[1], rel=1e-12)
     assert core.max_injected_m3 < scene.capacity
     path, target, first = _beyond_the_domain(tmp_path)
     with pytest.raises(SettingError, match=r'^legs\[0\]\.inflate_to_m3: .* segment '
                                            f'{first} reaches'):
-        pump_core(scene, emap, legs=(Leg.inflate(target), Leg.deflate(0.0)))
+        pump_core(scene, model, legs=(Leg.inflate(target), Leg.deflate(0.0)))
     with pytest.raises(SettingError, match=r'^legs\[0\]\.inflate_to_m3: .* exceeds what the '
                                            r'segments hold'):
         pump_core(scene, legs=(Leg.inflate(2 * scene.capacity),))

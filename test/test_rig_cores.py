@@ -17,6 +17,7 @@ from scenes import FAST_SCENE, inside_the_hysteresis_loop, write_scene
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import SettingError, actuator_core, camera_core, pump_core
+from softseq_ros.rig.model import QuasiStaticModel
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.values import (
     TOPIC_VALUE_TYPES,
@@ -212,11 +213,11 @@ def test_core_settings_are_checked_with_their_names(tmp_path):
 def test_actuator_refuses_garbage_and_keeps_its_state(tmp_path):
     actuator = actuator_core(load_scene(write_scene(tmp_path)))
     actuator.handle(command(1.0e-5), 0)
-    before = (actuator.tracker.branch, actuator.tracker.total)
+    before = (actuator.model.tracker.branch, actuator.model.tracker.total)
     warnings = []
     for value in (command(math.nan), command(math.inf), command(-1.0e-6), command(1.0)):
         warnings += [n.text for n in actuator.handle(value, 0) if type(n) is Notice]
-        assert (actuator.tracker.branch, actuator.tracker.total) == before
+        assert (actuator.model.tracker.branch, actuator.model.tracker.total) == before
     assert actuator.rejected_commands == 4
     assert any('1' in w and 'beyond' in w for w in warnings), warnings
     assert any('not finite' in w for w in warnings) and any('negative' in w for w in warnings)
@@ -238,7 +239,7 @@ def test_actuator_refuses_garbage_and_keeps_its_state(tmp_path):
         assert refused.value.key == key
     outputs = actuator.handle(command(2.5e-5), 0)
     volumes, = topic_values(outputs, SegmentVolumes)
-    reference = Tracker(actuator.emap).sweep([1.0e-5, 2.5e-5])
+    reference = Tracker(actuator.model.emap).sweep([1.0e-5, 2.5e-5])
     np.testing.assert_allclose(volumes.volumes_m3, reference.volumes[-1], rtol=1e-9)
 
 
@@ -248,7 +249,7 @@ def test_actuator_repeats_its_outputs_without_solving_and_stamps_them(tmp_path):
     sent = []
     for second, volume in enumerate([2.0e-5, 2.0e-5, 2.0e-5, 2.1e-5]):
         sent += actuator.handle(command(volume, second * 10**9), 0)
-    assert actuator.solves == 2
+    assert actuator.model.solves == 2
     volumes = topic_values(sent, SegmentVolumes)
     assert [v.stamp_ns for v in volumes] == [0, 10**9, 2 * 10**9, 3 * 10**9]
     assert volumes[0].volumes_m3 == volumes[1].volumes_m3 == volumes[2].volumes_m3
@@ -274,12 +275,14 @@ def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path)
     grid = np.linspace(0.0, 0.98 * emap.injected_range[1], 401)
     row = int(np.argmin(np.abs(grid - middle)))
     state_file = tmp_path / 'state.json'
-    first = actuator_core(scene, emap, state_file=str(state_file))
+    first = actuator_core(scene, QuasiStaticModel(emap, scene.segment_names),
+                          state_file=str(state_file))
     for volume in list(grid) + list(grid[::-1][:len(grid) - row]):
         first.handle(command(float(volume)), 0)
     assert json.loads(state_file.read_text())['volumes_m3'] == pytest.approx(list(held),
                                                                               rel=1e-9)
-    second = actuator_core(scene, emap, state_file=str(state_file))
+    second = actuator_core(scene, QuasiStaticModel(emap, scene.segment_names),
+                           state_file=str(state_file))
     second.begin_wait()
     assert second.handle(command(float(grid[row])), 0) == []
     resumed, notices = second.resume_from_file()
@@ -298,7 +301,7 @@ def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path)
     third = actuator_core(other, state_file=str(state_file))
     resumed, notices = third.resume_from_file()
     assert not resumed and 'written for other segments' in notices[0].text
-    assert third.tracker.state.injected == 0.0
+    assert third.model.tracker.state.injected == 0.0
 
 
 # ------------------------------------------------------------------------- camera

@@ -9,15 +9,8 @@ import pytest
 import yaml
 
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, classify
-from softseq_ros.scene.loader import (
-    Scene,
-    SceneError,
-    config_dir,
-    load_scene,
-    scene_from_dict,
-    scene_path,
-    shipped_scenes,
-)
+from softseq_ros.scene.loader import Scene, SceneError, load_scene, scene_from_dict
+from softseq_ros.scene.paths import config_dir, scene_path, shipped_scenes
 from softseq_ros.segments.models import BalloonSegment, LinearSegment, TabulatedSegment
 
 ML = 1e-6
@@ -309,11 +302,11 @@ def test_config_dir_is_the_checkout_folder_and_bare_names_resolve():
 
 
 def test_installed_layout_is_found(tmp_path, monkeypatch):
-    import softseq_ros.scene.loader as scene_module
+    import softseq_ros.scene.paths as paths_module
     share = tmp_path / 'share' / 'softseq_ros' / 'config'
     share.mkdir(parents=True)
     (share / 'paper.yaml').write_text('name: paper\n')
-    monkeypatch.setattr(scene_module, '__file__', str(tmp_path / 'lib' / 'a' / 'b' / 'scene.py'))
+    monkeypatch.setattr(paths_module, '__file__', str(tmp_path / 'lib' / 'a' / 'b' / 'scene.py'))
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path))
     assert config_dir() == share
 

@@ -397,7 +397,8 @@ def test_snapping_scenes_hold_the_invariants_on_every_step(build):
     if build == 'peak_valley_pair':
         segments = peak_valley_pair()
     else:
-        from softseq_ros.scene.loader import load_scene, scene_path
+        from softseq_ros.scene.loader import load_scene
+        from softseq_ros.scene.paths import scene_path
         try:
             segments = list(load_scene(scene_path(build)).segments)
         except ValueError:

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.analysis.metrics import Trace, monotone_leg
+from softseq_ros.errors import UserError
 from softseq_ros.scene.csv_columns import numeric_columns, read_rows
 
 FloatArray = NDArray[np.float64]
@@ -31,7 +32,7 @@ ABSOLUTE_LOOKING_PA = (80e3, 130e3)
 SHIFT_SEARCH = 0.5
 
 
-class ExperimentError(ValueError):
+class ExperimentError(UserError):
     """An experiment file that cannot be used; the message names the file, row and column."""
 
 

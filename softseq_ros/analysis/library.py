@@ -24,6 +24,7 @@ from typing import TextIO
 import numpy as np
 
 from softseq_ros.analysis.metrics import Trace, analyse
+from softseq_ros.errors import UserError
 from softseq_ros.scene.tables import read_table
 
 SWEEP_POINTS = 2001
@@ -31,7 +32,7 @@ POOL_FROM = 5  # assemblies; below this a pool costs more than it saves
 _LENGTH_LINE = re.compile(r'^\s*#\s*length_m\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
 
 
-class LibraryError(ValueError):
+class LibraryError(UserError):
     """A library folder or scene that cannot be assembled."""
 
 

@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from softseq_ros.errors import UserError
+
 FloatArray = NDArray[np.float64]
 
 # Grid on which shares of the inflow are taken (bins over the first inflation leg).
@@ -35,6 +37,10 @@ SNAP_SHARE_OF_RANGE = 1e-3
 PLATEAU_SHARE = 0.95
 
 
+class TraceError(UserError):
+    """A recorded or swept trace that holds nothing the metrics can measure."""
+
+
 @dataclass
 class Trace:
     """States in command order; ``sign`` is +1 on inflation legs and -1 on deflation legs."""
@@ -52,7 +58,7 @@ class Trace:
         sign = self.sign
         rising = np.flatnonzero(sign > 0)
         if not rising.size:
-            raise ValueError('the pump never inflates in this recording: nothing to measure')
+            raise TraceError('the pump never inflates in this recording: nothing to measure')
         start = int(rising[0])
         falling = np.flatnonzero(sign[start:] < 0)
         if not falling.size:

@@ -29,6 +29,7 @@ from softseq_ros.bag.arrays import (
     StringDecoder,
     open_bag,
 )
+from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
 
 FloatArray = NDArray[np.float64]
@@ -38,7 +39,7 @@ AMBIENT_SAMPLES = 2000
 INFLATION, DEFLATION = 'inflation', 'deflation'
 
 
-class RecordingError(ValueError):
+class RecordingError(UserError):
     """A bag that lacks what an analysis needs; the message names the bag and the topic."""
 
 

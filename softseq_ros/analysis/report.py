@@ -20,8 +20,9 @@ import numpy as np
 import yaml
 
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
-from softseq_ros.analysis.metrics import Trace, analyse, segment_limits
+from softseq_ros.analysis.metrics import Trace, TraceError, analyse, segment_limits
 from softseq_ros.analysis.recording import Recording, load_recording
+from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
 from softseq_ros.segments.identity import segments_sha256, short
 
@@ -30,11 +31,11 @@ KPA = 1e-3
 MM = 1e3
 
 
-class ReferenceFileError(ValueError):
+class ReferenceFileError(UserError):
     """A reference file that cannot be used."""
 
 
-class SceneMismatchError(ValueError):
+class SceneMismatchError(UserError):
     """A scene given for a bag that a scene with other segments made."""
 
 
@@ -84,8 +85,8 @@ def recording_metrics(recording: Recording, scene: object | None = None,
     trace = recording_trace(recording)
     try:
         result = analyse(trace)
-    except ValueError as err:
-        raise ValueError(f'{recording.path}: {err}') from None
+    except TraceError as err:
+        raise TraceError(f'{recording.path}: {err}') from None
     top = int(np.argmax(recording.state_injected))
     rest = recording.volumes[0]
     added = recording.volumes[top] - rest
@@ -240,8 +241,9 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
         # Before the equilibrium set is assembled and before anything is written.
         notes = check_scene(recording, scene)
         if scene.segment_names != recording.segment_names:
-            raise ValueError(f'{bag}: the bag\'s segments {", ".join(recording.segment_names)} '
-                             f'are not the scene\'s {", ".join(scene.segment_names)}')
+            raise SceneMismatchError(f"{bag}: the bag's segments "
+                                     f'{", ".join(recording.segment_names)} are not the '
+                                     f'scene\'s {", ".join(scene.segment_names)}')
         from softseq_ros.quasistatic.solve import build_map
 
         emap = build_map(scene.segments, scene.solver.resolution)

@@ -30,6 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 import yaml
 
+from softseq_ros.errors import UserError
+
 MAGIC = b'\x89MCAP0\r\n'
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
@@ -47,7 +49,7 @@ Bytes = NDArray[np.uint8]
 Ints = NDArray[np.int64]
 
 
-class BagArrayError(ValueError):
+class BagArrayError(UserError):
     """A bag that cannot be read as asked; the message names the file and what is wrong."""
 
 

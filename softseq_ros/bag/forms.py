@@ -12,6 +12,8 @@ from typing import Any, Mapping, Sequence
 
 import yaml
 
+from softseq_ros.errors import UserError
+
 from .cdr import encode
 from .msgdefs import message_definition
 
@@ -19,7 +21,7 @@ from .msgdefs import message_definition
 INFINITE_DURATION = {'sec': 9223372036, 'nsec': 854775807}
 
 
-class QosFormError(ValueError):
+class QosFormError(UserError):
     """A topic's offered QoS text that is not rosbag2's form."""
 
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import re
 import sys
 
+from softseq_ros.errors import UserError
+
 SEPARATOR = '=' * 80
 
 # Same pattern as rosbag2_storage_mcap: the first word of every non-comment line is a type.
@@ -31,7 +33,7 @@ _PRIMITIVES = frozenset({
 _MAX_DEPTH = 50
 
 
-class MessageDefinitionError(ValueError):
+class MessageDefinitionError(UserError):
     """A message type is malformed or its definition is not installed."""
 
 

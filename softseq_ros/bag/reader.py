@@ -21,10 +21,12 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 import yaml
 
+from softseq_ros.errors import UserError
+
 METADATA_FILE = 'metadata.yaml'
 
 
-class BagReadError(ValueError):
+class BagReadError(UserError):
     """A bag directory is missing, incomplete or malformed."""
 
 

@@ -36,6 +36,8 @@ import threading
 import time
 from typing import Any, BinaryIO, Callable, Mapping, Sequence
 
+from softseq_ros.errors import UserError
+
 from .forms import QosFormError, dump_yaml, parse_qos_yaml
 from .mcap_file import ChunkedMcapWriter
 from .msgdefs import canonical_type_name, message_definition, type_description_hash
@@ -53,7 +55,7 @@ DEFAULT_FLUSH_PERIOD_S = 0.5
 _COMPRESSIONS = {None: '', 'none': '', 'zstd': 'zstd', 'lz4': 'lz4'}
 
 
-class BagWriterError(ValueError):
+class BagWriterError(UserError):
     """A bag cannot be written as asked (bad directory, topic, type or state)."""
 
 

@@ -15,14 +15,13 @@ from softseq_ros.scene.design import (
     load_design,
     with_changes,
 )
+from softseq_ros.scene.validation import YamlLoader
 
 
 def _value(text: str) -> Any:
-    from softseq_ros.scene.loader import _SceneLoader
-
     try:
         # The scene files' reading of numbers, so 3e-6 is a number here too.
-        return yaml.load(text, Loader=_SceneLoader)  # noqa: S506 (a SafeLoader subclass)
+        return yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError:
         return text
 

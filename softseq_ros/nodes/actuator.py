@@ -31,7 +31,7 @@ from softseq_ros.nodes.core_node import CoreNode, message_class, qos_profile
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
-from softseq_ros.rig.build import actuator_core, equilibrium_map
+from softseq_ros.rig.build import actuator_core
 from softseq_ros.rig.values import INFO, WARNING, Notice, Output
 from softseq_ros.rig.wire import segment_volumes
 
@@ -64,7 +64,7 @@ class ActuatorNode(CoreNode):
             'File the state is written to after every change and resumed from when no '
             'actuator/volumes arrives at start (default: in $ROS_HOME/softseq, one per node '
             'name and namespace); empty: off, every start at rest.', read_only=True)
-        self.core = actuator_core(scene, equilibrium_map(scene), outputs=frozenset(outputs),
+        self.core = actuator_core(scene, outputs=frozenset(outputs),
                                   ambient_pressure_pa=ambient, state_file=state_file or None)
         self.connect(frozenset(outputs))
         self.send(self.core.begin(self.now_ns()))  # the scene it runs, latched

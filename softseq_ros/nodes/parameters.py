@@ -21,12 +21,13 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from softseq_ros.errors import UserError
 from softseq_ros.rig.contract import OUTPUT_NAMES
 from softseq_ros.scene.limits import Limit
 from softseq_ros.scene.loader import Scene, load_scene
 
 
-class NodeConfigError(ValueError):
+class NodeConfigError(UserError):
     """A node configuration that cannot run; the message names the parameter."""
 
 

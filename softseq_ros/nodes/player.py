@@ -23,6 +23,7 @@ from rosgraph_msgs.msg import Clock
 import yaml
 
 from softseq_ros.bag.arrays import BagArrays, open_bag
+from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
 
 CLOCK_TOPIC = contract.CLOCK.name
@@ -35,7 +36,7 @@ _DURABILITY = {'transient_local': DurabilityPolicy.TRANSIENT_LOCAL,
                2: DurabilityPolicy.VOLATILE}
 
 
-class PlayError(ValueError):
+class PlayError(UserError):
     """A bag or an option that the player cannot use."""
 
 

@@ -23,7 +23,8 @@ from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
-from softseq_ros.rig.build import equilibrium_map, pump_core
+from softseq_ros.rig.build import pump_core
+from softseq_ros.rig.model import actuator_model
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.programme import Leg
@@ -126,7 +127,7 @@ class SyringePumpNode(CoreNode):
         # The segments' equilibrium gives the pump its limits: the programme must stay in its
         # domain, and the end stop defaults to where the inflation ends.
         self.core, _ = pump_core(
-            scene, equilibrium_map(scene), flow_rate_m3_per_s=flow, cycles=cycles,
+            scene, actuator_model(scene), flow_rate_m3_per_s=flow, cycles=cycles,
             start_injected_m3=start, legs=parse_legs(legs_text) if legs_text else None,
             autostart=autostart, max_pressure_pa=max_pressure,
             feedback_timeout_s=feedback_timeout, open_loop=open_loop)

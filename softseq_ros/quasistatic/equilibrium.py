@@ -31,6 +31,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.assembly import (
     Assembly,
     Branch,
@@ -47,7 +48,7 @@ __all__ = ['DomainError', 'EquilibriumCurve', 'EquilibriumMap', 'SEQUENCE_TYPES'
            'SolvedPath', 'State', 'StatePoint', 'StateRows', 'Tracker', 'classify']
 
 
-class DomainError(ValueError):
+class DomainError(UserError):
     """
     A commanded volume outside what the segments' models cover.
 

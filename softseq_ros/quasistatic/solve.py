@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
 from softseq_ros.scene.csv_columns import read_columns
 from softseq_ros.segments.models import Segment
@@ -20,7 +21,7 @@ from softseq_ros.segments.models import Segment
 INJECTED_COLUMN = 'injected_m3'
 
 
-class HistoryError(ValueError):
+class HistoryError(UserError):
     """A volume-history file that cannot be used; the message starts with the file name."""
 
 

@@ -1,13 +1,13 @@
 """
-The actuator's core: the segments' quasi-static response to the pump's commanded volume.
+The actuator's core: the segments' response to the pump's commanded volume, through a model.
 
-Each :class:`PumpCommand` moves the equilibrium tracker to the commanded injected volume. The
-tracker's jump rule makes a dropped command harmless: a jump lands where a walk through every
-volume in between lands. The outputs the ``outputs`` set lists go out stamped with the
-command's stamp (the state at the commanded instant, so a listener pairs them exactly):
-pressure (absolute: gauge + ``ambient_pressure_pa``), volumes (with the gauge pressure),
-curvatures, and one :class:`SnapThrough` per snap. A command equal to the previous one is not
-solved again: the same numbers go out with the new stamp.
+Each :class:`PumpCommand` goes to the actuator's model (softseq_ros.rig.model: the quasi-static
+equilibrium by default, whose jump rule makes a dropped command harmless). The outputs the
+``outputs`` set lists go out stamped with the command's stamp (the state at the commanded
+instant, so a listener pairs them exactly): pressure (absolute: gauge +
+``ambient_pressure_pa``), volumes (with the gauge pressure), curvatures, and one
+:class:`SnapThrough` per snap. A model whose state moves between commands (one with a
+``rate_hz``) is advanced by :meth:`ActuatorCore.tick`, whose outputs carry the tick's time.
 
 At start (:meth:`begin`) it says once which scene's segments it runs (name, segment names,
 the SHA-256 of their definitions), on a latched topic, so every recording can name its physics.
@@ -27,9 +27,8 @@ import math
 import os
 from pathlib import Path
 
-from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, StatePoint, Tracker
-from softseq_ros.quasistatic.reach import beyond_domain
 from softseq_ros.rig import contract
+from softseq_ros.rig.model import ActuatorModel, CommandRefusedError, Snap
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.rig.values import (
     INFO,
@@ -50,32 +49,29 @@ MAX_BUFFERED_COMMANDS = 100_000
 
 
 class ActuatorCore:
-    """Tracks the equilibrium of a scene's segments under the commanded injected volume."""
+    """The actuator's model driven by the commanded injected volume, its state as outputs."""
 
     role = contract.ACTUATOR
 
-    def __init__(self, emap: EquilibriumMap, names: tuple[str, ...], *,
+    def __init__(self, model: ActuatorModel, names: tuple[str, ...], *,
                  outputs: frozenset[str] = frozenset(ACTUATOR_OUTPUTS),
                  ambient_pressure_pa: float = contract.DEFAULT_AMBIENT_PRESSURE_PA,
                  state_file: Path | None = None, scene_name: str = '') -> None:
         """An actuator at rest; ``outputs`` are scene output names (others are ignored)."""
-        self.emap = emap
-        self.tracker = Tracker(emap)
+        self.model = model
+        self.rate_hz = model.rate_hz
         self.names = tuple(names)
         self.scene_name = scene_name
-        # The digest of the segments the map was assembled from: what this actuator runs.
-        self.segments_sha256 = segments_sha256(emap.segments)
+        # The digest of the segments the model runs: what this actuator is.
+        self.segments_sha256 = segments_sha256(model.segments)
         self.outputs = frozenset(name for name in outputs if name in ACTUATOR_OUTPUTS)
         self.ambient_pressure_pa = ambient_pressure_pa
         self.state_file = state_file
         self._state_folder_made = False
         self.rejected_commands = 0
-        self.solves = 0
         self.waiting = False
         self._buffered: list[tuple[PumpCommand, int]] = []
         self._throttle = Throttle()
-        self._last_command: float | None = None
-        self._state: StatePoint | None = None  # the state of the last solve
         self._send_pressure = 'pressure' in self.outputs
         self._send_volumes = 'volumes' in self.outputs
         self._send_curvatures = 'curvature' in self.outputs
@@ -102,23 +98,27 @@ class ActuatorCore:
                                            'm^3 is negative')
         # An unstamped command gets the driver's time.
         stamp = value.stamp_ns or now
-        if self._state is not None and injected == self._last_command:
-            return self._outputs(stamp, ())
-        tracker = self.tracker
-        branch, total = tracker.branch, tracker.total
         try:
-            snaps = tracker.move(injected)
-        except DomainError as err:
-            # The tracker stops at the edge of its branch; keep the state as it was.
-            tracker.branch, tracker.total = branch, total
-            return self.refuse('domain', 'command refused: '
-                               + beyond_domain(injected, err, self.emap, self.names))
-        self.solves += 1
-        self._last_command = injected
-        self._state = self.emap.read(tracker.branch, tracker.total)
-        outputs = self._outputs(stamp, snaps)
+            snaps = self.model.command(injected, stamp)
+        except CommandRefusedError as err:
+            # The model keeps the state it had.
+            return self.refuse('domain', f'command refused: {err}')
+        # A repeated command changes nothing: the same numbers go out with the new stamp.
+        outputs = self._outputs(stamp, snaps or [])
+        if snaps is not None and self.state_file is not None:
+            self._save(outputs)
+        return outputs
+
+    def tick(self, now: int) -> list[Output]:
+        """Let the model's time run to ``now``; outputs only when its state moved."""
+        if self.waiting:
+            return []
+        snaps = self.model.advance(now)
+        if snaps is None:
+            return []
+        outputs = self._outputs(now, snaps)
         if self.state_file is not None:
-            self._save(injected, outputs)
+            self._save(outputs)
         return outputs
 
     def refuse(self, key: str, text: str) -> list[Output]:
@@ -127,8 +127,8 @@ class ActuatorCore:
         admitted = self._throttle.admit(key, text)
         return [] if admitted is None else [Notice(self.role, WARNING, admitted)]
 
-    def _outputs(self, stamp: int, snaps: list) -> list[Output]:
-        state = self._state
+    def _outputs(self, stamp: int, snaps: list[Snap]) -> list[Output]:
+        state = self.model.state()
         pressure = state.pressure
         out: list[Output] = []
         if self._send_pressure:
@@ -152,16 +152,16 @@ class ActuatorCore:
     @property
     def volumes(self) -> list[float]:
         """The segments' volumes [m^3] now."""
-        return self.emap.read(self.tracker.branch, self.tracker.total).volumes
+        return self.model.state().volumes
 
     def set_ambient_pressure(self, ambient_pa: float) -> None:
         """Change the ambient pressure added to the gauge pressure."""
         self.ambient_pressure_pa = ambient_pa
 
-    def _save(self, injected: float, outputs: list[Output]) -> None:
+    def _save(self, outputs: list[Output]) -> None:
         """Write the state atomically, so a kill mid-write leaves the previous one."""
         data = json.dumps({'names': list(self.names), 'segments_sha256': self.segments_sha256,
-                           'injected_m3': injected, 'volumes_m3': self._state.volumes})
+                           **self.model.saved()})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
         try:
             if not self._state_folder_made:
@@ -197,10 +197,10 @@ class ActuatorCore:
             return False, [Notice(self.role, WARNING,
                                   f'{source} does not fit this scene (segments {list(names)}, '
                                   f'expected {list(self.names)}); not resuming from it')]
-        injected = sum(volumes) - self.emap.total_rest_volume
+        injected = sum(volumes) - self.model.rest_volume_m3
         try:
-            self.resume(injected, volumes)
-        except DomainError as err:
+            self.model.resume(injected, volumes)
+        except CommandRefusedError as err:
             return False, [Notice(self.role, WARNING, f'{source}: cannot resume ({err})')]
         return True, [Notice(self.role, INFO,
                              f'resumed from {source} at {injected * 1e6:.4f} mL injected')]
@@ -222,9 +222,3 @@ class ActuatorCore:
                                   f'written for other segments (sha256 {str(written_for)[:12]}, '
                                   f'these are {self.segments_sha256[:12]}); starting at rest')]
         return self.resume_from(names, volumes, f'state_file {self.state_file}')
-
-    def resume(self, injected: float, volumes: list[float]) -> None:
-        """Put the tracker at ``injected`` on the branch nearest ``volumes`` (a restart)."""
-        self.tracker = Tracker(self.emap, injected=injected, volumes=volumes)
-        self._last_command = None
-        self._state = None

@@ -8,18 +8,18 @@ both build the same cores from the same scene the same way.
 from pathlib import Path
 from typing import Any
 
-from softseq_ros.quasistatic.equilibrium import EquilibriumMap
-from softseq_ros.quasistatic.reach import check_reach, check_scene_reach
+from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.camera import CameraCore
+from softseq_ros.rig.model import ActuatorModel, actuator_model
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, PumpCore
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile, check_capacity
 
 
-class SettingError(ValueError):
+class SettingError(UserError):
     """A core setting that cannot run; the message names the setting."""
 
 
@@ -56,35 +56,31 @@ def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
     return profile
 
 
-def check_programme(scene: Scene, profile: PumpProfile, emap: EquilibriumMap) -> None:
+def check_programme(scene: Scene, profile: PumpProfile, model: ActuatorModel) -> None:
     """
-    Refuse a programme that leaves the equilibrium's domain (softseq_ros.quasistatic.reach).
+    Refuse a programme the actuator's model cannot run (it leaves the model's domain).
 
     The scene's own programme is refused as a scene error naming the file and the scene key;
     one the settings changed, naming the setting (``legs[0].inflate_to_m3``).
     """
-    if profile == scene.pump.profile:
-        check_scene_reach(scene, emap)
-        return
     try:
-        check_reach(profile, emap, scene.segment_names)
+        model.check_programme(scene, profile)
     except ProgrammeError as err:
         raise SettingError(str(err)) from None
 
 
-def end_stop(emap: EquilibriumMap, profile: PumpProfile) -> float:
+def end_stop(model: ActuatorModel, profile: PumpProfile) -> float:
     """The pump's default end stop [m^3]: where the inflation ends, or the programme's peak."""
-    return max(emap.injected_range[1], profile.max_injected())
+    return max(model.end_stop_m3, profile.max_injected())
 
 
-def pump_core(scene: Scene, emap: EquilibriumMap | None = None,
+def pump_core(scene: Scene, model: ActuatorModel | None = None,
               **settings: Any) -> tuple[PumpCore, float]:
     """
     The scene's pump (settings from PUMP_SETTINGS override it) and its rate [Hz].
 
-    With the segments' equilibrium map ``emap`` the programme is checked against its domain
-    first, and ``max_injected_m3`` defaults to where the inflation ends (else to what the
-    segments hold).
+    With the actuator's model the programme is checked against the model's domain first, and
+    ``max_injected_m3`` defaults to where the inflation ends (else to what the segments hold).
     """
     _unknown('pump', settings, PUMP_SETTINGS)
     rate_hz = float(settings.get('rate_hz', scene.pump.rate_hz))
@@ -95,9 +91,9 @@ def pump_core(scene: Scene, emap: EquilibriumMap | None = None,
                            legs=settings.get('legs'), cycles=settings.get('cycles'),
                            start_injected_m3=settings.get('start_injected_m3'))
     default_stop = scene.capacity
-    if emap is not None:
-        check_programme(scene, profile, emap)
-        default_stop = end_stop(emap, profile)
+    if model is not None:
+        check_programme(scene, profile, model)
+        default_stop = end_stop(model, profile)
     core = PumpCore(
         profile, autostart=settings.get('autostart', True),
         max_pressure_pa=settings.get('max_pressure_pa', DEFAULT_MAX_PRESSURE_PA),
@@ -112,20 +108,17 @@ def pump_core(scene: Scene, emap: EquilibriumMap | None = None,
 ACTUATOR_SETTINGS = ('outputs', 'ambient_pressure_pa', 'state_file')
 
 
-def equilibrium_map(scene: Scene) -> EquilibriumMap:
-    """The scene's equilibrium map at the scene's solver resolution."""
-    resolution = scene.solver.resolution
-    return (EquilibriumMap(scene.segments, resolution=resolution) if resolution
-            else EquilibriumMap(scene.segments))
-
-
-def actuator_core(scene: Scene, emap: EquilibriumMap | None = None,
+def actuator_core(scene: Scene, model: ActuatorModel | None = None,
                   **settings: Any) -> ActuatorCore:
-    """The scene's actuator (settings from ACTUATOR_SETTINGS override it)."""
+    """
+    The scene's actuator (settings from ACTUATOR_SETTINGS override it) on ``model``.
+
+    By default the model is the one the scene asks for (softseq_ros.rig.model.actuator_model).
+    """
     _unknown('actuator', settings, ACTUATOR_SETTINGS)
     state_file = settings.get('state_file')
     return ActuatorCore(
-        emap if emap is not None else equilibrium_map(scene), scene.segment_names,
+        model if model is not None else actuator_model(scene), scene.segment_names,
         outputs=frozenset(settings.get('outputs', scene.outputs)),
         ambient_pressure_pa=settings.get('ambient_pressure_pa',
                                          contract.DEFAULT_AMBIENT_PRESSURE_PA),

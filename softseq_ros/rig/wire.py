@@ -21,6 +21,7 @@ from softseq_ros.bag.cdr import (
     joint_state_packer,
     string_cdr,
 )
+from softseq_ros.errors import UserError
 from softseq_ros.rig.contract import FRAME_ID
 from softseq_ros.rig.render import SEGMENT_RGB
 from softseq_ros.rig.values import (
@@ -46,7 +47,7 @@ LINE_STRIP = 4
 _SYRINGE = (SYRINGE_JOINT,)
 
 
-class InputError(ValueError):
+class InputError(UserError):
     """A received message that cannot become a core value; ``key`` names the kind of fault."""
 
     def __init__(self, key: str, text: str) -> None:

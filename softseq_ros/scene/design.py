@@ -52,17 +52,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from softseq_ros.scene.loader import (
-    _SCENE_NAME,
-    SceneError,
-    _Context,
-    _mapping,
-    _material,
-    _number,
-    _read_yaml,
-    _text,
-    config_dir,
-)
+from softseq_ros.scene.paths import config_dir
+from softseq_ros.scene.validation import SCENE_NAME, Context, SceneError, read_yaml
 
 WALL_READINGS = ('skin_bands', 'side_walls')
 MODELS = ('unit_cell', 'whole_segment')
@@ -174,11 +165,11 @@ _GEOMETRY_KEYS = ('length_m', 'height_m', 'width_m', 'beam_thickness_m', 'cavity
                   'wall_thickness_m')
 
 
-def _geometry(ctx: _Context, value: object) -> Geometry:
-    raw = _mapping(ctx, value, 'geometry', _GEOMETRY_KEYS,
+def _geometry(ctx: Context, value: object) -> Geometry:
+    raw = ctx.mapping(value, 'geometry', _GEOMETRY_KEYS,
                    ('wall_reading', 'skin_band_thickness_m', 'membrane_thickness_factors'))
-    dims = {key: _number(ctx, raw[key], f'geometry.{key}', gt=0.0) for key in _GEOMETRY_KEYS}
-    reading = _text(ctx, raw.get('wall_reading', 'skin_bands'), 'geometry.wall_reading')
+    dims = {key: ctx.number(raw[key], f'geometry.{key}', gt=0.0) for key in _GEOMETRY_KEYS}
+    reading = ctx.text(raw.get('wall_reading', 'skin_bands'), 'geometry.wall_reading')
     if reading not in WALL_READINGS:
         raise ctx.error('geometry.wall_reading',
                         f'unknown reading {reading!r}; expected one of {", ".join(WALL_READINGS)}')
@@ -195,7 +186,7 @@ def _geometry(ctx: _Context, value: object) -> Geometry:
         if 'skin_band_thickness_m' not in raw:
             raise ctx.error('geometry.skin_band_thickness_m',
                             'required with wall_reading side_walls')
-        band = _number(ctx, raw['skin_band_thickness_m'], 'geometry.skin_band_thickness_m',
+        band = ctx.number(raw['skin_band_thickness_m'], 'geometry.skin_band_thickness_m',
                        gt=0.0)
         if not math.isclose(g, w - 2 * d, rel_tol=1e-9, abs_tol=1e-12):
             raise ctx.error('geometry.cavity_width_m',
@@ -219,7 +210,7 @@ def _geometry(ctx: _Context, value: object) -> Geometry:
         if not isinstance(factors, (list, tuple)) or len(factors) != geometry.membranes:
             raise ctx.error(key, f'must be a list of {geometry.membranes} numbers (one per '
                                  f'membrane, base to tip), got {factors!r}')
-        values = tuple(_number(ctx, f, f'{key}[{i}]', ge=0.5) for i, f in enumerate(factors))
+        values = tuple(ctx.number(f, f'{key}[{i}]', ge=0.5) for i, f in enumerate(factors))
         for i, factor in enumerate(values):
             if factor > 1.5:
                 raise ctx.error(f'{key}[{i}]', f'must be <= 1.5 (a scatter of the thickness, '
@@ -231,15 +222,15 @@ def _geometry(ctx: _Context, value: object) -> Geometry:
     return geometry
 
 
-def _mesh(ctx: _Context, value: object, geometry: Geometry) -> MeshSettings:
+def _mesh(ctx: Context, value: object, geometry: Geometry) -> MeshSettings:
     defaults = MeshSettings()
-    raw = _mapping(ctx, {} if value is None else value, 'mesh', (),
+    raw = ctx.mapping({} if value is None else value, 'mesh', (),
                    ('model', 'element_size_m', 'thin_layer_cells', 'bulk_ratio'))
-    model = _text(ctx, raw.get('model', defaults.model), 'mesh.model')
+    model = ctx.text(raw.get('model', defaults.model), 'mesh.model')
     if model not in MODELS:
         raise ctx.error('mesh.model', f'unknown model {model!r}; expected one of '
                                       f'{", ".join(MODELS)}')
-    size = _number(ctx, raw.get('element_size_m', defaults.element_size_m),
+    size = ctx.number(raw.get('element_size_m', defaults.element_size_m),
                    'mesh.element_size_m', gt=0.0)
     if size > geometry.height_m / 4:
         raise ctx.error('mesh.element_size_m', f'must be at most a quarter of height_m '
@@ -247,18 +238,18 @@ def _mesh(ctx: _Context, value: object, geometry: Geometry) -> MeshSettings:
     thin = raw.get('thin_layer_cells', defaults.thin_layer_cells)
     if isinstance(thin, bool) or not isinstance(thin, int) or thin < 1:
         raise ctx.error('mesh.thin_layer_cells', f'must be an integer >= 1, got {thin!r}')
-    bulk = _number(ctx, raw.get('bulk_ratio', defaults.bulk_ratio), 'mesh.bulk_ratio', ge=100.0)
+    bulk = ctx.number(raw.get('bulk_ratio', defaults.bulk_ratio), 'mesh.bulk_ratio', ge=100.0)
     return MeshSettings(model=model, element_size_m=size, thin_layer_cells=thin,
                         bulk_ratio=bulk)
 
 
-def _volume(ctx: _Context, value: object) -> VolumeRange:
+def _volume(ctx: Context, value: object) -> VolumeRange:
     defaults_first, defaults_max = VolumeRange(1.0).first_step_m3, VolumeRange(1.0).max_step_m3
-    raw = _mapping(ctx, value, 'volume', ('max_injected_m3',), ('first_step_m3', 'max_step_m3'))
-    top = _number(ctx, raw['max_injected_m3'], 'volume.max_injected_m3', gt=0.0)
-    first = _number(ctx, raw.get('first_step_m3', defaults_first), 'volume.first_step_m3',
+    raw = ctx.mapping(value, 'volume', ('max_injected_m3',), ('first_step_m3', 'max_step_m3'))
+    top = ctx.number(raw['max_injected_m3'], 'volume.max_injected_m3', gt=0.0)
+    first = ctx.number(raw.get('first_step_m3', defaults_first), 'volume.first_step_m3',
                     gt=0.0)
-    largest = _number(ctx, raw.get('max_step_m3', defaults_max), 'volume.max_step_m3', gt=0.0)
+    largest = ctx.number(raw.get('max_step_m3', defaults_max), 'volume.max_step_m3', gt=0.0)
     if first > top:
         raise ctx.error('volume.first_step_m3', f'must not exceed max_injected_m3 ({top:g}), '
                                                 f'got {first:g}')
@@ -271,17 +262,17 @@ def _volume(ctx: _Context, value: object) -> VolumeRange:
 def design_from_dict(data: object, path: str | Path | None = None) -> Design:
     """Build a design from parsed YAML; ``path`` names the file in errors."""
     shown = str(path) if path is not None else '<design>'
-    ctx = _Context(shown, Path(path).parent if path is not None else Path('.'))
+    ctx = Context(shown, Path(path).parent if path is not None else Path('.'))
     try:
-        raw = _mapping(ctx, data, '', ('name', 'geometry', 'material', 'volume'),
+        raw = ctx.mapping(data, '', ('name', 'geometry', 'material', 'volume'),
                        ('description', 'mesh'))
-        name = _text(ctx, raw['name'], 'name')
-        if not _SCENE_NAME.match(name):
+        name = ctx.text(raw['name'], 'name')
+        if not SCENE_NAME.match(name):
             raise ctx.error('name', f'must start with a letter or digit and hold only letters, '
                                     f'digits, _, - and ., got {name!r}')
-        description = ' '.join(_text(ctx, raw.get('description', ''), 'description').split())
+        description = ' '.join(ctx.text(raw.get('description', ''), 'description').split())
         geometry = _geometry(ctx, raw['geometry'])
-        _material(ctx, raw['material'], 'material')   # the scene checks, with their messages
+        ctx.material(raw['material'], 'material')   # the scene checks, with their messages
         material = Material(law=raw['material']['law'],
                             params={k: v for k, v in raw['material'].items() if k != 'law'})
         mesh = _mesh(ctx, raw.get('mesh'), geometry)
@@ -304,7 +295,7 @@ def load_design(path: str | Path) -> Design:
     if not path.is_file():
         raise DesignError(f'{path}: design file not found')
     try:
-        data = _read_yaml(path, str(path))
+        data = read_yaml(path, str(path))
     except SceneError as err:
         raise DesignError(str(err).replace('scene file', 'design file')) from None
     return design_from_dict(data, path)

@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from softseq_ros.errors import UserError
+
 ACTIONS = ('inflate', 'deflate', 'hold')
 
 # 0.05 mL/s, the flow rate of the paper's syringe pump.
@@ -229,7 +231,7 @@ class PumpProfile:
         return t, self.injected_at(t)
 
 
-class ProgrammeError(ValueError):
+class ProgrammeError(UserError):
     """A programme the segments cannot follow; ``key`` names the leg, ``reason`` says why."""
 
     def __init__(self, key: str, reason: str) -> None:

@@ -34,10 +34,11 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from softseq_ros.errors import UserError
 from softseq_ros.segments.materials import Material
 
 
-class BulgeModelError(ValueError):
+class BulgeModelError(UserError):
     """Geometry or stretch outside what the cap model describes."""
 
 

@@ -17,12 +17,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
+from softseq_ros.errors import UserError
 from softseq_ros.segments.identity import exact, exact_list
 from softseq_ros.segments.materials import Material, material_definition
 
 FloatArray = NDArray[np.float64]
 
-class TableError(ValueError):
+class TableError(UserError):
     """A segment table that cannot be used; the message starts with the file name."""
 
 

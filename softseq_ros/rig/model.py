@@ -1,0 +1,185 @@
+"""
+The actuator's model: what the segments do with the fluid the pump injects, and when.
+
+The actuator core (softseq_ros.rig.actuator) knows its physics only through this seam:
+
+- :meth:`ActuatorModel.command`: the pump's injected volume from a time on;
+- :meth:`ActuatorModel.advance`: time passes with the last command held (``None``: nothing
+  changed, nothing to publish);
+- :meth:`ActuatorModel.state`: gauge pressure, segment volumes and curvatures now;
+- :meth:`ActuatorModel.saved` and :meth:`ActuatorModel.resume`: a restarted actuator keeps the
+  branch its history put it on;
+- :meth:`ActuatorModel.check_programme` and :attr:`ActuatorModel.end_stop_m3`: the pump learns
+  its reach from the model, not from the physics behind it.
+
+A model with :attr:`ActuatorModel.rate_hz` wants :meth:`advance` called at that rate (by the
+batch runner's clock or a node's timer); ``None`` means its state changes only on commands.
+
+:class:`QuasiStaticModel` is the quasi-static physics (softseq_ros.quasistatic): every command
+is answered at once with the equilibrium the volume history leads to, so time changes nothing
+and a command equal to the last one is not solved again. One equilibrium map serves every
+model of the same segments in a process (:func:`shared_map`): the rig's pump, actuator and
+any second actuator of the same scene share it.
+"""
+
+from typing import Protocol, Sequence
+
+from softseq_ros.errors import UserError
+from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
+from softseq_ros.scene.loader import Scene
+from softseq_ros.scene.programme import PumpProfile
+from softseq_ros.segments.identity import segments_sha256
+from softseq_ros.segments.models import Segment
+
+
+class CommandRefusedError(UserError):
+    """A command or a saved state the model cannot take; the message says why, in one line."""
+
+
+class ModelState(Protocol):
+    """The actuator's state: gauge pressure [Pa], segment volumes [m^3], curvatures [1/m]."""
+
+    pressure: float
+    volumes: list[float]
+    curvatures: list[float]
+
+
+class Snap(Protocol):
+    """A snap-through: where it happened [m^3 injected] and the states before and after."""
+
+    injected: float
+    from_volumes: Sequence[float]
+    to_volumes: Sequence[float]
+    from_pressure: float
+    to_pressure: float
+
+
+class ActuatorModel(Protocol):
+    """What the actuator core needs from a physics model of its segments."""
+
+    segments: tuple[Segment, ...]
+    rest_volume_m3: float
+    rate_hz: float | None
+
+    def command(self, injected_m3: float, now_ns: int) -> list[Snap] | None:
+        """
+        Take the pump's injected volume at ``now_ns``; the snap-throughs it caused.
+
+        ``None`` when the state did not change (a repeated command); CommandRefusedError when
+        the model cannot take the volume (its state stays as it was).
+        """
+
+    def advance(self, now_ns: int) -> list[Snap] | None:
+        """Move time to ``now_ns``; ``None`` when the state did not change."""
+
+    def state(self) -> ModelState:
+        """The state now."""
+
+    def saved(self) -> dict[str, object]:
+        """The state as JSON-able values, for :meth:`resume`."""
+
+    def resume(self, injected_m3: float, volumes_m3: Sequence[float]) -> None:
+        """Restart at ``injected_m3`` on the branch nearest ``volumes_m3``."""
+
+    @property
+    def end_stop_m3(self) -> float:
+        """The largest injected volume the model can take on inflation [m^3]."""
+
+    def check_programme(self, scene: Scene, profile: PumpProfile) -> None:
+        """Refuse (ProgrammeError, or SceneError for the scene's own) a programme it cannot run."""
+
+
+_MAPS: dict[tuple[str, int | None], EquilibriumMap] = {}
+
+
+def shared_map(segments: Sequence[Segment], resolution: int | None = None) -> EquilibriumMap:
+    """
+    The equilibrium map of these segments at this resolution (``None``: the default).
+
+    Assembled once per process: it is the expensive part, and it holds no actuator's state.
+    """
+    key = (segments_sha256(segments), resolution)
+    emap = _MAPS.get(key)
+    if emap is None:
+        emap = (EquilibriumMap(segments, resolution=resolution) if resolution is not None
+                else EquilibriumMap(segments))
+        _MAPS[key] = emap
+    return emap
+
+
+class QuasiStaticModel:
+    """The equilibrium the volume history leads to, at once (snap-throughs, hysteresis)."""
+
+    rate_hz = None   # nothing happens between commands
+
+    def __init__(self, emap: EquilibriumMap, names: Sequence[str]) -> None:
+        """A model at rest on the map ``emap`` of segments ``names`` (base to tip)."""
+        self.emap = emap
+        self.names = tuple(names)
+        self.segments = tuple(emap.segments)
+        self.rest_volume_m3 = emap.total_rest_volume
+        self.tracker = Tracker(emap)
+        self.solves = 0
+        self._last_command: float | None = None
+        self._injected = 0.0
+        self._state = emap.read(self.tracker.branch, self.tracker.total)
+
+    def command(self, injected_m3: float, now_ns: int) -> list[Snap] | None:
+        """Move to the equilibrium at ``injected_m3``; a repeated command is not solved again."""
+        if injected_m3 == self._last_command:
+            return None
+        tracker = self.tracker
+        branch, total = tracker.branch, tracker.total
+        try:
+            snaps = tracker.move(injected_m3)
+        except DomainError as err:
+            # The tracker stops at the edge of its branch; keep the state as it was.
+            tracker.branch, tracker.total = branch, total
+            raise CommandRefusedError(beyond_domain(injected_m3, err, self.emap, self.names)) \
+                from None
+        self.solves += 1
+        self._last_command = self._injected = injected_m3
+        self._state = self.emap.read(tracker.branch, tracker.total)
+        return snaps
+
+    def advance(self, now_ns: int) -> None:
+        """Time alone moves nothing in a quasi-static actuator."""
+        return None
+
+    def state(self) -> ModelState:
+        """The equilibrium state of the last command (at rest before the first)."""
+        return self._state
+
+    def saved(self) -> dict[str, object]:
+        """Injected volume and segment volumes, enough to find the branch again."""
+        return {'injected_m3': self._injected, 'volumes_m3': list(self._state.volumes)}
+
+    def resume(self, injected_m3: float, volumes_m3: Sequence[float]) -> None:
+        """Put the tracker at ``injected_m3`` on the branch nearest ``volumes_m3``."""
+        try:
+            tracker = Tracker(self.emap, injected=injected_m3, volumes=list(volumes_m3))
+        except DomainError as err:
+            raise CommandRefusedError(str(err)) from None
+        self.tracker = tracker
+        self._last_command = None
+        self._injected = injected_m3
+        self._state = self.emap.read(tracker.branch, tracker.total)
+
+    @property
+    def end_stop_m3(self) -> float:
+        """Where the inflation ends: the first segment reaches the end of its curve."""
+        return self.emap.injected_range[1]
+
+    def check_programme(self, scene: Scene, profile: PumpProfile) -> None:
+        """Walk the programme on the equilibrium set (softseq_ros.quasistatic.reach)."""
+        if profile == scene.pump.profile:
+            check_scene_reach(scene, self.emap)
+        else:
+            check_reach(profile, self.emap, self.names)
+
+
+def actuator_model(scene: Scene) -> QuasiStaticModel:
+    """The model a scene asks for, on the process's shared map of its segments."""
+    return QuasiStaticModel(shared_map(scene.segments, scene.solver.resolution),
+                            scene.segment_names)

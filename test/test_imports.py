@@ -1,0 +1,161 @@
+"""
+How the package's modules may import each other: no cycles, no private names, one model seam.
+
+Every import counts, also those inside a function (a function-level import that hides a cycle
+is still a cycle). The layers themselves (physics free of ROS and of the layers after it, rig
+cores free of their drivers) are checked in ``test_package.py``.
+"""
+
+import ast
+from pathlib import Path
+import textwrap
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE = 'softseq_ros'
+# The one rig module that may know the quasi-static solver: the actuator's model seam.
+MODEL_SEAM = f'{PACKAGE}.rig.model'
+
+
+def module_name(path: Path, root: Path = REPO) -> str:
+    parts = list(path.relative_to(root).with_suffix('').parts)
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+
+def package_modules(root: Path = REPO) -> dict[str, Path]:
+    return {module_name(path, root): path for path in sorted((root / PACKAGE).rglob('*.py'))}
+
+
+def imports_of(source: str, name: str, is_package: bool,
+               modules: set[str]) -> tuple[set[str], list[str]]:
+    """The package's modules that ``source`` imports, and the private names it imports."""
+    package = name.split('.') if is_package else name.split('.')[:-1]
+    found: set[str] = set()
+    private: list[str] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+            private += [alias.name for alias in node.names
+                        if any(part.startswith('_') for part in alias.name.split('.'))]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:
+                parent = package[:len(package) - node.level + 1]
+                base = '.'.join(parent + ([node.module] if node.module else []))
+            if base.split('.')[0] != PACKAGE:
+                continue
+            for alias in node.names:
+                full = f'{base}.{alias.name}'
+                if full in modules:
+                    found.add(full)
+                    continue
+                found.add(base)
+                if alias.name.startswith('_'):
+                    private.append(full)
+    return {module for module in found if module in modules and module != name}, private
+
+
+def import_graph(root: Path = REPO) -> tuple[dict[str, set[str]], dict[str, list[str]]]:
+    modules = package_modules(root)
+    graph, private = {}, {}
+    for name, path in modules.items():
+        graph[name], names = imports_of(path.read_text(encoding='utf-8'), name,
+                                        path.name == '__init__.py', set(modules))
+        if names:
+            private[name] = names
+    return graph, private
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected groups of more than one module (Tarjan, iteratively)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                group = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    group.append(member)
+                    if member == node:
+                        break
+                if len(group) > 1:
+                    found.append(sorted(group))
+    return found
+
+
+def test_the_checks_catch_a_hidden_cycle_and_a_private_import(tmp_path):
+    # A cycle hidden behind a function-level import, and a private name taken from a module.
+    sources = {
+        'a.py': 'from softseq_ros.b import helper\n',
+        'b.py': 'def helper():\n    from softseq_ros.a import thing\n',
+        'c.py': 'from softseq_ros.a import _Context\nfrom softseq_ros.b import helper\n',
+        '__init__.py': '',
+    }
+    for file, text in sources.items():
+        (tmp_path / PACKAGE).mkdir(exist_ok=True)
+        (tmp_path / PACKAGE / file).write_text(textwrap.dedent(text))
+    graph, private = import_graph(tmp_path)
+    assert cycles(graph) == [[f'{PACKAGE}.a', f'{PACKAGE}.b']]
+    assert private == {f'{PACKAGE}.c': [f'{PACKAGE}.a._Context']}
+
+
+def test_no_module_of_the_package_imports_in_a_cycle():
+    graph, _ = import_graph()
+    assert len(graph) > 50
+    assert cycles(graph) == []
+
+
+def test_no_module_imports_a_private_name_of_another():
+    # A name with a leading underscore is its module's business; what others need is public.
+    _, private = import_graph()
+    assert private == {}
+
+
+def test_benchmarks_tests_and_tools_use_only_public_names():
+    modules = set(package_modules())
+    offenders = {}
+    for folder in ('bench', 'test', 'tools'):
+        for path in sorted((REPO / folder).rglob('*.py')):
+            _, private = imports_of(path.read_text(encoding='utf-8'), f'{folder}.{path.stem}',
+                                    False, modules)
+            if private:
+                offenders[str(path.relative_to(REPO))] = private
+    assert offenders == {}
+
+
+def test_only_the_model_seam_of_the_rig_knows_the_quasistatic_solver():
+    graph, _ = import_graph()
+    rig = {name for name in graph if name.startswith(f'{PACKAGE}.rig.')}
+    assert MODEL_SEAM in rig
+    knowing = sorted(name for name in rig
+                     if any(module.startswith(f'{PACKAGE}.quasistatic') for module in graph[name]))
+    assert knowing == [MODEL_SEAM]
+    # The nodes and the batch runner reach the physics through the rig's cores and model too.
+    drivers = {name for name in graph if name.startswith((f'{PACKAGE}.nodes', f'{PACKAGE}.batch'))}
+    assert not {name: sorted(m for m in graph[name] if m.startswith(f'{PACKAGE}.quasistatic'))
+                for name in drivers
+                if any(m.startswith(f'{PACKAGE}.quasistatic') for m in graph[name])}
