@@ -5,7 +5,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 import signal
 import sys
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 from softseq_ros.errors import UserError
 from softseq_ros.stopping import TerminatedError, raise_terminated
@@ -37,10 +37,18 @@ def _solve(args: argparse.Namespace) -> int:
         raise DomainError(f'{args.path}: injected_m3 in data row {err.row + 1}: {reason}') \
             from None
     write_path(args.out, solved, scene.segment_names)
+    _warn_unconverged('solve', emap)
     snaps = ', '.join(f'{e.injected * 1e6:.3f} mL' for e in solved.events) or 'none'
     print(f'{scene.name}: {history.size} commanded volumes solved -> {args.out} '
           f'(snap-throughs: {snaps})')
     return 0
+
+
+def _warn_unconverged(command: str, emap: Any) -> None:
+    """Say so when an iterative solve of the map ran out of its budget (never silently)."""
+    if not emap.convergence.converged:
+        print(f'softseq {command}: warning: {emap.convergence.summary()}; the results may be '
+              'off by more than round-off (softseq_ros.tolerances)', file=sys.stderr)
 
 
 def _classify(args: argparse.Namespace) -> int:
@@ -54,6 +62,7 @@ def _classify(args: argparse.Namespace) -> int:
     emap = build_map(scene.segments, scene.solver.resolution)
     check_scene_reach(scene, emap)
     verdict = classify(emap)
+    _warn_unconverged('classify', emap)
     print(f'{scene.name}: {verdict}')
     lines, warnings = robustness_lines(verdict, scene_features(scene))
     for line in lines:

@@ -91,3 +91,23 @@ def test_a_real_peak_is_not_flagged():
     assert verdict == 'asymmetric' and not warnings
     assert all('smallest peak-valley depth' in line for line in lines)
     assert smallest_features(list(load_scene('paper').segments)) == []
+
+
+def test_one_rule_decides_the_sequence_type_of_solved_paths_and_recordings():
+    from softseq_ros.quasistatic.sequence import (
+        RECORDED_HYSTERESIS_TOLERANCE,
+        SOLVED_HYSTERESIS_TOLERANCE,
+        sequence_type,
+    )
+
+    even = np.full((50, 2), 0.5)
+    takeover = np.column_stack([np.linspace(0.9, 0.1, 50), np.linspace(0.1, 0.9, 50)])
+    turning = takeover - [0.0, 0.2]
+    assert sequence_type(False, 0.0, 1e-9, even) == 'none'
+    assert sequence_type(False, 0.0, 1e-9, takeover) == 'partial'
+    assert sequence_type(False, 0.0, 1e-9, turning) == 'symmetric'
+    assert sequence_type(True, 0.0, 1e-9, even) == 'asymmetric'
+    # A gap counts only beyond the tolerance of where the paths come from.
+    assert sequence_type(False, 2e-9, 1e-9, even) == 'asymmetric'
+    assert sequence_type(False, 1e-9, 1e-9, even) == 'none'
+    assert SOLVED_HYSTERESIS_TOLERANCE < RECORDED_HYSTERESIS_TOLERANCE

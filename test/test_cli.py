@@ -179,3 +179,28 @@ def test_help_of_every_subcommand_works():
         result = run_softseq(name, '--help')
         assert result.returncode == 0, (name, result.stderr)
         assert 'usage: softseq' in result.stdout
+
+
+def test_only_a_users_mistake_is_one_line_and_exit_2_a_bug_keeps_its_traceback(monkeypatch,
+                                                                               capsys):
+    from softseq_ros import cli
+    from softseq_ros.errors import UserError
+    from softseq_ros.scene.validation import SceneError
+
+    # Every error class a user's input can cause derives from the one root.
+    assert issubclass(SceneError, UserError)
+
+    def mistaken(_args):
+        raise SceneError('config/x.yaml: pump.rate_hz: must be > 0, got -1')
+
+    def buggy(_args):
+        raise ValueError('operands could not be broadcast together')
+
+    monkeypatch.setattr(cli, '_scenes', mistaken)
+    assert cli.main(['scenes']) == 2
+    assert capsys.readouterr().err == ('softseq scenes: error: config/x.yaml: pump.rate_hz: '
+                                       'must be > 0, got -1\n')
+    # A ValueError that is not a user's mistake is a bug: it is not dressed up as one.
+    monkeypatch.setattr(cli, '_scenes', buggy)
+    with pytest.raises(ValueError, match='could not be broadcast'):
+        cli.main(['scenes'])

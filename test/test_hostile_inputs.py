@@ -189,3 +189,21 @@ def test_a_table_saved_as_csv_utf8_with_a_byte_order_mark_is_read(tmp_path):
     latin.write_bytes('# Druck in Pa, gemessen am Prüfstand\n'.encode('latin-1') + rows.encode())
     with pytest.raises(TableError, match='latin.csv: the segment table is not UTF-8'):
         read_table(latin, length=0.1)
+
+
+def test_the_solver_logs_whether_its_iterative_solves_converged():
+    from softseq_ros.scene.loader import load_scene
+    from softseq_ros.tolerances import Tolerances
+
+    segments = load_scene('paper').segments
+    emap = EquilibriumMap(segments, resolution=200)
+    path = Tracker(emap).sweep(np.linspace(0.0, emap.injected_range[1], 50))
+    assert emap.convergence.converged and path.converged
+    assert emap.convergence.runs['inversion'] > 0
+    # Two Newton steps cannot reach round-off: the log says so instead of staying silent.
+    starved = EquilibriumMap(segments, resolution=200, tolerances=Tolerances(inversion_steps=2))
+    assert not starved.convergence.converged
+    assert 'NOT all converged' in starved.convergence.summary()
+    assert not Tracker(starved).sweep([0.0, 0.5 * starved.injected_range[1]]).converged
+    with pytest.raises(ValueError, match='inversion_steps must be an integer >= 1'):
+        Tolerances(inversion_steps=0)

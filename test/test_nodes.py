@@ -345,7 +345,8 @@ def test_parameters_are_validated_with_a_reason(context, tmp_path):
     with pytest.raises(InvalidParameterValueException, match='unknown output'):
         CameraNode(context=context, parameter_overrides=[
             scene, Parameter('outputs', value=['poses', 'photons'])])
-    with pytest.raises(InvalidParameterValueException, match=r'legs\[0\]: unknown key'):
+    with pytest.raises(InvalidParameterValueException,
+                       match=r'legs\[0\]\.inflate_to_ml: wrong or missing unit suffix'):
         SyringePumpNode(context=context, parameter_overrides=[
             scene, Parameter('legs', value='[{inflate_to_ml: 5}]')])
     with pytest.raises(InvalidParameterValueException, match='seed out of range'):

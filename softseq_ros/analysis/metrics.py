@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.errors import UserError
+from softseq_ros.quasistatic.sequence import RECORDED_HYSTERESIS_TOLERANCE, sequence_type
 
 FloatArray = NDArray[np.float64]
 
@@ -24,11 +25,6 @@ SHARE_BINS = 200
 SWITCH_WINDOW_BINS = SHARE_BINS // 10
 # A share change smaller than this over the whole leg names no switch.
 MIN_SWITCH_CHANGE = 0.05
-# The paper's sequence rules, as softseq_ros.quasistatic.equilibrium.classify applies them.
-SYMMETRIC_SHARE = -0.02
-PARTIAL_SHARE_CHANGE = 0.25
-# Inflation and deflation paths that differ by more than this share of the range: hysteresis.
-HYSTERESIS_TOLERANCE = 1e-4
 # A snap moves more fluid between segments at one command than this many times the command's
 # step, and more than this share of the injected range.
 SNAP_EXCHANGE_PER_STEP = 5.0
@@ -174,15 +170,8 @@ def analyse(trace: Trace, v_range: float | None = None) -> dict:
 
     middle, share = _shares(u_up, v_up, snap_volumes) if u_up.size > 2 else \
         (np.zeros(0), np.zeros((0, v_up.shape[1])))
-    if snaps or gap > HYSTERESIS_TOLERANCE * v_range:
-        kind = 'asymmetric'
-    elif share.size and np.min(share) < SYMMETRIC_SHARE:
-        kind = 'symmetric'
-    elif share.size and np.max(np.ptp(share, axis=0)) > PARTIAL_SHARE_CHANGE:
-        kind = 'partial'
-    else:
-        kind = 'none'
-    result['sequence_type'] = kind
+    result['sequence_type'] = sequence_type(bool(snaps), gap,
+                                            RECORDED_HYSTERESIS_TOLERANCE * v_range, share)
     result['deflation_recorded'] = bool(has_deflation)
     result['switch'] = _switch(middle, share, trace.segment_names)
     result['plateau'] = _plateau(u_up, p_up)

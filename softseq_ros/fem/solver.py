@@ -44,6 +44,41 @@ from softseq_ros.fem.constraints import ReducedSpace
 from softseq_ros.fem.ordering import SparseSolver
 
 
+@dataclass(frozen=True)
+class SettleSettings:
+    """
+    The budgets and thresholds of a snap-through followed at constant volume.
+
+    Lengths are in units of the model's size, forces of its force scale
+    (:meth:`InflationModel.settle_at_volume`).
+    """
+
+    # Damped steps before giving up.
+    max_steps: int = 1000
+    # Newton iterations allowed for one damped step, and for the static solve at rest.
+    damped_iterations: int = 12
+    final_iterations: int = 8
+    # A step whose Newton solve needed at most this many iterations lets the time step double.
+    easy_iterations: int = 4
+    # A failed damped step cuts the time step by this factor, down to this shortest step.
+    step_cut: float = 0.25
+    min_time_step: float = 1e-6
+    # At rest: forces below this share of the force scale (and below this share of those at
+    # the last failed static solve) and a last step below this share of the model's size.
+    rest_force: float = 1e-3
+    rest_force_drop: float = 0.1
+    rest_motion: float = 1e-3
+    # The static solve's tolerance, and how far its equilibrium may lie from where the
+    # motion came to rest (share of the model's size).
+    tolerance: float = 1e-6
+    final_agreement: float = 1e-2
+    # A push off a saddle: this share of the model's size, at most this many times; the time
+    # step is held short until the solid is this many pushes away from the saddle.
+    kick: float = 1e-3
+    max_kicks: int = 3
+    clear_of_saddle: float = 10.0
+
+
 class ConvergenceError(RuntimeError):
     """Newton's method did not converge for one load level."""
 
@@ -290,8 +325,8 @@ class InflationModel:
         # dt stays below 1 / (2 |rate|).
         return q, 0.5 / abs(rate)
 
-    def settle_at_volume(self, start: State, target: float, max_steps: int = 1000,
-                         tolerance: float = 1e-6, kick: float = 1e-3,
+    def settle_at_volume(self, start: State, target: float,
+                         settings: 'SettleSettings | None' = None,
                          on_motion: Callable[[NDArray[np.float64]], str | None] | None = None
                          ) -> State:
         """
@@ -310,9 +345,13 @@ class InflationModel:
         times the model size along the mode of falling energy, and the time step is held
         short enough for that mode to grow (implicit Euler with long steps damps growing modes
         too) until the solid is well away. This is the way a slowly pushed solid settles, not
-        a dynamic simulation (no inertia, no flow resistance). ``on_motion`` sees the
-        coordinates after every step and may give a reason to stop (:class:`MotionStoppedError`).
+        a dynamic simulation (no inertia, no flow resistance). ``settings`` name every budget
+        and threshold (:class:`SettleSettings`); a motion that does not come to rest within
+        them raises ConvergenceError. ``on_motion`` sees the coordinates after every step and
+        may give a reason to stop (:class:`MotionStoppedError`).
         """
+        settings = settings or SettleSettings()
+        kick = settings.kick
         q, p = start.q.copy(), float(start.pressure)
         self.reset_to(q)
         damping = self._lumped_damping(q)
@@ -321,22 +360,23 @@ class InflationModel:
         longest = np.inf                            # time step allowed while leaving it
         failed_at = np.inf  # the forces left when a static solve last failed
         good_step: float | None = None  # the last time step whose damped solve succeeded
-        for _ in range(max_steps):
+        for _ in range(settings.max_steps):
             try:
-                step = self.solve_volume(q, p, target, max_iterations=12,
+                step = self.solve_volume(q, p, target,
+                                         max_iterations=settings.damped_iterations,
                                          damping=damping / time_step)
                 if np.max(np.abs(step.q - q)) > self.MAX_MOVE * self.length_scale:
                     raise ConvergenceError('too far in one step')
             except ConvergenceError:
                 self.reset_to(q)
-                time_step *= 0.25
-                if time_step >= 1e-6:
+                time_step *= settings.step_cut
+                if time_step >= settings.min_time_step:
                     continue
                 # Stalled on a saddle: the falling mode is not there to grow, and any longer
                 # step runs up the others'. Push off it along its most unstable mode.
                 stalled = (f'the damped motion stalled, largest stretch '
                            f'{self.largest_stretch(q):.2f}')
-                if kicks == 3 or good_step is None:
+                if kicks == settings.max_kicks or good_step is None:
                     raise ConvergenceError(stalled) from None
                 self._factor(q, p, target, damping / good_step)
                 if (falling := self._falling_direction(damping, 1.0 / good_step)) is None:
@@ -352,22 +392,25 @@ class InflationModel:
             q, p = step.q, step.pressure
             if on_motion is not None and (reason := on_motion(q)):
                 raise MotionStoppedError(reason)
-            if step.iterations <= 4:
+            if step.iterations <= settings.easy_iterations:
                 time_step = min(2.0 * time_step, longest)
             if saddle is not None:
-                if np.max(np.abs(q - saddle)) < 10 * kick * self.length_scale:
+                clear = settings.clear_of_saddle * kick * self.length_scale
+                if np.max(np.abs(q - saddle)) < clear:
                     continue
                 saddle, longest = None, np.inf
             # At rest: the forces left are small, and so is the last step (with a long time
             # step the first alone says little).
-            if (forces > min(1e-3 * self.force_scale, 0.1 * failed_at)
-                    or motion > 1e-3 * self.length_scale):
+            if (forces > min(settings.rest_force * self.force_scale,
+                             settings.rest_force_drop * failed_at)
+                    or motion > settings.rest_motion * self.length_scale):
                 continue
             try:
                 # Near an equilibrium Newton's method needs a few iterations; more means
                 # there is none yet (a slow passage past where one vanished).
-                final = self.solve_volume(q, p, target, max_iterations=8, tolerance=tolerance)
-                if np.max(np.abs(final.q - q)) > 1e-2 * self.length_scale:
+                final = self.solve_volume(q, p, target, max_iterations=settings.final_iterations,
+                                          tolerance=settings.tolerance)
+                if np.max(np.abs(final.q - q)) > settings.final_agreement * self.length_scale:
                     raise ConvergenceError('not the equilibrium the motion came to')
             except ConvergenceError:
                 self.reset_to(q)
@@ -379,13 +422,14 @@ class InflationModel:
                 final.iterations = iterations
                 return final
             falling = self._falling_direction(damping)
-            if kicks == 3 or falling is None:
+            if kicks == settings.max_kicks or falling is None:
                 raise ConvergenceError('the damped motion came to rest on an unstable state')
             saddle = final.q
             q, longest = self._kick(final.q, falling, kick)
             p = final.pressure
             time_step, kicks = min(1.0, longest), kicks + 1
-        raise ConvergenceError(f'the damped motion did not come to rest in {max_steps} steps')
+        raise ConvergenceError(f'the damped motion did not come to rest in {settings.max_steps} '
+                               'steps')
 
     def solve_arc(self, start: State, direction: NDArray[np.float64], distance: float,
                   guess: State, scales: tuple[float, float, float], max_iterations: int = 25,

@@ -1,12 +1,14 @@
 """
 Actuator node: the actuator core (softseq_ros.rig.actuator) behind ROS topics.
 
-Each ``pump/command`` moves the equilibrium to the commanded injected volume; the node
-publishes the outputs the ``outputs`` parameter lists (default: the scene's):
-``actuator/pressure`` (absolute: gauge + ``ambient_pressure_pa``), ``actuator/volumes``
-(position = volumes, effort = gauge pressure), ``actuator/curvatures`` and one JSON object
-per snap-through on ``actuator/events``, each stamped with the command it answers; once at
-start, latched, ``actuator/scene``: which scene's segments it runs (name and digest).
+Each ``pump/command`` goes to the actuator's model (softseq_ros.rig.model: the quasi-static
+equilibrium at the commanded injected volume); a model that moves between commands is
+advanced on a timer at its rate. The node publishes the outputs the ``outputs`` parameter
+lists (default: the scene's): ``actuator/pressure`` (absolute: gauge +
+``ambient_pressure_pa``), ``actuator/volumes`` (position = volumes, effort = gauge pressure),
+``actuator/curvatures`` and one JSON object per snap-through on ``actuator/events``, each
+stamped with the command it answers; once at start, latched, ``actuator/scene``: which scene's
+segments it runs (name and digest).
 
 Resume: on start the node waits up to ``resume_timeout_s`` for a latched ``actuator/volumes``
 from a live publisher and resumes on the branch nearest those volumes; without one it reads
@@ -73,8 +75,14 @@ class ActuatorNode(CoreNode):
         if command is not None:
             self.create_timer(PUBLISHER_CHECK_S, self._check_publishers,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self.core.rate_hz is not None:
+            # A model whose state moves between commands is advanced on the ROS clock.
+            self.create_timer(1.0 / self.core.rate_hz, self._advance)
         self._begin_resume()
         self.configured = True
+
+    def _advance(self) -> None:
+        self.send(self.core.tick(self.now_ns()))
 
     @property
     def resuming(self) -> bool:

@@ -17,7 +17,6 @@ from typing import Any
 
 from rclpy.node import Parameter
 from std_srvs.srv import Trigger
-import yaml
 
 from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.parameters import NodeConfigError
@@ -27,52 +26,22 @@ from softseq_ros.rig.build import pump_core
 from softseq_ros.rig.model import actuator_model
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
 from softseq_ros.scene.limits import LIMITS
+from softseq_ros.scene.loader import legs_from_text
 from softseq_ros.scene.programme import Leg
-
-LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
+from softseq_ros.scene.validation import SceneError
 
 
 def parse_legs(text: str) -> tuple[Leg, ...]:
     """
-    Legs from a YAML list in the scene's syntax.
+    Legs from a YAML list in the scene's syntax (softseq_ros.scene.loader.legs_from_text).
 
     Example: ``[{inflate_to_m3: 5.0e-6}, {hold_s: 2}, {deflate_to_m3: 0.0}]``. Raises
     NodeConfigError naming the leg and key that is wrong.
     """
     try:
-        items = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise NodeConfigError(f'legs: not valid YAML ({" ".join(str(err).split())})') from None
-    if not isinstance(items, list) or not items:
-        raise NodeConfigError('legs: must be a non-empty YAML list such as '
-                              '[{inflate_to_m3: 5.0e-6}, {deflate_to_m3: 0.0}]')
-    legs = []
-    for index, item in enumerate(items):
-        where = f'legs[{index}]'
-        if not isinstance(item, dict) or len(item) != 1:
-            raise NodeConfigError(f'{where}: must be a mapping with one of {", ".join(LEG_KEYS)}')
-        (key, amount), = item.items()
-        if key not in LEG_KEYS:
-            raise NodeConfigError(f'{where}: unknown key {key!r}; expected one of '
-                                  f'{", ".join(LEG_KEYS)} (SI units)')
-        try:
-            # YAML 1.1 reads 5e-6 (no dot) as text; a number is meant.
-            number = float(amount)
-        except (TypeError, ValueError):
-            raise NodeConfigError(f'{where}.{key}: must be a number, got {amount!r}') from None
-        try:
-            if key == 'hold_s':
-                reason = LIMITS['pump.legs.hold_s'].reason(number)
-                if reason is not None:
-                    raise ValueError(reason)
-                legs.append(Leg.hold(number))
-            elif key == 'inflate_to_m3':
-                legs.append(Leg.inflate(number))
-            else:
-                legs.append(Leg.deflate(number))
-        except ValueError as err:
-            raise NodeConfigError(f'{where}.{key}: {err}') from None
-    return tuple(legs)
+        return legs_from_text(text)
+    except SceneError as err:
+        raise NodeConfigError(str(err)) from None
 
 
 def _legs_reason(text: str) -> str | None:

@@ -21,6 +21,7 @@ from scipy.interpolate import PPoly
 from scipy.optimize import brentq
 
 from softseq_ros.segments.models import Piece, Segment
+from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
 
 FloatArray = NDArray[np.float64]
 
@@ -107,9 +108,12 @@ def soft_direction(k: FloatArray) -> FloatArray:
 class SegmentNumerics:
     """The numbers every stage shares: segments, their pieces, scales and tolerances."""
 
-    def __init__(self, segments: Sequence[Segment]) -> None:
-        """Pieces and scales of ``segments`` (base to tip)."""
+    def __init__(self, segments: Sequence[Segment],
+                 tolerances: Tolerances = DEFAULT_TOLERANCES) -> None:
+        """Pieces and scales of ``segments`` (base to tip); ``convergence`` logs the solves."""
         self.segments = list(segments)
+        self.tolerances = tolerances
+        self.convergence = ConvergenceLog()
         self.rest_volumes = np.array([s.rest_volume for s in self.segments])
         self.max_volumes = np.array([s.max_volume for s in self.segments])
         self.total_rest_volume = float(self.rest_volumes.sum())
@@ -119,12 +123,12 @@ class SegmentNumerics:
                        for pieces in self.pieces for pc in pieces)
         self.p_scale = p_extent if p_extent > 0.0 else 1.0
         self.k_scale = self.p_scale / self.v_scale
-        self.tol_v = 1e-9 * self.v_scale
+        self.tol_v = tolerances.same_volume * self.v_scale
 
     def volumes_at(self, config: tuple[Piece, ...], p: FloatArray) -> FloatArray:
         """Each segment's volume on its piece of ``config`` at the pressures ``p``."""
-        return np.stack([seg.invert(piece, p) for seg, piece in zip(self.segments, config)],
-                        axis=-1)
+        return np.stack([seg.invert(piece, p, self.tolerances, self.convergence)
+                         for seg, piece in zip(self.segments, config)], axis=-1)
 
     def stiffness(self, config: tuple[Piece, ...], volumes: FloatArray) -> FloatArray:
         """Scaled dp/dv, clipped to the sign its piece promises (exactly 0 on a flat piece)."""
@@ -259,7 +263,8 @@ class Assembly:
             piece = config[i]
             if not piece.p_min <= p_flat <= piece.p_max or piece.direction < 0:
                 return
-            base[i] = self.numerics.segments[i].invert(piece, np.array([p_flat]))[0]
+            base[i] = self.numerics.segments[i].invert(
+                piece, np.array([p_flat]), self.numerics.tolerances, self.numerics.convergence)[0]
         k_others = self.numerics.stiffness(config, base[None, :])[0, others]
         if np.any(k_others <= 0.0):
             return

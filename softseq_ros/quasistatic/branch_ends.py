@@ -86,7 +86,7 @@ class BranchEnds:
         total = float(branch.total[end])
         k = self.numerics.stiffness(branch.pieces, v_fold[None, :])[0]
         null = soft_direction(k)
-        eps = 1e-6 * self.numerics.v_scale
+        eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
 
         def drift(v: FloatArray) -> float:
             p = np.array([s.pressure(x) for s, x in zip(self.numerics.segments, v)])
@@ -130,16 +130,18 @@ class BranchEnds:
             return float(np.min(np.minimum(v - lo, hi - v)) / scale_v)
 
         leaves_range.terminal = True
+        tolerances = self.numerics.tolerances
         y = start / scale_v
         t = 0.0
         for horizon in np.logspace(2, 14, 13):
-            sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian, rtol=1e-7,
-                            atol=1e-12, events=leaves_range)
+            sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian,
+                            rtol=tolerances.flow_rtol, atol=tolerances.flow_atol,
+                            events=leaves_range)
             y, t = sol.y[:, -1], horizon
             if sol.status == 1:
                 break
             # At rest means balanced pressures at a stable state: a fold is balanced too.
-            if np.max(np.abs(rhs(t, y))) < 1e-9 and self._is_stable(y * scale_v):
+            if np.max(np.abs(rhs(t, y))) < tolerances.flow_rest and self._is_stable(y * scale_v):
                 break
         return np.clip(y * scale_v, lo, hi)
 
@@ -147,7 +149,8 @@ class BranchEnds:
         numerics = self.numerics
         k = np.array([s.stiffness(x) for s, x in zip(numerics.segments, volumes)])
         k /= numerics.k_scale
-        return bool(np.sum(k < 0.0) <= 1 and cofactor_sum(k) > 1e-6)
+        return bool(np.sum(k < 0.0) <= 1
+                    and cofactor_sum(k) > numerics.tolerances.stable_cofactor)
 
     def _nearest_branch(self, total: float, volumes: FloatArray, exclude: int) -> int:
         best, best_distance = -1, math.inf
@@ -159,7 +162,8 @@ class BranchEnds:
             distance = float(np.max(np.abs(state - volumes)))
             if distance < best_distance:
                 best, best_distance = j, distance
-        if best < 0 or best_distance > 1e-3 * self.numerics.v_scale:
+        landing = self.numerics.tolerances.landing_distance * self.numerics.v_scale
+        if best < 0 or best_distance > landing:
             raise RuntimeError(f'snap-through at total volume {total:.9g} m^3 found no stable '
                                f'state to land on (nearest {best_distance:.3g} m^3 away)')
         return best

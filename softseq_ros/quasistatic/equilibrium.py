@@ -40,8 +40,10 @@ from softseq_ros.quasistatic.assembly import (
     SegmentNumerics,
 )
 from softseq_ros.quasistatic.branch_ends import BranchEnds
+from softseq_ros.quasistatic.sequence import SOLVED_HYSTERESIS_TOLERANCE, sequence_type
 from softseq_ros.quasistatic.states import StatePoint, StateReader, StateRows
 from softseq_ros.segments.models import Segment
+from softseq_ros.tolerances import DEFAULT_TOLERANCES, Tolerances
 
 SEQUENCE_TYPES = ('none', 'partial', 'symmetric', 'asymmetric')
 __all__ = ['DomainError', 'EquilibriumCurve', 'EquilibriumMap', 'SEQUENCE_TYPES', 'SnapEvent',
@@ -90,7 +92,12 @@ class State:
 
 @dataclass
 class SolvedPath:
-    """States along a history of commanded volumes, one row per command."""
+    """
+    States along a history of commanded volumes, one row per command.
+
+    ``converged``: every iterative solve of the map so far (its assembly and every read,
+    this path's included) reached round-off within its budget (softseq_ros.tolerances).
+    """
 
     injected: FloatArray
     pressure: FloatArray
@@ -99,6 +106,7 @@ class SolvedPath:
     branch: NDArray[np.int64]
     snap: NDArray[np.bool_]
     events: list[SnapEvent]
+    converged: bool = True
 
 
 class EquilibriumMap:
@@ -108,18 +116,22 @@ class EquilibriumMap:
     ``resolution`` is the number of samples that each segment's PV curve contributes across its
     whole volume range (more samples: smaller interpolation error, longer assembly).
     ``polish`` (default on) solves the states next to folds exactly; off, they are
-    interpolated linearly between the branch's samples.
+    interpolated linearly between the branch's samples. ``tolerances`` are the iterative
+    solves' budgets (softseq_ros.tolerances); ``convergence`` logs whether they converged, in
+    the assembly and in every read since.
     """
 
     def __init__(self, segments: Sequence[Segment], resolution: int = 2000,
-                 polish: bool = True) -> None:
+                 polish: bool = True, tolerances: Tolerances = DEFAULT_TOLERANCES) -> None:
         """Assemble the equilibrium set of ``segments`` (base to tip)."""
         if len(segments) < 2:
             raise ValueError(f'an actuator needs at least 2 segments, got {len(segments)}')
         if resolution < 16:
             raise ValueError(f'resolution must be >= 16, got {resolution}')
-        numerics = SegmentNumerics(segments)
+        numerics = SegmentNumerics(segments, tolerances)
         self.numerics = numerics
+        self.tolerances = tolerances
+        self.convergence = numerics.convergence
         self.segments = numerics.segments
         self.resolution = int(resolution)
         self.polish = bool(polish)
@@ -314,7 +326,8 @@ class Tracker:
                 rows = np.flatnonzero(branch_ids == b)
                 values[rows] = emap.reader.rows(int(b), self._on_branch(int(b), totals[rows]))
         return SolvedPath(commands, values[:, segments], values[:, :segments],
-                          values[:, segments + 1:], branch_ids, snap, events)
+                          values[:, segments + 1:], branch_ids, snap, events,
+                          emap.convergence.converged)
 
     def _on_branch(self, index: int, totals: FloatArray) -> FloatArray:
         """Totals clipped to a branch: a command at a domain edge may pass it by round-off."""
@@ -326,24 +339,15 @@ def classify(emap: EquilibriumMap, samples: int = 4001) -> str:
     """
     The paper's sequence type of an actuator (Fig. 1): none, partial, symmetric or asymmetric.
 
-    Inflate over the whole range and deflate back. A snap-through or a deflation path that
-    differs from the inflation path is *asymmetric*. Otherwise, with r_i = dv_i/dV the share of
-    the inflow each segment takes: some segment losing volume while the total grows
-    (r_i < -0.02) is *symmetric* (the inflation turns from one segment to another); a share that
-    changes by more than 0.25 over the range is *partial* (one segment takes over); otherwise
-    *none*.
+    Inflate over the whole range and deflate back, then apply the rules of
+    :func:`softseq_ros.quasistatic.sequence.sequence_type` to the solved paths.
     """
     lo, hi = emap.injected_range
     up = np.linspace(lo, hi, samples)
     inflation = Tracker(emap).sweep(up)
     deflation = Tracker(emap, injected=hi, volumes=inflation.volumes[-1]).sweep(up[::-1])
     gap = np.max(np.abs(inflation.volumes - deflation.volumes[::-1]))
-    if inflation.events or deflation.events or gap > 1e-6 * emap.v_scale:
-        return 'asymmetric'
     share = np.diff(inflation.volumes, axis=0) / np.diff(up)[:, None]
-    if np.min(share) < -0.02:
-        return 'symmetric'
-    if np.max(np.ptp(share, axis=0)) > 0.25:
-        return 'partial'
-    return 'none'
+    return sequence_type(bool(inflation.events or deflation.events), float(gap),
+                         SOLVED_HYSTERESIS_TOLERANCE * emap.v_scale, share)
 

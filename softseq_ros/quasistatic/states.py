@@ -111,15 +111,19 @@ class StateReader:
         below, above = branch.pressure[i].copy(), branch.pressure[i + 1].copy()
         t0, t1 = branch.total[i], branch.total[i + 1]
         pressure = below + (above - below) * (total - t0) / (t1 - t0)
-        for _ in range(64):
+        tolerances = self.numerics.tolerances
+        ulps = tolerances.round_off_ulps
+        converged = False
+        for _ in range(tolerances.polish_steps):
             volumes = self.numerics.volumes_at(branch.pieces, pressure)
             excess = volumes.sum(axis=1) - total
             short = excess < 0.0
             below = np.where(short, pressure, below)
             above = np.where(short, above, pressure)
-            done = (np.abs(excess) <= 4.0 * np.finfo(float).eps * self.numerics.v_scale) | (
-                np.abs(above - below) <= 4.0 * np.spacing(np.abs(above)))
+            done = (np.abs(excess) <= ulps * np.finfo(float).eps * self.numerics.v_scale) | (
+                np.abs(above - below) <= ulps * np.spacing(np.abs(above)))
             if np.all(done):
+                converged = True
                 break
             k = np.stack([s.stiffness(volumes[:, j])
                           for j, s in enumerate(self.numerics.segments)], axis=1)
@@ -128,6 +132,7 @@ class StateReader:
             inside = (np.isfinite(step) & (step > np.minimum(below, above))
                       & (step < np.maximum(below, above)))
             pressure = np.where(done, pressure, np.where(inside, step, 0.5 * (below + above)))
+        self.numerics.convergence.record('polish', converged)
         volumes = self.numerics.volumes_at(branch.pieces, pressure)
         # The bisection leaves the volume balance off by round-off; the largest volume takes it.
         largest = np.argmax(volumes, axis=1)

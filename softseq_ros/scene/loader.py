@@ -43,6 +43,8 @@ from dataclasses import dataclass
 import math
 from pathlib import Path
 
+import yaml
+
 from softseq_ros.scene.design import DesignError, cached_table, design_path, load_design
 from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.scene.paths import scene_path
@@ -59,6 +61,7 @@ from softseq_ros.scene.validation import (
     SEGMENT_NAME,
     Context,
     SceneError,
+    YamlLoader,
     join,
     read_yaml,
 )
@@ -264,6 +267,48 @@ def _segments(ctx: Context, value: object) -> tuple[Segment, ...]:
     return tuple(segments)
 
 
+LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
+
+
+def read_legs(ctx: Context, value: object, key_path: str) -> list[Leg]:
+    """The legs of a pump programme from parsed YAML: a non-empty list of one-key mappings."""
+    items = ctx.sequence(value, key_path)
+    if not items:
+        raise ctx.error(key_path, 'needs at least one leg')
+    legs = []
+    for index, item in enumerate(items):
+        where = f'{key_path}[{index}]'
+        if isinstance(item, dict) and len(item) != 1:
+            raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}, '
+                                   f'got {len(item)} keys')
+        leg = ctx.mapping(item, where, (), LEG_KEYS)
+        if not leg:
+            raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}')
+        (key, amount), = leg.items()
+        at = join(where, key)
+        if key == 'hold_s':
+            legs.append(Leg.hold(ctx.limited(amount, at, 'pump.legs.hold_s')))
+            continue
+        target = ctx.number(amount, at, ge=0.0)
+        legs.append(Leg.inflate(target) if key == 'inflate_to_m3' else Leg.deflate(target))
+    return legs
+
+
+def legs_from_text(text: str, key_path: str = 'legs') -> tuple[Leg, ...]:
+    """
+    Legs from YAML text in the scene's syntax, e.g. ``[{inflate_to_m3: 5e-6}, {hold_s: 2}]``.
+
+    For settings given as text (the pump node's ``legs`` parameter); SceneError names the leg
+    and key at fault (``legs[1].hold_s: ...``).
+    """
+    try:
+        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.YAMLError as err:
+        raise SceneError(f'{key_path}: not valid YAML ({" ".join(str(err).split())})') \
+            from None
+    return tuple(read_legs(Context('', Path('.')), data, key_path))
+
+
 def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
     raw = ctx.mapping(value, 'pump', ('legs',),
                    ('flow_rate_m3_per_s', 'rate_hz', 'cycles', 'start_injected_m3'))
@@ -272,26 +317,7 @@ def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
     rate = ctx.limited(raw.get('rate_hz', DEFAULT_PUMP_RATE_HZ), 'pump.rate_hz')
     cycles = int(ctx.limited(raw.get('cycles', 1), 'pump.cycles', integer=True))
     start = ctx.number(raw.get('start_injected_m3', 0.0), 'pump.start_injected_m3', ge=0.0)
-    items = ctx.sequence(raw['legs'], 'pump.legs')
-    if not items:
-        raise ctx.error('pump.legs', 'needs at least one leg')
-    legs = []
-    for index, item in enumerate(items):
-        key_path = f'pump.legs[{index}]'
-        leg_keys = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
-        if isinstance(item, dict) and len(item) != 1:
-            raise ctx.error(key_path, f'needs exactly one of {", ".join(leg_keys)}, '
-                                      f'got {len(item)} keys')
-        leg = ctx.mapping(item, key_path, (), leg_keys)
-        if not leg:
-            raise ctx.error(key_path, f'needs exactly one of {", ".join(leg_keys)}')
-        (key, amount), = leg.items()
-        where = join(key_path, key)
-        if key == 'hold_s':
-            legs.append(Leg.hold(ctx.limited(amount, where, 'pump.legs.hold_s')))
-            continue
-        target = ctx.number(amount, where, ge=0.0)
-        legs.append(Leg.inflate(target) if key == 'inflate_to_m3' else Leg.deflate(target))
+    legs = read_legs(ctx, raw['legs'], 'pump.legs')
     # Walk the programme as the pump will, so a leg that cannot run names its own key. Every
     # cycle after the first starts where the one before ended, so two cycles show them all.
     now = start

@@ -100,14 +100,19 @@ class Context:
     """The file being read (for error messages and relative paths) and typed access to it."""
 
     def __init__(self, shown: str, folder: Path) -> None:
-        """``shown`` names the file in errors; relative paths in it start from ``folder``."""
+        """
+        Read a file shown as ``shown`` in errors, its relative paths starting from ``folder``.
+
+        ``shown`` is '' for text that is no file (a setting): errors then start at the key.
+        """
         self.shown = shown
         self.folder = folder
 
     def error(self, key_path: str, problem: str) -> SceneError:
-        """The one-line error for ``key_path``."""
+        """The one-line error for ``key_path`` (after the file's name, when there is a file)."""
         one_line = ' '.join(str(problem).split())
-        return SceneError(f'{self.shown}: {key_path or "(top level)"}: {one_line}')
+        where = f'{self.shown}: ' if self.shown else ''
+        return SceneError(f'{where}{key_path or "(top level)"}: {one_line}')
 
     def mapping(self, value: object, key_path: str, required: tuple[str, ...],
                 optional: tuple[str, ...] = ()) -> dict[str, Any]:

@@ -20,6 +20,7 @@ from scipy.optimize import brentq
 from softseq_ros.errors import UserError
 from softseq_ros.segments.identity import exact, exact_list
 from softseq_ros.segments.materials import Material, material_definition
+from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
 
 FloatArray = NDArray[np.float64]
 
@@ -136,14 +137,17 @@ class Segment(ABC):
             pieces.append(Piece(lo, hi, direction, p_lo, p_hi))
         return pieces
 
-    def invert(self, piece: Piece, p: ArrayLike) -> FloatArray:
+    def invert(self, piece: Piece, p: ArrayLike,
+               tolerances: Tolerances = DEFAULT_TOLERANCES,
+               log: ConvergenceLog | None = None) -> FloatArray:
         """
         Volumes on a rising or falling ``piece`` where the pressure equals ``p``.
 
         Safeguarded Newton, vectorised: a Newton step where it stays inside the bracket the
         piece gives, a halving where it would not. It cannot fail on a monotone piece and
         reaches round-off in a few steps (at most 64 halvings near a peak, where the slope
-        vanishes). Pressures outside the piece's range return the nearer end.
+        vanishes) within ``tolerances.inversion_steps``; ``log`` counts whether it did.
+        Pressures outside the piece's range return the nearer end.
         """
         if piece.direction == 0:
             raise ValueError('a flat piece has no inverse')
@@ -155,21 +159,26 @@ class Segment(ABC):
         guess = piece.v_lo + (piece.v_hi - piece.v_lo) * np.clip(
             (target - piece.p_at_lo) / span, 0.0, 1.0) if span else 0.5 * (lo + hi)
         x = np.broadcast_to(guess, target.shape).astype(float)
-        floor = 4.0 * np.finfo(float).eps * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
-        for _ in range(96):
+        ulps = tolerances.round_off_ulps
+        floor = ulps * np.finfo(float).eps * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+        converged = False
+        for _ in range(tolerances.inversion_steps):
             residual = sign * (self.pressure(x) - target)
             above = residual > 0.0
             hi = np.where(above, x, hi)
             lo = np.where(above, lo, x)
             done = (np.abs(residual) <= floor) | (
-                hi - lo <= 4.0 * np.spacing(np.maximum(np.abs(hi), 1e-300)))
+                hi - lo <= ulps * np.spacing(np.maximum(np.abs(hi), 1e-300)))
             if np.all(done):
+                converged = True
                 break
             slope = sign * self.stiffness(x)
             with np.errstate(divide='ignore', invalid='ignore'):
                 step = x - residual / slope
             inside = np.isfinite(step) & (step > lo) & (step < hi)
             x = np.where(done, x, np.where(inside, step, 0.5 * (lo + hi)))
+        if log is not None:
+            log.record('inversion', converged)
         # A pressure at a piece's end maps to that end exactly: near a peak the pressure is flat to
         # round-off over a stretch of volume, and the junctions between pieces must agree.
         x = np.where(target == piece.p_at_lo, piece.v_lo, x)
