@@ -7,16 +7,18 @@ found from the bag's topics. Only the topics the analysis needs are read, straig
 (:mod:`softseq_ros.bag.arrays`); everything is SI, pressures are gauge unless named absolute.
 
 What belongs to this run: the run starts at the first pump command. A latched message stamped
-before it (an actuator state, a snapshot, a snap-through event kept by a transient-local
-publisher from an earlier run) is left out and counted in ``ignored``. The scene the actuator
-said it runs (``actuator/scene``, published once when it starts, so usually before the first
-command) is kept whenever it was said: it describes the actuator, not one run.
+before it (an actuator state or a snapshot kept by a transient-local publisher from an earlier
+run) is left out and counted in ``ignored``; snap-through events carry no stamp and are all
+kept. The scene the actuator said it runs (``actuator/scene``, published once when it starts,
+so usually before the first command) is kept whenever it was said: it describes the actuator,
+not one run. The JSON the String topics carry is read with the codecs that write it
+(:mod:`softseq_ros.rig.wire`).
 """
 
 from dataclasses import dataclass, field
-import json
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +33,14 @@ from softseq_ros.bag.arrays import (
 )
 from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
+from softseq_ros.rig.wire import (
+    PUMP_STATUS_JSON,
+    SCENE_IDENTITY_JSON,
+    SNAP_THROUGH_JSON,
+    SNAPSHOT_STEP_JSON,
+    JsonPayload,
+    PayloadError,
+)
 
 FloatArray = NDArray[np.float64]
 NS_PER_S = 1_000_000_000
@@ -255,8 +265,7 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         recording.status = [_status(text, log_time, t0)
                             for log_time, text in optional[contract.PUMP_STATUS].messages]
     if contract.EVENTS in optional:
-        recording.events = _events(optional[contract.EVENTS].messages, names[contract.EVENTS],
-                                   t0, ignored)
+        recording.events = _events(optional[contract.EVENTS].messages, names[contract.EVENTS])
     if contract.SNAPSHOTS in optional:
         steps = optional.get(contract.SNAPSHOT_STEPS)
         recording.snapshots = _snapshots(
@@ -325,53 +334,45 @@ def _ambient(pressure: dict, state_stamp: NDArray[np.int64], gauge: FloatArray) 
     return float(np.median(difference))
 
 
+def _decode(codec: JsonPayload, topic: str, number: int, text: str,
+            log_time_ns: int | None = None) -> Any:
+    """
+    Message ``number`` of ``topic`` through its codec; RecordingError naming both if garbled.
+
+    ``log_time_ns`` stands for the stamp of a payload that carries none.
+    """
+    try:
+        return codec.decode(text, stamp_ns=log_time_ns)
+    except PayloadError:
+        keys = ', '.join(codec.required(stamp_given=log_time_ns is not None))
+        raise RecordingError(f'{topic}: message {number} is not a {codec.what} (JSON with '
+                             f'{keys}): {text[:60]!r}') from None
+
+
 def _status(text: str, log_time_ns: int, t0: int) -> tuple[float, str, str]:
     """Pump status: JSON {"state", "reason", "stamp_ns"}, or plain text in older bags."""
     if text.startswith('{'):
         try:
-            value = json.loads(text)
-            stamp = int(value.get('stamp_ns', log_time_ns))
-            return (stamp - t0) / NS_PER_S, str(value.get('state', '')), \
-                str(value.get('reason', ''))
-        except (json.JSONDecodeError, TypeError, ValueError, AttributeError):
+            status = PUMP_STATUS_JSON.decode(text, stamp_ns=log_time_ns)
+            return (status.stamp_ns - t0) / NS_PER_S, status.state, status.reason
+        except PayloadError:
             pass
     state, _, reason = text.partition(':')
     return (log_time_ns - t0) / NS_PER_S, state.strip(), reason.strip()
 
 
-def _events(messages: list[tuple[int, str]], topic: str, t0: int,
-            ignored: dict[str, int]) -> list[dict]:
-    events = []
-    for number, (_, text) in enumerate(messages, start=1):
-        try:
-            event = json.loads(text)
-            float(event['injected_m3'])
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-            raise RecordingError(f'{topic}: message {number} is not a snap-through event '
-                                 f'(JSON with injected_m3): {text[:60]!r}') from None
-        if 'stamp_ns' in event and int(event['stamp_ns']) < t0:
-            ignored[topic] = ignored.get(topic, 0) + 1
-            continue
-        events.append(event)
-    return events
+def _events(messages: list[tuple[int, str]], topic: str) -> list[dict]:
+    """The snap-through events as their JSON objects (they carry no stamp to sort out by)."""
+    return [SNAP_THROUGH_JSON.fields(_decode(SNAP_THROUGH_JSON, topic, number, text, log_time))
+            for number, (log_time, text) in enumerate(messages, start=1)]
 
 
 def _scenes(messages: list[tuple[int, str]], topic: str) -> list[RecordedScene]:
     """The distinct scene identities of ``actuator/scene``, in the order said."""
     scenes: list[RecordedScene] = []
     for number, (log_time, text) in enumerate(messages, start=1):
-        try:
-            value = json.loads(text)
-            segments = value['segments']
-            scene = RecordedScene(str(value['scene']), tuple(str(s) for s in segments),
-                                  str(value['segments_sha256']),
-                                  int(value.get('stamp_ns', log_time)))
-            if not isinstance(segments, list) or len(scene.segments_sha256) != 64:
-                raise ValueError
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError):
-            raise RecordingError(f'{topic}: message {number} is not a scene identity (JSON '
-                                 f'with scene, segments, segments_sha256): {text[:60]!r}') \
-                from None
+        said = _decode(SCENE_IDENTITY_JSON, topic, number, text, log_time)
+        scene = RecordedScene(said.scene, said.segments, said.segments_sha256, said.stamp_ns)
         if not any(_same_scene(scene, seen) for seen in scenes):
             scenes.append(scene)
     return scenes
@@ -386,14 +387,9 @@ def _snapshots(shots: list, steps: list[tuple[int, str]] | None, steps_topic: st
                t0: int, ignored: dict[str, int], topic: str) -> list[Snapshot]:
     parsed = []
     for number, (_, text) in enumerate(steps or [], start=1):
-        try:
-            value = json.loads(text)
-            parsed.append((int(value['stamp_ns']), int(value['step']),
-                           float(value['trigger_injected_m3']), str(value['direction'])))
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-            raise RecordingError(f'{steps_topic}: message {number} is not a snapshot step (JSON '
-                                 f'with stamp_ns, step, trigger_injected_m3, direction): '
-                                 f'{text[:60]!r}') from None
+        # Steps pair with snapshots by stamp: a step must carry its own.
+        step = _decode(SNAPSHOT_STEP_JSON, steps_topic, number, text)
+        parsed.append((step.stamp_ns, step.step, step.trigger_injected_m3, step.direction))
     used = [False] * len(parsed)
     result = []
     # Rows where a new inflation leg starts after a deflation: the cycles' boundaries.

@@ -17,7 +17,6 @@ message counts, so memory grows with the columns asked for, not with the bag.
 
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-import json
 import os
 from pathlib import Path
 import struct
@@ -720,13 +719,3 @@ def _read_unchunked(stream: BinaryIO, file: Path, summary: Any,
     except McapError as err:
         raise BagArrayError(f'{file}: {err}') from None
 
-
-def parse_json_string(text: str, where: str) -> dict:
-    """A JSON object carried in a std_msgs/String, or a clear error naming where it was."""
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise BagArrayError(f'{where}: not JSON ({err.msg}): {text[:60]!r}') from None
-    if not isinstance(value, dict):
-        raise BagArrayError(f'{where}: expected a JSON object, got {text[:60]!r}')
-    return value

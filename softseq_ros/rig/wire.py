@@ -6,8 +6,13 @@ batch runner writes exactly these bytes into its bags, so a batch bag and a bag 
 the nodes over DDS hold the same encoding of the same values. Nothing here imports rclpy:
 templates of fixed-layout messages (pose arrays, marker arrays) are built from plain objects
 with the messages' fields, and received messages are read by their fields only.
+
+The JSON objects the std_msgs/String topics carry are defined here once, per value type, with
+both their encoder and their decoder (:class:`JsonPayload`): the analysis reads recorded
+payloads with the same codec the nodes and the batch runner write them with.
 """
 
+import dataclasses
 from functools import lru_cache
 import json
 from types import SimpleNamespace
@@ -56,6 +61,205 @@ class InputError(UserError):
         self.key = key
 
 
+# ---------------------------------------------------------------- JSON in std_msgs/String
+#
+# Every std_msgs/String topic of the contract carries one JSON object per message. Its codec
+# below is the only place that knows the object's keys: the nodes and the batch runner encode
+# with it and the analysis decodes with it, so the two cannot disagree.
+
+STAMP_KEY = 'stamp_ns'
+
+
+class PayloadError(InputError):
+    """A String payload that is not the JSON its topic carries; names the topic and the key."""
+
+    def __init__(self, topic: str, what: str, key: str | None, problem: str,
+                 text: str) -> None:
+        """``key``: the offending key (None: the text as a whole); ``problem``: what is wrong."""
+        super().__init__(f'{topic}: {key or "json"}',
+                         f'{topic}: not a {what} ({problem}): {text[:60]!r}')
+        self.topic, self.what, self.field, self.problem = topic, what, key, problem
+
+
+def _is_number(item: Any) -> bool:
+    return type(item) is int or type(item) is float  # json.loads gives no bool subclass here
+
+
+# A key's kind: what it must hold in the JSON, how to test it, and how the value holds it.
+_KINDS: dict[str, tuple[str, Callable[[Any], bool], Callable[[Any], Any]]] = {
+    'int': ('an integer', lambda item: type(item) is int, int),
+    'float': ('a number', _is_number, float),
+    'str': ('a string', lambda item: type(item) is str, str),
+    'floats': ('a list of numbers',
+               lambda item: type(item) is list and all(_is_number(x) for x in item),
+               lambda item: [float(x) for x in item]),
+    'strs': ('a list of strings',
+             lambda item: type(item) is list and all(type(x) is str for x in item), tuple),
+}
+
+
+class JsonPayload:
+    """
+    The JSON object a std_msgs/String topic carries for one value type: its keys, both ways.
+
+    ``keys`` are (key, kind) pairs in the order they are written; each key is the name of the
+    value's field. ``stamp_ns`` is a key when the payload carries its stamp; a payload that does
+    not (``actuator/events``) takes the message's time from the caller. ``check`` returns the
+    key and what is wrong with a decoded value beyond keys and kinds (None: nothing).
+
+    The text is ``json.dumps`` of the keys in order, with json's default separators: the bytes
+    the bags already hold, so a key, its order or its kind never changes here unnoticed. Decoding
+    refuses non-JSON, a JSON value that is no object, a missing key and a key of the wrong kind
+    with a :class:`PayloadError`; keys it does not know are left alone.
+    """
+
+    def __init__(self, value_type: type, what: str, keys: tuple[tuple[str, str], ...],
+                 check: Callable[[Any], tuple[str, str] | None] | None = None) -> None:
+        """A codec for ``value_type`` (a values class with a String ``topic``)."""
+        fields = {field.name for field in dataclasses.fields(value_type)}
+        names = tuple(key for key, _ in keys)
+        unknown = set(names) - fields - {STAMP_KEY}
+        missing = fields - set(names) - {STAMP_KEY}
+        if unknown or missing or STAMP_KEY not in fields or len(set(names)) != len(names) \
+                or any(kind not in _KINDS for _, kind in keys):
+            raise TypeError(f'{value_type.__name__}: JSON keys {names} do not match its fields '
+                            f'(not fields: {sorted(unknown)}, fields left out: {sorted(missing)})')
+        self.value_type, self.what, self.keys, self.check = value_type, what, keys, check
+        self.names = names
+        self.topic = value_type.topic
+
+    @property
+    def carries_stamp(self) -> bool:
+        """True when the payload carries ``stamp_ns`` (else the message's time is the stamp)."""
+        return STAMP_KEY in self.names
+
+    def required(self, stamp_given: bool = False) -> tuple[str, ...]:
+        """The keys a payload must hold (``stamp_given``: the caller knows the message time)."""
+        return tuple(name for name in self.names if not (stamp_given and name == STAMP_KEY))
+
+    def fields(self, value: Any) -> dict[str, Any]:
+        """The JSON object of ``value``, keys in the written order."""
+        out = {}
+        for key, kind in self.keys:
+            item = getattr(value, key)
+            out[key] = list(item) if kind in ('floats', 'strs') else item
+        return out
+
+    def text(self, value: Any) -> str:
+        """The JSON text the topic carries for ``value``."""
+        return json.dumps(self.fields(value))
+
+    def encode(self, value: Any) -> bytes:
+        """The CDR bytes of the std_msgs/String holding ``value``."""
+        return string_cdr(self.text(value))
+
+    def decode(self, text: str, stamp_ns: int | None = None) -> Any:
+        """
+        The value a payload holds; :class:`PayloadError` (one line) when it holds none.
+
+        ``stamp_ns``: the message's time, the value's stamp when the payload carries none
+        (required for a codec whose payload never does; without it a missing ``stamp_ns`` key
+        is refused).
+        """
+        if not self.carries_stamp and stamp_ns is None:
+            raise TypeError(f'{self.topic.name} carries no stamp: decode needs stamp_ns')
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise self._error(None, f'not JSON: {err.msg}', text) from None
+        except (ValueError, RecursionError) as err:
+            raise self._error(None, f'not JSON: {err}', text) from None
+        if type(data) is not dict:
+            raise self._error(None, f'not a JSON object: {_short(data)}', text)
+        values = {}
+        for key, kind in self.keys:
+            if key not in data:
+                if key == STAMP_KEY and stamp_ns is not None:
+                    values[key] = stamp_ns
+                    continue
+                raise self._error(key, f'no key {key}; expected {", ".join(self.names)}',
+                                  text)
+            item = data[key]
+            noun, accepts, convert = _KINDS[kind]
+            if not accepts(item):
+                raise self._error(key, f'{key} must be {noun}, got {_short(item)}', text)
+            try:
+                values[key] = convert(item)
+            except OverflowError:
+                raise self._error(key, f'{key} is out of range', text) from None
+        if not self.carries_stamp:
+            values[STAMP_KEY] = stamp_ns
+        value = self.value_type(**values)
+        fault = self.check(value) if self.check else None
+        if fault is not None:
+            raise self._error(*fault, text)
+        return value
+
+    def _error(self, key: str | None, problem: str, text: str) -> PayloadError:
+        return PayloadError(self.topic.name, self.what, key, problem, text)
+
+
+def _short(item: Any) -> str:
+    text = json.dumps(item)
+    return text if len(text) <= 40 else text[:37] + '...'
+
+
+_HEX = frozenset('0123456789abcdefABCDEF')
+SHA256_HEX_DIGITS = 64
+INFLATION, DEFLATION = 'inflation', 'deflation'
+
+
+def _scene_fault(value: SceneIdentity) -> tuple[str, str] | None:
+    digest = value.segments_sha256
+    if len(digest) != SHA256_HEX_DIGITS or not set(digest) <= _HEX:
+        return 'segments_sha256', (f'segments_sha256 must be {SHA256_HEX_DIGITS} hexadecimal '
+                                   'digits')
+    return None
+
+
+def _step_fault(value: SnapshotStep) -> tuple[str, str] | None:
+    if value.direction not in (INFLATION, DEFLATION):
+        return 'direction', (f'direction must be {INFLATION} or {DEFLATION}, '
+                             f'got {value.direction!r}')
+    return None
+
+
+PUMP_STATUS_JSON = JsonPayload(
+    PumpStatus, 'pump status', (('state', 'str'), ('reason', 'str'), (STAMP_KEY, 'int')))
+# A snap-through event carries no stamp (bags hold it so): read back, the message's time is
+# its stamp.
+SNAP_THROUGH_JSON = JsonPayload(
+    SnapThrough, 'snap-through event',
+    (('injected_m3', 'float'), ('from_volumes_m3', 'floats'), ('to_volumes_m3', 'floats'),
+     ('from_pressure_pa', 'float'), ('to_pressure_pa', 'float')))
+SCENE_IDENTITY_JSON = JsonPayload(
+    SceneIdentity, 'scene identity',
+    (('scene', 'str'), ('segments', 'strs'), ('segments_sha256', 'str'), (STAMP_KEY, 'int')),
+    _scene_fault)
+SNAPSHOT_STEP_JSON = JsonPayload(
+    SnapshotStep, 'snapshot step',
+    (('step', 'int'), ('trigger_injected_m3', 'float'), ('direction', 'str'),
+     ('injected_m3', 'float'), (STAMP_KEY, 'int')),
+    _step_fault)
+
+# The codec of every value a std_msgs/String topic carries, by value type and by topic name.
+JSON_PAYLOADS: dict[type, JsonPayload] = {
+    codec.value_type: codec
+    for codec in (PUMP_STATUS_JSON, SNAP_THROUGH_JSON, SCENE_IDENTITY_JSON, SNAPSHOT_STEP_JSON)}
+JSON_PAYLOADS_BY_TOPIC: dict[str, JsonPayload] = {
+    codec.topic.name: codec for codec in JSON_PAYLOADS.values()}
+
+
+def pump_status_json(value: PumpStatus) -> str:
+    """The JSON text ``pump/status`` carries."""
+    return PUMP_STATUS_JSON.text(value)
+
+
+def scene_identity_json(value: SceneIdentity) -> str:
+    """The JSON text ``actuator/scene`` carries."""
+    return SCENE_IDENTITY_JSON.text(value)
+
+
 # ---------------------------------------------------------------- values -> CDR bytes
 
 _COMMAND_PACK, _COMMAND_BLOCK = joint_state_packer('', _SYRINGE, (1, 1, 0))
@@ -71,16 +275,6 @@ def _pump_command(value: PumpCommand) -> bytes:
 # for curvatures (positions only); a rig sends one set of names for hours.
 _volume_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
 _curvature_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
-
-
-def pump_status_json(value: PumpStatus) -> str:
-    """The JSON text ``pump/status`` carries."""
-    return json.dumps({'state': value.state, 'reason': value.reason,
-                       'stamp_ns': value.stamp_ns})
-
-
-def _pump_status(value: PumpStatus) -> bytes:
-    return string_cdr(pump_status_json(value))
 
 
 def _pressure(value: Pressure) -> bytes:
@@ -110,29 +304,6 @@ def _curvatures(value: SegmentCurvatures) -> bytes:
     sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
     return ENCAPSULATION + pack(sec, nanosec, block, len(curvatures), *curvatures, 0, 0)
 
-
-def _snap_through(value: SnapThrough) -> bytes:
-    return string_cdr(json.dumps({
-        'injected_m3': value.injected_m3, 'from_volumes_m3': value.from_volumes_m3,
-        'to_volumes_m3': value.to_volumes_m3, 'from_pressure_pa': value.from_pressure_pa,
-        'to_pressure_pa': value.to_pressure_pa}))
-
-
-def scene_identity_json(value: SceneIdentity) -> str:
-    """The JSON text ``actuator/scene`` carries."""
-    return json.dumps({'scene': value.scene, 'segments': list(value.segments),
-                       'segments_sha256': value.segments_sha256, 'stamp_ns': value.stamp_ns})
-
-
-def _scene_identity(value: SceneIdentity) -> bytes:
-    return string_cdr(scene_identity_json(value))
-
-
-def _snapshot_step(value: SnapshotStep) -> bytes:
-    return string_cdr(json.dumps({
-        'step': value.step, 'trigger_injected_m3': value.trigger_injected_m3,
-        'direction': value.direction, 'injected_m3': value.injected_m3,
-        'stamp_ns': value.stamp_ns}))
 
 
 def _header(frame_id: str = FRAME_ID) -> SimpleNamespace:
@@ -198,15 +369,15 @@ def _side_image(value: SideImage) -> bytes:
 
 ENCODERS: dict[type, Callable[[Any], bytes]] = {
     PumpCommand: _pump_command,
-    PumpStatus: _pump_status,
+    PumpStatus: PUMP_STATUS_JSON.encode,
     Pressure: _pressure,
     SegmentVolumes: _volumes,
     SegmentCurvatures: _curvatures,
-    SnapThrough: _snap_through,
-    SceneIdentity: _scene_identity,
+    SnapThrough: SNAP_THROUGH_JSON.encode,
+    SceneIdentity: SCENE_IDENTITY_JSON.encode,
     Backbone: _pose_array,
     Snapshot: _pose_array,
-    SnapshotStep: _snapshot_step,
+    SnapshotStep: SNAPSHOT_STEP_JSON.encode,
     Markers: _markers,
     SideImage: _side_image,
 }
