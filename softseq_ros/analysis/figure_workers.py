@@ -10,6 +10,8 @@ command can start the worker before anything else.
 
 import os
 
+from softseq_ros.parallel import Workers
+
 
 def _warm_up(svg: bool) -> None:
     """Import the drawing stack and the figure functions the jobs will name."""
@@ -23,7 +25,7 @@ def _warm_up(svg: bool) -> None:
     Figure().subplots()
 
 
-def start_workers(svg: bool = False) -> object | None:
+def start_workers(svg: bool = False) -> Workers | None:
     """
     A forked figure worker that starts importing matplotlib now (SVG's backend too with ``svg``).
 
@@ -34,11 +36,13 @@ def start_workers(svg: bool = False) -> object | None:
 
     if (os.cpu_count() or 1) <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
         return None
-    return multiprocessing.get_context('fork').Pool(1, initializer=_warm_up, initargs=(svg,))
+    # Fork, not spawn: the worker is to inherit nothing but this module, and to be ready
+    # before the caller has imported anything heavy.
+    return Workers(1, initializer=_warm_up, initargs=(svg,), start_method='fork',
+                   start_now=True)
 
 
-def stop_workers(workers: object | None) -> None:
+def stop_workers(workers: Workers | None) -> None:
     """End a worker from :func:`start_workers` (None is accepted: there was none)."""
     if workers is not None:
-        workers.terminate()
-        workers.join()
+        workers.close()

@@ -7,11 +7,10 @@ assembles every ordered pair (base, tip), and with ``--triples`` every ordered t
 assembly is classified by the solver (:func:`softseq_ros.quasistatic.equilibrium.classify`)
 and swept quasi-statically over its whole range and back; the sweep is measured with the same
 metrics as a recording (:mod:`softseq_ros.analysis.metrics`): switch and snap volumes, pressure
-range, hysteresis and how far the tip reaches. More than a handful of assemblies run on a
-process pool.
+range, hysteresis and how far the tip reaches. More than a handful of assemblies run in worker
+processes (:func:`softseq_ros.parallel.run_jobs`).
 """
 
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 import itertools
 import json
@@ -25,6 +24,7 @@ import numpy as np
 
 from softseq_ros.analysis.metrics import Trace, analyse
 from softseq_ros.errors import UserError
+from softseq_ros.parallel import run_jobs
 from softseq_ros.scene.tables import read_table
 
 SWEEP_POINTS = 2001
@@ -82,7 +82,7 @@ def _segment(entry: Entry) -> object:
 
 def assemble(entries: tuple[Entry, ...]) -> dict:
     """Classify and sweep one assembly (base to tip); every number SI, pressures gauge."""
-    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, classify
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, classify, inflate_and_deflate
     from softseq_ros.segments.kinematics import backbone_batch
 
     segments = []
@@ -94,13 +94,12 @@ def assemble(entries: tuple[Entry, ...]) -> dict:
     emap = EquilibriumMap(segments)
     kind = classify(emap)
     lo, hi = emap.injected_range
-    up = np.linspace(lo, hi, SWEEP_POINTS)
-    rising = Tracker(emap).sweep(up)
-    falling = Tracker(emap, injected=hi, volumes=rising.volumes[-1]).sweep(up[::-1])
+    rising, falling = inflate_and_deflate(emap, SWEEP_POINTS)
+    rows = rising.injected.size
     trace = Trace(np.concatenate([rising.injected, falling.injected]),
                   np.concatenate([rising.pressure, falling.pressure]),
                   np.vstack([rising.volumes, falling.volumes]),
-                  np.concatenate([np.ones(up.size, np.int8), -np.ones(up.size, np.int8)]),
+                  np.concatenate([np.ones(rows, np.int8), -np.ones(rows, np.int8)]),
                   segment_names=tuple(s.name for s in segments))
     metrics = analyse(trace, v_range=hi - lo)
     lengths = [e.length_m for e in entries]
@@ -139,29 +138,21 @@ def run_library(entries: list[Entry], triples: bool = False, processes: int | No
     combos = list(itertools.product(entries, repeat=2))
     if triples:
         combos += list(itertools.product(entries, repeat=3))
-    results: list[dict | None] = [None] * len(combos)
-    workers = processes if processes is not None else (os.cpu_count() or 1)
-    done = 0
 
-    def report(result: dict) -> None:
-        nonlocal done
-        done += 1
+    def report(done: int, total: int, result: dict) -> None:
         if progress is not None:
-            progress.write(f'library: {done}/{len(combos)} assembled ('
+            progress.write(f'library: {done}/{total} assembled ('
                            f'{" + ".join(result["segments"])}: {result["sequence_type"]})\n')
             progress.flush()
 
-    if len(combos) < POOL_FROM or workers <= 1:
-        for k, combo in enumerate(combos):
-            results[k] = assemble(combo)
-            report(results[k])
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            futures = {pool.submit(assemble, combo): k for k, combo in enumerate(combos)}
-            for future in as_completed(futures):
-                results[futures[future]] = future.result()
-                report(results[futures[future]])
-    return [r for r in results if r is not None]
+    # Below POOL_FROM assemblies, or with one process asked for, they run here.
+    return run_jobs(assemble, combos, workers=max(processes, 1) if processes is not None else None,
+                    backend='processes' if len(combos) >= POOL_FROM else 'serial',
+                    progress=report, name=_combo_name)
+
+
+def _combo_name(combo: tuple[Entry, ...]) -> str:
+    return f'assembly {" + ".join(entry.name for entry in combo)}'
 
 
 def library_markdown(results: list[dict]) -> str:

@@ -3,11 +3,11 @@ Sweeps over design parameters: every combination of the given values, run in par
 
 Locally the designs run in worker processes (one per core by default); given a Dask scheduler
 address they run on that cluster's workers instead (``distributed``), for studies that outgrow
-one machine. A worker returns its table as text, so workers need no shared file system; the
-tables land in one folder with a ``summary.csv`` of one row per design.
+one machine (both through :func:`softseq_ros.parallel.run_jobs`). A worker returns its table
+as text, so workers need no shared file system; the tables land in one folder, each as soon as
+it is done, with a ``summary.csv`` of one row per design.
 """
 
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 import csv
 from dataclasses import dataclass
 import itertools
@@ -17,6 +17,7 @@ import re
 import tempfile
 from typing import Any, Callable
 
+from softseq_ros.parallel import run_jobs
 from softseq_ros.scene.design import Design, DesignError, with_changes
 
 SUMMARY_COLUMNS = ('table', 'design', 'parameters', 'peak_pressure_pa', 'peak_injected_m3',
@@ -74,39 +75,31 @@ def run_case(case: SweepCase) -> tuple[dict[str, Any], str]:
     return row, text
 
 
+def _case_name(case: SweepCase) -> str:
+    return f'design {case.label}'
+
+
 def run_sweep(cases: list[SweepCase], out_dir: Path, workers: int = 1,
               scheduler: str | None = None,
               progress: Callable[[str], None] | None = None) -> Path:
     """Run the cases locally on ``workers`` processes or on a Dask scheduler; summary path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows: list[dict[str, Any]] = []
 
-    def collect(row: dict[str, Any], text: str) -> None:
+    def collect(done: int, total: int, result: tuple[dict[str, Any], str]) -> None:
+        row, text = result
         (out_dir / row['table']).write_text(text)
-        rows.append(row)
         if progress is not None:
-            progress(f'{len(rows)}/{len(cases)} {row["table"]}: peak '
+            progress(f'{done}/{total} {row["table"]}: peak '
                      f'{row["peak_pressure_pa"] / 1e3:.3f} kPa, {row["wall_s"]:.1f} s')
 
     if scheduler is not None:
-        from distributed import Client
-        from distributed import as_completed as dask_completed
-
-        with Client(scheduler, timeout='10s') as client:
-            futures = client.map(run_case, cases, pure=False)
-            for future in dask_completed(futures):
-                collect(*future.result())
-    elif workers == 1:
-        for case in cases:
-            collect(*run_case(case))
+        results = run_jobs(run_case, cases, backend='dask', scheduler=scheduler,
+                           progress=collect, name=_case_name)
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            pending: list[Future] = [pool.submit(run_case, case) for case in cases]
-            for future in as_completed(pending):
-                collect(*future.result())
-    order = {case.label: index for index, case in enumerate(cases)}
-    rows.sort(key=lambda row: order[row['table'][:-4]])
+        results = run_jobs(run_case, cases, workers=workers, backend='processes',
+                           progress=collect, name=_case_name)
+    rows = [row for row, _ in results]
     summary = out_dir / 'summary.csv'
     with summary.open('w', newline='') as handle:
         handle.write('# One row per design of the sweep; SI units, gauge pressures.\n')

@@ -40,14 +40,18 @@ from softseq_ros.quasistatic.assembly import (
     SegmentNumerics,
 )
 from softseq_ros.quasistatic.branch_ends import BranchEnds
-from softseq_ros.quasistatic.sequence import SOLVED_HYSTERESIS_TOLERANCE, sequence_type
+from softseq_ros.quasistatic.sequence import (
+    SEQUENCE_TYPES,
+    SOLVED_HYSTERESIS_TOLERANCE,
+    sequence_type,
+)
 from softseq_ros.quasistatic.states import StatePoint, StateReader, StateRows
 from softseq_ros.segments.models import Segment
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, Tolerances
 
-SEQUENCE_TYPES = ('none', 'partial', 'symmetric', 'asymmetric')
 __all__ = ['DomainError', 'EquilibriumCurve', 'EquilibriumMap', 'SEQUENCE_TYPES', 'SnapEvent',
-           'SolvedPath', 'State', 'StatePoint', 'StateRows', 'Tracker', 'classify']
+           'SolvedPath', 'State', 'StatePoint', 'StateRows', 'Tracker', 'classify',
+           'inflate_and_deflate']
 
 
 class DomainError(UserError):
@@ -335,6 +339,22 @@ class Tracker:
         return np.clip(totals, branch.lo, branch.hi)
 
 
+def inflate_and_deflate(emap: EquilibriumMap, samples: int = 4001) -> tuple[SolvedPath,
+                                                                              SolvedPath]:
+    """
+    Sweep an assembly from rest to the end of its range and back down: (inflation, deflation).
+
+    Inflation follows ``samples`` evenly spaced injected volumes over ``emap.injected_range``
+    from rest; deflation starts where it ended and follows the same volumes in reverse, so row
+    ``i`` of the deflation is at the volume of row ``samples - 1 - i`` of the inflation.
+    """
+    lo, hi = emap.injected_range
+    up = np.linspace(lo, hi, samples)
+    inflation = Tracker(emap).sweep(up)
+    deflation = Tracker(emap, injected=hi, volumes=inflation.volumes[-1]).sweep(up[::-1])
+    return inflation, deflation
+
+
 def classify(emap: EquilibriumMap, samples: int = 4001) -> str:
     """
     The paper's sequence type of an actuator (Fig. 1): none, partial, symmetric or asymmetric.
@@ -342,12 +362,9 @@ def classify(emap: EquilibriumMap, samples: int = 4001) -> str:
     Inflate over the whole range and deflate back, then apply the rules of
     :func:`softseq_ros.quasistatic.sequence.sequence_type` to the solved paths.
     """
-    lo, hi = emap.injected_range
-    up = np.linspace(lo, hi, samples)
-    inflation = Tracker(emap).sweep(up)
-    deflation = Tracker(emap, injected=hi, volumes=inflation.volumes[-1]).sweep(up[::-1])
+    inflation, deflation = inflate_and_deflate(emap, samples)
     gap = np.max(np.abs(inflation.volumes - deflation.volumes[::-1]))
-    share = np.diff(inflation.volumes, axis=0) / np.diff(up)[:, None]
+    share = np.diff(inflation.volumes, axis=0) / np.diff(inflation.injected)[:, None]
     return sequence_type(bool(inflation.events or deflation.events), float(gap),
                          SOLVED_HYSTERESIS_TOLERANCE * emap.v_scale, share)
 
