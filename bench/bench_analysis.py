@@ -1,7 +1,8 @@
 """
 Playback analysis: our array reader against rosbags and mcap-ros2-support, report time, memory.
 
-    python bench/bench_analysis.py [--big BAG_OR_NOTHING] [--repeat 3]
+    python bench/bench_analysis.py [--big] [--repeat 3] [--commands 9] [--out FILE]
+    python bench/bench_analysis.py --quick
 
 Makes the paper bag (`softseq run paper`) in bags/bench_paper and, with --big, an 18-cycle
 paper bag (10.3 million messages) in bags/bench_paper18, anew each run (so they have the current
@@ -20,6 +21,11 @@ writer's layout). In one run it measures:
 Writes bench/analysis_results.md. In-process times are the best of --repeat runs (the run least
 disturbed by others on a shared machine); command times are the median, minimum and maximum of
 --commands runs of each.
+
+``--quick`` checks that the benchmark runs, in under 30 s: the paper scene shortened to
+0 -> 6 -> 0 mL (about 50,000 messages), every measurement once, the bags in a temporary folder
+(not bags/); the tables are printed, not written (unless ``--out`` is given). The test suite
+runs it (test/test_bench_quick.py).
 """
 
 import argparse
@@ -28,6 +34,7 @@ import platform
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -41,21 +48,30 @@ from softseq_ros.rig import contract  # noqa: E402
 TOPICS = {contract.PUMP_COMMAND: ('position', 'velocity'),
           contract.VOLUMES: ('position', 'effort'),
           contract.CURVATURES: ('position',)}
+# --quick: the paper programme shortened to 0 -> 6 -> 0 mL (240 s of rig time).
+QUICK_LEGS = [{'inflate_to_m3': 6.0e-6}, {'deflate_to_m3': 0.0}]
 
 
-def make_bag(path: Path, cycles: int) -> Path:
+def make_bag(path: Path, cycles: int, legs: list | None = None) -> Path:
+    """The paper scene run into ``path``: ``cycles`` cycles of its programme (or of ``legs``)."""
     import shutil
 
     shutil.rmtree(path, ignore_errors=True)
     scene = REPO / 'config' / 'paper.yaml'
-    if cycles != 1:
+    if cycles != 1 or legs is not None:
         import yaml
         document = yaml.safe_load(scene.read_text())
-        document['name'] = f'paper_{cycles}_cycles'
+        document['name'] = f'paper_{cycles}_cycles' if legs is None else 'paper_quick'
         document['pump']['cycles'] = cycles
+        if legs is not None:
+            document['pump']['legs'] = legs
+            top = max(leg.get('inflate_to_m3', 0.0) for leg in legs)
+            camera = document['camera']
+            camera['trigger_injected_m3'] = [v for v in camera['trigger_injected_m3']
+                                             if v <= top]
         for segment in document['segments']:
             segment['table'] = str(REPO / 'config' / segment['table'])
-        scene = path.parent / f'paper_{cycles}_cycles.yaml'
+        scene = path.parent / f'{document["name"]}.yaml'
         scene.write_text(yaml.safe_dump(document))
     subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'run', str(scene), '--out',
                     str(path), '--no-report', '--quiet'], check=True)
@@ -206,11 +222,32 @@ def main() -> None:
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--commands', type=int, default=9, help='runs of each command')
     parser.add_argument('--big', action='store_true', help='also the 18-cycle bag (10^7 msgs)')
-    parser.add_argument('--out', type=Path, default=REPO / 'bench' / 'analysis_results.md')
+    parser.add_argument('--out', type=Path, default=None,
+                        help='results file (default bench/analysis_results.md; with --quick '
+                        'none: printed only)')
+    parser.add_argument('--quick', action='store_true',
+                        help='a check that the benchmark runs: a short bag in a temporary '
+                        'folder, every measurement once, about 30 s')
     args = parser.parse_args()
-    bags = REPO / 'bags'
-    bags.mkdir(exist_ok=True)
-    paper = make_bag(bags / 'bench_paper', 1)
+    if args.quick:
+        if args.big:
+            parser.error('--quick and --big: choose one')
+        args.repeat = args.commands = 1
+        with tempfile.TemporaryDirectory(prefix='bench_analysis_') as folder:
+            lines = measure(args, Path(folder))
+    else:
+        bags = REPO / 'bags'
+        bags.mkdir(exist_ok=True)
+        lines = measure(args, bags)
+    out = args.out or (None if args.quick else REPO / 'bench' / 'analysis_results.md')
+    if out is not None:
+        out.write_text('\n'.join(lines))
+    print('\n'.join(lines))
+
+
+def measure(args: argparse.Namespace, bags: Path) -> list[str]:
+    """Every measurement, the bags in ``bags``; the results as markdown lines."""
+    paper = make_bag(bags / 'bench_paper', 1, QUICK_LEGS if args.quick else None)
     count = open_bag(paper).channels
     messages = sum(c.message_count for c in count.values())
     read = sum(count[t].message_count for t in names().values())
@@ -253,11 +290,14 @@ def main() -> None:
         rows.append(('18-cycle paper bag', big_messages, rss))
         big_line = f'`softseq report` of the 18-cycle bag: {wall:.1f} s'
 
+    source = ('`softseq run paper`' if not args.quick else
+              '**quick check**: the paper scene shortened to 0 -> 6 -> 0 mL')
+    flag = ' --big' if args.big else ' --quick' if args.quick else ''
     lines = [
         '# Playback analysis benchmark', '',
-        f'`python bench/bench_analysis.py{" --big" if args.big else ""}` on '
+        f'`python bench/bench_analysis.py{flag}` on '
         f'{platform.machine()}, Python {platform.python_version()}; the paper bag '
-        f'(`softseq run paper`: {messages:,} messages, {read:,} of them on the three topics '
+        f'({source}: {messages:,} messages, {read:,} of them on the three topics '
         'read). Best of '
         f'{args.repeat} runs unless one. All three readers return identical arrays (checked).',
         '',
@@ -286,8 +326,7 @@ def main() -> None:
         '| peak memory of `softseq report` (max RSS) | messages | MB |', '|---|---:|---:|',
         *[f'| {name} | {n:,} | {rss / 1024:.0f} |' for name, n, rss in rows],
         '', big_line, '']
-    args.out.write_text('\n'.join(lines))
-    print('\n'.join(lines))
+    return lines
 
 
 if __name__ == '__main__':

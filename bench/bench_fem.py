@@ -3,12 +3,20 @@ FEM benchmarks: run time, unknowns and memory per segment and mesh density; the 
 sweep throughput with 1 and 2 workers; the paper pair across Ecoflex 00-30 fits; figures.
 
     python bench/bench_fem.py [--part meshes|whole|sweep|materials|figures|all]
+    python bench/bench_fem.py --quick
 
 Benchmarks, not tests: nothing is asserted about time. Every run is a fresh process (its peak
 resident memory is the run's), single-threaded BLAS, on a 2-core machine shared with other work
 (the load average is written beside each part). Each part stores its numbers in
 bench/fem_results.json and the whole of bench/fem_results.md is rewritten from that file, so
 one part can be re-run alone. Figures go to docs/fem_*.png.
+
+``--quick`` checks that the benchmark runs, in under 30 s, without a fine mesh: one coarse case
+(the top unit cell at 2 mm, one thin-layer cell: the first case of the whole-segment part) in a
+fresh process, the same design as a sweep of one (to 30 mL, one worker), the pair summary of
+one fit's shipped tables in bench/fem_materials (no FEM run), the figures at 2 mm; the results
+file, the report and the figures go to a temporary folder and the report is printed. The test
+suite runs it (test/test_bench_quick.py).
 """
 
 import argparse
@@ -50,6 +58,13 @@ MATERIALS = {
     'Yeoh 17 / -0.2 / 0.023 kPa (Sorotoki)': {
         'law': 'yeoh', 'c1_pa': 17000.0, 'c2_pa': -200.0, 'c3_pa': 23.0},
 }
+
+
+# --quick: the coarse case (the whole-segment part's first) and its sweep's volume.
+QUICK_ELEMENT_M = 0.002
+QUICK_CHANGES = {'mesh.model': 'unit_cell', 'mesh.element_size_m': QUICK_ELEMENT_M,
+                 'mesh.thin_layer_cells': 1}
+QUICK_SWEEP_M3 = 3e-5
 
 
 def _load() -> dict:
@@ -246,8 +261,8 @@ def _draw_mesh(ax: object, points: np.ndarray, cells: np.ndarray, title: str) ->
     ax.view_init(elev=22, azim=-60)
 
 
-def write_figures() -> None:
-    """docs/fem_mesh.png (meshes, undeformed and inflated) and docs/fem_pv.png (curves)."""
+def write_figures(folder: Path = REPO / 'docs', element_size_m: float = 0.001) -> None:
+    """fem_mesh.png (meshes, undeformed and inflated) and fem_pv.png (curves) in ``folder``."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -255,7 +270,8 @@ def write_figures() -> None:
 
     from softseq_ros.fem.segment import build_segment
 
-    top = with_changes(load_design(DESIGNS / 'paper_top.yaml'), {'mesh.element_size_m': 0.001})
+    top = with_changes(load_design(DESIGNS / 'paper_top.yaml'),
+                       {'mesh.element_size_m': element_size_m})
     segment = build_segment(top)
     model = segment.model
     factor = segment.volume_factor
@@ -268,7 +284,8 @@ def write_figures() -> None:
     cells = segment.mesh.cells
     fig = plt.figure(figsize=(13, 4.6))
     _draw_mesh(fig.add_subplot(1, 3, 1, projection='3d'), model.reference, cells,
-               f'top unit cell, 1 mm elements ({segment.dofs} unknowns)')
+               f'top unit cell, {element_size_m * 1e3:g} mm elements ({segment.dofs} '
+               'unknowns)')
     _draw_mesh(fig.add_subplot(1, 3, 2, projection='3d'), deformed, cells,
                f'inflated: {(result.states[-1].volume - model.rest_volume) * factor * 1e6:.0f}'
                f' mL into the segment, {result.states[-1].pressure / 1e3:.2f} kPa')
@@ -277,7 +294,7 @@ def write_figures() -> None:
     fig.suptitle('Table I segment meshes (half width; x along the segment, z from the beam to '
                  'the membranes)', fontsize=10)
     fig.tight_layout()
-    fig.savefig(REPO / 'docs' / 'fem_mesh.png', dpi=130)
+    fig.savefig(folder / 'fem_mesh.png', dpi=130)
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
@@ -312,21 +329,66 @@ def write_figures() -> None:
     axes[1].set_title('curvature of the beam', fontsize=9)
     axes[2].set_title('FEM unit cells (1 mm) across Ecoflex 00-30 fits', fontsize=9)
     fig.tight_layout()
-    fig.savefig(REPO / 'docs' / 'fem_pv.png', dpi=130)
+    fig.savefig(folder / 'fem_pv.png', dpi=130)
     plt.close(fig)
-    print('wrote docs/fem_mesh.png, docs/fem_pv.png')
+    print(f'wrote {folder / "fem_mesh.png"}, {folder / "fem_pv.png"}')
 
 
 PARTS = {'meshes': part_meshes, 'whole': part_whole, 'sweep': part_sweep,
          'materials': part_materials}
 
 
-def write_report() -> None:
+def quick(folder: Path) -> None:
+    """``--quick``: one coarse case through every part's code, no fine mesh; into ``folder``."""
+    from softseq_ros.fem.sweep import run_sweep, sweep_cases
+
+    yeoh = with_changes(load_design(DESIGNS / 'paper_top.yaml'), QUICK_CHANGES)
+    print(f'quick: top unit cell at {QUICK_ELEMENT_M * 1e3:g} mm in a fresh process ...',
+          flush=True)
+    result = fresh_run(yeoh, str(folder / 'quick_top.csv'))
+    print(result, flush=True)
+    # The same run shown as the first row of the meshes part and of the whole-segment part.
+    _store('meshes', {'machine': _machine(), 'rows': [
+        {'segment': 'top', 'element_size_m': QUICK_ELEMENT_M, **result}]})
+    _store('whole', {'machine': _machine(), 'rows': [
+        {'segment': 'top', 'model': 'unit_cell', 'material': 'Yeoh',
+         'element_size_m': QUICK_ELEMENT_M, 'thin_layer_cells': 1, **result}]})
+
+    print(f'quick: the same design to {QUICK_SWEEP_M3 * 1e6:g} mL as a sweep of one ...',
+          flush=True)
+    base = with_changes(yeoh, {'volume.max_injected_m3': QUICK_SWEEP_M3})
+    cases = sweep_cases(base, {'geometry.membrane_thickness_m': [0.0005]})
+    start = time.perf_counter()
+    run_sweep(cases, folder / 'sweep', workers=1)
+    wall = time.perf_counter() - start
+    _store('sweep', {'machine': _machine(), 'rows': [
+        {'workers': 1, 'designs': len(cases), 'wall_s': round(wall, 1),
+         'designs_per_minute': round(60 * len(cases) / wall, 2)}],
+        'case': f'paper_top, {QUICK_ELEMENT_M * 1e3:g} mm elements, 0 to '
+                f'{QUICK_SWEEP_M3 * 1e6:g} mL, membrane 0.5 mm (quick check)'})
+
+    label = next(iter(MATERIALS))
+    slug = ''.join(c if c.isalnum() else '_' for c in label)[:40]
+    tables = {name: REPO / 'bench' / 'fem_materials' / f'{name}__{slug}.csv'
+              for name in ('bottom', 'top')}
+    if all(path.is_file() for path in tables.values()):
+        print('quick: the pair summary of one fit (shipped tables) ...', flush=True)
+        row = {'material': label, **_pair_summary(tables['bottom'], tables['top'])}
+        _store('materials', {'machine': _machine(), 'rows': [row], 'element_size_m': 0.001})
+    else:
+        print(f'quick: no shipped tables for {label} in bench/fem_materials; materials '
+              'skipped', flush=True)
+
+    print('quick: figures ...', flush=True)
+    write_figures(folder, QUICK_ELEMENT_M)
+
+
+def write_report(note: str = '') -> None:
     data = _load()
     lines = ['# FEM benchmark results', '',
              'Written by `python bench/bench_fem.py` (see its docstring for the method). '
              'Times on a 2-core machine shared with other work; each run single-threaded in a '
-             "fresh process; memory is the run's peak resident set.", '']
+             "fresh process; memory is the run's peak resident set." + note, '']
     if 'meshes' in data:
         part = data['meshes']
         lines += ['## Unit cell: time, unknowns and memory per mesh density', '',
@@ -343,6 +405,8 @@ def write_report() -> None:
                   '']
         for name in ('top', 'bottom'):
             rows = [r for r in part['rows'] if r['segment'] == name]
+            if len(rows) < 2:
+                continue   # one mesh (--quick): nothing to compare
             changes = [f'{(b["peak_pressure_pa"] / a["peak_pressure_pa"] - 1) * 100:+.2f} %'
                        for a, b in zip(rows[:-1], rows[1:])]
             lines.append(f'- {name}: ' + ', '.join(
@@ -395,9 +459,24 @@ def write_report() -> None:
 
 
 def main() -> None:
+    global RESULTS, REPORT
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--part', choices=[*PARTS, 'figures', 'report', 'all'], default='all')
+    parser.add_argument('--quick', action='store_true',
+                        help='a check that the benchmark runs: one coarse case, about 30 s, '
+                        'nothing written into the repository (the report is printed)')
     args = parser.parse_args()
+    if args.quick:
+        if args.part != 'all':
+            parser.error('--quick runs its own coarse case of every part: no --part with it')
+        with tempfile.TemporaryDirectory(prefix='bench_fem_') as folder:
+            RESULTS = Path(folder) / 'fem_results.json'
+            REPORT = Path(folder) / 'fem_results.md'
+            quick(Path(folder))
+            write_report(' **Quick check** (`--quick`): one coarse case, the numbers show that '
+                         'the benchmark runs.')
+            print('\n' + REPORT.read_text())
+        return
     names = list(PARTS) + ['figures'] if args.part == 'all' else [args.part]
     for name in names:
         if name == 'figures':

@@ -2,7 +2,7 @@
 Rig benchmarks: batch speed, hand-started processes on sim time, real-time latency.
 
     python bench/bench_rig.py [--part batch|processes|latency|baseline|all] [--repeats N]
-                              [--baseline-ref REF] [--out bench/rig_results.md]
+                              [--baseline-ref REF] [--out bench/rig_results.md] [--quick]
 
 Benchmarks, not tests: nothing is asserted about time. Each part prints a markdown section and
 replaces its own section of the results file (the other parts' sections stay), so one part can
@@ -14,8 +14,9 @@ load, the CPU times (this process only) much less.
 Parts:
   batch      softseq_ros.batch.BatchRun on the paper scene (0 -> 65 -> 0 mL, pump 50 Hz, camera
              10 Hz, everything recorded); where the time goes (exclusive timers around each
-             component, and cProfile's top functions); the saving from skipping work (reduced
-             outputs, a 1 Hz camera, a pump hold answered from the actuator's cache).
+             stage of the run, through BatchRun's public ``wrap`` hook, and cProfile's top
+             functions); the saving from skipping work (reduced outputs, a 1 Hz camera, a pump
+             hold answered from the actuator's cache).
   processes  the console-script nodes as processes on sim time (sim_clock at several speed-ups,
              recorder writing a bag): the highest speed-up at which no message is lost.
   latency    real time, pump and camera at 100 Hz, nodes as processes, a probe node in this
@@ -25,6 +26,11 @@ Parts:
              code at --baseline-ref (checked out into a temporary git worktree) against this
              checkout, alternated A B A B in this one run; and what a line logged through
              rclpy's public logger costs.
+
+``--quick``: the batch part only (no DDS, no processes), every run on a 100 s programme and
+once, the actuator alone on 1000 commands; a few seconds. Printed, not written into the results
+file unless ``--out`` is given. The test suite runs it (test/test_bench_quick.py), so a
+benchmark that no longer runs fails a test.
 """
 
 import argparse
@@ -32,6 +38,7 @@ import atexit
 from collections import defaultdict
 from contextlib import contextmanager
 import cProfile
+from dataclasses import dataclass
 import importlib.metadata
 import json
 import math
@@ -73,7 +80,7 @@ from softseq_ros.rig import contract  # noqa: E402
 from softseq_ros.rig.build import actuator_core  # noqa: E402
 from softseq_ros.rig.values import PumpCommand  # noqa: E402
 from softseq_ros.scene.loader import load_scene  # noqa: E402
-from softseq_ros.scene.programme import Leg  # noqa: E402
+from softseq_ros.scene.programme import Leg, PumpProfile  # noqa: E402
 from softseq_ros.segments.kinematics import backbone_batch  # noqa: E402
 
 RESULTS = ROOT / 'bench' / 'rig_results.md'
@@ -89,6 +96,10 @@ SHORT_LEGS_YAML = '[{inflate_to_m3: 1.0e-5}, {deflate_to_m3: 0.0}]'
 HOLD_LEGS = (Leg.inflate(5.0e-6), Leg.hold(200.0), Leg.deflate(0.0))
 # For cProfile (about 4x slower under the profiler): 0 -> 2.5 mL -> 0, 100 s.
 PROFILE_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
+# --quick: the batch part only, every run 0 -> 2.5 -> 0 mL (100 s sim; cProfile 40 s).
+QUICK_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
+QUICK_HOLD_LEGS = (Leg.inflate(1.25e-6), Leg.hold(50.0), Leg.deflate(0.0))
+QUICK_PROFILE_LEGS = (Leg.inflate(1.0e-6), Leg.deflate(0.0))
 
 SPEEDUPS = (10, 30, 100, 300, 1000)
 RECORDED_TOPICS = tuple(contract.resolve(topic.name) for topic in contract.RIG_TOPICS
@@ -143,30 +154,52 @@ def under_load_note(before: str, after: str) -> str:
 
 # ------------------------------------------------------------------------------ part 1: batch
 
-class _TimedBatch(BatchRun):
-    """A BatchRun that also measures CPU time (its cores keep their counters)."""
+@dataclass(frozen=True)
+class BatchSizes:
+    """The programmes and counts of the batch part: the measurement, or a quick check of it."""
 
-    def run(self):  # noqa: ANN201
-        cpu = time.process_time()
-        result = super().run()
-        self.cpu_s = time.process_time() - cpu
-        return result
+    full_legs: tuple[Leg, ...] | None   # the headline run; None: the scene's own programme
+    short_legs: tuple[Leg, ...]         # where the time goes, and the skipping-work variants
+    hold_legs: tuple[Leg, ...]          # as long as short_legs, as many commands, half a hold
+    profile_legs: tuple[Leg, ...]       # under cProfile
+    micro_commands: int                 # the actuator alone
 
 
-class _InstrumentedBatch(_TimedBatch):
-    """Exclusive time per component: each wrapped call's time minus its wrapped callees'."""
+FULL = BatchSizes(None, SHORT_LEGS, HOLD_LEGS, PROFILE_LEGS, 5000)
+QUICK = BatchSizes(QUICK_LEGS, QUICK_LEGS, QUICK_HOLD_LEGS, QUICK_PROFILE_LEGS, 1000)
 
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self.exclusive = defaultdict(float)
-        self.calls = defaultdict(int)
-        self._stack: list[float] = []
+# What each stage of BatchRun.STAGES is, for the table (a stage not named here shows its label).
+STAGE_NAMES = {
+    'pump.tick': 'pump: tick (programme, state)',
+    'pump.handle': 'pump: pressure check (volumes feedback)',
+    'actuator.tick': 'actuator: model advance between commands',
+    'actuator.handle': 'actuator: command handling (no solve)',
+    'actuator.model.command': 'actuator: equilibrium solve (QuasiStaticModel.command)',
+    'camera.tick': 'camera: frame (backbone kinematics, poses, markers)',
+    'camera.handle': 'camera: input handlers (snapshots, with their backbone kinematics)',
+    'encode': 'serialisation (CDR encode)',
+    'append': 'bag writing (MCAP, zstd chunks)',
+}
 
-    def _timed(self, name, function):
-        stack, exclusive, calls, clock = self._stack, self.exclusive, self.calls, \
+
+class StageTimer:
+    """
+    A ``wrap`` hook for BatchRun: the exclusive time of every stage and its calls.
+
+    Exclusive: each wrapped call's time minus the time of the wrapped calls inside it (the
+    actuator's command handling does not count the equilibrium solve it asks for).
+    """
+
+    def __init__(self) -> None:
+        self.exclusive: dict[str, float] = defaultdict(float)
+        self.calls: dict[str, int] = defaultdict(int)
+        self.stack: list[float] = []
+
+    def __call__(self, label: str, function):
+        stack, exclusive, calls, clock = self.stack, self.exclusive, self.calls, \
             time.perf_counter
 
-        def wrapper(*args):
+        def timed(*args):
             stack.append(0.0)
             start = clock()
             try:
@@ -174,33 +207,18 @@ class _InstrumentedBatch(_TimedBatch):
             finally:
                 elapsed = clock() - start
                 inner = stack.pop()
-                exclusive[name] += elapsed - inner
-                calls[name] += 1
+                exclusive[label] += elapsed - inner
+                calls[label] += 1
                 if stack:
                     stack[-1] += elapsed
-        return wrapper
+        return timed
 
-    def _loop(self, wall_start) -> None:
-        pump, actuator, camera = self.pump, self.actuator, self.camera
-        pump.tick = self._timed('pump: tick (programme, state)', pump.tick)
-        pump.handle = self._timed('pump: pressure check', pump.handle)
-        actuator.handle = self._timed('actuator: command handling (no solve)',
-                                      actuator.handle)
-        solve = 'actuator: equilibrium solve (Tracker.move, EquilibriumMap.read)'
-        actuator.tracker.move = self._timed(solve, actuator.tracker.move)
-        actuator.emap.read = self._timed(solve, actuator.emap.read)
-        camera.handle = self._timed('camera: input handlers', camera.handle)
-        camera.tick = self._timed('camera: frame (poses, markers)', camera.tick)
-        camera._update_backbone = self._timed('camera: backbone kinematics',
-                                              camera._update_backbone)
-        # The router looks handle up on the core at every call: it calls the wrappers.
-        super()._loop(wall_start)
 
-    def _open_channels(self, writer) -> None:  # noqa: ANN001
-        super()._open_channels(writer)
-        for channel in self._channels.values():
-            channel.encode = self._timed('serialisation (CDR encode)', channel.encode)
-            channel.append = self._timed('bag writing (MCAP, zstd chunks)', channel.append)
+def describe_legs(legs: tuple[Leg, ...]) -> str:
+    """A programme from 0 mL as text: '0 -> 10 -> 0 mL', '0 -> 5 -> (hold 200 s) -> 0 mL'."""
+    steps = [f'(hold {leg.duration_s:g} s)' if leg.action == 'hold' else f'{leg.to_m3 / ML:g}'
+             for leg in legs]
+    return ' -> '.join(['0', *steps]) + ' mL'
 
 
 def _batch_overrides(legs=None, camera_rate=None, outputs=None):
@@ -215,15 +233,22 @@ def _batch_overrides(legs=None, camera_rate=None, outputs=None):
     return dict(overrides)
 
 
-def run_batch(workdir: Path, label: str, repeats: int, cls=_TimedBatch, **options):
-    """Best of ``repeats`` (by wall time) of one batch configuration; returns (run, result)."""
+def run_batch(workdir: Path, label: str, repeats: int, wrap=None, **options):
+    """
+    Best of ``repeats`` (by wall time) of one batch configuration: (run, result, CPU [s]).
+
+    The CPU time is this process's during ``run()`` (all its threads). ``wrap`` goes to every
+    repeat (BatchRun's public hook); a timer there adds up over the repeats.
+    """
     best = None
     for index in range(repeats):
         out = workdir / f'{re.sub(r"[^a-z0-9]+", "_", label.lower())}_{index}'
-        run = cls('paper', out, overrides=_batch_overrides(**options))
+        run = BatchRun('paper', out, overrides=_batch_overrides(**options), wrap=wrap)
+        cpu = time.process_time()
         result = run.run()
+        cpu = time.process_time() - cpu
         if best is None or result.wall_s < best[1].wall_s:
-            best = (run, result)
+            best = (run, result, cpu)
         shutil.rmtree(out, ignore_errors=True)
     return best
 
@@ -232,10 +257,10 @@ def _messages(result) -> int:
     return sum(result.message_counts.values())
 
 
-def actuator_micro(repeats: int) -> dict[str, float]:
+def actuator_micro(repeats: int, count: int = 5000) -> dict[str, float]:
     """Microseconds per command: a moving volume (solve) against a repeated one (cache)."""
     core = actuator_core(load_scene('paper'))
-    count = 5000
+    model = core.model
     volumes = np.linspace(0.0, 10.0 * ML, count).tolist()
 
     def feed(values) -> float:
@@ -248,20 +273,20 @@ def actuator_micro(repeats: int) -> dict[str, float]:
     moving = held = math.inf
     for _ in range(repeats):
         # Back to rest, so every repeat walks the same path.
-        core.resume(0.0, [s.rest_volume for s in core.emap.segments])
-        solves = core.solves
+        model.resume(0.0, [s.rest_volume for s in model.segments])
+        solves = model.solves
         moving = min(moving, feed(volumes))
-        moving_solves = core.solves - solves
-        solves = core.solves
+        moving_solves = model.solves - solves
+        solves = model.solves
         held = min(held, feed([volumes[-1]] * count))
-        held_solves = core.solves - solves
+        held_solves = model.solves - solves
     return {'moving_us': moving, 'held_us': held, 'moving_solves': moving_solves,
             'held_solves': held_solves, 'count': count}
 
 
-def cprofile_top(workdir: Path, rows: int = 14) -> str:
+def cprofile_top(workdir: Path, legs: tuple[Leg, ...] = PROFILE_LEGS, rows: int = 14) -> str:
     out = workdir / 'profiled'
-    run = BatchRun('paper', out, overrides=_batch_overrides(legs=PROFILE_LEGS))
+    run = BatchRun('paper', out, overrides=_batch_overrides(legs=legs))
     profile = cProfile.Profile()
     profile.enable()
     run.run()
@@ -284,17 +309,27 @@ def cprofile_top(workdir: Path, rows: int = 14) -> str:
         'about 4x, pure-Python call-heavy code the most).'
 
 
-def part_batch(repeats: int) -> str:
+def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
     load_before = load_text()
     scene = load_scene('paper')
+    short = describe_legs(sizes.short_legs)
     lines = ['## 1. Batch run (`softseq_ros.batch.BatchRun`, one process, no DDS)', '']
+    if sizes is not FULL:
+        lines += ['**Quick check** (`--quick`): short programmes, too short for the numbers '
+                  'to mean much; they show that the benchmark runs.', '']
     with tempfile.TemporaryDirectory(prefix='bench_rig_') as tmp:
         workdir = Path(tmp)
-        print('batch: full paper scene, everything recorded ...', flush=True)
-        full_run, full = run_batch(workdir, 'full', repeats)
-        cpu_speedup = full.sim_duration_s / full_run.cpu_s
+        if sizes.full_legs is None:
+            print('batch: full paper scene, everything recorded ...', flush=True)
+            programme = '0 -> 65 -> 0 mL at 0.05 mL/s'
+        else:
+            print(f'batch: paper scene, {describe_legs(sizes.full_legs)}, everything recorded '
+                  '...', flush=True)
+            programme = f'programme shortened to {describe_legs(sizes.full_legs)} at 0.05 mL/s'
+        run, full, full_cpu = run_batch(workdir, 'full', repeats, legs=sizes.full_legs)
+        cpu_speedup = full.sim_duration_s / full_cpu
         lines += [
-            f'Paper scene `config/paper.yaml`: 0 -> 65 -> 0 mL at 0.05 mL/s '
+            f'Paper scene `config/paper.yaml`: {programme} '
             f'({full.sim_duration_s:.0f} s sim), pump {scene.pump.rate_hz:g} Hz, camera '
             f'{scene.camera.rate_hz:g} Hz, outputs {", ".join(scene.outputs)}; every message '
             'serialised and written to an MCAP bag (zstd chunks, compressed on a worker thread). '
@@ -304,7 +339,7 @@ def part_batch(repeats: int) -> str:
             '| wall [s] | CPU of this process [s] | speed-up (sim / wall) | speed-up (sim / CPU) '
             '| messages | messages / wall s |',
             '|---:|---:|---:|---:|---:|---:|',
-            f'| {full.wall_s:.1f} | {full_run.cpu_s:.1f} | **{full.speedup:.0f}x** | '
+            f'| {full.wall_s:.1f} | {full_cpu:.1f} | **{full.speedup:.0f}x** | '
             f'{cpu_speedup:.0f}x | {_messages(full)} | {_messages(full) / full.wall_s:,.0f} |',
             '',
             'Messages: ' + ', '.join(f'{t} {n}' for t, n in sorted(full.message_counts.items()))
@@ -314,60 +349,76 @@ def part_batch(repeats: int) -> str:
             'the finished chunks and keeps other work off the first.', '']
 
         print('batch: where the time goes ...', flush=True)
-        instrumented, result = run_batch(workdir, 'instrumented', 1, cls=_InstrumentedBatch,
-                                         legs=SHORT_LEGS)
+        timer = StageTimer()
+        _, result, _ = run_batch(workdir, 'instrumented', 1, wrap=timer,
+                                 legs=sizes.short_legs)
         total = result.wall_s
-        rows = sorted(instrumented.exclusive.items(), key=lambda item: -item[1])
-        accounted = sum(instrumented.exclusive.values())
+        called = [label for label in timer.exclusive if timer.calls[label]]
+        rows = sorted(called, key=lambda label: -timer.exclusive[label])
+        accounted = sum(timer.exclusive.values())
         lines += [
             '### Where the time goes', '',
-            f'Shortened programme 0 -> 10 -> 0 mL ({result.sim_duration_s:.0f} s sim, same '
-            'scene and rates), each component wrapped in a timer that counts its own time '
-            'without the wrapped calls inside it (a node handler that publishes does not '
-            f'count the serialisation and bag write of what it publishes). Run wall '
-            f'{total:.2f} s ({result.speedup:.0f}x; the timers themselves add a few %).', '',
-            '| component | calls | own time [s] | share | per call [us] |',
+            f'Shortened programme {short} ({result.sim_duration_s:.0f} s sim, same '
+            'scene and rates). Every stage of the run (`BatchRun.STAGES`) is wrapped, through '
+            "BatchRun's public `wrap` hook, in a timer that counts its own time without the "
+            "wrapped calls inside it (the actuator's command handling does not count the "
+            'equilibrium solve it asks for; the serialisation and bag write of what a core '
+            'produces are stages of their own). The backbone kinematics have no stage of their '
+            "own: they are in the camera's frame (`camera.tick`) and snapshots "
+            f'(`camera.handle`). Run wall {total:.2f} s ({result.speedup:.0f}x; the timers '
+            'themselves add a few %).', '',
+            '| component (stage) | calls | own time [s] | share | per call [us] |',
             '|---|---:|---:|---:|---:|']
-        for name, seconds in rows:
-            calls = instrumented.calls[name]
-            lines.append(f'| {name} | {calls} | {seconds:.2f} | {100 * seconds / total:.0f} % '
-                         f'| {1e6 * seconds / max(calls, 1):.1f} |')
+        for label in rows:
+            seconds, calls = timer.exclusive[label], timer.calls[label]
+            lines.append(f'| {STAGE_NAMES.get(label, label)} (`{label}`) | {calls} | '
+                         f'{seconds:.2f} | {100 * seconds / total:.0f} % | '
+                         f'{1e6 * seconds / max(calls, 1):.1f} |')
         rest = total - accounted
         lines += [f'| runner: routing, queue, loop, setup (the rest) | | {rest:.2f} | '
                   f'{100 * rest / total:.0f} % | |', '']
+        idle = [label for label in BatchRun.STAGES if not timer.calls.get(label)]
+        if idle:
+            lines += ['Stages never called in this run: '
+                      + ', '.join(f'`{label}`' for label in idle)
+                      + (' (the quasi-static model changes only on commands: it has no rate, '
+                         'so the runner never ticks the actuator)'
+                         if 'actuator.tick' in idle else '') + '.', '']
 
         print('batch: cProfile ...', flush=True)
-        lines += ['cProfile of a 0 -> 2.5 -> 0 mL run, functions by own time:', '',
-                  cprofile_top(workdir), '']
+        lines += [f'cProfile of a {describe_legs(sizes.profile_legs)} run, functions by own '
+                  'time:', '', cprofile_top(workdir, sizes.profile_legs), '']
 
         print('batch: skipping work ...', flush=True)
+        hold_s = PumpProfile(sizes.hold_legs, scene.pump.profile.flow_rate).duration()
         variants = [
             ('everything recorded (scene outputs)', {}),
             ('outputs [pressure, volumes] only (no curvature, poses, markers, events)',
              {'outputs': ['pressure', 'volumes']}),
             ('camera at 1 Hz (instead of 10 Hz)', {'camera_rate': 1.0}),
-            ('pump hold: 0 -> 5 mL, hold 200 s, -> 0 (same 400 s, same command count)',
-             {'legs': HOLD_LEGS}),
+            (f'pump hold: {describe_legs(sizes.hold_legs)} (same {hold_s:.0f} s, same command '
+             'count)', {'legs': sizes.hold_legs}),
         ]
         lines += [
             '### Skipping what a scene does not need', '',
-            f'Shortened programme 0 -> 10 -> 0 mL unless said otherwise, best of {repeats} '
+            f'Shortened programme {short} unless said otherwise, best of {repeats} '
             'runs each (by wall time).', '',
             '| variant | wall [s] | CPU [s] | speed-up | CPU vs everything | messages | '
             'actuator solves / commands |', '|---|---:|---:|---:|---:|---:|---:|']
         reference_cpu = None
         for label, options in variants:
             print(f'  {label}', flush=True)
-            options.setdefault('legs', SHORT_LEGS)
-            run, result = run_batch(workdir, label, repeats, **options)
+            options.setdefault('legs', sizes.short_legs)
+            run, result, cpu = run_batch(workdir, label, repeats, **options)
             actuator = run.actuator
-            reference_cpu = reference_cpu or run.cpu_s
+            reference_cpu = reference_cpu or cpu
             commands = result.message_counts.get('/pump/command', 0)
             lines.append(
-                f'| {label} | {result.wall_s:.2f} | {run.cpu_s:.2f} | {result.speedup:.0f}x | '
-                f'{100 * run.cpu_s / reference_cpu:.0f} % | {_messages(result)} | '
-                f'{actuator.solves} / {commands} (rejected {actuator.rejected_commands}) |')
-        micro = actuator_micro(repeats)
+                f'| {label} | {result.wall_s:.2f} | {cpu:.2f} | {result.speedup:.0f}x | '
+                f'{100 * cpu / reference_cpu:.0f} % | {_messages(result)} | '
+                f'{actuator.model.solves} / {commands} (rejected '
+                f'{actuator.rejected_commands}) |')
+        micro = actuator_micro(repeats, sizes.micro_commands)
         lines += [
             '', f'Actuator alone (batch mode, emit discarded), {micro["count"]} commands, best '
             f'of {repeats}: a moving volume costs {micro["moving_us"]:.1f} us per command '
@@ -1037,11 +1088,17 @@ def main() -> None:
     global LATENCY_RUN_S, BASELINE_REF
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--part', choices=(*PARTS, 'all'), default='all')
-    parser.add_argument('--repeats', type=int, default=3,
-                        help='repeats of the shortened batch runs (best is kept)')
+    parser.add_argument('--repeats', type=int, default=None,
+                        help='repeats of the shortened batch runs (best is kept; default 3, '
+                        '1 with --quick)')
     parser.add_argument('--latency-seconds', type=float, default=LATENCY_RUN_S,
                         help='length of the real-time latency run [s]')
-    parser.add_argument('--out', type=Path, default=RESULTS)
+    parser.add_argument('--out', type=Path, default=None,
+                        help=f'results file (default {RESULTS.relative_to(ROOT)}; with --quick '
+                        'none: printed only)')
+    parser.add_argument('--quick', action='store_true',
+                        help='the batch part only, on short programmes, once: a check that the '
+                        'benchmark runs, in a few seconds')
     parser.add_argument('--baseline-ref', default=BASELINE_REF,
                         help='git revision the baseline part compares against')
     options = parser.parse_args()
@@ -1049,19 +1106,27 @@ def main() -> None:
         parser.error(f'--latency-seconds: must be more than the {LATENCY_WARMUP_S:g} s warm-up')
     LATENCY_RUN_S = options.latency_seconds
     BASELINE_REF = options.baseline_ref
-    if options.repeats < 1:
+    if options.quick and options.part not in ('batch', 'all'):
+        parser.error(f'--quick runs the batch part only, not {options.part} (DDS, processes)')
+    repeats = options.repeats if options.repeats is not None else (1 if options.quick else 3)
+    if repeats < 1:
         parser.error('--repeats: must be at least 1')
-    runners = {'batch': part_batch, 'processes': part_processes, 'latency': part_latency,
-               'baseline': part_baseline}
-    chosen = PARTS if options.part == 'all' else (options.part,)
+    out = options.out or (None if options.quick else RESULTS)
+    sizes = QUICK if options.quick else FULL
+    runners = {'batch': lambda repeats: part_batch(repeats, sizes), 'processes': part_processes,
+               'latency': part_latency, 'baseline': part_baseline}
+    chosen = ('batch',) if options.quick else PARTS if options.part == 'all' \
+        else (options.part,)
     sections = {}
     for part in chosen:
         start = time.monotonic()
-        sections[part] = runners[part](options.repeats)
+        sections[part] = runners[part](repeats)
         print(f'\n{sections[part]}\n\n({part}: {time.monotonic() - start:.0f} s)\n',
               flush=True)
-        write_results(options.out, sections)
-    print(f'written {options.out}')
+        if out is not None:
+            write_results(out, sections)
+    if out is not None:
+        print(f'written {out}')
 
 
 def _interrupted(_signum, _frame) -> None:

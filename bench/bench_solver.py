@@ -1,10 +1,17 @@
 """
 Run time against error for the equilibrium tracker, with independent references.
 
-    python bench/bench_solver.py [--quick] [--out docs]
+    python bench/bench_solver.py [--fewer-repeats] [--skip-noise] [--out docs]
+    python bench/bench_solver.py --quick [--out FOLDER]
 
 Writes docs/benchmarks.md (tables) and docs/bench_solver.png (figure). Every ratio is measured
 in this one process; times are the best of several repeats (the machine may be shared).
+
+``--quick`` checks that the benchmark runs, in about 30 s: two scenes (fig1_asymmetric, two
+segments with snap-throughs; a 3-segment Gent chain), 401 commands, resolution 2000 only, a
+reference at 4000, one dynamic slowness, a small scaling and noise study, fewer repeats. Its
+numbers mean little; the report and the figure go to a temporary folder (or ``--out``) and the
+report is printed. The test suite runs it (test/test_bench_quick.py).
 
 Error of a path, against a high-precision reference (our tracker at resolution 32000 with every
 state Newton-polished to round-off by bench/reference_solvers.polish_states; for two segments it
@@ -17,10 +24,12 @@ The history is an inflation from 0 to 0.9999 of the injected range and back, 400
 """
 
 import argparse
+from dataclasses import dataclass
 import math
 from pathlib import Path
 import signal
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -51,6 +60,32 @@ REFERENCE_RESOLUTION = 32000
 SWEEP_STEPS = 100_000
 
 
+@dataclass(frozen=True)
+class Sizes:
+    """What a run covers: the benchmark, or a quick check that it runs (``--quick``)."""
+
+    scenes: tuple[str, ...] | None       # None: every scene of scenes()
+    history_commands: int
+    resolutions: tuple[int, ...]
+    reference_resolution: int
+    slownesses: tuple[float, ...]
+    scaling_steps: tuple[int, ...]
+    monotone_chains: tuple[int, ...]
+    peaked_chains: tuple[int, ...]
+    table_rows: tuple[int, ...]
+    noise_rows: tuple[int, ...]
+    noise_levels: tuple[float, ...] | None   # None: all of them (200 rows: the first four)
+    noise_seeds: int | None                  # None: 5 (3 with fewer repeats)
+    noise_alarm_s: int
+
+
+FULL = Sizes(None, 4001, RESOLUTIONS, REFERENCE_RESOLUTION, (1e-3, 1e-4, 1e-5, 1e-6),
+             (10**3, 10**4, 10**5, 10**6), (2, 3, 4, 5), (2, 3), (50, 200, 1000, 5000),
+             (60, 200), None, None, 120)
+QUICK = Sizes(('fig1_asymmetric', 'chain3'), 401, (2000,), 4000, (1e-3,), (10**3, 10**4),
+              (2, 3), (2,), (50,), (60,), (2e-3,), 2, 30)
+
+
 def best_of(fn, repeats):
     best = math.inf
     for _ in range(repeats):
@@ -78,7 +113,12 @@ def chain(count, peaks=True):
     return segments
 
 
-def scenes():
+def scenes(names=None):
+    """(name, segment builder) of the benchmark's scenes, or of those ``names`` (and chainN)."""
+    if names is not None:
+        every = dict(scenes())
+        return [(name, every.get(name) or (lambda count=int(name[5:]): chain(count)))
+                for name in names]
     found = []
     for name in ('fig1_none', 'fig1_partial', 'fig1_symmetric', 'fig1_asymmetric', 'paper'):
         path = ROOT / 'config' / f'{name}.yaml'
@@ -99,9 +139,9 @@ def history(emap, count=4001):
 # ---------------------------------------------------------------------------------- errors
 
 class Reference:
-    def __init__(self, segments, commands):
+    def __init__(self, segments, commands, resolution=REFERENCE_RESOLUTION):
         self.segments = segments
-        self.emap = EquilibriumMap(segments, resolution=REFERENCE_RESOLUTION, polish=6)
+        self.emap = EquilibriumMap(segments, resolution=resolution, polish=6)
         path = Tracker(self.emap).sweep(commands)
         totals = commands + self.emap.total_rest_volume
         self.volumes = polish_states(segments, path.volumes, totals)
@@ -151,9 +191,9 @@ class Reference:
 
 # ---------------------------------------------------------------------------------- methods
 
-def bench_ours(segments, ref, commands, sweep_commands, quick):
+def bench_ours(segments, ref, commands, sweep_commands, few, resolutions=RESOLUTIONS):
     rows = []
-    for resolution in RESOLUTIONS:
+    for resolution in resolutions:
         for polish in POLISH:
             start = time.perf_counter()
             emap = EquilibriumMap(segments, resolution=resolution, polish=polish)
@@ -161,16 +201,16 @@ def bench_ours(segments, ref, commands, sweep_commands, quick):
             path = Tracker(emap).sweep(commands)
             split, snap, press = ref.errors(path.volumes, path.pressure,
                                             [e.injected for e in path.events])
-            steps = commands[:: 2 if quick else 1][:2000]
+            steps = commands[:: 2 if few else 1][:2000]
 
             def stepping(emap=emap, steps=steps):
                 tracker = Tracker(emap)
                 for u in steps:
                     tracker.step(u)
 
-            per_step = best_of(stepping, 2 if quick else 3) / steps.size
+            per_step = best_of(stepping, 2 if few else 3) / steps.size
             sweep = best_of(lambda emap=emap: Tracker(emap).sweep(sweep_commands),
-                            3 if quick else 7)
+                            3 if few else 7)
             rows.append({'method': f'ours r={resolution} polish={polish}', 'split': split,
                          'off': ref.last_off,
                              'snap': snap, 'press': press, 'assembly': assembly, 'step': per_step,
@@ -206,7 +246,7 @@ def bench_dynamic(segments, ref, commands, slowness):
             'sweep': per_step * SWEEP_STEPS, 'extrapolated': True, 'slowness': slowness}
 
 
-def bench_interp(segments, ref, commands, sweep_commands, points, quick):
+def bench_interp(segments, ref, commands, sweep_commands, points, few):
     """np.interp of every output column (N volumes, pressure, N curvatures) on a table of
     ``points`` rows along the inflation leg: the floor of any table lookup."""
     emap = ref.emap
@@ -216,8 +256,8 @@ def bench_interp(segments, ref, commands, sweep_commands, points, quick):
     columns = [path.volumes[:, i] for i in range(len(segments))] + [path.pressure] + \
         [path.curvatures[:, i] for i in range(len(segments))]
     tables = [(grid, c) for c in columns]
-    sweep = best_of(lambda: interp_floor(tables, sweep_commands), 3 if quick else 7)
-    single = best_of(lambda: np.interp(sweep_commands, grid, columns[0]), 3 if quick else 7)
+    sweep = best_of(lambda: interp_floor(tables, sweep_commands), 3 if few else 7)
+    single = best_of(lambda: np.interp(sweep_commands, grid, columns[0]), 3 if few else 7)
     got = interp_floor(tables, up)
     volumes = np.stack(got[: len(segments)], axis=1)
     split, _, press = ref.errors(volumes, got[len(segments)], None)
@@ -229,33 +269,33 @@ def bench_interp(segments, ref, commands, sweep_commands, points, quick):
 
 # ---------------------------------------------------------------------------------- scaling
 
-def bench_scaling(quick):
+def bench_scaling(few, sizes=FULL):
     lines = ['| work | assembly [s] | 100k-step sweep [ms] | per step (sweep) [us] |',
              '|---|---:|---:|---:|']
     emap = EquilibriumMap(peak_valley_pair())
     lo, hi = emap.injected_range
-    for steps in (10**3, 10**4, 10**5, 10**6):
+    for steps in sizes.scaling_steps:
         commands = lo + (hi - lo) * np.abs(np.sin(np.linspace(0, 20, steps)))
-        t = best_of(lambda c=commands, m=emap: Tracker(m).sweep(c), 2 if quick else 3)
+        t = best_of(lambda c=commands, m=emap: Tracker(m).sweep(c), 2 if few else 3)
         lines.append(f'| peak-valley pair, {steps} steps | - | {t * 1e3 * 1e5 / steps:.1f} '
                      f'(scaled) | {t / steps * 1e6:.3f} |')
-    for count in (2, 3, 4, 5):
+    for count in sizes.monotone_chains:
         start = time.perf_counter()
         emap = EquilibriumMap(chain(count, peaks=False))
         assembly = time.perf_counter() - start
         lo, hi = emap.injected_range
         commands = lo + (hi - lo) * np.abs(np.sin(np.linspace(0, 20, SWEEP_STEPS)))
-        t = best_of(lambda c=commands, m=emap: Tracker(m).sweep(c), 2 if quick else 3)
+        t = best_of(lambda c=commands, m=emap: Tracker(m).sweep(c), 2 if few else 3)
         lines.append(f'| monotone chain, {count} segments | {assembly:.2f} | {t * 1e3:.1f} | '
                      f'{t / SWEEP_STEPS * 1e6:.3f} |')
-    for count in (2, 3):
+    for count in sizes.peaked_chains:
         start = time.perf_counter()
         emap = EquilibriumMap(chain(count, peaks=True))
         assembly = time.perf_counter() - start
         lines.append(f'| chain with 2 peaked segments, {count} segments | {assembly:.2f} '
                      '| - | - |')
     pair = peak_valley_pair()
-    for rows in (50, 200, 1000, 5000):
+    for rows in sizes.table_rows:
         tabulated = []
         for s in pair:
             lam = np.linspace(1.0, (s.max_volume / s.rest_volume) ** (1 / 3), rows)
@@ -266,7 +306,7 @@ def bench_scaling(quick):
         assembly = time.perf_counter() - start
         lo, hi = emap.injected_range
         commands = lo + (hi - lo) * np.abs(np.sin(np.linspace(0, 20, SWEEP_STEPS)))
-        t = best_of(lambda c=commands, m=emap: Tracker(m).sweep(c), 2 if quick else 3)
+        t = best_of(lambda c=commands, m=emap: Tracker(m).sweep(c), 2 if few else 3)
         lines.append(f'| peak-valley pair as tables, {rows} rows | {assembly:.2f} | '
                      f'{t * 1e3:.1f} | {t / SWEEP_STEPS * 1e6:.3f} |')
     return lines
@@ -282,29 +322,30 @@ def _alarm(*_):
     raise _SlowError
 
 
-def noise_study(quick):
+def noise_study(few, sizes=FULL):
     """Spurious snap-throughs on the paper's partial-sequence tables with Gaussian noise."""
     base = [read_table(ROOT / 'config' / 'segments' / f'paper_{n}.csv',
                                       length=0.111) for n in ('bottom', 'top')]
     levels = (1e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2)
-    seeds = range(3 if quick else 5)
+    seeds = range(sizes.noise_seeds or (3 if few else 5))
+    alarm_s = sizes.noise_alarm_s
     signal.signal(signal.SIGALRM, _alarm)
     lines = ['| rows | noise / p range | smoothing | runs with spurious snaps | pieces (mean) '
              '| max pressure error / p range | max split error / range |',
              '|---:|---:|---|---:|---:|---:|---:|']
     results = []
-    for rows in (60, 200):
+    for rows in sizes.noise_rows:
         clean = []
         for s in base:
             v = np.linspace(s.rest_volume, s.max_volume, rows)
             clean.append((v, s.pressure(v), s.curvature(v)))
         clean_map = EquilibriumMap([TabulatedSegment(f'c{i}', 0.111, *t)
                                     for i, t in enumerate(clean)])
-        commands = history(clean_map, 2001)
+        commands = history(clean_map, min(2001, sizes.history_commands))
         clean_path = Tracker(clean_map).sweep(commands)
         # Past the level where every run snaps, 200-row tables have hundreds of pieces and the
         # assembly takes minutes: nothing more to learn there.
-        for level in (levels if rows < 200 else levels[:4]):
+        for level in sizes.noise_levels or (levels if rows < 200 else levels[:4]):
             for smooth in (False, True):
                 snapped, pieces, p_err, v_err, slow = 0, [], 0.0, 0.0, 0
                 for seed in seeds:
@@ -318,7 +359,7 @@ def noise_study(quick):
                         p_err = max(p_err, float(np.max(np.abs(noisy - p)) / np.ptp(p)))
                         segments.append(TabulatedSegment(f'n{i}', 0.111, v, noisy, c))
                     pieces.append(np.mean([len(s.monotone_pieces()) for s in segments]))
-                    signal.alarm(120)
+                    signal.alarm(alarm_s)
                     try:
                         emap = EquilibriumMap(segments)
                         path = Tracker(emap).sweep(np.clip(commands, *emap.injected_range))
@@ -331,7 +372,7 @@ def noise_study(quick):
                         snapped += 1
                     finally:
                         signal.alarm(0)
-                note = f' ({slow} assemblies > 120 s)' if slow else ''
+                note = f' ({slow} assemblies > {alarm_s} s)' if slow else ''
                 lines.append(f'| {rows} | {level:g} | {"yes" if smooth else "no"} | '
                              f'{snapped}/{len(seeds)}{note} | {np.mean(pieces):.1f} | '
                              f'{p_err:.2e} | {v_err:.2e} |')
@@ -352,17 +393,34 @@ def fmt(x, digits=2):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--quick', action='store_true', help='fewer repeats (a smoke run)')
-    parser.add_argument('--out', default=str(ROOT / 'docs'), help='folder for the results')
+    parser.add_argument('--quick', action='store_true',
+                        help='a check that the benchmark runs: small inputs, about 30 s, the '
+                        'results in a temporary folder (unless --out) and printed')
+    parser.add_argument('--fewer-repeats', action='store_true',
+                        help='the whole benchmark with fewer repeats of each timing')
+    parser.add_argument('--out', default=None,
+                        help='folder for the results (default docs/; with --quick a temporary '
+                        'one)')
     parser.add_argument('--skip-noise', action='store_true')
     args = parser.parse_args()
-    out = Path(args.out)
+    if args.quick and args.out is None:
+        with tempfile.TemporaryDirectory(prefix='bench_solver_') as folder:
+            report = run(args, Path(folder), QUICK)
+    else:
+        report = run(args, Path(args.out or ROOT / 'docs'), QUICK if args.quick else FULL)
+    if args.quick:
+        print('\n' + report)
+
+
+def run(args, out, sizes):
+    """The whole benchmark into the folder ``out``; the report's text."""
+    few = args.quick or args.fewer_repeats
     out.mkdir(parents=True, exist_ok=True)
     report = ['# Solver benchmark: run time against error', '',
               'Written by `python bench/bench_solver.py` (see bench/README.md for the method).',
               '']
     all_rows = {}
-    for name, build in scenes():
+    for name, build in scenes(sizes.scenes):
         segments = build()
         print(f'== {name}', flush=True)
         try:
@@ -370,16 +428,16 @@ def main():
         except Exception as error:  # noqa: BLE001 - a scene the solver cannot assemble
             report += [f'## {name}', '', f'Assembly failed: {error}', '']
             continue
-        commands = history(probe)
+        commands = history(probe, sizes.history_commands)
         lo, hi = probe.injected_range
         sweep_commands = lo + (hi - lo) * 0.9999 * np.abs(np.sin(np.linspace(0, 12,
                                                                               SWEEP_STEPS)))
-        ref = Reference(segments, commands)
-        rows = bench_ours(segments, ref, commands, sweep_commands, args.quick)
+        ref = Reference(segments, commands, sizes.reference_resolution)
+        rows = bench_ours(segments, ref, commands, sweep_commands, few, sizes.resolutions)
         rows.append(bench_naive(segments, ref, commands))
-        for slowness in (1e-3, 1e-4, 1e-5, 1e-6):
+        for slowness in sizes.slownesses:
             rows.append(bench_dynamic(segments, ref, commands, slowness))
-        rows.append(bench_interp(segments, ref, commands, sweep_commands, 2000, args.quick))
+        rows.append(bench_interp(segments, ref, commands, sweep_commands, 2000, few))
         all_rows[name] = (rows, ref)
         report += [f'## {name}', '',
                    f'{len(segments)} segments; volume range {ref.v_scale * 1e6:.4g} mL, '
@@ -407,14 +465,15 @@ def main():
         # Written after every scene, so an interrupted run still leaves its tables.
         (out / 'benchmarks.md').write_text('\n'.join(report) + '\n')
     report += summarise(all_rows)
-    report += ['## Scaling', '', *bench_scaling(args.quick), '']
+    report += ['## Scaling', '', *bench_scaling(few, sizes), '']
     if not args.skip_noise:
-        lines, results = noise_study(args.quick)
+        lines, results = noise_study(few, sizes)
         report += ['## Noisy tables (paper scene, Gaussian noise on every row but the first)',
                    '', *lines, '']
-    figure(all_rows, out / 'bench_solver.png')
+    figure(all_rows, out / 'bench_solver.png', sizes.resolutions[0])
     (out / 'benchmarks.md').write_text('\n'.join(report) + '\n')
     print(f'wrote {out / "benchmarks.md"} and {out / "bench_solver.png"}')
+    return '\n'.join(report)
 
 
 def summarise(all_rows):
@@ -438,7 +497,7 @@ def summarise(all_rows):
     return lines + ['']
 
 
-def figure(all_rows, path):
+def figure(all_rows, path, label_resolution=RESOLUTIONS[0]):
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -452,7 +511,8 @@ def figure(all_rows, path):
             kind = row['method'].split()[0].split('.')[0]
             x = row['sweep'] / SWEEP_STEPS
             left.scatter(x, max(row['split'], 1e-17), marker=markers[kind], color=colour,
-                         label=name if kind == 'ours' and row.get('resolution') == 250
+                         label=name if kind == 'ours'
+                         and row.get('resolution') == label_resolution
                          and row.get('polish') == 0 else None)
         dyn = [r for r in rows if r.get('slowness') and 'failed' not in r]
         if dyn:

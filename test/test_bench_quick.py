@@ -1,0 +1,120 @@
+"""
+Every benchmark in bench/ still runs: its ``--quick`` mode, end to end, in a subprocess.
+
+A benchmark is not a test (no time is asserted here), but one that no longer runs after a
+change of the package is found here rather than at its next full run. Each quick mode works on
+small inputs, prints its tables and writes nothing into the repository: the checks below look
+for the tables it promises, with numbers in them, and that its results files were left alone.
+The DDS parts (bench_rig's processes, latency and baseline parts, bench_soak's real-time part)
+are not in the quick modes: they take minutes of real time.
+"""
+
+import os
+from pathlib import Path
+import re
+import subprocess
+import sys
+import time
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+TIMEOUT_S = 300
+
+# script -> (what its output must contain, patterns of table rows with numbers, results files
+# its full mode writes and its quick mode must leave alone)
+QUICK = {
+    'bench_rig.py': (
+        ['## 1. Batch run', '### Where the time goes',
+         '| component (stage) | calls | own time [s] | share | per call [us] |',
+         '### Skipping what a scene does not need', 'Actuator alone'],
+        [r'\| actuator: equilibrium solve [^|]*\(`actuator\.model\.command`\) \| [1-9]\d* \| '
+         r'\d+\.\d+ \| \d+ % \| \d+\.\d+ \|',
+         r'\| camera: frame [^|]*\(`camera\.tick`\) \| [1-9]\d* \|',
+         r'\| bag writing [^|]*\(`append`\) \| [1-9]\d* \|',
+         r'\| \d+\.\d \| \d+\.\d \| \*\*\d+x\*\* \| \d+x \| [1-9]\d* \| [\d,]+ \|',
+         r'\| pump hold: [^|]* \| \d+\.\d\d \| \d+\.\d\d \| \d+x \| \d+ % \| \d+ \| '
+         r'[1-9]\d* / [1-9]\d* \(rejected 0\) \|',
+         r'a moving volume costs \d+\.\d us per command \([1-9]\d* solves\)'],
+        ['bench/rig_results.md']),
+    'bench_soak.py': (
+        ['## 1. Batch soak', 'complete = True', 'per-topic counts equal to the run',
+         '| cycle | messages | wall [s] |', 'pump state at the end `finished`'],
+        [r'\*\*[\d,]+ messages\*\* in \d+ s wall',
+         r'\*\*End / start: RSS \d+\.\d{3}\*\*',
+         r'\*\*last / first \d+\.\d\d\*\*',
+         r'\| 2 \| [\d,]+ \| \d+\.\d \| [\d,]+ \| \d+\.\d \| \d+\.\d \| [\d,]+ \|'],
+        ['bench/soak_results.md']),
+    'bench_solver.py': (
+        ['## fig1_asymmetric', '## chain3', '## Targets', '## Scaling', '## Noisy tables',
+         '| method | split err | split err off snaps |'],
+        [r'\| ours r=2000 polish=2 \| \d\.\d\de-\d\d \| \d\.\d\de-\d\d \|',
+         r'\| naive root-finding \| \d\.\d\de-\d\d \|',
+         r'\| dynamic Radau QR/p=0\.001 \| \d\.\d\de-\d\d \|',
+         r'\| fig1_asymmetric \| \d+x \(',
+         r'\| monotone chain, 3 segments \| \d+\.\d\d \| \d+\.\d \|',
+         r'\| 60 \| 0\.002 \| yes \| \d/2 \|'],
+        ['docs/benchmarks.md', 'docs/bench_solver.png']),
+    'bench_analysis.py': (
+        ['All three readers return identical arrays (checked)',
+         '| whole report of the paper bag | time |'],
+        [r'\| ours \(`softseq_ros\.bag\.arrays`\) \| \d+\.\d\d s \(CPU \d+\.\d\d s\) \| 1x \|',
+         r'\| rosbags [^|]* \| \d+\.\d\d s \| \d+x \|',
+         r'\| mcap-ros2-support [^|]* \| \d+\.\d\d s \| \d+x \|',
+         r'\| in-process: read, metrics, 5 figures as PNG \| \d+\.\d\d s \|',
+         r'\| the command with `--scene paper` \| \d+\.\d\d s',
+         r'\| paper bag \| [\d,]+ \| \d+ \|'],
+        ['bench/analysis_results.md']),
+    'bench_restructure.py': (
+        ['# Restructuring: speed old against new', '| job | command | old [s] | new [s] |'],
+        [r'\| sweep \| `softseq classify fig1_asymmetric` \| \d+\.\d\d \| \d+\.\d\d \| '
+         r'\d\.\d{3} \(',
+         r'\| assembly \| `softseq classify three_segments` \| \d+\.\d\d \| \d+\.\d\d \|'],
+        ['bench/restructure_results.md']),
+    'bench_fem.py': (
+        ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
+         '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],
+        [r'\| top \| 2 \| [1-9]\d* \| [1-9]\d* \| \d+\.\d \| \d+\.\d \| \d+ \| \d+\.\d \|',
+         r'\| top \| unit_cell \| Yeoh \| 2 \| 1 \| [1-9]\d* \|',
+         r'\| 1 \| 1 \| \d+\.\d \| \d+\.\d+ \|',
+         r'\| neo-Hooke[^|]* \| \d+\.\d \| \d+\.\d \| \w+ \|'],
+        ['bench/fem_results.json', 'bench/fem_results.md', 'docs/fem_mesh.png',
+         'docs/fem_pv.png']),
+}
+
+
+def _stamp(relative: str) -> tuple[int, int] | None:
+    path = REPO / relative
+    if not path.exists():
+        return None
+    info = path.stat()
+    return info.st_mtime_ns, info.st_size
+
+
+def _soak_scenes() -> set[str]:
+    return {path.name for path in (REPO / 'config').glob('soak_*.yaml')}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('script', sorted(QUICK))
+def test_benchmark_quick_mode_runs(script, tmp_path):
+    texts, rows, results = QUICK[script]
+    before = {relative: _stamp(relative) for relative in results}
+    scenes = _soak_scenes()
+    env = dict(os.environ, PYTHONUNBUFFERED='1', MPLBACKEND='Agg', TMPDIR=str(tmp_path))
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, str(REPO / 'bench' / script), '--quick'], cwd=REPO,
+                          env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    took = time.monotonic() - start
+    output = done.stdout
+    assert done.returncode == 0, (f'{script} --quick failed ({done.returncode}) after '
+                                  f'{took:.0f} s:\n{output[-3000:]}\n{done.stderr[-5000:]}')
+    missing = [text for text in texts if text not in output]
+    assert not missing, f'{script} --quick printed none of {missing}:\n{output[-5000:]}'
+    unmatched = [row for row in rows if not re.search(row, output)]
+    assert not unmatched, f'{script} --quick: no line matches {unmatched}:\n{output[-5000:]}'
+    # Nothing written into the repository: its results files as they were, no scene left.
+    assert {relative: _stamp(relative) for relative in results} == before
+    assert _soak_scenes() == scenes
+    # Its temporary folders are removed.
+    assert list(tmp_path.iterdir()) == []
