@@ -22,6 +22,7 @@ from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.writer import BagWriter
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
+from softseq_ros.rig.model import ActuatorModel
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
 from softseq_ros.rig.wire import ENCODERS
@@ -80,6 +81,9 @@ class BatchRun:
     the rig's namespace in the bag's topic names. ``progress`` gets a progress line, ``log``
     the cores' warnings (also kept in the result).
 
+    ``model`` is the actuator's model (softseq_ros.rig.model; default: the one the scene asks
+    for); one with a rate is advanced at that rate on the run's clock.
+
     ``wrap`` lets a benchmark or a profiler see every stage of the run without touching the
     runner: it is called once per stage as ``wrap(label, function)`` before the run starts and
     returns the function to call instead (the same one, or one that times or counts it). The
@@ -93,7 +97,8 @@ class BatchRun:
                  overrides: dict[str, dict[str, Any]] | None = None,
                  progress: TextIO | None = None, log: TextIO | None = None,
                  start_time_ns: int | None = None, namespace: str = '/',
-                 wrap: Callable[[str, Stage], Stage] | None = None) -> None:
+                 wrap: Callable[[str, Stage], Stage] | None = None,
+                 model: ActuatorModel | None = None) -> None:
         """Load the scene (unless given loaded) and build the cores; ``out`` must not exist."""
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.out = Path(out)
@@ -103,7 +108,7 @@ class BatchRun:
         if unknown:
             raise ValueError(f'overrides: unknown core(s) {", ".join(unknown)}; expected '
                              f'{", ".join(contract.NODE_NAMES)}')
-        self.actuator = actuator_core(self.scene, **overrides.get(contract.ACTUATOR, {}))
+        self.actuator = actuator_core(self.scene, model, **overrides.get(contract.ACTUATOR, {}))
         # The pump's feedback timeout runs on the simulated clock here (the actuator answers
         # within the same tick); without a volumes output there is no feedback to wait for.
         pump_settings = {'feedback_clock': None,

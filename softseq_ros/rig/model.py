@@ -22,11 +22,13 @@ model of the same segments in a process (:func:`shared_map`): the rig's pump, ac
 any second actuator of the same scene share it.
 """
 
+from collections import OrderedDict
 from typing import Protocol, Sequence
 
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
+from softseq_ros.quasistatic.solve import build_map
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.segments.identity import segments_sha256
@@ -90,21 +92,27 @@ class ActuatorModel(Protocol):
         """Refuse (ProgrammeError, or SceneError for the scene's own) a programme it cannot run."""
 
 
-_MAPS: dict[tuple[str, int | None], EquilibriumMap] = {}
+# The maps a process keeps: enough for the rigs of a few scenes side by side, bounded so that a
+# notebook running many scenes one after another does not keep them all.
+SHARED_MAPS = 8
+_MAPS: OrderedDict[tuple[str, int | None], EquilibriumMap] = OrderedDict()
 
 
 def shared_map(segments: Sequence[Segment], resolution: int | None = None) -> EquilibriumMap:
     """
     The equilibrium map of these segments at this resolution (``None``: the default).
 
-    Assembled once per process: it is the expensive part, and it holds no actuator's state.
+    Assembled once per process (the same segments by their digest): it is the expensive part,
+    and it holds no actuator's state. The :data:`SHARED_MAPS` most recently used are kept.
     """
     key = (segments_sha256(segments), resolution)
     emap = _MAPS.get(key)
     if emap is None:
-        emap = (EquilibriumMap(segments, resolution=resolution) if resolution is not None
-                else EquilibriumMap(segments))
-        _MAPS[key] = emap
+        emap = _MAPS[key] = build_map(segments, resolution)
+        while len(_MAPS) > SHARED_MAPS:
+            _MAPS.popitem(last=False)
+    else:
+        _MAPS.move_to_end(key)
     return emap
 
 
