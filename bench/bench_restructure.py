@@ -29,6 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 BASELINE = '6b18066'   # main before the physics was split and the model seam added
 RESULTS = REPO / 'bench' / 'restructure_results.md'
 START_TIME = '1795000000'
+ALL_JOBS = ('batch', 'report', 'sweep', 'assembly', 'library')
 
 
 def commands(bags: Path) -> dict[str, list[str]]:
@@ -117,9 +118,10 @@ def main() -> int:
     parser.add_argument('--quick', action='store_true',
                         help='one pair of the two shortest jobs, nothing written')
     parser.add_argument('--out', type=Path, default=RESULTS)
+    parser.add_argument('--jobs', nargs='+', choices=ALL_JOBS, default=None,
+                        help='only these jobs (default: all; printed, not written)')
     options = parser.parse_args()
-    jobs = ['sweep', 'assembly'] if options.quick else \
-        ['batch', 'report', 'sweep', 'assembly', 'library']
+    jobs = options.jobs or (['sweep', 'assembly'] if options.quick else list(ALL_JOBS))
     pairs = 1 if options.quick else options.pairs
     baseline = options.baseline or ('HEAD' if options.quick else BASELINE)
     head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=REPO, check=True,
@@ -141,7 +143,7 @@ def main() -> int:
             subprocess.run(['git', 'worktree', 'remove', '--force', str(old)], cwd=REPO,
                            check=False, capture_output=True)
     text = markdown(results, baseline, head, pairs)
-    if options.quick:
+    if options.quick or options.jobs:
         print(text)
     else:
         options.out.write_text(text)

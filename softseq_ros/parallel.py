@@ -6,9 +6,11 @@ order, whatever order they finish in; ``progress`` hears of each as it finishes 
 process, so it may write files). The backends:
 
 - ``'serial'``: one after the other in this process; also what one job or one worker gets.
-- ``'processes'``: worker processes on this machine, started by ``spawn`` (a fresh interpreter:
-  safe whatever threads this process runs, the same on every platform), at most one per job.
-  The function must be importable (a module's top-level function) and the jobs picklable.
+- ``'processes'``: worker processes on this machine, at most one per job, started by
+  :func:`default_start_method`: ``fork`` (no interpreter to start, nothing to import again)
+  where this process runs a single thread, so no lock can be held by a thread the child would
+  lack; ``spawn`` (a fresh interpreter) otherwise, or where there is no fork. The function must be
+  importable (a module's top-level function) and the jobs picklable.
 - ``'dask'``: a Dask cluster (``distributed``): the scheduler at ``scheduler`` (its workers,
   for studies that outgrow one machine), or else a ``LocalCluster`` of ``workers`` processes
   with one thread each, started for the call and closed after it.
@@ -31,12 +33,12 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import threading
 from typing import Any, Callable, Iterable, Sequence
 
 from softseq_ros.errors import UserError
 
 BACKENDS = ('serial', 'processes', 'dask')
-START_METHOD = 'spawn'
 DASK_CONNECT_TIMEOUT = '10s'
 POLL_S = 0.2  # how long an interrupt may wait to be seen while jobs run
 STOP_TIMEOUT_S = 5.0  # a stopped worker still alive after this is killed
@@ -45,6 +47,13 @@ STOP_TIMEOUT_S = 5.0  # a stopped worker still alive after this is killed
 Progress = Callable[[int, int, Any], None]
 # name(job): how an error names a job (default: "job 3 of 9").
 Namer = Callable[[Any], str]
+
+
+def default_start_method() -> str:
+    """``fork`` where it is available and this process runs one thread; ``spawn`` otherwise."""
+    if 'fork' in multiprocessing.get_all_start_methods() and threading.active_count() == 1:
+        return 'fork'
+    return 'spawn'
 
 
 class JobError(Exception):
@@ -197,23 +206,25 @@ class Workers:
     """
     Worker processes kept for several calls; ``close`` (or leaving a ``with``) ends them.
 
-    ``initializer(*initargs)`` runs in each worker as it starts. ``start_method`` is
-    ``'spawn'`` unless a caller needs ``'fork'`` (a worker that inherits what this process has
-    loaded). ``start_now`` starts the workers at once (with fork all of them, with spawn as many
-    as there are workers, usually) rather than at the first job, so that an initializer's work
-    overlaps the caller's. A job that raises leaves them be (the call's queued jobs are
-    cancelled); an interrupt, or any other exception while waiting, ends them.
+    ``initializer(*initargs)`` runs in each worker as it starts. ``start_method`` (default:
+    :func:`default_start_method`) may ask for ``'fork'`` (a worker that inherits what this
+    process has loaded) or ``'spawn'``. ``start_now`` starts the workers at once (with fork
+    all of them, with spawn as many as there are workers, usually) rather than at the first
+    job, so that an initializer's work overlaps the caller's. A job that raises leaves them be
+    (the call's queued jobs are cancelled); an interrupt, or any other exception while
+    waiting, ends them.
     """
 
     def __init__(self, workers: int | None = None, *,
                  initializer: Callable[..., None] | None = None, initargs: tuple = (),
-                 start_method: str = START_METHOD, start_now: bool = False) -> None:
+                 start_method: str | None = None, start_now: bool = False) -> None:
         """Prepare ``workers`` processes (default one per core)."""
         self.workers = (os.cpu_count() or 1) if workers is None else int(workers)
         if self.workers < 1:
             raise ValueError(f'workers must be >= 1, got {workers}')
         self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(
-            self.workers, mp_context=multiprocessing.get_context(start_method),
+            self.workers,
+            mp_context=multiprocessing.get_context(start_method or default_start_method()),
             initializer=_start_worker, initargs=(initializer, initargs))
         if start_now:
             for _ in range(self.workers):

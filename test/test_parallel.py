@@ -193,3 +193,21 @@ def test_the_dask_backend_runs_on_a_local_cluster_of_two_workers():
         run_jobs(inverse, [1, 0], workers=2, backend='dask', name=lambda x: f'x={x}')
     assert caught.value.index == 1
     assert time.perf_counter() - start < 20
+
+
+def test_workers_fork_only_while_this_process_runs_one_thread():
+    import threading
+
+    from softseq_ros.parallel import default_start_method
+
+    release = threading.Event()
+    helper = threading.Thread(target=release.wait)
+    helper.start()
+    try:
+        # Another thread may hold a lock that a forked child would inherit held: spawn.
+        assert default_start_method() == 'spawn'
+    finally:
+        release.set()
+        helper.join()
+    if threading.active_count() == 1:
+        assert default_start_method() == 'fork'
