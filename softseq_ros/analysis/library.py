@@ -25,7 +25,6 @@ import numpy as np
 from softseq_ros.analysis.metrics import Trace, analyse
 from softseq_ros.errors import UserError
 from softseq_ros.parallel import run_jobs
-from softseq_ros.scene.tables import read_table
 
 SWEEP_POINTS = 2001
 POOL_FROM = 5  # assemblies; below this a pool costs more than it saves
@@ -72,7 +71,9 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None) ->
 
 
 def _segment(entry: Entry) -> object:
+    # The segment models pull scipy in: imported where a worker needs them, not at start.
     if entry.table is not None:
+        from softseq_ros.scene.tables import read_table
 
         return read_table(entry.table, entry.name, entry.length_m)
     from softseq_ros.scene.loader import load_scene
