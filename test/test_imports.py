@@ -147,15 +147,17 @@ def test_benchmarks_tests_and_tools_use_only_public_names():
     assert offenders == {}
 
 
-def test_only_the_model_seam_of_the_rig_knows_the_quasistatic_solver():
+PHYSICS_MODELS = (f'{PACKAGE}.quasistatic', f'{PACKAGE}.dynamic')
+
+
+def test_only_the_model_seam_of_the_rig_knows_the_physics_models():
     graph, _ = import_graph()
     rig = {name for name in graph if name.startswith(f'{PACKAGE}.rig.')}
     assert MODEL_SEAM in rig
     knowing = sorted(name for name in rig
-                     if any(module.startswith(f'{PACKAGE}.quasistatic') for module in graph[name]))
+                     if any(module.startswith(PHYSICS_MODELS) for module in graph[name]))
     assert knowing == [MODEL_SEAM]
     # The nodes and the batch runner reach the physics through the rig's cores and model too.
     drivers = {name for name in graph if name.startswith((f'{PACKAGE}.nodes', f'{PACKAGE}.batch'))}
-    assert not {name: sorted(m for m in graph[name] if m.startswith(f'{PACKAGE}.quasistatic'))
-                for name in drivers
-                if any(m.startswith(f'{PACKAGE}.quasistatic') for m in graph[name])}
+    assert not {name: sorted(m for m in graph[name] if m.startswith(PHYSICS_MODELS))
+                for name in drivers if any(m.startswith(PHYSICS_MODELS) for m in graph[name])}

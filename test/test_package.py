@@ -34,15 +34,18 @@ ROS_MODULES = {
 # Data flows scene -> segment models -> quasi-static solver -> rig core -> node or batch ->
 # topic -> bag -> analysis: the physics imports none of the later layers, and the rig's cores
 # none of their drivers.
-PHYSICS_LAYERS = ('segments', 'scene', 'quasistatic')
+PHYSICS_LAYERS = ('segments', 'scene', 'quasistatic', 'dynamic')
 DOWNSTREAM_LAYERS = {f'{PACKAGE}.{layer}' for layer in (
     'rig', 'nodes', 'batch', 'bag', 'analysis', 'cli', 'fem')}
 # Within the physics: segment models never read a user's file and know no solver; the user's
 # inputs know no solver.
 PHYSICS_DOWNSTREAM = {
-    'segments': DOWNSTREAM_LAYERS | {f'{PACKAGE}.scene', f'{PACKAGE}.quasistatic'},
-    'scene': DOWNSTREAM_LAYERS | {f'{PACKAGE}.quasistatic'},
-    'quasistatic': DOWNSTREAM_LAYERS,
+    'segments': DOWNSTREAM_LAYERS | {f'{PACKAGE}.scene', f'{PACKAGE}.quasistatic',
+                                     f'{PACKAGE}.dynamic'},
+    'scene': DOWNSTREAM_LAYERS | {f'{PACKAGE}.quasistatic', f'{PACKAGE}.dynamic'},
+    # The two physics models are alternatives: neither knows the other.
+    'quasistatic': DOWNSTREAM_LAYERS | {f'{PACKAGE}.dynamic'},
+    'dynamic': DOWNSTREAM_LAYERS | {f'{PACKAGE}.quasistatic'},
 }
 RIG_DRIVERS = {f'{PACKAGE}.{layer}' for layer in ('nodes', 'batch', 'analysis', 'cli', 'fem')}
 

@@ -23,13 +23,17 @@ any second actuator of the same scene share it.
 """
 
 from collections import OrderedDict
+from dataclasses import dataclass
+import math
 from typing import Protocol, Sequence
 
+from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
 from softseq_ros.quasistatic.solve import build_map
 from softseq_ros.scene.loader import Scene
+from softseq_ros.scene.network import NetworkSettings
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
@@ -187,7 +191,126 @@ class QuasiStaticModel:
             check_reach(profile, self.emap, self.names)
 
 
-def actuator_model(scene: Scene) -> QuasiStaticModel:
-    """The model a scene asks for, on the process's shared map of its segments."""
-    return QuasiStaticModel(shared_map(scene.segments, scene.solver.resolution),
-                            scene.segment_names)
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class FlowState:
+    """The dynamic actuator's state: pressure at the syringe, volumes, curvatures."""
+
+    pressure: float
+    volumes: list[float]
+    curvatures: list[float]
+
+
+class DynamicModel:
+    """
+    The fluid network in time (softseq_ros.dynamic): the segments lag the pump's commands.
+
+    A command says the injected volume at a time: the syringe pushed the flow that brings the
+    injected volume there, evenly since the last command, and keeps pushing it (as a pump on
+    a ramp does) for as long again; then it holds. A command older than the model's time (a
+    late message) puts its difference into the base segment at once. The model advances at
+    ``rate_hz`` on its driver's clock. Its reach and end stop are the quasi-static ones
+    (``reach``): a transient may still carry a segment past its curve, which is refused then.
+    """
+
+    def __init__(self, segments: Sequence[Segment], names: Sequence[str],
+                 network: NetworkSettings, reach: QuasiStaticModel) -> None:
+        """At rest; the clock starts at the first command or tick."""
+        self.flow_network = NetworkFlow(segments, network)
+        self.names = tuple(names)
+        self.segments = tuple(segments)
+        self.rest_volume_m3 = float(sum(s.rest_volume for s in segments))
+        self.rate_hz = network.rate_hz
+        self.reach = reach
+        self._origin_ns: int | None = None
+        self._last_command: tuple[float, float] | None = None   # (time [s], injected [m^3])
+        self._flow_until = math.inf
+
+    def _seconds(self, now_ns: int) -> float:
+        if self._origin_ns is None:
+            self._origin_ns = now_ns
+        return (now_ns - self._origin_ns) / NS_PER_S
+
+    def _run_to(self, t: float) -> None:
+        """Integrate to ``t`` [s]; the pump's flow stops where its last command ran out."""
+        network = self.flow_network
+        try:
+            if network.flow != 0.0 and self._flow_until < t:
+                network.advance(self._flow_until)
+                network.set_flow(0.0)
+            network.advance(t)
+        except NetworkDomainError as err:
+            raise CommandRefusedError(str(err)) from None
+
+    def command(self, injected_m3: float, now_ns: int) -> list[Snap]:
+        """Push the flow that brings the injected volume to ``injected_m3`` at ``now_ns``."""
+        t = self._seconds(now_ns)
+        network = self.flow_network
+        if t > network.t:
+            # The catch-up: exactly the commanded volume at the command's instant.
+            network.set_flow((injected_m3 - network.injected) / (t - network.t))
+            self._flow_until = t
+            self._run_to(t)
+        elif injected_m3 != network.injected:
+            network.inject_now(injected_m3 - network.injected)
+        # From here the pump goes on at the rate of its last two commands, for as long as
+        # the last interval lasted (a ramp's next command then finds the volume it names).
+        previous, self._last_command = self._last_command, (t, injected_m3)
+        if previous is not None and t > previous[0]:
+            network.set_flow((injected_m3 - previous[1]) / (t - previous[0]))
+            self._flow_until = t + (t - previous[0])
+        else:
+            network.set_flow(0.0)
+            self._flow_until = t
+        return []
+
+    def advance(self, now_ns: int) -> list[Snap] | None:
+        """Let the fluid move until ``now_ns``; None when no time passed."""
+        t = self._seconds(now_ns)
+        if t <= self.flow_network.t:
+            return None
+        self._run_to(t)
+        return []
+
+    def state(self) -> ModelState:
+        """Pressure at the syringe (gauge), segment volumes and curvatures now."""
+        network = self.flow_network
+        volumes = network.volumes()
+        return FlowState(network.syringe_pressure(), [float(v) for v in volumes],
+                         [float(s.curvature(v)) for s, v in zip(self.segments, volumes)])
+
+    def saved(self) -> dict[str, object]:
+        """Injected volume and segment volumes (the channel flows are not kept)."""
+        network = self.flow_network
+        return {'injected_m3': network.injected,
+                'volumes_m3': [float(v) for v in network.volumes()]}
+
+    def resume(self, injected_m3: float, volumes_m3: Sequence[float]) -> None:
+        """Restart at rest at these volumes."""
+        self.flow_network.set_volumes(volumes_m3, injected_m3)
+        self._last_command = None
+
+    @property
+    def end_stop_m3(self) -> float:
+        """Where the quasi-static inflation ends."""
+        return self.reach.end_stop_m3
+
+    def check_programme(self, scene: Scene, profile: PumpProfile) -> None:
+        """The quasi-static reach of the programme."""
+        self.reach.check_programme(scene, profile)
+
+
+def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
+    """
+    The model a scene asks for, on the process's shared map of its segments.
+
+    The fluid network in time when the scene declares one (``network``), else the quasi-static
+    equilibrium.
+    """
+    quasistatic = QuasiStaticModel(shared_map(scene.segments, scene.solver.resolution),
+                                   scene.segment_names)
+    if scene.network is None:
+        return quasistatic
+    return DynamicModel(scene.segments, scene.segment_names, scene.network, quasistatic)

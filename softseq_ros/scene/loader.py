@@ -34,6 +34,8 @@ publish. Every quantity is SI and every key that carries a unit says so in its s
       image_height_px: 480
     outputs: [pressure, volumes, curvature, poses, markers, events]   # optional
     solver: {resolution: null}        # optional; null keeps the solver's default
+    network:                          # optional: time in the physics (scene/network.py)
+      channels: [{length_m: 0.01, radius_m: 0.25e-3}]   # one per neighbouring pair
 
 Every mistake raises ``SceneError`` with one line ``<file>: <key path>: <what is wrong>``, e.g.
 ``config/x.yaml: segments[1].length_m: must be > 0, got -0.1``.
@@ -46,6 +48,7 @@ from pathlib import Path
 import yaml
 
 from softseq_ros.scene.design import DesignError, cached_table, design_path, load_design
+from softseq_ros.scene.network import NetworkSettings, read_network
 from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.scene.paths import scene_path
 from softseq_ros.scene.programme import (
@@ -123,6 +126,7 @@ class Scene:
     camera: CameraSettings
     outputs: frozenset[str]
     solver: SolverSettings
+    network: NetworkSettings | None = None
 
     @property
     def segment_names(self) -> tuple[str, ...]:
@@ -423,7 +427,7 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     folder = Path(path).parent if path is not None else Path('.')
     ctx = Context(shown, folder)
     raw = ctx.mapping(data, '', ('name', 'segments', 'pump'),
-                   ('description', 'camera', 'outputs', 'solver'))
+                      ('description', 'camera', 'outputs', 'solver', 'network'))
     name = ctx.text(raw['name'], 'name')
     if not SCENE_NAME.match(name):
         raise ctx.error('name', f'must start with a letter or digit and hold only letters, '
@@ -436,7 +440,8 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     camera = _camera(ctx, raw.get('camera'), pump.profile)
     outputs = _outputs(ctx, raw.get('outputs'))
     solver = _solver(ctx, raw.get('solver'))
-    return Scene(name=name, description=description,
+    network = read_network(ctx, raw.get('network'), len(segments))
+    return Scene(name=name, description=description, network=network,
                  path=Path(path) if path is not None else None, segments=segments, pump=pump,
                  camera=camera, outputs=outputs, solver=solver)
 

@@ -1,0 +1,208 @@
+"""
+Segments joined by tubes and fed at the base by the syringe: the network integrated in time.
+
+Segment i holds volume v_i at pressure p_i(v_i) (its model: table or law). The syringe imposes
+the volume flow Q(t) into the base segment through the supply line; channel j carries q_j from
+segment j to segment j + 1 with a pressure drop ``L_j dq_j/dt + R_j q_j + a_j q_j |q_j|``
+(softseq_ros.dynamic.network). So
+
+    dv_0/dt = Q - q_0,   dv_i/dt = q_(i-1) - q_i,   and the tip's volume follows from mass:
+    v_tip = (rest volumes) + (injected volume) - (the other volumes),
+
+which keeps the sum of the volumes equal to the injected volume to round-off at every instant.
+A channel without inertance carries the flow its pressure drop drives at once; one with it
+has its flow as a state. The state (the volumes but the tip's, the inertial flows) is stiff
+where the channels are short and wide, so it is integrated by scipy's Radau (implicit,
+error-controlled, its step chosen by the error, never fixed), one integration across as many
+commands as keep the flow the same: a pump ramp costs a few steps once the transients decay.
+
+Volumes are checked after every step: a segment that leaves its model's range ends the
+integration with :class:`NetworkDomainError` (the quasi-static solver refuses such a volume too).
+"""
+
+import math
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.integrate import Radau
+
+from softseq_ros.dynamic.network import TubeLaw, tube_law
+from softseq_ros.errors import UserError
+from softseq_ros.scene.network import NetworkSettings
+from softseq_ros.segments.models import Segment
+
+FloatArray = NDArray[np.float64]
+# Absolute tolerances: this share of the volume scale for a volume, of the volume scale per
+# second for a flow (with the relative tolerance on top).
+ATOL_SHARE = 1e-3
+# Flows closer than this share of their size are the same (a ramp's commands, to round-off).
+SAME_FLOW = 1e-9
+# The solver is never asked to step beyond this horizon [s] at once.
+HORIZON_S = 1.0e9
+
+
+class NetworkDomainError(UserError):
+    """A segment's volume left the range its model covers while fluid moved."""
+
+
+class NetworkFlow:
+    """The network's state in time: volumes, channel flows, and the supply flow now."""
+
+    def __init__(self, segments: Sequence[Segment], network: NetworkSettings,
+                 rtol: float | None = None) -> None:
+        """At rest at time 0, no supply flow; ``rtol`` overrides the network's tolerance."""
+        if len(network.channels) != len(segments) - 1:
+            raise ValueError(f'{len(segments)} segments need {len(segments) - 1} channels, got '
+                             f'{len(network.channels)}')
+        self.segments = list(segments)
+        self.n = len(self.segments)
+        self.laws: list[TubeLaw] = [tube_law(c, network.fluid) for c in network.channels]
+        self.supply = None if network.supply is None else tube_law(network.supply,
+                                                                   network.fluid)
+        self.inertial = [j for j, law in enumerate(self.laws) if law.inertance > 0.0]
+        self.rest = np.array([s.rest_volume for s in self.segments])
+        self.full = np.array([s.max_volume for s in self.segments])
+        self.rest_total = float(self.rest.sum())
+        self.v_scale = float(np.sum(self.full - self.rest))
+        self.rtol = float(network.rtol if rtol is None else rtol)
+        size = self.n - 1 + len(self.inertial)
+        self.atol = np.full(size, self.rtol * ATOL_SHARE * self.v_scale)
+        self.t = 0.0
+        self.injected = 0.0
+        self.flow = 0.0
+        self.y = np.concatenate([self.rest[:-1], np.zeros(len(self.inertial))])
+        self.peak_reynolds = [0.0] * len(self.laws)
+        self.steps = 0
+        self._origin = (0.0, 0.0)   # (time, injected) where the current supply flow began
+        self._solver: Radau | None = None
+        self._dense = None
+
+    # ------------------------------------------------------------------ the equations
+
+    def volumes_of(self, y: FloatArray, injected: float) -> FloatArray:
+        """All segment volumes from a state and the injected volume (mass fixes the tip's)."""
+        others = y[:self.n - 1]
+        return np.append(others, self.rest_total + injected - float(np.sum(others)))
+
+    def pressures(self, volumes: FloatArray) -> FloatArray:
+        """Each segment's gauge pressure [Pa], its volume clipped to its model's range."""
+        clipped = np.clip(volumes, self.rest, self.full)
+        return np.array([float(s.pressure(v)) for s, v in zip(self.segments, clipped)])
+
+    def channel_flows(self, y: FloatArray, pressures: FloatArray) -> FloatArray:
+        """Each channel's flow [m^3/s], segment j to j + 1."""
+        flows = np.empty(len(self.laws))
+        inertial = iter(y[self.n - 1:])
+        for j, law in enumerate(self.laws):
+            flows[j] = next(inertial) if law.inertance > 0.0 else \
+                law.flow(pressures[j] - pressures[j + 1])
+        return flows
+
+    def _injected_at(self, t: float) -> float:
+        start_t, start_injected = self._origin
+        return start_injected + self.flow * (t - start_t)
+
+    def _rhs(self, t: float, y: FloatArray) -> FloatArray:
+        volumes = self.volumes_of(y, self._injected_at(t))
+        pressures = self.pressures(volumes)
+        flows = self.channel_flows(y, pressures)
+        inflow = np.concatenate([[self.flow], flows[:-1]])
+        dv = inflow[:self.n - 1] - flows[:self.n - 1]
+        dq = [(pressures[j] - pressures[j + 1] - self.laws[j].drop(flows[j]))
+              / self.laws[j].inertance for j in self.inertial]
+        return np.concatenate([dv, dq])
+
+    # ------------------------------------------------------------------ time
+
+    def set_flow(self, flow: float) -> None:
+        """
+        From now on the syringe pushes ``flow`` [m^3/s] (negative: it draws).
+
+        A flow within round-off of the present one (a ramp's next command) keeps the present
+        integration going; another one starts a new one from the state now.
+        """
+        if abs(flow - self.flow) > SAME_FLOW * max(abs(flow), abs(self.flow)) \
+                or self._solver is None:
+            self.flow = float(flow)
+            self._origin = (self.t, self.injected)
+            self._solver = None
+
+    def inject_now(self, volume: float) -> None:
+        """Put ``volume`` [m^3] into the base segment at once (a command that came late)."""
+        self.y = self.y.copy()
+        self.y[0] += volume
+        self.injected += volume
+        self._origin = (self.t, self.injected)
+        self._solver = None
+
+    def set_volumes(self, volumes: Sequence[float], injected: float) -> None:
+        """Put the segments at ``volumes`` at rest (no channel flow): a resume."""
+        self.y = np.concatenate([np.asarray(volumes[:-1], dtype=float),
+                                 np.zeros(len(self.inertial))])
+        self.injected = float(injected)
+        self._origin = (self.t, self.injected)
+        self._solver = None
+
+    def advance(self, t: float) -> None:
+        """Integrate to time ``t`` [s] with the current supply flow."""
+        if t <= self.t:
+            return
+        if self._solver is None:
+            self._solver = Radau(self._rhs, self.t, self.y, self.t + HORIZON_S,
+                                 rtol=self.rtol, atol=self.atol)
+            self._dense = None
+        solver = self._solver
+        while solver.t < t:
+            message = solver.step()
+            if solver.status == 'failed':
+                raise NetworkDomainError(f'the network integration failed at '
+                                         f'{solver.t:.6g} s: {message}')
+            self.steps += 1
+            self._dense = solver.dense_output()
+            self._check(solver.t, solver.y)
+        y = self._dense(t) if self._dense is not None and solver.t > t else solver.y
+        self.y = np.asarray(y, dtype=float)
+        self.t = t
+        self.injected = self._injected_at(t)
+        pressures = self.pressures(self.volumes())
+        for j, flow in enumerate(self.channel_flows(self.y, pressures)):
+            self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
+
+    def _check(self, t: float, y: FloatArray) -> None:
+        volumes = self.volumes_of(y, self._injected_at(t))
+        slack = 1e-9 * self.v_scale
+        outside = np.flatnonzero((volumes < self.rest - slack) | (volumes > self.full + slack))
+        if outside.size:
+            i = int(outside[0])
+            edge = 'its rest volume' if volumes[i] < self.rest[i] else 'the end of its curve'
+            raise NetworkDomainError(
+                f'segment {self.segments[i].name} passes {edge} at {t:.6g} s '
+                f'({volumes[i]:.6g} m^3, injected {self._injected_at(t):.6g} m^3)')
+
+    # ------------------------------------------------------------------ the state now
+
+    def volumes(self) -> FloatArray:
+        """The segment volumes [m^3] now."""
+        return self.volumes_of(self.y, self.injected)
+
+    def flows(self) -> FloatArray:
+        """The channel flows [m^3/s] now."""
+        return self.channel_flows(self.y, self.pressures(self.volumes()))
+
+    def syringe_pressure(self) -> float:
+        """The gauge pressure [Pa] at the syringe: the base segment's plus the supply line's."""
+        base = float(self.pressures(self.volumes())[0])
+        return base + (self.supply.drop(self.flow) if self.supply is not None else 0.0)
+
+
+def time_constant(resistance: float, compliances: Sequence[float]) -> float:
+    """R C1 C2 / (C1 + C2): how fast two compliant segments joined by R even out [s]."""
+    c1, c2 = compliances
+    return resistance * c1 * c2 / (c1 + c2)
+
+
+def damping_ratio(resistance: float, inertance: float, compliances: Sequence[float]) -> float:
+    """Zeta = (R / 2) sqrt(C / L) of the series RLC the two segments and the channel form."""
+    c1, c2 = compliances
+    return 0.5 * resistance * math.sqrt(c1 * c2 / (c1 + c2) / inertance)

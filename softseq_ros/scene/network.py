@@ -1,0 +1,108 @@
+"""
+The fluid network a scene may declare: the fluid, the supply line and the channels.
+
+A scene with a ``network`` block puts time into the physics (softseq_ros.dynamic): fluid flows
+from the syringe through the supply line into the base segment and through one channel between
+each pair of neighbouring segments. Every tube is circular, given by its length and radius;
+what follows from them (Hagen-Poiseuille resistance, inertance, minor losses) is computed in
+softseq_ros.dynamic.network. Schema (optional keys show their defaults)::
+
+    network:
+      fluid: {viscosity_pa_s: 1.0e-3, density_kg_per_m3: 998.0}   # water at 20 C
+      supply: {length_m: 0.5, radius_m: 0.8e-3}      # optional: syringe to base segment
+      channels:                                     # base to tip, one per neighbouring pair
+        - {length_m: 0.01, radius_m: 0.25e-3, inertance: false, minor_loss: 0.0}
+      rate_hz: 200.0                                # the actuator's output rate
+      rtol: 1.0e-6                                  # the integrator's relative tolerance
+
+A scene without it is quasi-static, exactly as before, and computes nothing dynamic.
+"""
+
+from dataclasses import dataclass
+
+from softseq_ros.scene.validation import Context, join
+
+WATER_VISCOSITY_PA_S = 1.0e-3      # water at 20 C
+WATER_DENSITY_KG_PER_M3 = 998.0
+DEFAULT_NETWORK_RATE_HZ = 200.0
+DEFAULT_NETWORK_RTOL = 1.0e-6
+MAX_NETWORK_RATE_HZ = 1.0e4
+TUBE_KEYS = ('length_m', 'radius_m', 'inertance', 'minor_loss')
+
+
+@dataclass(frozen=True)
+class Fluid:
+    """Dynamic viscosity [Pa s] and density [kg/m^3] of the working fluid."""
+
+    viscosity_pa_s: float = WATER_VISCOSITY_PA_S
+    density_kg_per_m3: float = WATER_DENSITY_KG_PER_M3
+
+
+@dataclass(frozen=True)
+class Tube:
+    """
+    A circular tube: length [m], inner radius [m].
+
+    ``inertance``: the fluid's inertia counts (the tube's flow becomes a state);
+    ``minor_loss``: the loss coefficient K of its ends and bends (dimensionless), a pressure
+    drop of K rho q |q| / (2 A^2) on top of the viscous one.
+    """
+
+    length_m: float
+    radius_m: float
+    inertance: bool = False
+    minor_loss: float = 0.0
+
+
+@dataclass(frozen=True)
+class NetworkSettings:
+    """The declared network: the fluid, the supply line (None: ideal) and the channels."""
+
+    fluid: Fluid
+    supply: Tube | None
+    channels: tuple[Tube, ...]
+    rate_hz: float = DEFAULT_NETWORK_RATE_HZ
+    rtol: float = DEFAULT_NETWORK_RTOL
+
+
+def _tube(ctx: Context, value: object, key_path: str) -> Tube:
+    raw = ctx.mapping(value, key_path, ('length_m', 'radius_m'), ('inertance', 'minor_loss'))
+    length = ctx.number(raw['length_m'], join(key_path, 'length_m'), gt=0.0)
+    radius = ctx.number(raw['radius_m'], join(key_path, 'radius_m'), gt=0.0)
+    if radius > length:
+        # Hagen-Poiseuille needs a tube, not an orifice.
+        raise ctx.error(join(key_path, 'radius_m'), f'{radius:g} m exceeds the length '
+                                                     f'({length:g} m): not a tube')
+    inertance = raw.get('inertance', False)
+    if not isinstance(inertance, bool):
+        raise ctx.error(join(key_path, 'inertance'), f'must be true or false, got {inertance!r}')
+    minor_loss = ctx.number(raw.get('minor_loss', 0.0), join(key_path, 'minor_loss'), ge=0.0)
+    return Tube(length, radius, inertance, minor_loss)
+
+
+def read_network(ctx: Context, value: object, segment_count: int) -> NetworkSettings | None:
+    """The ``network`` block of a scene (None when the scene has none)."""
+    if value is None:
+        return None
+    raw = ctx.mapping(value, 'network', ('channels',), ('fluid', 'supply', 'rate_hz', 'rtol'))
+    fluid_raw = ctx.mapping(raw.get('fluid', {}), 'network.fluid', (),
+                            ('viscosity_pa_s', 'density_kg_per_m3'))
+    fluid = Fluid(
+        ctx.number(fluid_raw.get('viscosity_pa_s', WATER_VISCOSITY_PA_S),
+                   'network.fluid.viscosity_pa_s', gt=0.0),
+        ctx.number(fluid_raw.get('density_kg_per_m3', WATER_DENSITY_KG_PER_M3),
+                   'network.fluid.density_kg_per_m3', gt=0.0))
+    supply = None if raw.get('supply') is None else _tube(ctx, raw['supply'], 'network.supply')
+    items = ctx.sequence(raw['channels'], 'network.channels')
+    if len(items) != segment_count - 1:
+        raise ctx.error('network.channels', f'needs one channel per pair of neighbouring '
+                                            f'segments ({segment_count - 1}), got {len(items)}')
+    channels = tuple(_tube(ctx, item, f'network.channels[{index}]')
+                     for index, item in enumerate(items))
+    rate = ctx.number(raw.get('rate_hz', DEFAULT_NETWORK_RATE_HZ), 'network.rate_hz', gt=0.0)
+    if rate > MAX_NETWORK_RATE_HZ:
+        raise ctx.error('network.rate_hz', f'must be <= {MAX_NETWORK_RATE_HZ:g}, got {rate:g}')
+    rtol = ctx.number(raw.get('rtol', DEFAULT_NETWORK_RTOL), 'network.rtol', gt=0.0)
+    if not 1e-13 <= rtol <= 1e-2:
+        raise ctx.error('network.rtol', f'must be within 1e-13 and 1e-2, got {rtol:g}')
+    return NetworkSettings(fluid, supply, channels, rate, rtol)

@@ -1,0 +1,157 @@
+"""
+Time in the physics: the fluid network against closed forms, and on the rig.
+
+Two linear segments (p_i = (v_i - V_i) / C_i) joined by one channel of resistance R even out
+exponentially with the time constant R C1 C2 / (C1 + C2); with the channel's inertance L they
+form a series RLC circuit and ring with the damping ratio (R / 2) sqrt(C / L), C = C1 C2 /
+(C1 + C2). The sum of the volumes is the injected volume at every instant.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from softseq_ros.bag.reader import read_bag
+from softseq_ros.batch import BatchRun
+from softseq_ros.dynamic.flow import NetworkFlow, damping_ratio, time_constant
+from softseq_ros.dynamic.network import tube_law
+from softseq_ros.rig.model import DynamicModel, QuasiStaticModel, actuator_model
+from softseq_ros.scene.loader import SceneError, load_scene, scene_from_dict
+from softseq_ros.scene.network import Fluid, NetworkSettings, Tube
+from softseq_ros.segments.models import LinearSegment
+
+ML = 1e-6
+C1, C2 = 1.0e-10, 2.0e-10          # compliances [m^3/Pa]: 1 mL raises 10 kPa, 5 kPa
+REST = 1.0 * ML
+PRESSURE = 1.0e5                   # both segments start inflated to 100 kPa, in equilibrium
+CHANNEL = Tube(length_m=0.1, radius_m=1.0e-3)
+
+
+def pair() -> list[LinearSegment]:
+    return [LinearSegment('bottom', 0.1, REST, 1.0 / C1, 50.0 * ML),
+            LinearSegment('top', 0.1, REST, 1.0 / C2, 50.0 * ML)]
+
+
+def displaced(network: NetworkSettings, step: float) -> NetworkFlow:
+    """The pair at equal pressures, ``step`` [m^3] just put into the bottom, then left alone."""
+    flow = NetworkFlow(pair(), network, rtol=1e-11)
+    flow.set_volumes([REST + C1 * PRESSURE + step, REST + C2 * PRESSURE],
+                     injected=(C1 + C2) * PRESSURE + step)
+    return flow
+
+
+def settled_and_start(step: float) -> tuple[float, float]:
+    """The bottom's volume once even again, and how far above it the step put it."""
+    settled = REST + C1 * PRESSURE + step * C1 / (C1 + C2)
+    return settled, step * C2 / (C1 + C2)
+
+
+def test_two_segments_even_out_with_the_time_constant_rc():
+    network = NetworkSettings(Fluid(), None, (CHANNEL,))
+    law = tube_law(CHANNEL, Fluid())
+    assert law.resistance == pytest.approx(8 * 1e-3 * 0.1 / (math.pi * 1e-12), rel=1e-15)
+    tau = time_constant(law.resistance, (C1, C2))
+    step = 3.0 * ML
+    flow = displaced(network, step)
+    # At equal pressures again the bottom holds C1 / (C1 + C2) of the step.
+    settled, start = settled_and_start(step)
+    for t in np.linspace(0.1, 5.0, 25) * tau:
+        flow.advance(t)
+        gap = flow.volumes()[0] - settled
+        assert gap == pytest.approx(start * math.exp(-t / tau), rel=1e-6)
+        total = 2.0 * REST + (C1 + C2) * PRESSURE + step
+        assert abs(float(np.sum(flow.volumes())) - total) <= 1e-12 * 80 * ML
+
+
+def test_with_inertance_the_pair_rings_as_a_series_rlc_circuit():
+    tube = Tube(length_m=0.1, radius_m=1.0e-3, inertance=True)
+    network = NetworkSettings(Fluid(), None, (tube,))
+    law = tube_law(tube, Fluid())
+    assert law.inertance == pytest.approx(998.0 * 0.1 / (math.pi * 1e-6), rel=1e-15)
+    zeta = damping_ratio(law.resistance, law.inertance, (C1, C2))
+    assert 0.05 < zeta < 0.5   # underdamped: it rings
+    c = C1 * C2 / (C1 + C2)
+    alpha = law.resistance / (2.0 * law.inertance)
+    omega_d = math.sqrt(1.0 / (law.inertance * c) - alpha ** 2)
+    assert alpha / math.sqrt(alpha ** 2 + omega_d ** 2) == pytest.approx(zeta, rel=1e-12)
+    step = 2.0 * ML
+    flow = displaced(network, step)
+    settled, start = settled_and_start(step)
+    period = 2.0 * math.pi / omega_d
+    swings = []
+    for t in np.linspace(0.02, 3.0, 150) * period:
+        flow.advance(t)
+        gap = flow.volumes()[0] - settled
+        expected = start * math.exp(-alpha * t) * (math.cos(omega_d * t)
+                                                   + alpha / omega_d * math.sin(omega_d * t))
+        assert gap == pytest.approx(expected, abs=1e-6 * start)
+        swings.append(gap)
+    # It overshoots: the bottom segment ends up below its even share before settling.
+    assert min(swings) < -0.3 * start
+
+
+def test_the_scene_declares_the_network_and_refuses_a_bad_one_in_one_line(tmp_path):
+    scene = load_scene('fig1_asymmetric')
+    assert scene.network is None
+    assert isinstance(actuator_model(scene), QuasiStaticModel)
+    data = {'name': 'x', 'segments': [
+        {'name': 'a', 'length_m': 0.1, 'linear': {'rest_volume_m3': 1e-6,
+                                                 'stiffness_pa_per_m3': 1e10,
+                                                 'max_volume_m3': 4e-5}},
+        {'name': 'b', 'length_m': 0.1, 'linear': {'rest_volume_m3': 1e-6,
+                                                 'stiffness_pa_per_m3': 5e9,
+                                                 'max_volume_m3': 4e-5}}],
+        'pump': {'legs': [{'inflate_to_m3': 1e-5}]},
+        'network': {'channels': [{'length_m': 0.05, 'radius_m': 0.5e-3}], 'rate_hz': 100}}
+    with_network = scene_from_dict(data, tmp_path / 'x.yaml')
+    assert with_network.network.channels == (Tube(0.05, 0.5e-3),)
+    assert with_network.network.fluid == Fluid(1.0e-3, 998.0)
+    assert isinstance(actuator_model(with_network), DynamicModel)
+    bad = dict(data, network={'channels': []})
+    with pytest.raises(SceneError, match=r'x\.yaml: network\.channels: needs one channel per '
+                                         r'pair of neighbouring segments \(1\), got 0$'):
+        scene_from_dict(bad, tmp_path / 'x.yaml')
+    bad = dict(data, network={'channels': [{'length_m': 0.05, 'radius_mm': 0.5}]})
+    with pytest.raises(SceneError, match=r'network\.channels\[0\]\.radius_mm: wrong or missing '
+                                         'unit suffix'):
+        scene_from_dict(bad, tmp_path / 'x.yaml')
+
+
+def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):
+    data = {'name': 'network_pair', 'segments': [
+        {'name': 'bottom', 'length_m': 0.1, 'linear': {
+            'rest_volume_m3': 1e-6, 'stiffness_pa_per_m3': 1.0 / C1, 'max_volume_m3': 4e-5,
+            'curvature_per_m_per_m3': 1e5}},
+        {'name': 'top', 'length_m': 0.1, 'linear': {
+            'rest_volume_m3': 1e-6, 'stiffness_pa_per_m3': 1.0 / C2, 'max_volume_m3': 4e-5,
+            'curvature_per_m_per_m3': 1e5}}],
+        'pump': {'flow_rate_m3_per_s': 1e-6, 'rate_hz': 50,
+                 'legs': [{'inflate_to_m3': 1e-5}, {'hold_s': 1.0}]},
+        'camera': {'rate_hz': 2},
+        'network': {'channels': [{'length_m': 0.1, 'radius_m': 0.5e-3}], 'rate_hz': 200}}
+    scene = scene_from_dict(data, tmp_path / 'network_pair.yaml')
+    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    assert result.pump_state == 'finished'
+    commands = {m.log_time_ns: m.msg.position[0]
+                for m in read_bag(tmp_path / 'bag', ['/pump/command'])}
+    volumes = [(m.log_time_ns, np.array(m.msg.position))
+               for m in read_bag(tmp_path / 'bag', ['/actuator/volumes'])]
+    # The actuator speaks at its own 200 Hz, between the pump's 50 Hz commands too.
+    times = np.array([t for t, _ in volumes])
+    assert np.all(np.diff(times) > 0) and np.max(np.diff(times)) <= 5_000_000
+    # Mass: at every command instant the volumes hold the rest volumes plus what was injected.
+    for t, v in volumes:
+        if t in commands:
+            assert abs(float(v.sum()) - 2e-6 - commands[t]) <= 1e-12 * 80 * ML
+    # The top segment lags behind its quasi-static share while the pump pushes, then catches
+    # up in the hold: tau = R C1 C2 / (C1 + C2).
+    law = tube_law(Tube(0.1, 0.5e-3), Fluid())
+    tau = time_constant(law.resistance, (C1, C2))
+    assert 0.05 < tau < 0.5
+    share_top = C2 / (C1 + C2)
+    end_of_ramp = 10.0 * 1e9
+    pushing = [v for t, v in volumes if 0.5 * end_of_ramp < t < end_of_ramp]
+    assert all(v[1] - 1e-6 < share_top * (v.sum() - 2e-6) * (1 - 1e-3) for v in pushing)
+    final = volumes[-1][1]
+    assert final[1] - 1e-6 == pytest.approx(share_top * 1e-5, rel=1e-3)
