@@ -155,3 +155,76 @@ def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):
     assert all(v[1] - 1e-6 < share_top * (v.sum() - 2e-6) * (1 - 1e-3) for v in pushing)
     final = volumes[-1][1]
     assert final[1] - 1e-6 == pytest.approx(share_top * 1e-5, rel=1e-3)
+
+
+def test_as_the_pump_slows_the_dynamic_path_converges_to_the_quasistatic_one():
+    # The Fig. 1 asymmetric pair (two Gent balloons, two snap-throughs on inflation) joined by
+    # a 10 mm channel of 0.5 mm radius, inflated at 1e-8 to 1e-11 m^3/s: three decades.
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+
+    segments = load_scene('fig1_asymmetric').segments
+    emap = EquilibriumMap(segments)
+    top = 0.95 * emap.injected_range[1]
+    grid = np.linspace(0.0, top, 200)
+    quasistatic = Tracker(emap).sweep(grid)
+    snaps = [event.injected for event in quasistatic.events]
+    assert len(snaps) == 2
+    away = np.all([np.abs(grid - snap) > 0.03 * top for snap in snaps], axis=0)
+    network = NetworkSettings(Fluid(), None, (Tube(0.01, 0.5e-3),), rtol=1e-8)
+    distances, delays = [], []
+    for flow_rate in (1e-8, 1e-9, 1e-10, 1e-11):
+        flow = NetworkFlow(segments, network)
+        flow.set_flow(flow_rate)
+        volumes = []
+        for injected in grid:
+            flow.advance(injected / flow_rate)
+            volumes.append(flow.volumes())
+        distances.append(np.max(np.abs(np.array(volumes)[away] - quasistatic.volumes[away])))
+        # Each snap: where the exchange between the segments peaks, against the fold.
+        flow = NetworkFlow(segments, network)
+        flow.set_flow(flow_rate)
+        late = []
+        for snap in snaps:
+            fine = np.linspace(snap - 0.5 * ML, snap + 1.0 * ML, 1501)
+            exchange = []
+            for injected in fine:
+                flow.advance(injected / flow_rate)
+                exchange.append(abs(flow.flows()[0]))
+            late.append(fine[int(np.argmax(exchange))] - snap)
+        delays.append(max(late))
+    # Off the snaps the path lags the quasi-static one in proportion to the flow (first order).
+    ratios = np.array(distances[:-1]) / np.array(distances[1:])
+    assert np.all(ratios > 8.0) and np.all(ratios < 12.5), distances
+    # The snaps come late by a delay that shrinks like flow^(2/3) (a saddle-node passage):
+    # at least 3x per decade, and within 5 uL of the quasi-static snap at the slowest.
+    delays = np.array(delays)
+    assert np.all(delays > -1e-3 * ML)
+    assert np.all(delays[:-1] > 3.0 * np.maximum(delays[1:], 1e-3 * ML)), delays
+    assert delays[-1] < 5e-3 * ML
+
+
+STEP_INDEPENDENCE = 1e-6   # of the volume scale, at every output, snap-throughs included
+
+
+def test_the_result_does_not_depend_on_the_step_the_tolerance_sets():
+    # The Fig. 1 asymmetric pair through both snap-throughs, a channel with inertance, at the
+    # default tolerance and at one 100x tighter: the integrator's steps differ, the answer not.
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap
+    from softseq_ros.scene.network import DEFAULT_NETWORK_RTOL
+
+    segments = load_scene('fig1_asymmetric').segments
+    emap = EquilibriumMap(segments)
+    grid = np.linspace(0.0, 0.95 * emap.injected_range[1], 500)
+    tube = Tube(0.01, 0.5e-3, inertance=True)
+    runs = []
+    for rtol in (DEFAULT_NETWORK_RTOL, DEFAULT_NETWORK_RTOL / 100):
+        flow = NetworkFlow(segments, NetworkSettings(Fluid(), None, (tube,), rtol=rtol))
+        flow.set_flow(1e-7)
+        volumes = []
+        for injected in grid:
+            flow.advance(injected / 1e-7)
+            volumes.append(flow.volumes())
+        runs.append((np.array(volumes), flow.steps))
+    (default, default_steps), (tight, tight_steps) = runs
+    assert tight_steps > 2 * default_steps
+    assert np.max(np.abs(default - tight)) < STEP_INDEPENDENCE * emap.v_scale
