@@ -7,7 +7,9 @@ form a series RLC circuit and ring with the damping ratio (R / 2) sqrt(C / L), C
 (C1 + C2). The sum of the volumes is the injected volume at every instant.
 """
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -228,3 +230,47 @@ def test_the_result_does_not_depend_on_the_step_the_tolerance_sets():
     (default, default_steps), (tight, tight_steps) = runs
     assert tight_steps > 2 * default_steps
     assert np.max(np.abs(default - tight)) < STEP_INDEPENDENCE * emap.v_scale
+
+
+def test_a_snap_through_is_an_event_with_a_start_the_fluid_it_moves_and_a_duration():
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+
+    segments = load_scene('fig1_asymmetric').segments
+    emap = EquilibriumMap(segments)
+    top = 0.95 * emap.injected_range[1]
+    expected = Tracker(emap).sweep(np.linspace(0.0, top, 2000)).events
+    flow = NetworkFlow(segments, NetworkSettings(Fluid(), None, (Tube(0.01, 0.5e-3),)))
+    flow.set_flow(1e-9)
+    flow.advance(top / 1e-9)
+    snaps = flow.take_snaps()
+    assert len(snaps) == len(expected) == 2
+    for snap, event in zip(snaps, expected):
+        # Slow pumping: the snap starts at the fold and lands where the quasi-static one does.
+        assert snap.injected == pytest.approx(event.injected, abs=0.05 * ML)
+        np.testing.assert_allclose(snap.to_volumes, event.to_volumes, atol=0.2 * ML)
+        moved = abs(event.from_volumes[0] - event.to_volumes[0])
+        assert snap.fluid_moved_m3 == pytest.approx(moved, rel=0.05)
+        assert 0.0 < snap.duration_s < snap.end_s - snap.start_s
+        assert snap.peak_exchange_m3_per_s > 100 * 1e-9
+    assert flow.take_snaps() == []
+
+
+def test_on_the_rig_a_snap_through_goes_out_on_the_events_topic(tmp_path):
+    import yaml
+
+    from softseq_ros.scene.validation import YamlLoader
+
+    data = yaml.load((Path(__file__).resolve().parents[1] / 'config' / 'fig1_asymmetric.yaml')
+                     .read_text(), Loader=YamlLoader)
+    data['pump'].update({'flow_rate_m3_per_s': 2e-7, 'legs': [{'inflate_to_m3': 3.0e-5}]})
+    data['camera'] = {'rate_hz': 1}
+    data['network'] = {'channels': [{'length_m': 0.01, 'radius_m': 0.5e-3}], 'rate_hz': 50}
+    scene = scene_from_dict(data, tmp_path / 'fig1_network.yaml')
+    BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    events = [json.loads(m.msg.data) for m in read_bag(tmp_path / 'bag', ['/actuator/events'])]
+    assert len(events) == 1
+    # The pump outruns the exchange: the snap starts past the fold of the quasi-static path.
+    assert 26.4 * ML < events[0]['injected_m3'] < 28.0 * ML
+    # The bottom takes the top's fluid (as long as the exchange outruns the pump fivefold).
+    assert events[0]['to_volumes_m3'][0] - events[0]['from_volumes_m3'][0] > 5 * ML
+    assert events[0]['to_volumes_m3'][1] < events[0]['from_volumes_m3'][1] - 5 * ML

@@ -20,6 +20,7 @@ Volumes are checked after every step: a segment that leaves its model's range en
 integration with :class:`NetworkDomainError` (the quasi-static solver refuses such a volume too).
 """
 
+from dataclasses import dataclass
 import math
 from typing import Sequence
 
@@ -74,6 +75,8 @@ class NetworkFlow:
         self.y = np.concatenate([self.rest[:-1], np.zeros(len(self.inertial))])
         self.peak_reynolds = [0.0] * len(self.laws)
         self.steps = 0
+        self.snaps = SnapWatcher(self.v_scale)
+        self.new_snaps: list[DynamicSnap] = []
         self._origin = (0.0, 0.0)   # (time, injected) where the current supply flow began
         self._solver: Radau | None = None
         self._dense = None
@@ -161,6 +164,7 @@ class NetworkFlow:
             self.steps += 1
             self._dense = solver.dense_output()
             self._check(solver.t, solver.y)
+            self._watch(solver.t, solver.y)
         y = self._dense(t) if self._dense is not None and solver.t > t else solver.y
         self.y = np.asarray(y, dtype=float)
         self.t = t
@@ -168,6 +172,23 @@ class NetworkFlow:
         pressures = self.pressures(self.volumes())
         for j, flow in enumerate(self.channel_flows(self.y, pressures)):
             self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
+
+    def _watch(self, t: float, y: FloatArray) -> None:
+        injected = self._injected_at(t)
+        volumes = self.volumes_of(y, injected)
+        rates = self._rhs(t, y)[:self.n - 1]
+        # The tip's rate from mass: the pump's flow less the others'.
+        rates = np.append(rates, self.flow - float(np.sum(rates)))
+        pressure = float(self.pressures(volumes)[0])
+        snap = self.snaps.observe(t, injected, volumes, pressure,
+                                  exchange_flow(rates, self.flow), self.flow)
+        if snap is not None:
+            self.new_snaps.append(snap)
+
+    def take_snaps(self) -> list['DynamicSnap']:
+        """The snap-throughs completed since the last call."""
+        found, self.new_snaps = self.new_snaps, []
+        return found
 
     def _check(self, t: float, y: FloatArray) -> None:
         volumes = self.volumes_of(y, self._injected_at(t))
@@ -206,3 +227,84 @@ def damping_ratio(resistance: float, inertance: float, compliances: Sequence[flo
     """Zeta = (R / 2) sqrt(C / L) of the series RLC the two segments and the channel form."""
     c1, c2 = compliances
     return 0.5 * resistance * math.sqrt(c1 * c2 / (c1 + c2) / inertance)
+
+
+# A snap-through, as the network lives it: fluid exchanged between the segments faster than
+# this many times the pump's flow, and more of it than this share of the volume scale.
+SNAP_EXCHANGE_PER_FLOW = 5.0
+SNAP_SHARE_OF_SCALE = 1e-3
+
+
+@dataclass
+class DynamicSnap:
+    """
+    A snap-through in time: where it started and ended, the fluid it moved, how fast, how long.
+
+    ``injected`` [m^3] and ``start_s`` [s]: where the exchange first outran the pump;
+    ``duration_s``: from 10 % to 90 % of the fluid moved; ``peak_exchange_m3_per_s``: the
+    fastest exchange; ``fluid_moved_m3``: the fluid exchanged between the segments beyond
+    what the pump pushed; volumes and pressures (gauge, at the base) before and after.
+    """
+
+    injected: float
+    start_s: float
+    end_s: float
+    duration_s: float
+    fluid_moved_m3: float
+    peak_exchange_m3_per_s: float
+    from_volumes: list[float]
+    to_volumes: list[float]
+    from_pressure: float
+    to_pressure: float
+
+
+def exchange_flow(volume_rates: FloatArray, supply_flow: float) -> float:
+    """Fluid moving between the segments beyond the pump's flow [m^3/s]."""
+    return 0.5 * max(float(np.sum(np.abs(volume_rates))) - abs(supply_flow), 0.0)
+
+
+class SnapWatcher:
+    """Finds snap-throughs in the network's steps: episodes of fast exchange, timed."""
+
+    def __init__(self, v_scale: float) -> None:
+        """Episodes must move more than SNAP_SHARE_OF_SCALE of ``v_scale``."""
+        self.v_scale = v_scale
+        self.found: list[DynamicSnap] = []
+        # (time, injected, exchange, volumes, pressure) of the steps of the episode under way
+        self._episode: list[tuple[float, float, float, FloatArray, float]] | None = None
+        self._last: tuple[float, float, float, FloatArray, float] | None = None
+
+    def observe(self, t: float, injected: float, volumes: FloatArray, pressure: float,
+                exchange: float, supply_flow: float) -> DynamicSnap | None:
+        """One step's state; a snap when an episode of fast exchange has just ended."""
+        fast = exchange > SNAP_EXCHANGE_PER_FLOW * abs(supply_flow) and exchange > 0.0
+        sample = (t, injected, exchange, volumes.copy(), pressure)
+        if fast:
+            if self._episode is None:
+                # The episode starts at the last calm step: the state before the snap.
+                self._episode = [self._last] if self._last is not None else []
+            self._episode.append(sample)
+            self._last = sample
+            return None
+        self._last = sample
+        if self._episode is None:
+            return None
+        episode, self._episode = self._episode + [sample], None
+        return self._close(episode)
+
+    def _close(self, episode: list) -> DynamicSnap | None:
+        times = np.array([s[0] for s in episode])
+        rates = np.array([s[2] for s in episode])
+        # The fluid moved: the exchange integrated over the episode (trapezoids on the steps).
+        moved = np.concatenate([[0.0], np.cumsum(0.5 * (rates[1:] + rates[:-1])
+                                                 * np.diff(times))])
+        total = float(moved[-1])
+        if total <= SNAP_SHARE_OF_SCALE * self.v_scale:
+            return None
+        t10, t90 = np.interp([0.1 * total, 0.9 * total], moved, times)
+        first, last = episode[0], episode[-1]
+        snap = DynamicSnap(float(first[1]), float(first[0]), float(last[0]), float(t90 - t10),
+                           total, float(rates.max()), [float(v) for v in first[3]],
+                           [float(v) for v in last[3]], float(first[4]), float(last[4]))
+        self.found.append(snap)
+        return snap

@@ -211,7 +211,8 @@ class DynamicModel:
     injected volume there, evenly since the last command, and keeps pushing it (as a pump on
     a ramp does) for as long again; then it holds. A command older than the model's time (a
     late message) puts its difference into the base segment at once. The model advances at
-    ``rate_hz`` on its driver's clock. Its reach and end stop are the quasi-static ones
+    ``rate_hz`` on its driver's clock; a snap-through (softseq_ros.dynamic.flow.DynamicSnap) is
+    reported when it has run its course. Its reach and end stop are the quasi-static ones
     (``reach``): a transient may still carry a segment past its curve, which is refused then.
     """
 
@@ -264,7 +265,7 @@ class DynamicModel:
         else:
             network.set_flow(0.0)
             self._flow_until = t
-        return []
+        return network.take_snaps()
 
     def advance(self, now_ns: int) -> list[Snap] | None:
         """Let the fluid move until ``now_ns``; None when no time passed."""
@@ -272,7 +273,7 @@ class DynamicModel:
         if t <= self.flow_network.t:
             return None
         self._run_to(t)
-        return []
+        return self.flow_network.take_snaps()
 
     def state(self) -> ModelState:
         """Pressure at the syringe (gauge), segment volumes and curvatures now."""
