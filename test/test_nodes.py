@@ -506,8 +506,12 @@ def test_two_namespaced_rigs_run_side_by_side_without_crosstalk(context, tmp_pat
         stamps = {stamp_ns(c.header) for c in commands}
         assert all(stamp_ns(m.header) in stamps for m in got[f'{namespace}/actuator/volumes'])
         peaks.append(max(c.position[0] for c in commands))
-    # Each rig followed its own programme (sampled at 100 Hz: within one tick of the top).
-    assert 2.9e-5 < peaks[0] <= 3.0e-5 and 1.1e-5 < peaks[1] <= 1.2e-5
+    # Each rig followed its own programme: never past its own top, and near it. The pump
+    # samples its programme on wall-clock ticks (100 Hz); on a loaded machine a tick may come
+    # late and miss the top, so "near" allows a quarter second of the 20 mL/s flow (5 mL),
+    # still far from the other rig's top.
+    stall = 0.25 * 2.0e-5
+    assert 3.0e-5 - stall < peaks[0] <= 3.0e-5 and 1.2e-5 - stall < peaks[1] <= 1.2e-5
     assert not any('publishers' in w for w in warnings), warnings
 
 
