@@ -106,7 +106,9 @@ class NetworkFlow:
         start_t, start_injected = self._origin
         return start_injected + self.flow * (t - start_t)
 
-    def _rhs(self, t: float, y: FloatArray) -> FloatArray:
+    def _balance(self, t: float, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                              FloatArray]:
+        """Volumes, pressures, channel flows and the state's rates at time ``t``."""
         volumes = self.volumes_of(y, self._injected_at(t))
         pressures = self.pressures(volumes)
         flows = self.channel_flows(y, pressures)
@@ -114,7 +116,10 @@ class NetworkFlow:
         dv = inflow[:self.n - 1] - flows[:self.n - 1]
         dq = [(pressures[j] - pressures[j + 1] - self.laws[j].drop(flows[j]))
               / self.laws[j].inertance for j in self.inertial]
-        return np.concatenate([dv, dq])
+        return volumes, pressures, flows, np.concatenate([dv, dq])
+
+    def _rhs(self, t: float, y: FloatArray) -> FloatArray:
+        return self._balance(t, y)[3]
 
     # ------------------------------------------------------------------ time
 
@@ -163,35 +168,23 @@ class NetworkFlow:
                                          f'{solver.t:.6g} s: {message}')
             self.steps += 1
             self._dense = solver.dense_output()
-            self._check(solver.t, solver.y)
-            self._watch(solver.t, solver.y)
+            self._after_step(solver.t, solver.y)
         y = self._dense(t) if self._dense is not None and solver.t > t else solver.y
         self.y = np.asarray(y, dtype=float)
         self.t = t
         self.injected = self._injected_at(t)
-        pressures = self.pressures(self.volumes())
-        for j, flow in enumerate(self.channel_flows(self.y, pressures)):
+        for j, flow in enumerate(self.flows()):
             self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
-
-    def _watch(self, t: float, y: FloatArray) -> None:
-        injected = self._injected_at(t)
-        volumes = self.volumes_of(y, injected)
-        rates = self._rhs(t, y)[:self.n - 1]
-        # The tip's rate from mass: the pump's flow less the others'.
-        rates = np.append(rates, self.flow - float(np.sum(rates)))
-        pressure = float(self.pressures(volumes)[0])
-        snap = self.snaps.observe(t, injected, volumes, pressure,
-                                  exchange_flow(rates, self.flow), self.flow)
-        if snap is not None:
-            self.new_snaps.append(snap)
 
     def take_snaps(self) -> list['DynamicSnap']:
         """The snap-throughs completed since the last call."""
         found, self.new_snaps = self.new_snaps, []
         return found
 
-    def _check(self, t: float, y: FloatArray) -> None:
-        volumes = self.volumes_of(y, self._injected_at(t))
+    def _after_step(self, t: float, y: FloatArray) -> None:
+        """Refuse a volume beyond its segment's curve; watch for snap-throughs."""
+        volumes, pressures, _, rates = self._balance(t, y)
+        injected = self._injected_at(t)
         slack = 1e-9 * self.v_scale
         outside = np.flatnonzero((volumes < self.rest - slack) | (volumes > self.full + slack))
         if outside.size:
@@ -199,7 +192,13 @@ class NetworkFlow:
             edge = 'its rest volume' if volumes[i] < self.rest[i] else 'the end of its curve'
             raise NetworkDomainError(
                 f'segment {self.segments[i].name} passes {edge} at {t:.6g} s '
-                f'({volumes[i]:.6g} m^3, injected {self._injected_at(t):.6g} m^3)')
+                f'({volumes[i]:.6g} m^3, injected {injected:.6g} m^3)')
+        # The tip's rate from mass: the pump's flow less the others'.
+        volume_rates = np.append(rates[:self.n - 1], self.flow - float(np.sum(rates[:self.n - 1])))
+        snap = self.snaps.observe(t, injected, volumes, float(pressures[0]),
+                                  exchange_flow(volume_rates, self.flow), self.flow)
+        if snap is not None:
+            self.new_snaps.append(snap)
 
     # ------------------------------------------------------------------ the state now
 

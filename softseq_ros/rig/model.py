@@ -222,7 +222,7 @@ class DynamicModel:
         self.flow_network = NetworkFlow(segments, network)
         self.names = tuple(names)
         self.segments = tuple(segments)
-        self.rest_volume_m3 = float(sum(s.rest_volume for s in segments))
+        self.rest_volume_m3 = self.flow_network.rest_total
         self.rate_hz = network.rate_hz
         self.reach = reach
         self._origin_ns: int | None = None

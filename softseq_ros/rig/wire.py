@@ -250,16 +250,6 @@ JSON_PAYLOADS_BY_TOPIC: dict[str, JsonPayload] = {
     codec.topic.name: codec for codec in JSON_PAYLOADS.values()}
 
 
-def pump_status_json(value: PumpStatus) -> str:
-    """The JSON text ``pump/status`` carries."""
-    return PUMP_STATUS_JSON.text(value)
-
-
-def scene_identity_json(value: SceneIdentity) -> str:
-    """The JSON text ``actuator/scene`` carries."""
-    return SCENE_IDENTITY_JSON.text(value)
-
-
 # ---------------------------------------------------------------- values -> CDR bytes
 
 _COMMAND_PACK, _COMMAND_BLOCK = joint_state_packer('', _SYRINGE, (1, 1, 0))
