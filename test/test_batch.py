@@ -32,8 +32,9 @@ from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
+# A quasi-static scene has no channels: no channel flows.
 RECORDED = tuple(contract.resolve(topic.name) for topic in contract.RIG_TOPICS
-                 if topic is not contract.IMAGE)
+                 if topic not in (contract.IMAGE, contract.CHANNEL_FLOWS))
 START_NS = 1_795_000_000 * 10**9   # 2026-11-18, a fixed date for reproducible bags
 
 

@@ -28,6 +28,7 @@ class LaggingModel:
         self.segments = inner.segments
         self.rest_volume_m3 = inner.rest_volume_m3
         self.rate_hz = rate_hz
+        self.channel_names = inner.channel_names
         self.lag_ns = round(lag_s * NS)
         self._pending: deque[tuple[int, float]] = deque()
 
@@ -59,6 +60,12 @@ class LaggingModel:
 
     def check_programme(self, scene, profile):
         self.inner.check_programme(scene, profile)
+
+    def channel_state(self):
+        return self.inner.channel_state()
+
+    def take_warnings(self):
+        return self.inner.take_warnings()
 
 
 def test_a_model_with_time_is_advanced_at_its_rate_and_recorded(tmp_path):

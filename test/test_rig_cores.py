@@ -60,7 +60,8 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
     for topic in contract.RIG_TOPICS:
         assert not topic.name.startswith('/'), topic.name
         assert topic.producer in contract.NODE_NAMES
-        assert topic.output is None or topic.output in contract.OUTPUT_NAMES
+        assert topic.output is None or topic.output in contract.OUTPUT_NAMES \
+            or contract.DERIVED_OUTPUTS.get(topic.output) in contract.OUTPUT_NAMES
     # Every topic has exactly one value type, and every consumed topic's value type is one
     # that the consuming core's handle takes (it would otherwise be silently dropped).
     assert sorted(kind.topic.name for kind in TOPIC_VALUE_TYPES) == \
@@ -71,7 +72,8 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
     assert {t.name for t in contract.consumed_by(contract.CAMERA)} == {
         'actuator/volumes', 'actuator/curvatures'}
     # Every output a scene may list switches some topic on.
-    assert {t.output for t in contract.RIG_TOPICS} - {None} == set(contract.OUTPUT_NAMES)
+    assert {t.output for t in contract.RIG_TOPICS} - {None} == \
+        set(contract.OUTPUT_NAMES) | set(contract.DERIVED_OUTPUTS)
     assert contract.resolve('pump/command', '/rig2') == '/rig2/pump/command'
     assert contract.resolve('pump/command') == '/pump/command'
     assert contract.relative_name('/rig2/pump/command', '/rig2') == 'pump/command'

@@ -206,7 +206,7 @@ def test_the_keys_written_are_the_fields_and_each_is_needed_to_decode(codec):
     written = json.loads(codec.text(value))
     assert tuple(written) == codec.names
     fields = {field.name for field in dataclasses.fields(codec.value_type)}
-    assert set(written) | {STAMP_KEY} == fields
+    assert set(written) | {STAMP_KEY} | {key for key, _ in codec.optional} == fields
     # A key the encoder writes but the decoder does not read would survive its removal.
     for key in written:
         partial = json.dumps({k: v for k, v in written.items() if k != key})
@@ -216,6 +216,27 @@ def test_the_keys_written_are_the_fields_and_each_is_needed_to_decode(codec):
     # Keys the decoder does not know are left alone (a newer writer may add some).
     extra = json.dumps({**written, 'added_later': [1, 2]})
     assert _same(codec.decode(extra, **_stamp(value)), value)
+
+
+def test_a_snap_through_in_time_adds_its_timing_after_the_keys_a_quasi_static_one_has():
+    instant = EXAMPLE[SnapThrough]
+    timed = dataclasses.replace(instant, start_ns=1_700_000_000_123_456_789, duration_s=0.0125,
+                                fluid_moved_m3=2.3e-5, peak_exchange_m3_per_s=1.5e-6)
+    text = SNAP_THROUGH_JSON.text(timed)
+    written = json.loads(text)
+    # The quasi-static keys first, in their order and with their values; the timing after.
+    assert list(written)[:len(SNAP_THROUGH_JSON.names)] == list(SNAP_THROUGH_JSON.names)
+    assert text.startswith(SNAP_THROUGH_JSON.text(instant)[:-1] + ', ')
+    assert written['start_ns'] == 1_700_000_000_123_456_789 and written['duration_s'] == 0.0125
+    decoded = SNAP_THROUGH_JSON.decode(text, stamp_ns=instant.stamp_ns)
+    assert decoded == timed
+    # Without them a snap-through reads back as instantaneous.
+    assert SNAP_THROUGH_JSON.decode(SNAP_THROUGH_JSON.text(instant),
+                                    stamp_ns=instant.stamp_ns).duration_s is None
+    with pytest.raises(PayloadError) as refused:
+        SNAP_THROUGH_JSON.decode(json.dumps({**written, 'duration_s': 'long'}),
+                                 stamp_ns=instant.stamp_ns)
+    assert refused.value.field == 'duration_s'
 
 
 def test_a_codec_whose_keys_are_not_its_values_fields_is_refused_at_once():

@@ -68,7 +68,8 @@ class ActuatorNode(CoreNode):
             'name and namespace); empty: off, every start at rest.', read_only=True)
         self.core = actuator_core(scene, outputs=frozenset(outputs),
                                   ambient_pressure_pa=ambient, state_file=state_file or None)
-        self.connect(frozenset(outputs))
+        # The core's own outputs: those its model can give (no flows without channels).
+        self.connect(self.core.outputs)
         self.send(self.core.begin(self.now_ns()))  # the scene it runs, latched
         self._warned_publishers: frozenset[str] = frozenset()
         command = self.subscription(contract.PUMP_COMMAND)

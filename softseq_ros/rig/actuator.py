@@ -5,8 +5,10 @@ Each :class:`PumpCommand` goes to the actuator's model (softseq_ros.rig.model: t
 equilibrium by default, whose jump rule makes a dropped command harmless). The outputs the
 ``outputs`` set lists go out stamped with the command's stamp (the state at the commanded
 instant, so a listener pairs them exactly): pressure (absolute: gauge +
-``ambient_pressure_pa``), volumes (with the gauge pressure), curvatures, and one
-:class:`SnapThrough` per snap. A model whose state moves between commands (one with a
+``ambient_pressure_pa``), volumes (with the gauge pressure), curvatures, the channel flows
+of a model with channels, and one :class:`SnapThrough` per snap (with its duration when the
+model lives it in time). The model's warnings (a channel no longer laminar) go to the log.
+A model whose state moves between commands (one with a
 ``rate_hz``) is advanced by :meth:`ActuatorCore.tick`, whose outputs carry the tick's time.
 
 At start (:meth:`begin`) it says once which scene's segments it runs (name, segment names,
@@ -28,11 +30,12 @@ import os
 from pathlib import Path
 
 from softseq_ros.rig import contract
-from softseq_ros.rig.model import ActuatorModel, CommandRefusedError, Snap
+from softseq_ros.rig.model import ActuatorModel, CommandRefusedError, Snap, TimedSnap
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.rig.values import (
     INFO,
     WARNING,
+    ChannelFlows,
     Notice,
     Output,
     Pressure,
@@ -44,7 +47,7 @@ from softseq_ros.rig.values import (
 )
 from softseq_ros.segments.identity import segments_sha256
 
-ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events')
+ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events', 'flows')
 MAX_BUFFERED_COMMANDS = 100_000
 
 
@@ -64,7 +67,10 @@ class ActuatorCore:
         self.scene_name = scene_name
         # The digest of the segments the model runs: what this actuator is.
         self.segments_sha256 = segments_sha256(model.segments)
-        self.outputs = frozenset(name for name in outputs if name in ACTUATOR_OUTPUTS)
+        # The channel flows go with the volumes, for a model with channels (none: no topic).
+        derived = {'flows'} if model.channel_names and \
+            contract.DERIVED_OUTPUTS['flows'] in outputs else set()
+        self.outputs = frozenset(name for name in outputs if name in ACTUATOR_OUTPUTS) | derived
         self.ambient_pressure_pa = ambient_pressure_pa
         self.state_file = state_file
         self._state_folder_made = False
@@ -76,6 +82,7 @@ class ActuatorCore:
         self._send_volumes = 'volumes' in self.outputs
         self._send_curvatures = 'curvature' in self.outputs
         self._send_events = 'events' in self.outputs
+        self._send_flows = 'flows' in self.outputs
 
     def begin(self, now: int) -> list[Output]:
         """What the actuator says once at start: which scene's segments it runs."""
@@ -137,14 +144,27 @@ class ActuatorCore:
             out.append(SegmentVolumes(stamp, self.names, state.volumes, pressure))
         if self._send_curvatures:
             out.append(SegmentCurvatures(stamp, self.names, state.curvatures))
+        if self._send_flows:
+            flows, drops = self.model.channel_state()
+            out.append(ChannelFlows(stamp, self.model.channel_names, flows, drops))
         for snap in snaps:
-            out.append(Notice(self.role, INFO,
-                              f'snap-through at {snap.injected * 1e6:.4f} mL injected'))
+            event = SnapThrough(stamp, float(snap.injected),
+                                [float(v) for v in snap.from_volumes],
+                                [float(v) for v in snap.to_volumes],
+                                float(snap.from_pressure), float(snap.to_pressure))
+            said = f'snap-through at {snap.injected * 1e6:.4f} mL injected'
+            if isinstance(snap, TimedSnap):
+                event.start_ns = snap.start_ns
+                event.duration_s = float(snap.duration_s)
+                event.fluid_moved_m3 = float(snap.fluid_moved_m3)
+                event.peak_exchange_m3_per_s = float(snap.peak_exchange_m3_per_s)
+                said += (f', {snap.fluid_moved_m3 * 1e6:.3f} mL moved in '
+                         f'{snap.duration_s * 1e3:.3g} ms (10-90 %)')
+            out.append(Notice(self.role, INFO, said))
             if self._send_events:
-                out.append(SnapThrough(stamp, float(snap.injected),
-                                       [float(v) for v in snap.from_volumes],
-                                       [float(v) for v in snap.to_volumes],
-                                       float(snap.from_pressure), float(snap.to_pressure)))
+                out.append(event)
+        for line in self.model.take_warnings():
+            out.append(Notice(self.role, WARNING, line))
         return out
 
     # ---------------------------------------------------------------- state

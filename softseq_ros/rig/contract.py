@@ -74,9 +74,19 @@ VOLUMES = Topic(
 CURVATURES = Topic(
     'actuator/curvatures', 'sensor_msgs/msg/JointState', Qos(100), ACTUATOR, (CAMERA,),
     'curvature', 'one joint per segment: position = curvature [1/m]')
+# The channel flows are the other half of the volumes' state: on with them, for an actuator
+# whose model has channels (a scene with a network). So 'flows' is a core's output that no
+# scene lists: the actuator derives it (DERIVED_OUTPUTS: what it goes with).
+DERIVED_OUTPUTS: dict[str, str] = {'flows': 'volumes'}
+CHANNEL_FLOWS = Topic(
+    'actuator/channel_flows', 'sensor_msgs/msg/JointState', Qos(100), ACTUATOR, (), 'flows',
+    'one joint per channel, base to tip, named <segment>_to_<segment>: velocity = flow '
+    '[m^3/s], positive towards the tip; effort = pressure drop along it [Pa]')
 EVENTS = Topic(
     'actuator/events', 'std_msgs/msg/String', Qos(100, latched=True), ACTUATOR, (), 'events',
-    'JSON per snap-through: injected_m3, from/to_volumes_m3, from/to_pressure_pa (gauge)')
+    'JSON per snap-through: injected_m3, from/to_volumes_m3, from/to_pressure_pa (gauge); in '
+    'time (a scene with a network) also start_ns, duration_s (10 % to 90 % of the fluid '
+    'moved), fluid_moved_m3, peak_exchange_m3_per_s')
 # Which scene's segments the actuator runs, as ROS keeps a robot's description: latched, so
 # a recorder that starts later still gets it, and every bag can name the physics behind it.
 SCENE = Topic(
@@ -100,8 +110,8 @@ IMAGE = Topic(
     'rgb8 side view, rendered only while someone subscribes')
 
 RIG_TOPICS: tuple[Topic, ...] = (PUMP_COMMAND, PUMP_STATUS, PRESSURE, VOLUMES, CURVATURES,
-                                 EVENTS, SCENE, BACKBONE, SNAPSHOTS, SNAPSHOT_STEPS, MARKERS,
-                                 IMAGE)
+                                 CHANNEL_FLOWS, EVENTS, SCENE, BACKBONE, SNAPSHOTS,
+                                 SNAPSHOT_STEPS, MARKERS, IMAGE)
 TOPICS_BY_NAME: dict[str, Topic] = {topic.name: topic for topic in RIG_TOPICS}
 
 # The simulated clock is ROS's own (absolute by convention); QoS as rclpy's TimeSource takes it.

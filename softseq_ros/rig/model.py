@@ -28,12 +28,13 @@ import math
 from typing import Protocol, Sequence
 
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
+from softseq_ros.dynamic.network import LAMINAR_REYNOLDS
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
 from softseq_ros.quasistatic.solve import build_map
 from softseq_ros.scene.loader import Scene
-from softseq_ros.scene.network import NetworkSettings
+from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
@@ -61,12 +62,35 @@ class Snap(Protocol):
     to_pressure: float
 
 
+@dataclass(frozen=True)
+class TimedSnap:
+    """
+    A snap-through that took time (the dynamic model): a :class:`Snap` and its timing.
+
+    ``start_ns``: when the exchange began, on the driver's clock; ``duration_s``: 10 % to 90 %
+    of the fluid moved; ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``: between the
+    segments, beyond the pump's own flow (softseq_ros.dynamic.flow.DynamicSnap).
+    """
+
+    injected: float
+    from_volumes: list[float]
+    to_volumes: list[float]
+    from_pressure: float
+    to_pressure: float
+    start_ns: int
+    duration_s: float
+    fluid_moved_m3: float
+    peak_exchange_m3_per_s: float
+
+
 class ActuatorModel(Protocol):
     """What the actuator core needs from a physics model of its segments."""
 
     segments: tuple[Segment, ...]
     rest_volume_m3: float
     rate_hz: float | None
+    # The channels between the segments, base to tip (empty: the model has none to report).
+    channel_names: tuple[str, ...]
 
     def command(self, injected_m3: float, now_ns: int) -> list[Snap] | None:
         """
@@ -94,6 +118,12 @@ class ActuatorModel(Protocol):
 
     def check_programme(self, scene: Scene, profile: PumpProfile) -> None:
         """Refuse (ProgrammeError, or SceneError for the scene's own) a programme it cannot run."""
+
+    def channel_state(self) -> tuple[list[float], list[float]]:
+        """Each channel's flow [m^3/s] and pressure drop [Pa] now (empty lists: none)."""
+
+    def take_warnings(self) -> list[str]:
+        """What the model found doubtful since the last call (one line each)."""
 
 
 # The maps a process keeps: enough for the rigs of a few scenes side by side, bounded so that a
@@ -124,6 +154,7 @@ class QuasiStaticModel:
     """The equilibrium the volume history leads to, at once (snap-throughs, hysteresis)."""
 
     rate_hz = None   # nothing happens between commands
+    channel_names: tuple[str, ...] = ()
 
     def __init__(self, emap: EquilibriumMap, names: Sequence[str]) -> None:
         """A model at rest on the map ``emap`` of segments ``names`` (base to tip)."""
@@ -190,6 +221,14 @@ class QuasiStaticModel:
         else:
             check_reach(profile, self.emap, self.names)
 
+    def channel_state(self) -> tuple[list[float], list[float]]:
+        """No channels: the fluid is everywhere at once."""
+        return [], []
+
+    def take_warnings(self) -> list[str]:
+        """The equilibrium has nothing to doubt."""
+        return []
+
 
 NS_PER_S = 1_000_000_000
 
@@ -221,6 +260,9 @@ class DynamicModel:
         """At rest; the clock starts at the first command or tick."""
         self.flow_network = NetworkFlow(segments, network)
         self.names = tuple(names)
+        self.channel_names = channel_names(self.names)
+        self._turbulent = [tube.friction != LAMINAR for tube in network.channels]
+        self._warned = [False] * len(network.channels)
         self.segments = tuple(segments)
         self.rest_volume_m3 = self.flow_network.rest_total
         self.rate_hz = network.rate_hz
@@ -265,7 +307,7 @@ class DynamicModel:
         else:
             network.set_flow(0.0)
             self._flow_until = t
-        return network.take_snaps()
+        return self._take_snaps()
 
     def advance(self, now_ns: int) -> list[Snap] | None:
         """Let the fluid move until ``now_ns``; None when no time passed."""
@@ -273,7 +315,33 @@ class DynamicModel:
         if t <= self.flow_network.t:
             return None
         self._run_to(t)
-        return self.flow_network.take_snaps()
+        return self._take_snaps()
+
+    def _take_snaps(self) -> list[TimedSnap]:
+        origin = self._origin_ns or 0
+        return [TimedSnap(snap.injected, snap.from_volumes, snap.to_volumes, snap.from_pressure,
+                          snap.to_pressure, origin + round(snap.start_s * NS_PER_S),
+                          snap.duration_s, snap.fluid_moved_m3, snap.peak_exchange_m3_per_s)
+                for snap in self.flow_network.take_snaps()]
+
+    def channel_state(self) -> tuple[list[float], list[float]]:
+        """Each channel's flow [m^3/s] towards the tip and pressure drop [Pa] now."""
+        network = self.flow_network
+        pressures = network.pressures(network.volumes())
+        return ([float(q) for q in network.flows()],
+                [float(pressures[j] - pressures[j + 1]) for j in range(len(network.laws))])
+
+    def take_warnings(self) -> list[str]:
+        """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
+        lines = []
+        for j, peak in enumerate(self.flow_network.peak_reynolds):
+            if peak > LAMINAR_REYNOLDS and not self._warned[j]:
+                self._warned[j] = True
+                law = ('its friction follows Blasius' if self._turbulent[j] else
+                       'the laminar law underestimates its drop: give it friction: blasius')
+                lines.append(f'channel {self.channel_names[j]}: Reynolds number {peak:.0f} '
+                             f'above {LAMINAR_REYNOLDS:.0f}, no longer laminar ({law})')
+        return lines
 
     def state(self) -> ModelState:
         """Pressure at the syringe (gauge), segment volumes and curvatures now."""

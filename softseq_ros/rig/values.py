@@ -73,8 +73,25 @@ class SegmentCurvatures:
 
 
 @dataclass(slots=True)
+class ChannelFlows:
+    """Each channel's flow [m^3/s] (positive towards the tip) and pressure drop [Pa]."""
+
+    topic: ClassVar[Topic] = contract.CHANNEL_FLOWS
+    stamp_ns: int
+    names: tuple[str, ...]
+    flows_m3_per_s: list[float]
+    drops_pa: list[float]
+
+
+@dataclass(slots=True)
 class SnapThrough:
-    """A snap-through at ``injected_m3``: from one state to another (gauge pressures)."""
+    """
+    A snap-through at ``injected_m3``: from one state to another (gauge pressures).
+
+    A snap-through in time (the dynamic model) says more: when it started (``start_ns``), how
+    long it took (``duration_s``, 10 % to 90 % of the fluid moved), the fluid it moved between
+    the segments and its peak exchange flow; None for a quasi-static one (instantaneous).
+    """
 
     topic: ClassVar[Topic] = contract.EVENTS
     stamp_ns: int
@@ -83,6 +100,10 @@ class SnapThrough:
     to_volumes_m3: list[float]
     from_pressure_pa: float
     to_pressure_pa: float
+    start_ns: int | None = None
+    duration_s: float | None = None
+    fluid_moved_m3: float | None = None
+    peak_exchange_m3_per_s: float | None = None
 
 
 @dataclass(slots=True)
@@ -162,9 +183,9 @@ class Notice:
 
 
 TOPIC_VALUE_TYPES = (PumpCommand, PumpStatus, Pressure, SegmentVolumes, SegmentCurvatures,
-                     SnapThrough, SceneIdentity, Backbone, Snapshot, SnapshotStep, Markers,
-                     SideImage)
+                     ChannelFlows, SnapThrough, SceneIdentity, Backbone, Snapshot, SnapshotStep,
+                     Markers, SideImage)
 TopicValue = (PumpCommand | PumpStatus | Pressure | SegmentVolumes | SegmentCurvatures
-              | SnapThrough | SceneIdentity | Backbone | Snapshot | SnapshotStep | Markers
-              | SideImage)
+              | ChannelFlows | SnapThrough | SceneIdentity | Backbone | Snapshot | SnapshotStep
+              | Markers | SideImage)
 Output = TopicValue | Notice

@@ -31,6 +31,7 @@ from softseq_ros.rig.contract import FRAME_ID
 from softseq_ros.rig.render import SEGMENT_RGB
 from softseq_ros.rig.values import (
     Backbone,
+    ChannelFlows,
     Markers,
     Pressure,
     PumpCommand,
@@ -114,17 +115,26 @@ class JsonPayload:
     """
 
     def __init__(self, value_type: type, what: str, keys: tuple[tuple[str, str], ...],
-                 check: Callable[[Any], tuple[str, str] | None] | None = None) -> None:
-        """A codec for ``value_type`` (a values class with a String ``topic``)."""
+                 check: Callable[[Any], tuple[str, str] | None] | None = None,
+                 optional: tuple[tuple[str, str], ...] = ()) -> None:
+        """
+        A codec for ``value_type`` (a values class with a String ``topic``).
+
+        ``optional`` keys come after ``keys``, each written only when the value's field is not
+        None and read back as None when absent: a payload that gains them keeps the bytes of
+        every value that has none.
+        """
         fields = {field.name for field in dataclasses.fields(value_type)}
         names = tuple(key for key, _ in keys)
-        unknown = set(names) - fields - {STAMP_KEY}
-        missing = fields - set(names) - {STAMP_KEY}
-        if unknown or missing or STAMP_KEY not in fields or len(set(names)) != len(names) \
-                or any(kind not in _KINDS for _, kind in keys):
-            raise TypeError(f'{value_type.__name__}: JSON keys {names} do not match its fields '
+        every = names + tuple(key for key, _ in optional)
+        unknown = set(every) - fields - {STAMP_KEY}
+        missing = fields - set(every) - {STAMP_KEY}
+        if unknown or missing or STAMP_KEY not in fields or len(set(every)) != len(every) \
+                or any(kind not in _KINDS for _, kind in keys + optional):
+            raise TypeError(f'{value_type.__name__}: JSON keys {every} do not match its fields '
                             f'(not fields: {sorted(unknown)}, fields left out: {sorted(missing)})')
         self.value_type, self.what, self.keys, self.check = value_type, what, keys, check
+        self.optional = optional
         self.names = names
         self.topic = value_type.topic
 
@@ -143,6 +153,10 @@ class JsonPayload:
         for key, kind in self.keys:
             item = getattr(value, key)
             out[key] = list(item) if kind in ('floats', 'strs') else item
+        for key, kind in self.optional:
+            item = getattr(value, key)
+            if item is not None:
+                out[key] = list(item) if kind in ('floats', 'strs') else item
         return out
 
     def text(self, value: Any) -> str:
@@ -172,10 +186,12 @@ class JsonPayload:
         if type(data) is not dict:
             raise self._error(None, f'not a JSON object: {_short(data)}', text)
         values = {}
-        for key, kind in self.keys:
+        for key, kind in self.keys + self.optional:
             if key not in data:
                 if key == STAMP_KEY and stamp_ns is not None:
                     values[key] = stamp_ns
+                    continue
+                if (key, kind) in self.optional:
                     continue
                 raise self._error(key, f'no key {key}; expected {", ".join(self.names)}',
                                   text)
@@ -231,7 +247,10 @@ PUMP_STATUS_JSON = JsonPayload(
 SNAP_THROUGH_JSON = JsonPayload(
     SnapThrough, 'snap-through event',
     (('injected_m3', 'float'), ('from_volumes_m3', 'floats'), ('to_volumes_m3', 'floats'),
-     ('from_pressure_pa', 'float'), ('to_pressure_pa', 'float')))
+     ('from_pressure_pa', 'float'), ('to_pressure_pa', 'float')),
+    # A snap-through in time: a quasi-static one has none of these (and its bytes stay).
+    optional=(('start_ns', 'int'), ('duration_s', 'float'), ('fluid_moved_m3', 'float'),
+              ('peak_exchange_m3_per_s', 'float')))
 SCENE_IDENTITY_JSON = JsonPayload(
     SceneIdentity, 'scene identity',
     (('scene', 'str'), ('segments', 'strs'), ('segments_sha256', 'str'), (STAMP_KEY, 'int')),
@@ -265,6 +284,7 @@ def _pump_command(value: PumpCommand) -> bytes:
 # for curvatures (positions only); a rig sends one set of names for hours.
 _volume_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
 _curvature_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
+_channel_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
 
 
 def _pressure(value: Pressure) -> bytes:
@@ -294,6 +314,17 @@ def _curvatures(value: SegmentCurvatures) -> bytes:
     sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
     return ENCAPSULATION + pack(sec, nanosec, block, len(curvatures), *curvatures, 0, 0)
 
+
+
+def _channel_flows(value: ChannelFlows) -> bytes:
+    names, flows, drops = value.names, value.flows_m3_per_s, value.drops_pa
+    packer = _channel_packers.get(names)
+    if packer is None or not len(names) == len(flows) == len(drops):
+        packer = _channel_packers[names] = joint_state_packer('', names,
+                                                              (0, len(flows), len(drops)))
+    pack, block = packer
+    sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
+    return ENCAPSULATION + pack(sec, nanosec, block, 0, len(flows), *flows, len(drops), *drops)
 
 
 def _header(frame_id: str = FRAME_ID) -> SimpleNamespace:
@@ -363,6 +394,7 @@ ENCODERS: dict[type, Callable[[Any], bytes]] = {
     Pressure: _pressure,
     SegmentVolumes: _volumes,
     SegmentCurvatures: _curvatures,
+    ChannelFlows: _channel_flows,
     SnapThrough: SNAP_THROUGH_JSON.encode,
     SceneIdentity: SCENE_IDENTITY_JSON.encode,
     Backbone: _pose_array,
@@ -421,9 +453,16 @@ def segment_curvatures(msg: Any) -> SegmentCurvatures:
     return SegmentCurvatures(_stamp_ns(msg.header), tuple(msg.name), _floats(msg.position))
 
 
+def channel_flows(msg: Any) -> ChannelFlows:
+    """A received sensor_msgs/JointState of channel flows (velocity) and drops (effort)."""
+    return ChannelFlows(_stamp_ns(msg.header), tuple(msg.name), _floats(msg.velocity),
+                        _floats(msg.effort))
+
+
 DECODERS: dict[str, Callable[[Any], TopicValue]] = {
     PumpCommand.topic.name: pump_command,
     Pressure.topic.name: pressure,
     SegmentVolumes.topic.name: segment_volumes,
     SegmentCurvatures.topic.name: segment_curvatures,
+    ChannelFlows.topic.name: channel_flows,
 }

@@ -11,7 +11,8 @@ softseq_ros.dynamic.network. Schema (optional keys show their defaults)::
       fluid: {viscosity_pa_s: 1.0e-3, density_kg_per_m3: 998.0}   # water at 20 C
       supply: {length_m: 0.5, radius_m: 0.8e-3}      # optional: syringe to base segment
       channels:                                     # base to tip, one per neighbouring pair
-        - {length_m: 0.01, radius_m: 0.25e-3, inertance: false, minor_loss: 0.0}
+        - {length_m: 0.01, radius_m: 0.25e-3, inertance: false, minor_loss: 0.0,
+           friction: laminar}                       # or blasius: turbulent above Re ~ 1190
       rate_hz: 200.0                                # the actuator's output rate
       rtol: 1.0e-6                                  # the integrator's relative tolerance
 
@@ -27,7 +28,9 @@ WATER_DENSITY_KG_PER_M3 = 998.0
 DEFAULT_NETWORK_RATE_HZ = 200.0
 DEFAULT_NETWORK_RTOL = 1.0e-6
 MAX_NETWORK_RATE_HZ = 1.0e4
-TUBE_KEYS = ('length_m', 'radius_m', 'inertance', 'minor_loss')
+LAMINAR, BLASIUS = 'laminar', 'blasius'
+FRICTION_LAWS = (LAMINAR, BLASIUS)
+TUBE_KEYS = ('length_m', 'radius_m', 'inertance', 'minor_loss', 'friction')
 
 
 @dataclass(frozen=True)
@@ -45,13 +48,16 @@ class Tube:
 
     ``inertance``: the fluid's inertia counts (the tube's flow becomes a state);
     ``minor_loss``: the loss coefficient K of its ends and bends (dimensionless), a pressure
-    drop of K rho q |q| / (2 A^2) on top of the viscous one.
+    drop of K rho q |q| / (2 A^2) on top of the viscous one;
+    ``friction``: ``laminar`` (Hagen-Poiseuille) or ``blasius`` (Hagen-Poiseuille, and
+    Blasius's turbulent law where it gives the larger drop: softseq_ros.dynamic.network).
     """
 
     length_m: float
     radius_m: float
     inertance: bool = False
     minor_loss: float = 0.0
+    friction: str = LAMINAR
 
 
 @dataclass(frozen=True)
@@ -65,8 +71,14 @@ class NetworkSettings:
     rtol: float = DEFAULT_NETWORK_RTOL
 
 
+def channel_names(segment_names: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    """The channels' names, base to tip: ``<segment>_to_<next segment>``."""
+    return tuple(f'{a}_to_{b}' for a, b in zip(segment_names, segment_names[1:]))
+
+
 def _tube(ctx: Context, value: object, key_path: str) -> Tube:
-    raw = ctx.mapping(value, key_path, ('length_m', 'radius_m'), ('inertance', 'minor_loss'))
+    raw = ctx.mapping(value, key_path, ('length_m', 'radius_m'),
+                      ('inertance', 'minor_loss', 'friction'))
     length = ctx.number(raw['length_m'], join(key_path, 'length_m'), gt=0.0)
     radius = ctx.number(raw['radius_m'], join(key_path, 'radius_m'), gt=0.0)
     if radius > length:
@@ -77,7 +89,11 @@ def _tube(ctx: Context, value: object, key_path: str) -> Tube:
     if not isinstance(inertance, bool):
         raise ctx.error(join(key_path, 'inertance'), f'must be true or false, got {inertance!r}')
     minor_loss = ctx.number(raw.get('minor_loss', 0.0), join(key_path, 'minor_loss'), ge=0.0)
-    return Tube(length, radius, inertance, minor_loss)
+    friction = raw.get('friction', LAMINAR)
+    if friction not in FRICTION_LAWS:
+        raise ctx.error(join(key_path, 'friction'), f'must be one of {", ".join(FRICTION_LAWS)}, '
+                                                     f'got {friction!r}')
+    return Tube(length, radius, inertance, minor_loss, friction)
 
 
 def read_network(ctx: Context, value: object, segment_count: int) -> NetworkSettings | None:

@@ -1,0 +1,206 @@
+"""
+The fluid network on the rig and at its edges: what a dynamic actuator publishes (channel
+flows, timed snap-throughs, warnings), the pump's relief on the dynamic pressure, turbulent
+friction, and the limits of near-zero resistance and near-zero flow.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from softseq_ros.bag.reader import bag_summary, read_bag
+from softseq_ros.batch import BatchRun
+from softseq_ros.dynamic.flow import NetworkFlow
+from softseq_ros.dynamic.network import LAMINAR_REYNOLDS, tube_law
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+from softseq_ros.scene.loader import SceneError, load_scene, scene_from_dict
+from softseq_ros.scene.network import BLASIUS, Fluid, NetworkSettings, Tube
+from softseq_ros.scene.validation import YamlLoader
+
+ML = 1e-6
+WATER = Fluid()
+FIG1 = Path(__file__).resolve().parents[1] / 'config' / 'fig1_asymmetric.yaml'
+
+
+def fig1_with_network(tmp_path: Path, network: dict, flow: float = 2e-7,
+                      top: float = 3.0e-5):
+    """The Fig. 1 asymmetric pair with ``network``, inflated at ``flow`` to ``top``."""
+    data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+    data['pump'].update({'flow_rate_m3_per_s': flow, 'legs': [{'inflate_to_m3': top}]})
+    data['camera'] = {'rate_hz': 1}
+    data['network'] = network
+    return scene_from_dict(data, tmp_path / 'fig1_network.yaml')
+
+
+def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_path):
+    channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
+    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
+    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    bag = tmp_path / 'bag'
+    flows = list(read_bag(bag, ['/actuator/channel_flows']))
+    volumes = list(read_bag(bag, ['/actuator/volumes']))
+    # The state goes out at the network's rate while the pump runs (150 s at 50 Hz), each
+    # volumes message with its channel flows.
+    assert len(flows) == len(volumes) == result.message_counts['/actuator/channel_flows']
+    assert len(flows) > 0.9 * 50 * 3.0e-5 / 2e-7
+    law = tube_law(Tube(**channel), WATER)
+    bottom, top = scene.segments
+    for message, state in zip(flows[::25], volumes[::25]):
+        assert list(message.msg.name) == ['bottom_to_top']
+        assert message.log_time_ns == state.log_time_ns
+        v_bottom, v_top = state.msg.position
+        # Drop: the two segments' pressures at their volumes; flow: Hagen-Poiseuille's.
+        drop = float(bottom.pressure(v_bottom) - top.pressure(v_top))
+        assert message.msg.effort[0] == pytest.approx(drop, abs=1e-9 * abs(drop) + 1e-9)
+        resistance = 8 * 1e-3 * 0.01 / (math.pi * 0.5e-3 ** 4)
+        assert law.resistance == pytest.approx(resistance, rel=1e-14)
+        assert message.msg.velocity[0] == pytest.approx(drop / resistance, rel=1e-12,
+                                                        abs=1e-30)
+    events = [json.loads(m.msg.data) for m in read_bag(bag, ['/actuator/events'])]
+    assert len(events) == 1
+    event = events[0]
+    moved = event['to_volumes_m3'][0] - event['from_volumes_m3'][0]
+    # The snap started before it was published, lasted a positive time, and moved at least
+    # what the bottom's volume gained beyond the pump's own push in that time.
+    published = next(m.log_time_ns for m in read_bag(bag, ['/actuator/events']))
+    assert 0 < event['start_ns'] < published
+    assert 0.0 < event['duration_s'] < (published - event['start_ns']) / 1e9
+    assert event['fluid_moved_m3'] > 0.5 * moved > 2 * ML
+    assert event['peak_exchange_m3_per_s'] > 5 * 2e-7
+
+
+def test_a_quasi_static_scene_has_no_channel_flows_topic(tmp_path):
+    data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+    data['pump'].update({'legs': [{'inflate_to_m3': 2.0e-6}]})
+    data['camera'] = {'rate_hz': 1}
+    BatchRun(scene_from_dict(data, tmp_path / 'fig1.yaml'), tmp_path / 'bag',
+             start_time_ns=0).run()
+    assert '/actuator/channel_flows' not in bag_summary(tmp_path / 'bag').topics
+
+
+def test_the_pump_relief_acts_on_the_dynamic_pressure_at_the_syringe(tmp_path):
+    # The pair stays below 9 kPa quasi-statically up to 30 mL; a narrow supply line adds
+    # R Q = 8 mu l Q / (pi r^4) = 4.1 kPa at 0.2 mL/s: the syringe sees more than the relief.
+    channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
+    supply = {'length_m': 0.5, 'radius_m': 0.5e-3}
+    relief = {'pump': {'max_pressure_pa': 9.0e3}}
+    narrow = fig1_with_network(tmp_path, {'channels': [channel], 'supply': supply})
+    result = BatchRun(narrow, tmp_path / 'narrow', start_time_ns=0, overrides=relief).run()
+    assert result.pump_state == 'stopped'
+    statuses = [json.loads(m.msg.data) for m in read_bag(tmp_path / 'narrow',
+                                                           ['/pump/status'])]
+    assert 'max_pressure_pa' in statuses[-1]['reason']
+    commands = [m.msg.position[0] for m in read_bag(tmp_path / 'narrow', ['/pump/command'])]
+    assert max(commands) < 2.9e-5
+    # Without the supply line the same programme runs to its end under the same relief.
+    ideal = fig1_with_network(tmp_path, {'channels': [channel]})
+    result = BatchRun(ideal, tmp_path / 'ideal', start_time_ns=0, overrides=relief).run()
+    assert result.pump_state == 'finished'
+
+
+def test_blasius_friction_is_laminar_below_its_crossing_and_turbulent_above():
+    laminar = tube_law(Tube(0.01, 0.5e-3), WATER)
+    turbulent = tube_law(Tube(0.01, 0.5e-3, friction=BLASIUS), WATER)
+    # The crossing of 64 / Re and 0.316 Re^(-1/4): Re = (64 / 0.316)^(4/3).
+    crossing = (64.0 / 0.316) ** (4.0 / 3.0)
+    q_cross = crossing / laminar.reynolds_per_flow
+    for share in (1e-6, 0.5, 0.99):
+        q = share * q_cross
+        assert turbulent.drop(q) == laminar.drop(q) == pytest.approx(laminar.resistance * q)
+    # Above it, the Darcy-Weisbach drop with Blasius's friction factor, written out here.
+    area, diameter = math.pi * 0.5e-3 ** 2, 1.0e-3
+    for reynolds in (3000.0, 1.0e4, 5.0e4):
+        q = reynolds / laminar.reynolds_per_flow
+        velocity = q / area
+        expected = 0.316 * reynolds ** -0.25 * (0.01 / diameter) * 998.0 * velocity ** 2 / 2
+        assert turbulent.drop(q) == pytest.approx(expected, rel=1e-12)
+        assert turbulent.drop(-q) == -turbulent.drop(q)
+        assert turbulent.drop(q) > laminar.drop(q)
+    # The flow a drop drives inverts the drop, with minor losses too; the slope is its
+    # derivative (a centred difference).
+    lossy = tube_law(Tube(0.01, 0.5e-3, minor_loss=1.5, friction=BLASIUS), WATER)
+    for law in (laminar, turbulent, lossy):
+        for drop in (1e-3, 10.0, 1e3, 3e4, -2e4):
+            q = law.flow(drop)
+            assert law.drop(q) == pytest.approx(drop, rel=1e-12)
+            h = 1e-6 * abs(drop)
+            slope = (law.flow(drop + h) - law.flow(drop - h)) / (2 * h)
+            assert law.flow_slope(drop) == pytest.approx(slope, rel=1e-5)
+
+
+def test_the_friction_law_is_checked_in_the_scene(tmp_path):
+    with pytest.raises(SceneError, match=r'network\.channels\[0\]\.friction: must be one of '
+                                         r'laminar, blasius'):
+        fig1_with_network(tmp_path, {'channels': [{'length_m': 0.01, 'radius_m': 5e-4,
+                                                    'friction': 'moody'}]})
+
+
+def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path):
+    # A wide short channel: the snap-through's exchange reaches Reynolds numbers in the
+    # thousands. Warned once, with the channel's name and what to do.
+    channel = {'length_m': 0.01, 'radius_m': 1.0e-3}
+    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
+    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    turbulent = [line for line in result.warnings if 'no longer laminar' in line]
+    assert len(turbulent) == 1
+    assert 'channel bottom_to_top' in turbulent[0] and 'friction: blasius' in turbulent[0]
+    peak = float(turbulent[0].split('Reynolds number ')[1].split()[0])
+    assert peak > LAMINAR_REYNOLDS
+    # With Blasius's law the channel says it follows it, and the turbulent drop slows the
+    # exchange: the snap takes longer.
+    channel['friction'] = BLASIUS
+    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
+    blasius = BatchRun(scene, tmp_path / 'blasius', start_time_ns=0).run()
+    assert any('follows Blasius' in line for line in blasius.warnings)
+    durations = [json.loads(m.msg.data)['duration_s']
+                 for bag in ('bag', 'blasius')
+                 for m in read_bag(tmp_path / bag, ['/actuator/events'])]
+    assert len(durations) == 2 and durations[1] > durations[0]
+
+
+def test_near_zero_resistance_stays_well_posed_and_lands_on_the_quasi_static_path():
+    # A channel as short as it is wide, its resistance taken towards zero with the fluid's
+    # viscosity (1000x): the time constant falls to microseconds against a pump that takes
+    # minutes. The stiff integrator steps over it at no extra cost, and the path closes on the
+    # quasi-static one (first order in R, down to the tolerance's floor), snaps included.
+    segments = load_scene('fig1_asymmetric').segments
+    emap = EquilibriumMap(segments)
+    grid = np.linspace(0.0, 0.95 * emap.injected_range[1], 400)
+    quasistatic = Tracker(emap).sweep(grid)
+    far = np.ones(len(grid), bool)
+    for snap in quasistatic.events:
+        far &= np.abs(grid - snap.injected) > 1.0 * ML
+    distances = []
+    for viscosity in (1.0e-3, 1.0e-6):
+        flow = NetworkFlow(segments, NetworkSettings(Fluid(viscosity_pa_s=viscosity), None,
+                                                     (Tube(1.0e-3, 1.0e-3),)))
+        flow.set_flow(1e-7)
+        path = []
+        for injected in grid:
+            flow.advance(injected / 1e-7)
+            path.append(flow.volumes())
+        assert np.all(np.isfinite(path))
+        distances.append(np.max(np.abs(np.array(path)[far] - quasistatic.volumes[far])))
+        # A few steps per output, not millions for the microsecond time constant.
+        assert flow.steps < 3 * len(grid)
+        assert [s.injected for s in flow.take_snaps()] == pytest.approx(
+            [e.injected for e in quasistatic.events], abs=0.02 * ML)
+    assert distances[1] < distances[0] / 20
+    assert distances[1] < 1e-6 * emap.v_scale
+
+
+def test_near_zero_flow_holds_still_for_as_long_as_asked():
+    segments = load_scene('fig1_asymmetric').segments
+    flow = NetworkFlow(segments, NetworkSettings(WATER, None, (Tube(0.01, 0.5e-3),)))
+    flow.set_flow(1e-18)          # 1 fL/s: a month of it moves 2.6 nL
+    month = 30 * 86400.0
+    flow.advance(month)
+    volumes = flow.volumes()
+    assert float(np.sum(volumes)) == pytest.approx(flow.rest_total + 1e-18 * month,
+                                                   abs=1e-12 * flow.v_scale)
+    assert np.all(np.isfinite(volumes)) and flow.steps < 1000
+    assert flow.take_snaps() == []
