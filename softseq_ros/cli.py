@@ -22,6 +22,8 @@ def _solve(args: argparse.Namespace) -> int:
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
+    if scene.network is not None:
+        return _solve_network(args, scene)
     emap = build_map(scene.segments, scene.solver.resolution)
     if args.path is not None:
         history = read_history(args.path)
@@ -41,6 +43,51 @@ def _solve(args: argparse.Namespace) -> int:
     snaps = ', '.join(f'{e.injected * 1e6:.3f} mL' for e in solved.events) or 'none'
     print(f'{scene.name}: {history.size} commanded volumes solved -> {args.out} '
           f'(snap-throughs: {snaps})')
+    return 0
+
+
+def _solve_network(args: argparse.Namespace, scene: Any) -> int:
+    """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
+    from softseq_ros.dynamic.path import (
+        PathError,
+        history_path,
+        programme_path,
+        snaps_file,
+        write_path,
+        write_snaps,
+    )
+    from softseq_ros.quasistatic.solve import read_history
+
+    profile = scene.pump.profile
+    if args.path is not None:
+        history = read_history(args.path)
+        try:
+            path = history_path(scene.segments, scene.network, history, profile.flow_rate)
+        except PathError as err:
+            raise PathError(f'{args.path}: injected_m3: {err}') from None
+    else:
+        path = programme_path(scene.segments, scene.network, profile, rate_hz=scene.pump.rate_hz)
+    snaps_out = snaps_file(args.out)
+    write_path(args.out, path, scene.segment_names)
+    write_snaps(snaps_out, path.snaps, scene.segment_names)
+    print(f'{scene.name}: {path.time_s.size} samples of the network in time, pump at '
+          f'{profile.flow_rate * 1e6:g} mL/s -> {args.out} (snap-throughs: {len(path.snaps)} '
+          f'-> {snaps_out})')
+    for snap in path.snaps:
+        print(f'  snap-through at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
+              f'{snap.fluid_moved_m3 * 1e6:.3f} mL moved, peak '
+              f'{snap.peak_exchange_m3_per_s * 1e6:.4g} mL/s, 10-90 % in {snap.duration_s:.4g} s')
+    names = ', '.join(f'{a}-{b} {re:.0f}' for a, b, re in zip(
+        scene.segment_names[:-1], scene.segment_names[1:], path.peak_reynolds))
+    print(f'  peak Reynolds number per channel: {names}')
+    if max(path.peak_reynolds, default=0.0) > 2300.0:
+        print('softseq solve: warning: a channel left the laminar range (Reynolds number above '
+              '2300): Hagen-Poiseuille underestimates its pressure drop', file=sys.stderr)
+    if path.drained is not None:
+        print(f'softseq solve: warning: the path ends at {path.time_s[-1]:.6g} s '
+              f'({path.injected[-1] * 1e6:.4g} mL injected): {path.drained}; the syringe drew '
+              "the base segment empty before the channels let the others' fluid follow",
+              file=sys.stderr)
     return 0
 
 
@@ -154,6 +201,56 @@ def _library(args: argparse.Namespace) -> int:
     return 0
 
 
+def _rates(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.rates import (
+        RatesError,
+        check_grid,
+        quasistatic_reference,
+        rates_figure,
+        rates_markdown,
+        reference_line,
+        run_rates,
+        write_rates_csv,
+    )
+    from softseq_ros.scene.loader import load_scene
+
+    def numbers(option: str, text: str) -> list[float]:
+        try:
+            return [float(item) for item in text.split(',')]
+        except ValueError:
+            raise RatesError(f'{option}: {text!r} is not a comma-separated list of numbers') \
+                from None
+
+    def count(option: str, text: str | None, least: int) -> int | None:
+        if text is None:
+            return None
+        try:
+            value = int(text)
+        except ValueError:
+            raise RatesError(f'{option}: {text!r} is not a whole number') from None
+        if value < least:
+            raise RatesError(f'{option}: must be >= {least}, got {value}')
+        return value
+
+    flows, radii = numbers('--flows', args.flows), numbers('--radii', args.radii)
+    samples = count('--samples', args.samples, 50)
+    workers = count('--workers', args.workers, 1)
+    if args.scheduler is not None and workers is not None:
+        raise RatesError('--workers: not with --scheduler (the cluster has its own workers)')
+    scene = load_scene(args.scene)
+    check_grid(scene, flows, radii)
+    out = args.out or Path('bags') / f'rates_{scene.name}'
+    reference = quasistatic_reference(scene, samples)
+    rows = run_rates(scene, flows, radii, workers=workers, scheduler=args.scheduler,
+                     samples_per_leg=samples)
+    table = write_rates_csv(out / 'rates.csv', rows, scene.name, reference)
+    figure = rates_figure(rows, scene.segment_names, reference, scene.name, out / 'rates.png')
+    print(reference_line(reference))
+    print(rates_markdown(rows), end='')
+    print(f'written: {table}, {figure}')
+    return 0
+
+
 def _play(args: argparse.Namespace) -> int:
     from softseq_ros.nodes.player import play
 
@@ -202,8 +299,12 @@ def build_parser() -> argparse.ArgumentParser:
                            'of commanded injected volumes (the history matters).')
     solve.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
     solve.add_argument('--path', type=Path, help='CSV with a column injected_m3, in order '
-                       "(default: the scene's pump profile at the pump rate)")
-    solve.add_argument('--out', type=Path, required=True, help='output CSV file')
+                       "(default: the scene's pump profile at the pump rate; with a network, "
+                       "pushed from row to row at the pump's flow rate)")
+    solve.add_argument('--out', type=Path, required=True, help='output CSV file; with a '
+                       'network (docs/dynamic.md) the path in time (time_s first, the channel '
+                       'flows added) and its snap-throughs (start, duration, fluid moved, peak '
+                       'flow) in OUT_snaps.csv beside it')
     solve.set_defaults(handler=_solve)
 
     classify = sub.add_parser('classify', help="the paper's sequence type of a scene",
@@ -269,6 +370,26 @@ def build_parser() -> argparse.ArgumentParser:
     library.add_argument('--jobs', type=int, help='worker processes (default: one per core)')
     library.add_argument('--out', type=Path, help='output folder (default bags/library_NAME)')
     library.set_defaults(handler=_library)
+
+    rates = sub.add_parser('rates', help='rate map: the sequence over pump flows and radii',
+                           description='Run a scene with a network (docs/dynamic.md) along its '
+                           'pump programme at every pump flow rate and channel radius of a grid '
+                           '(every channel set to the radius), in parallel, and write rates.csv '
+                           '(one row per grid point: sequence type, leading segment, switch, '
+                           'snap-throughs with durations, peak Reynolds number; SI) and '
+                           'rates.png.')
+    rates.add_argument('scene', help='scene YAML file with a network block, or the name of a '
+                       'shipped scene')
+    rates.add_argument('--flows', required=True, metavar='Q1,Q2,...',
+                       help='pump flow rates [m^3/s], comma-separated, e.g. 1e-8,1e-7')
+    rates.add_argument('--radii', required=True, metavar='R1,R2,...',
+                       help='channel radii [m], comma-separated, e.g. 0.2e-3,0.5e-3')
+    rates.add_argument('--samples', default='600', metavar='N', help='samples of the path per '
+                       'leg of the programme (default 600, at least 50)')
+    rates.add_argument('--workers', help='local worker processes (default: one per core)')
+    rates.add_argument('--scheduler', help='Dask scheduler address, e.g. tcp://10.0.0.5:8786')
+    rates.add_argument('--out', type=Path, help='output folder (default bags/rates_NAME)')
+    rates.set_defaults(handler=_rates)
 
     play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
                           description='Publish every recorded message on its topic with its '

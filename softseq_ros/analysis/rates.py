@@ -1,0 +1,366 @@
+"""
+Rate maps: which sequence a scene with a fluid network shows at each pump flow and channel size.
+
+``softseq rates SCENE --flows ... --radii ...`` runs the scene's pump programme (inflate, hold,
+deflate) at every pump flow rate of the grid, with every channel of the scene's network set to
+every radius of the grid, on the package's parallel executor (:func:`softseq_ros.parallel.
+run_jobs`: local processes, or a Dask scheduler). Each run is the dynamic path
+(:mod:`softseq_ros.dynamic.path`), measured with the same metrics as a recording
+(:func:`softseq_ros.analysis.metrics.analyse`), so its sequence type comes from the one
+classifier (:func:`softseq_ros.quasistatic.sequence.sequence_type`) with the tolerance of a
+sampled path, and its *leading segment* is the one that takes over the inflow at the switch
+(the largest change of a segment's share of the inflow on inflation). The quasi-static path
+along the same programme is measured the same way, for reference.
+
+The table (``rates.csv``) has one row per grid point: flow [m^3/s], radius [m], sequence type,
+leading segment, switch volume, the snap-throughs the network lived (start [m^3 injected],
+direction, 10-90 % duration [s], fluid moved [m^3], peak exchange flow [m^3/s]; several
+snap-throughs of one run are separated by ``;`` in the same order in each column), the largest
+Reynolds number of any channel, and where a deflation drained a segment to its rest volume
+while the others still held fluid (the run ends there; see
+:class:`softseq_ros.dynamic.path.DynamicPath`), or why the point was refused (the pump filled a
+segment past its curve before the channels let the fluid on). The figure (``rates.png``)
+colours the flow x radius grid by the leading segment and writes the sequence type and the
+inflation snap-throughs' durations in each cell.
+"""
+
+import csv
+from dataclasses import dataclass, replace
+import math
+from pathlib import Path
+import sys
+import time
+from typing import Any, Sequence, TextIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from softseq_ros.analysis.metrics import Trace, analyse
+from softseq_ros.errors import UserError
+from softseq_ros.parallel import run_jobs
+
+FloatArray = NDArray[np.float64]
+# Samples of the path per leg of the programme: 2 % of the shares' bins each at the least
+# (analysis.metrics takes the shares on 200 bins of the inflation leg).
+SAMPLES_PER_LEG = 600
+# A segment leads once it takes this share of the inflow (or more: the others give fluid
+# back), over bins of this share of the inflation leg.
+LEAD_SHARE = 0.9
+LEAD_BINS = 100
+COLUMNS = ('flow_rate_m3_per_s', 'channel_radius_m', 'sequence_type', 'leading_segment',
+           'lead_injected_m3', 'switch_injected_m3', 'switch_segment', 'snap_injected_m3',
+           'snap_direction', 'snap_duration_s',
+           'snap_fluid_moved_m3', 'snap_peak_exchange_m3_per_s', 'peak_reynolds',
+           'drained_at_injected_m3', 'refused', 'integrator_steps', 'wall_s')
+
+
+class RatesError(UserError):
+    """A rate map that cannot be run: the message names the option or the scene."""
+
+
+@dataclass(frozen=True)
+class RatePoint:
+    """One grid point: the scene, the pump's flow rate [m^3/s], every channel's radius [m]."""
+
+    scene: Any
+    flow_rate_m3_per_s: float
+    channel_radius_m: float
+    samples_per_leg: int = SAMPLES_PER_LEG
+
+
+def scene_at(scene: Any, flow_rate: float, radius: float) -> Any:
+    """The scene with its pump at ``flow_rate`` [m^3/s] and every channel of ``radius`` [m]."""
+    profile = replace(scene.pump.profile, flow_rate=flow_rate)
+    channels = tuple(replace(tube, radius_m=radius) for tube in scene.network.channels)
+    return replace(scene, pump=replace(scene.pump, profile=profile),
+                   network=replace(scene.network, channels=channels))
+
+
+def check_grid(scene: Any, flows: Sequence[float], radii: Sequence[float]) -> None:
+    """Refuse a grid the scene cannot run, naming the option; before anything runs."""
+    if scene.network is None:
+        where = scene.path if scene.path is not None else scene.name
+        raise RatesError(f'{where}: the scene has no network block, so its sequence does not '
+                         'depend on the pump rate (docs/dynamic.md)')
+    for option, values in (('--flows', flows), ('--radii', radii)):
+        if not values:
+            raise RatesError(f'{option}: give at least one value')
+        bad = [v for v in values if not (math.isfinite(v) and v > 0.0)]
+        if bad:
+            raise RatesError(f'{option}: every value must be finite and > 0, got {bad[0]:g}')
+    shortest = min(tube.length_m for tube in scene.network.channels)
+    too_wide = [r for r in radii if r > shortest]
+    if too_wide:
+        raise RatesError(f'--radii: {too_wide[0]:g} m exceeds the shortest channel '
+                         f'({shortest:g} m long): not a tube')
+
+
+def programme_times(profile: Any, samples_per_leg: int) -> FloatArray:
+    """Sample times [s]: ``samples_per_leg`` evenly over every leg, each boundary once."""
+    times, _ = profile.breakpoints()
+    pieces = [np.linspace(a, b, samples_per_leg, endpoint=False)
+              for a, b in zip(times[:-1], times[1:])]
+    return np.concatenate(pieces + [times[-1:]])
+
+
+def leg_signs(profile: Any, times: FloatArray) -> NDArray[np.int8]:
+    """+1 where the pump inflates, -1 where it deflates, 0 in a hold (and after the end)."""
+    return np.sign(profile.flow_at(times)).astype(np.int8)
+
+
+def leading_segment(injected: FloatArray, volumes: FloatArray, signs: NDArray[np.int8],
+                    names: Sequence[str]) -> tuple[str, float | None]:
+    """
+    The segment that first takes over the inflow on the first inflation, and where [m^3].
+
+    It is the first to take LEAD_SHARE of the inflow over one of LEAD_BINS equal bins of the
+    leg's injected volume (more than all of it when the others give fluid back; a snap it
+    gains by counts). ``('', None)`` when no segment ever takes that share (the inflow stays
+    split, as between two linear segments).
+    """
+    rising = np.flatnonzero(signs > 0)
+    if rising.size < 2:
+        return '', None
+    falling = np.flatnonzero(signs[rising[0]:] < 0)
+    end = rising[0] + int(falling[0]) if falling.size else signs.size
+    leg = np.arange(rising[0], end)
+    leg = leg[signs[leg] > 0]
+    u, v = injected[leg], volumes[leg]
+    keep = np.append(np.diff(u) > 0, True)
+    u, v = u[keep], v[keep]
+    if u.size < 2:
+        return '', None
+    grid = np.linspace(u[0], u[-1], LEAD_BINS + 1)
+    sampled = np.column_stack([np.interp(grid, u, v[:, k]) for k in range(v.shape[1])])
+    share = np.diff(sampled, axis=0) / np.diff(grid)[:, None]
+    taking = np.argwhere(share >= LEAD_SHARE)
+    if not taking.size:
+        return '', None
+    row, segment = taking[0]
+    return names[int(segment)], float(0.5 * (grid[row] + grid[row + 1]))
+
+
+def sequence_of(injected: FloatArray, pressure: FloatArray, volumes: FloatArray,
+                signs: NDArray[np.int8], names: Sequence[str]) -> dict:
+    """
+    Sequence type, leading segment and switch of a path, measured as a recording's.
+
+    The path's rows are in time order; holds (sign 0) count with the inflation before them,
+    so what the fluid does while the pump stands still is part of the sequence.
+    """
+    span = float(np.ptp(injected)) if injected.size else 0.0
+    metrics = analyse(Trace(injected, pressure, volumes, signs, segment_names=tuple(names)),
+                      v_range=span if span > 0.0 else None)
+    switch = metrics['switch']
+    lead, lead_at = leading_segment(injected, volumes, signs, names)
+    return {'sequence_type': metrics['sequence_type'], 'leading_segment': lead,
+            'lead_injected_m3': lead_at,
+            'switch_injected_m3': switch['injected_m3'] if switch else None,
+            'switch_segment': switch['segment_taking_over'] if switch else ''}
+
+
+def rate_point(point: RatePoint) -> dict:
+    """Run one grid point: its row of the table (SI)."""
+    from softseq_ros.dynamic.flow import NetworkDomainError
+    from softseq_ros.dynamic.path import programme_path
+
+    start = time.perf_counter()
+    scene = scene_at(point.scene, point.flow_rate_m3_per_s, point.channel_radius_m)
+    profile = scene.pump.profile
+    times = programme_times(profile, point.samples_per_leg)
+    row: dict[str, Any] = {'flow_rate_m3_per_s': point.flow_rate_m3_per_s,
+                           'channel_radius_m': point.channel_radius_m, 'refused': ''}
+    try:
+        path = programme_path(scene.segments, scene.network, profile, times=times)
+    except NetworkDomainError as err:
+        # One point of the map out of reach (the pump outruns the channel and fills the base
+        # past its curve) says so in its row; the others still run.
+        row.update({'sequence_type': 'refused', 'leading_segment': '', 'lead_injected_m3': None,
+                    'switch_injected_m3': None, 'switch_segment': '', 'snaps': [],
+                    'peak_reynolds': float('nan'), 'drained_at_injected_m3': None,
+                    'refused': str(err), 'integrator_steps': 0,
+                    'wall_s': time.perf_counter() - start})
+        return row
+    signs = leg_signs(profile, path.time_s)
+    row.update(sequence_of(path.injected, path.pressure, path.volumes, signs,
+                           scene.segment_names))
+    directions = {1: 'inflation', -1: 'deflation', 0: 'hold'}
+    row['snaps'] = [{'injected_m3': s.injected, 'start_s': s.start_s,
+                     'direction': directions[int(leg_signs(profile, np.array([s.start_s]))[0])],
+                     'duration_s': s.duration_s, 'fluid_moved_m3': s.fluid_moved_m3,
+                     'peak_exchange_m3_per_s': s.peak_exchange_m3_per_s}
+                    for s in path.snaps]
+    row['peak_reynolds'] = max(path.peak_reynolds) if path.peak_reynolds else 0.0
+    row['drained_at_injected_m3'] = float(path.injected[-1]) if path.drained else None
+    row['integrator_steps'] = path.steps
+    row['wall_s'] = time.perf_counter() - start
+    return row
+
+
+def quasistatic_reference(scene: Any, samples_per_leg: int = SAMPLES_PER_LEG) -> dict:
+    """The quasi-static path along the scene's programme, measured as a grid point is."""
+    from softseq_ros.quasistatic.equilibrium import Tracker
+    from softseq_ros.quasistatic.solve import build_map
+
+    profile = scene.pump.profile
+    times = programme_times(profile, samples_per_leg)
+    emap = build_map(scene.segments, scene.solver.resolution)
+    solved = Tracker(emap).sweep(profile.injected_at(times))
+    row = sequence_of(solved.injected, solved.pressure, solved.volumes,
+                      leg_signs(profile, times), scene.segment_names)
+    row['snaps'] = [{'injected_m3': e.injected,
+                     'fluid_moved_m3': float(0.5 * np.abs(e.to_volumes - e.from_volumes).sum())}
+                    for e in solved.events]
+    return row
+
+
+def run_rates(scene: Any, flows: Sequence[float], radii: Sequence[float],
+              workers: int | None = None, scheduler: str | None = None,
+              samples_per_leg: int = SAMPLES_PER_LEG,
+              progress: TextIO | None = sys.stderr) -> list[dict]:
+    """Every grid point (flows outer, radii inner), on local processes or a Dask scheduler."""
+    check_grid(scene, flows, radii)
+    points = [RatePoint(scene, float(q), float(r), samples_per_leg)
+              for q in flows for r in radii]
+
+    def report(done: int, total: int, row: dict) -> None:
+        if progress is not None:
+            progress.write(f'rates: {done}/{total} {_point_text(row)}: '
+                           f'{row["sequence_type"]}, leads {row["leading_segment"] or "-"}\n')
+            progress.flush()
+
+    return run_jobs(rate_point, points, workers=workers,
+                    backend='dask' if scheduler is not None else 'processes',
+                    scheduler=scheduler, progress=report, name=_point_name)
+
+
+def _point_text(row: dict) -> str:
+    return (f'{row["flow_rate_m3_per_s"] * 1e6:g} mL/s, radius '
+            f'{row["channel_radius_m"] * 1e3:g} mm')
+
+
+def _point_name(point: RatePoint) -> str:
+    return (f'flow {point.flow_rate_m3_per_s:g} m^3/s, radius '
+            f'{point.channel_radius_m:g} m')
+
+
+def _joined(values: Sequence[Any]) -> str:
+    return ';'.join(v if isinstance(v, str) else repr(float(v)) for v in values)
+
+
+def csv_row(row: dict) -> dict:
+    """A result as the table's cells: SI numbers, several snap-throughs joined by ``;``."""
+    snaps = row['snaps']
+    cells = {'flow_rate_m3_per_s': repr(row['flow_rate_m3_per_s']),
+             'channel_radius_m': repr(row['channel_radius_m']),
+             'sequence_type': row['sequence_type'],
+             'leading_segment': row['leading_segment'],
+             'lead_injected_m3': ('' if row['lead_injected_m3'] is None
+                                  else repr(row['lead_injected_m3'])),
+             'switch_injected_m3': ('' if row['switch_injected_m3'] is None
+                                    else repr(row['switch_injected_m3'])),
+             'switch_segment': row['switch_segment'],
+             'peak_reynolds': repr(float(row['peak_reynolds'])),
+             'drained_at_injected_m3': ('' if row['drained_at_injected_m3'] is None
+                                        else repr(row['drained_at_injected_m3'])),
+             'refused': row['refused'],
+             'integrator_steps': str(row['integrator_steps']),
+             'wall_s': f'{row["wall_s"]:.3f}'}
+    for column, key in (('snap_injected_m3', 'injected_m3'), ('snap_direction', 'direction'),
+                        ('snap_duration_s', 'duration_s'),
+                        ('snap_fluid_moved_m3', 'fluid_moved_m3'),
+                        ('snap_peak_exchange_m3_per_s', 'peak_exchange_m3_per_s')):
+        cells[column] = _joined([s[key] for s in snaps])
+    return cells
+
+
+def reference_line(reference: dict) -> str:
+    """The quasi-static reference in one line (mL for humans)."""
+    lead = reference['lead_injected_m3']
+    snaps = ', '.join(f'{s["injected_m3"] * 1e6:.2f} mL' for s in reference['snaps']) or 'none'
+    return (f'quasi-static along the same programme: {reference["sequence_type"]}, '
+            + (f'{reference["leading_segment"]} leads from {lead * 1e6:.2f} mL'
+               if lead is not None else 'no segment leads')
+            + f', snap-throughs at {snaps}')
+
+
+def write_rates_csv(path: Path, rows: list[dict], scene_name: str, reference: dict) -> Path:
+    """The table, one row per grid point, under comment lines naming the scene and reference."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open('w', newline='') as handle:
+        handle.write(f'# Rate map of scene {scene_name}: one row per pump flow rate and '
+                     'channel radius; SI units; several snap-throughs of a run are separated '
+                     'by ";".\n')
+        handle.write(f'# {reference_line(reference)}\n')
+        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow(csv_row(row))
+    return path
+
+
+def rates_markdown(rows: list[dict]) -> str:
+    """The table for humans (mL/s, mm, mL, s)."""
+    lines = ['| pump flow | channel radius | sequence | leads (from) | snap-throughs (start, '
+             'i: inflation, h: hold, d: deflation; duration; fluid moved) | peak Reynolds |',
+             '|---:|---:|---|---|---|---:|']
+    for row in rows:
+        point = (f'| {row["flow_rate_m3_per_s"] * 1e6:g} mL/s | '
+                 f'{row["channel_radius_m"] * 1e3:g} mm |')
+        if row['refused']:
+            lines.append(f'{point} refused: {row["refused"]} | | | |')
+            continue
+        lead = row['lead_injected_m3']
+        leads = f'{row["leading_segment"]} ({lead * 1e6:.1f} mL)' if lead is not None else '-'
+        snaps = '; '.join(f'{s["injected_m3"] * 1e6:.1f} mL {s["direction"][0]}, '
+                          f'{_seconds(s["duration_s"])}, {s["fluid_moved_m3"] * 1e6:.1f} mL'
+                          for s in row['snaps']) or '-'
+        lines.append(f'{point} {row["sequence_type"]} | {leads} | {snaps} | '
+                     f'{row["peak_reynolds"]:.0f} |')
+    return '\n'.join(lines) + '\n'
+
+
+def _seconds(value: float) -> str:
+    return f'{value:.0f} s' if value >= 10.0 else f'{value:.2g} s'
+
+
+def rates_figure(rows: list[dict], names: Sequence[str], reference: dict, title: str,
+                 out: Path) -> Path:
+    """The flow x radius grid coloured by the leading segment, annotated per cell."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch, Rectangle
+
+    flows = sorted({row['flow_rate_m3_per_s'] for row in rows})
+    radii = sorted({row['channel_radius_m'] for row in rows})
+    palette = ['tab:blue', 'tab:orange', 'tab:green', 'tab:purple', 'tab:brown']
+    colours = {name: palette[k % len(palette)] for k, name in enumerate(names)}
+    fig = Figure(figsize=(1.25 * len(flows) + 2.4, 0.6 * len(radii) + 1.6))
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.12, 0.26, 0.85, 0.6))
+    for row in rows:
+        i, j = flows.index(row['flow_rate_m3_per_s']), radii.index(row['channel_radius_m'])
+        lead = row['leading_segment']
+        ax.add_patch(Rectangle((i, j), 1, 1, facecolor=colours.get(lead, '0.85'), alpha=0.55,
+                               edgecolor='white'))
+        rising = [s for s in row['snaps'] if s['direction'] == 'inflation']
+        durations = ', '.join(_seconds(s['duration_s']) for s in rising[:2]) or 'no snap'
+        if row['refused']:
+            durations = 'beyond a curve'
+        ax.text(i + 0.5, j + 0.5, f'{row["sequence_type"]}\n{durations}', ha='center',
+                va='center', fontsize=6.5)
+    ax.set_xlim(0, len(flows))
+    ax.set_ylim(0, len(radii))
+    ax.set_xticks(np.arange(len(flows)) + 0.5, [f'{q * 1e6:g}' for q in flows], fontsize=7)
+    ax.set_yticks(np.arange(len(radii)) + 0.5, [f'{r * 1e3:g}' for r in radii], fontsize=7)
+    ax.set_xlabel('pump flow rate [mL/s]', fontsize=8)
+    ax.set_ylabel('channel radius [mm]', fontsize=8)
+    handles = [Patch(facecolor=colours[name], alpha=0.55, label=f'{name} leads')
+               for name in names]
+    ax.legend(handles=handles, loc='upper center', bbox_to_anchor=(0.5, -0.16), ncol=len(names),
+              fontsize=7, frameon=False)
+    fig.suptitle(f'{title}: who takes over the inflow, the sequence type and the inflation '
+                 "snap-throughs' 10-90 % durations", fontsize=7.5)
+    ax.set_title(reference_line(reference), fontsize=6.5)
+    fig.savefig(out, dpi=100)
+    return out

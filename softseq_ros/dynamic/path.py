@@ -1,0 +1,279 @@
+"""
+A scene's fluid network along a pump programme: the dynamic path, sampled where asked.
+
+The quasi-static solver answers "where is the equilibrium at this injected volume"; with a
+network the answer depends on how fast the volume got there. Here the syringe's flow is
+piecewise constant in time (a :class:`FlowSchedule`): the legs of a pump programme (inflate
+and deflate at the pump's flow rate, hold at zero flow), or a history of injected volumes
+pushed at one flow rate. :func:`run_schedule` integrates the network
+(:class:`softseq_ros.dynamic.flow.NetworkFlow`, through its public methods only) across the
+legs and reads the state at the asked times: time, injected volume, the syringe's gauge
+pressure, the segment volumes and curvatures, the channel flows; with the snap-throughs the
+network lived (:class:`softseq_ros.dynamic.flow.DynamicSnap`: start, fluid moved, peak exchange
+flow, 10-90 % duration) and each channel's peak Reynolds number over the samples.
+:func:`write_path` and :func:`write_snaps` write both as the CSV files of ``softseq solve``.
+
+Every value is SI (s, m^3, m^3/s, Pa gauge, 1/m).
+"""
+
+import csv
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from softseq_ros.dynamic.flow import DynamicSnap, NetworkDomainError, NetworkFlow
+from softseq_ros.errors import UserError
+from softseq_ros.scene.network import NetworkSettings
+from softseq_ros.scene.programme import PumpProfile
+from softseq_ros.segments.models import Segment
+
+FloatArray = NDArray[np.float64]
+
+
+class PathError(UserError):
+    """Sample times or a volume history the network cannot be run along."""
+
+
+@dataclass(frozen=True)
+class FlowSchedule:
+    """
+    The syringe's flow in time: ``flows[k]`` [m^3/s] from ``times[k]`` to ``times[k + 1]`` [s].
+
+    Time 0 is where the network starts at rest, nothing injected; the flow is zero after the
+    last time.
+    """
+
+    times: FloatArray
+    flows: FloatArray
+
+    def injected_at(self, t: ArrayLike) -> FloatArray:
+        """The injected volume [m^3] the schedule has pushed by times ``t`` [s]."""
+        volumes = np.concatenate([[0.0], np.cumsum(self.flows * np.diff(self.times))])
+        return np.interp(np.asarray(t, dtype=float), self.times, volumes)
+
+    @property
+    def end_s(self) -> float:
+        """When the last leg ends [s]."""
+        return float(self.times[-1])
+
+
+@dataclass
+class DynamicPath:
+    """
+    The network's state at the sample times, in time order (one row per sample).
+
+    ``pressure`` is the syringe's gauge pressure [Pa] (the base segment's plus the supply
+    line's drop); ``channel_flows[:, j]`` flows from segment j to j + 1 [m^3/s]; ``snap[i]``
+    says a snap-through started after sample i - 1 and by sample i; ``snaps`` are all the
+    snap-throughs that ran their course by the last sample; ``peak_reynolds[j]`` is channel
+    j's largest Reynolds number over the samples; ``steps`` the integrator's steps.
+
+    ``drained`` (None when every sample was reached) says why the path ends before the last
+    sample time: the syringe drew a segment below its rest volume while the others still held
+    fluid the channels had not yet let through. No segment model covers a volume below rest,
+    and any finite flow does this at the end of a deflation to nothing injected (the far
+    segments always lag), so the rows end at the last sample before it.
+    """
+
+    time_s: FloatArray
+    injected: FloatArray
+    pressure: FloatArray
+    volumes: FloatArray
+    curvatures: FloatArray
+    channel_flows: FloatArray
+    snap: NDArray[np.bool_]
+    snaps: list[DynamicSnap]
+    peak_reynolds: list[float]
+    steps: int
+    drained: str | None = None
+
+
+def programme_schedule(profile: PumpProfile) -> tuple[FlowSchedule, float]:
+    """
+    The flow schedule of a pump programme, and the programme's time 0 on the schedule's clock.
+
+    A programme that starts with fluid already injected is reached first at the pump's flow
+    rate from rest (so the offset is that ramp's duration; 0 otherwise).
+    """
+    times, volumes = profile.breakpoints()
+    lead = profile.start_injected / profile.flow_rate
+    flows = np.diff(volumes) / np.diff(times)
+    if lead > 0.0:
+        times = np.concatenate([[-lead], times])
+        flows = np.concatenate([[profile.flow_rate], flows])
+    return FlowSchedule(times + lead, flows), lead
+
+
+def history_schedule(history: ArrayLike, flow_rate: float) -> tuple[FlowSchedule, FloatArray]:
+    """
+    A volume history pushed at ``flow_rate`` [m^3/s]: the schedule and the time of each row.
+
+    The syringe moves from rest to the first row and then from row to row at the flow rate,
+    inflating or deflating as the volumes go; a repeated volume takes no time.
+    """
+    volumes = np.asarray(history, dtype=float)
+    if volumes.ndim != 1 or volumes.size == 0:
+        raise PathError('a volume history needs at least one injected volume')
+    if not np.all(np.isfinite(volumes)) or np.any(volumes < 0.0):
+        raise PathError('injected volumes must be finite and >= 0 m^3')
+    if not flow_rate > 0.0:
+        raise PathError(f'the flow rate must be > 0 m^3/s, got {flow_rate:g}')
+    steps = np.diff(np.concatenate([[0.0], volumes]))
+    row_times = np.cumsum(np.abs(steps)) / flow_rate
+    moving = steps != 0.0
+    starts = np.concatenate([[0.0], row_times[moving]])
+    return FlowSchedule(starts, np.sign(steps[moving]) * flow_rate), row_times
+
+
+def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
+                 schedule: FlowSchedule, sample_times: ArrayLike,
+                 rtol: float | None = None) -> DynamicPath:
+    """
+    Integrate the network along ``schedule`` and read its state at ``sample_times`` [s].
+
+    The sample times must be >= 0 and in order; each leg's flow is set exactly at its start,
+    so a sample at a leg's boundary sees the flow of the leg that starts there. ``rtol``
+    overrides the network's tolerance. A segment pushed beyond its curve raises
+    :class:`softseq_ros.dynamic.flow.NetworkDomainError` (a UserError).
+    """
+    samples = np.asarray(sample_times, dtype=float)
+    if samples.ndim != 1 or samples.size == 0:
+        raise PathError('at least one sample time is needed')
+    if not np.all(np.isfinite(samples)) or samples[0] < 0.0 or np.any(np.diff(samples) < 0.0):
+        raise PathError('sample times must be finite, >= 0 s and in order')
+    fluid = NetworkFlow(segments, network, rtol=rtol)
+    n, channels = len(fluid.segments), len(fluid.laws)
+    volumes = np.empty((samples.size, n))
+    flows = np.empty((samples.size, channels))
+    pressure = np.empty(samples.size)
+    injected = np.empty(samples.size)
+    snaps: list[DynamicSnap] = []
+    legs = list(zip(schedule.times[:-1], schedule.times[1:], schedule.flows))
+    leg = 0
+    drained = None
+    reached = samples.size
+    # The flow of the leg under way, or zero once the schedule has run out.
+    fluid.set_flow(float(legs[0][2]) if legs and schedule.times[0] <= 0.0 else 0.0)
+    for i, t in enumerate(samples):
+        try:
+            while leg < len(legs) and legs[leg][1] <= t:
+                boundary = float(legs[leg][1])
+                fluid.advance(boundary)
+                # The integrator may have stepped past the boundary with the old flow, and
+                # the network watches its steps: an episode it saw start there never
+                # happened, since the flow changes now.
+                snaps.extend(s for s in fluid.take_snaps() if s.start_s <= boundary)
+                leg += 1
+                fluid.set_flow(float(legs[leg][2]) if leg < len(legs) else 0.0)
+            fluid.advance(float(t))
+        except NetworkDomainError as err:
+            if fluid.flow >= 0.0:
+                raise
+            drained, reached = str(err), i
+            break
+        # An episode begun on steps past a change of flow and closed on the steps after it
+        # ends before it starts: not a snap-through of this path either.
+        snaps.extend(s for s in fluid.take_snaps() if s.end_s >= s.start_s)
+        volumes[i] = fluid.volumes()
+        flows[i] = fluid.flows()
+        pressure[i] = fluid.syringe_pressure()
+        injected[i] = fluid.injected
+    samples, volumes, flows = samples[:reached], volumes[:reached], flows[:reached]
+    pressure, injected = pressure[:reached], injected[:reached]
+    curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, k]), dtype=float)
+                                  for k, s in enumerate(fluid.segments)])
+    snap = np.zeros(samples.size, dtype=bool)
+    for found in snaps:
+        row = int(np.searchsorted(samples, found.start_s, side='left'))
+        if row < samples.size:
+            snap[row] = True
+    return DynamicPath(samples, injected, pressure, volumes, curvatures, flows, snap, snaps,
+                       [float(x) for x in fluid.peak_reynolds], fluid.steps, drained)
+
+
+def programme_path(segments: Sequence[Segment], network: NetworkSettings,
+                   profile: PumpProfile, times: ArrayLike | None = None,
+                   rate_hz: float | None = None, rtol: float | None = None) -> DynamicPath:
+    """
+    The dynamic path along a pump programme, at ``times`` [s] or at ``rate_hz`` [Hz].
+
+    Times are on the programme's clock (0 at the start of its first leg); by default the
+    programme is sampled as the pump publishes it (``rate_hz``, its end included).
+    """
+    schedule, lead = programme_schedule(profile)
+    if times is None:
+        if rate_hz is None:
+            raise PathError('give the sample times or the rate to sample at')
+        times, _ = profile.sample(rate_hz)
+    path = run_schedule(segments, network, schedule, np.asarray(times, dtype=float) + lead,
+                        rtol)
+    if lead > 0.0:
+        path.time_s = path.time_s - lead
+        path.snaps = [replace(s, start_s=s.start_s - lead, end_s=s.end_s - lead)
+                      for s in path.snaps]
+    return path
+
+
+def history_path(segments: Sequence[Segment], network: NetworkSettings, history: ArrayLike,
+                 flow_rate: float, rtol: float | None = None) -> DynamicPath:
+    """The dynamic path along a volume history pushed at ``flow_rate`` [m^3/s], row by row."""
+    schedule, row_times = history_schedule(history, flow_rate)
+    return run_schedule(segments, network, schedule, row_times, rtol)
+
+
+def path_columns(names: Sequence[str]) -> list[str]:
+    """
+    Column names of a dynamic path's CSV for segments ``names`` (base to tip).
+
+    The quasi-static path's columns (``pressure_pa`` is the syringe's gauge pressure here),
+    with the time first and each channel's flow before the event column.
+    """
+    flows = [f'flow_{a}_to_{b}_m3_per_s' for a, b in zip(names[:-1], names[1:])]
+    return (['time_s', 'injected_m3', 'pressure_pa'] + [f'volume_{n}_m3' for n in names]
+            + [f'curvature_{n}_per_m' for n in names] + flows + ['event'])
+
+
+def write_path(out: str | Path, path: DynamicPath, names: Sequence[str]) -> None:
+    """One row per sample; ``event`` is ``snap`` where a snap-through started."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with out.open('w', newline='') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(path_columns(names))
+        for i in range(path.time_s.size):
+            writer.writerow([repr(float(path.time_s[i])), repr(float(path.injected[i])),
+                             repr(float(path.pressure[i])),
+                             *(repr(float(x)) for x in path.volumes[i]),
+                             *(repr(float(x)) for x in path.curvatures[i]),
+                             *(repr(float(x)) for x in path.channel_flows[i]),
+                             'snap' if path.snap[i] else ''])
+
+
+def snaps_file(out: str | Path) -> Path:
+    """Where the snap-throughs of a path written to ``out`` go: ``NAME_snaps.csv`` beside it."""
+    out = Path(out)
+    return out.with_name(f'{out.stem}_snaps.csv')
+
+
+def snap_columns(names: Sequence[str]) -> list[str]:
+    """Column names of the snap-throughs' CSV for segments ``names`` (base to tip)."""
+    return (['start_s', 'end_s', 'injected_m3', 'duration_s', 'fluid_moved_m3',
+             'peak_exchange_m3_per_s', 'from_pressure_pa', 'to_pressure_pa']
+            + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names])
+
+
+def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[str]) -> None:
+    """One row per snap-through (the header alone when there was none)."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with out.open('w', newline='') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(snap_columns(names))
+        for snap in snaps:
+            writer.writerow([repr(float(x)) for x in (
+                snap.start_s, snap.end_s, snap.injected, snap.duration_s, snap.fluid_moved_m3,
+                snap.peak_exchange_m3_per_s, snap.from_pressure, snap.to_pressure,
+                *snap.from_volumes, *snap.to_volumes)])
