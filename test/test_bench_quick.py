@@ -71,6 +71,16 @@ QUICK = {
          r'\d\.\d{3} \(',
          r'\| assembly \| `softseq classify three_segments` \| \d+\.\d\d \| \d+\.\d\d \|'],
         ['bench/restructure_results.md']),
+    'bench_dynamic.py': (
+        ['## paper', '## fig1_asymmetric', '| ours: rtol | run time [s] | steps | error / range |',
+         '## Batch rig: the paper scene with the network on'],
+        [r'\| 1e-03 \| \d+\.\d{3} \| [1-9]\d* \| \d\.\d\de-\d\d \|',
+         r'\| 1e-07 \| \d+\.\d{3} \| [1-9]\d* \| \d\.\d\de-\d\d \|',
+         # FONSim runs when its own environment exists, and is said to be skipped otherwise.
+         r'(\| 2 \| \d+\.\d\d \| [1-9]\d* \| \d\.\d\de-\d\d \||\*\*FONSim skipped\*\*)',
+         r'\| quasi-static \| \(pump 50\) \| \d+ \| \d+\.\d \| [\d,]+ \| \*\*\d+x\*\* \|',
+         r'\| network \| 200 \| \d+ \| \d+\.\d \| [\d,]+ \| \*\*\d+x\*\* \|'],
+        ['bench/dynamic_results.md']),
     'bench_fem.py': (
         ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
          '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],

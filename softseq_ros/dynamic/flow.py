@@ -26,7 +26,7 @@ from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.integrate import Radau
+from scipy.integrate import DenseOutput, Radau
 
 from softseq_ros.dynamic.network import TubeLaw, tube_law
 from softseq_ros.errors import UserError
@@ -80,26 +80,52 @@ class NetworkFlow:
         self._origin = (0.0, 0.0)   # (time, injected) where the current supply flow began
         self._solver: Radau | None = None
         self._dense = None
+        # Plain floats and bound methods: with a handful of segments, numpy's cost per call on
+        # tiny arrays outweighs the arithmetic, and the right-hand side runs thousands of times.
+        self._pressure_of = [s.pressure for s in self.segments]
+        self._bounds = list(zip(self.rest.tolist(), self.full.tolist()))
+        self._steady = [None if law.inertance > 0.0 else law.flow for law in self.laws]
+        # The last two balances computed, keyed by (t, state): Radau evaluates the rates at
+        # each accepted step's end, which the step's checks need again (the other entry
+        # survives a numerical Jacobian's probe in between).
+        self._recent: list[tuple[float, list[float], tuple]] = []
+        # Volumes, pressures and flows of the state now, computed once per state: the rig
+        # asks for them several times per output.
+        self._now: tuple[FloatArray, FloatArray, FloatArray] | None = None
 
     # ------------------------------------------------------------------ the equations
 
     def volumes_of(self, y: FloatArray, injected: float) -> FloatArray:
         """All segment volumes from a state and the injected volume (mass fixes the tip's)."""
-        others = y[:self.n - 1]
-        return np.append(others, self.rest_total + injected - float(np.sum(others)))
+        return np.array(self._volume_list(y.tolist(), injected))
+
+    def _volume_list(self, state: list[float], injected: float) -> list[float]:
+        others = state[:self.n - 1]
+        return others + [self.rest_total + injected - sum(others)]
 
     def pressures(self, volumes: FloatArray) -> FloatArray:
         """Each segment's gauge pressure [Pa], its volume clipped to its model's range."""
-        clipped = np.clip(volumes, self.rest, self.full)
-        return np.array([float(s.pressure(v)) for s, v in zip(self.segments, clipped)])
+        asked = np.asarray(volumes, dtype=float).tolist()
+        # The rig asks for the pressures of the volumes now, which are known already.
+        if self._now is not None and asked == self._now[0].tolist():
+            return self._now[1].copy()
+        return np.array(self._pressure_list(asked))
+
+    def _pressure_list(self, volumes: list[float]) -> list[float]:
+        return [float(pressure(min(max(v, lo), hi)))
+                for pressure, v, (lo, hi) in zip(self._pressure_of, volumes, self._bounds)]
 
     def channel_flows(self, y: FloatArray, pressures: FloatArray) -> FloatArray:
         """Each channel's flow [m^3/s], segment j to j + 1."""
-        flows = np.empty(len(self.laws))
-        inertial = iter(y[self.n - 1:])
-        for j, law in enumerate(self.laws):
-            flows[j] = next(inertial) if law.inertance > 0.0 else \
-                law.flow(pressures[j] - pressures[j + 1])
+        return np.array(self._flow_list(np.asarray(y, dtype=float).tolist(),
+                                        np.asarray(pressures, dtype=float).tolist()))
+
+    def _flow_list(self, state: list[float], pressures: list[float]) -> list[float]:
+        flows = []
+        inertial = iter(state[self.n - 1:])
+        for j, steady in enumerate(self._steady):
+            flows.append(next(inertial) if steady is None
+                         else steady(pressures[j] - pressures[j + 1]))
         return flows
 
     def _injected_at(self, t: float) -> float:
@@ -109,17 +135,26 @@ class NetworkFlow:
     def _balance(self, t: float, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray,
                                                               FloatArray]:
         """Volumes, pressures, channel flows and the state's rates at time ``t``."""
-        volumes = self.volumes_of(y, self._injected_at(t))
-        pressures = self.pressures(volumes)
-        flows = self.channel_flows(y, pressures)
-        inflow = np.concatenate([[self.flow], flows[:-1]])
-        dv = inflow[:self.n - 1] - flows[:self.n - 1]
-        dq = [(pressures[j] - pressures[j + 1] - self.laws[j].drop(flows[j]))
-              / self.laws[j].inertance for j in self.inertial]
-        return volumes, pressures, flows, np.concatenate([dv, dq])
+        state = y.tolist()
+        for key_t, key_state, found in self._recent:
+            if key_t == t and key_state == state:
+                return found
+        volumes = self._volume_list(state, self._injected_at(t))
+        pressures = self._pressure_list(volumes)
+        flows = self._flow_list(state, pressures)
+        last = self.n - 1
+        rates = [(self.flow if i == 0 else flows[i - 1]) - flows[i] for i in range(last)]
+        for j in self.inertial:
+            law = self.laws[j]
+            rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
+        found = (np.array(volumes), np.array(pressures), np.array(flows), np.array(rates))
+        self._recent = [self._recent[-1], (t, state, found)] if self._recent \
+            else [(t, state, found)]
+        return found
 
     def _rhs(self, t: float, y: FloatArray) -> FloatArray:
-        return self._balance(t, y)[3]
+        # A copy: the solver may work on the array it is given, and the balance is kept.
+        return self._balance(t, y)[3].copy()
 
     # ------------------------------------------------------------------ time
 
@@ -143,6 +178,7 @@ class NetworkFlow:
         self.injected += volume
         self._origin = (self.t, self.injected)
         self._solver = None
+        self._now = None
 
     def set_volumes(self, volumes: Sequence[float], injected: float) -> None:
         """Put the segments at ``volumes`` at rest (no channel flow): a resume."""
@@ -151,6 +187,7 @@ class NetworkFlow:
         self.injected = float(injected)
         self._origin = (self.t, self.injected)
         self._solver = None
+        self._now = None
 
     def advance(self, t: float) -> None:
         """Integrate to time ``t`` [s] with the current supply flow."""
@@ -160,6 +197,7 @@ class NetworkFlow:
             self._solver = Radau(self._rhs, self.t, self.y, self.t + HORIZON_S,
                                  rtol=self.rtol, atol=self.atol)
             self._dense = None
+            self._recent = []
         solver = self._solver
         while solver.t < t:
             message = solver.step()
@@ -167,13 +205,21 @@ class NetworkFlow:
                 raise NetworkDomainError(f'the network integration failed at '
                                          f'{solver.t:.6g} s: {message}')
             self.steps += 1
-            self._dense = solver.dense_output()
+            # Fetched only when an output falls inside the step: a step that passes no
+            # output, or one whose end is the output, needs no interpolant.
+            self._dense = _PENDING
             self._after_step(solver.t, solver.y)
-        y = self._dense(t) if self._dense is not None and solver.t > t else solver.y
+        if self._dense is not None and solver.t > t:
+            if self._dense is _PENDING:
+                self._dense = _Interpolant(solver.dense_output())
+            y = self._dense(t)
+        else:
+            y = solver.y
         self.y = np.asarray(y, dtype=float)
         self.t = t
         self.injected = self._injected_at(t)
-        for j, flow in enumerate(self.flows()):
+        self._now = None
+        for j, flow in enumerate(self._current()[2].tolist()):
             self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
 
     def take_snaps(self) -> list['DynamicSnap']:
@@ -202,18 +248,56 @@ class NetworkFlow:
 
     # ------------------------------------------------------------------ the state now
 
+    def _current(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Volumes, pressures and channel flows of the state now (computed once per state)."""
+        if self._now is None:
+            state = self.y.tolist()
+            volumes = self._volume_list(state, self.injected)
+            pressures = self._pressure_list(volumes)
+            self._now = (np.array(volumes), np.array(pressures),
+                         np.array(self._flow_list(state, pressures)))
+        return self._now
+
     def volumes(self) -> FloatArray:
         """The segment volumes [m^3] now."""
-        return self.volumes_of(self.y, self.injected)
+        return self._current()[0].copy()
 
     def flows(self) -> FloatArray:
         """The channel flows [m^3/s] now."""
-        return self.channel_flows(self.y, self.pressures(self.volumes()))
+        return self._current()[2].copy()
 
     def syringe_pressure(self) -> float:
         """The gauge pressure [Pa] at the syringe: the base segment's plus the supply line's."""
-        base = float(self.pressures(self.volumes())[0])
+        base = float(self._current()[1][0])
         return base + (self.supply.drop(self.flow) if self.supply is not None else 0.0)
+
+
+# An interpolant the last step has and the outputs have not yet asked for.
+_PENDING = object()
+
+
+class _Interpolant:
+    """
+    The solver's dense output of one step, evaluated at one instant at a time.
+
+    scipy's generic call checks and reshapes its argument on every call, which costs more
+    than the cubic itself; the rig asks for one instant per output. Radau's interpolant is
+    y_old + Q [x, x^2, x^3], x = (t - t_old) / h, evaluated here with the same operations.
+    Another interpolant is called as it is.
+    """
+
+    def __init__(self, dense: DenseOutput) -> None:
+        self.dense = dense
+        self.fast = all(hasattr(dense, name) for name in ('t_old', 'h', 'Q', 'order', 'y_old'))
+
+    def __call__(self, t: float) -> FloatArray:
+        dense = self.dense
+        if not self.fast:
+            return dense(t)
+        x = (t - dense.t_old) / dense.h
+        y = np.dot(dense.Q, np.cumprod(np.full(dense.order + 1, x)))
+        y += dense.y_old
+        return y
 
 
 def time_constant(resistance: float, compliances: Sequence[float]) -> float:
