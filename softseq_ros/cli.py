@@ -85,9 +85,7 @@ def _solve_network(args: argparse.Namespace, scene: Any) -> int:
               '2300): Hagen-Poiseuille underestimates its pressure drop', file=sys.stderr)
     if path.drained is not None:
         print(f'softseq solve: warning: the path ends at {path.time_s[-1]:.6g} s '
-              f'({path.injected[-1] * 1e6:.4g} mL injected): {path.drained}; the syringe drew '
-              "the base segment empty before the channels let the others' fluid follow",
-              file=sys.stderr)
+              f'({path.injected[-1] * 1e6:.4g} mL injected): {path.drained}', file=sys.stderr)
     return 0
 
 

@@ -139,9 +139,15 @@ def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):
                 for m in read_bag(tmp_path / 'bag', ['/pump/command'])}
     volumes = [(m.log_time_ns, np.array(m.msg.position))
                for m in read_bag(tmp_path / 'bag', ['/actuator/volumes'])]
-    # The actuator speaks at its own 200 Hz, between the pump's 50 Hz commands too.
+    # While the pump pushes, both segments only fill (no fluid moves between them): the
+    # actuator answers the pump's 50 Hz commands. In the hold the bottom gives fluid to the
+    # top, a transient: the actuator speaks at its own 200 Hz, between the commands too.
     times = np.array([t for t, _ in volumes])
-    assert np.all(np.diff(times) > 0) and np.max(np.diff(times)) <= 5_000_000
+    assert np.all(np.diff(times) > 0)
+    ramp_end = round(1e-5 / 1e-6 * 1e9)
+    assert set(times[times < ramp_end - 20_000_000]) <= set(commands)
+    hold = times[(times > ramp_end + 50_000_000) & (times < ramp_end + 500_000_000)]
+    assert np.max(np.diff(hold)) <= 5_000_000 and len(set(hold) - set(commands)) > 50
     # Mass: at every command instant the volumes hold the rest volumes plus what was injected.
     for t, v in volumes:
         if t in commands:

@@ -14,7 +14,7 @@ import yaml
 
 from softseq_ros.bag.reader import bag_summary, read_bag
 from softseq_ros.batch import BatchRun
-from softseq_ros.dynamic.flow import NetworkFlow
+from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import LAMINAR_REYNOLDS, tube_law
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import SceneError, load_scene, scene_from_dict
@@ -38,15 +38,16 @@ def fig1_with_network(tmp_path: Path, network: dict, flow: float = 2e-7,
 
 def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_path):
     channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
-    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
+    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 200})
     result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
     bag = tmp_path / 'bag'
     flows = list(read_bag(bag, ['/actuator/channel_flows']))
     volumes = list(read_bag(bag, ['/actuator/volumes']))
-    # The state goes out at the network's rate while the pump runs (150 s at 50 Hz), each
-    # volumes message with its channel flows.
+    # Each volumes message comes with its channel flows: one per pump command (150 s at
+    # 50 Hz), and more at the network's 200 Hz while the snap-through moves the fluid.
     assert len(flows) == len(volumes) == result.message_counts['/actuator/channel_flows']
-    assert len(flows) > 0.9 * 50 * 3.0e-5 / 2e-7
+    commands = result.message_counts['/pump/command']
+    assert len(flows) > commands > 0.9 * 50 * 3.0e-5 / 2e-7
     law = tube_law(Tube(**channel), WATER)
     bottom, top = scene.segments
     for message, state in zip(flows[::25], volumes[::25]):
@@ -71,6 +72,12 @@ def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_p
     assert 0.0 < event['duration_s'] < (published - event['start_ns']) / 1e9
     assert event['fluid_moved_m3'] > 0.5 * moved > 2 * ML
     assert event['peak_exchange_m3_per_s'] > 5 * 2e-7
+    # While it ran, the state went out at the network's 200 Hz, between the pump's commands.
+    during = [m.log_time_ns for m in flows
+              if event['start_ns'] <= m.log_time_ns <= published]
+    assert np.max(np.diff(during)) <= 1e9 / 200 * 1.001
+    command_times = {m.log_time_ns for m in read_bag(bag, ['/pump/command'])}
+    assert len(set(during) - command_times) > 0.5 * len(during)
 
 
 def test_a_quasi_static_scene_has_no_channel_flows_topic(tmp_path):
@@ -204,3 +211,58 @@ def test_near_zero_flow_holds_still_for_as_long_as_asked():
                                                    abs=1e-12 * flow.v_scale)
     assert np.all(np.isfinite(volumes)) and flow.steps < 1000
     assert flow.take_snaps() == []
+
+
+def test_a_withdrawal_faster_than_the_channel_collapses_the_base_and_still_ends_at_rest(
+        tmp_path):
+    # Up to 20 mL and back to nothing at 0.2 mL/s: at the end the syringe draws from the base
+    # faster than the top's fluid comes through the channel. The base collapses below its
+    # rest volume under suction (a gauge pressure below zero), pulls the top's fluid through,
+    # and the run ends at rest, nothing refused.
+    data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+    data['pump'].update({'flow_rate_m3_per_s': 2e-7,
+                         'legs': [{'inflate_to_m3': 2.0e-5}, {'deflate_to_m3': 0.0},
+                                  {'hold_s': 5.0}]})
+    data['camera'] = {'rate_hz': 1}
+    data['network'] = {'channels': [{'length_m': 0.02, 'radius_m': 0.25e-3}]}
+    scene = scene_from_dict(data, tmp_path / 'withdrawal.yaml')
+    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    assert result.pump_state == 'finished'
+    assert not [line for line in result.warnings if 'refused' in line or 'held' in line]
+    states = [m.msg for m in read_bag(tmp_path / 'bag', ['/actuator/volumes'])]
+    rest = [segment.rest_volume for segment in scene.segments]
+    assert min(s.position[0] - rest[0] for s in states) < 0.0
+    assert min(s.effort[0] for s in states) < 0.0
+    np.testing.assert_allclose(states[-1].position, rest, atol=1e-9 * ML)
+
+
+def test_suction_beyond_vacuum_is_refused_and_the_rig_holds_its_last_state(tmp_path):
+    from softseq_ros.rig.build import actuator_core
+    from softseq_ros.rig.values import WARNING, Notice, PumpCommand
+
+    # The top holds most of 20 mL, the channel is narrow, and the syringe draws 20 mL/s: the
+    # base would have to pull harder than vacuum to keep up.
+    channel = {'length_m': 0.02, 'radius_m': 0.15e-3}
+    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 100})
+    flow = NetworkFlow(scene.segments, scene.network)
+    flow.set_volumes([2.0 * ML, 18.0e-6 + 2 * 0.905 * ML - 2.0 * ML], injected=18.0e-6)
+    flow.set_flow(-2e-5)
+    with pytest.raises(NetworkDomainError, match=r'^segment bottom collapses under suction '
+                       r'beyond vacuum at .* s \(.* m\^3, rest .* m\^3, injected .* m\^3\): '
+                       r'the syringe draws faster than the channels let the fluid follow$'):
+        flow.advance(1.0)
+    # On the rig: the commands and the ticks that would need it are refused with a warning;
+    # the state stays at the last instant reached.
+    core = actuator_core(scene)
+    core.model.resume(18.0e-6, [2.0 * ML, 18.0e-6 + 2 * 0.905 * ML - 2.0 * ML])
+    said = []
+    for k in range(1, 60):
+        now = k * 10_000_000
+        said += core.handle(PumpCommand(now, max(18.0e-6 - 2e-5 * k * 0.01, 0.0), -2e-5), now)
+        said += core.tick(now + 5_000_000)
+    refusals = [n.text for n in said if isinstance(n, Notice) and n.level == WARNING
+                and 'no longer laminar' not in n.text]
+    assert refusals and all('beyond vacuum' in text for text in refusals)
+    assert core.rejected_commands > 0
+    volumes = core.model.state().volumes
+    assert np.all(np.isfinite(volumes)) and volumes[0] < 0.905 * ML

@@ -16,8 +16,8 @@ The table (``rates.csv``) has one row per grid point: flow [m^3/s], radius [m], 
 leading segment, switch volume, the snap-throughs the network lived (start [m^3 injected],
 direction, 10-90 % duration [s], fluid moved [m^3], peak exchange flow [m^3/s]; several
 snap-throughs of one run are separated by ``;`` in the same order in each column), the largest
-Reynolds number of any channel, and where a deflation drained a segment to its rest volume
-while the others still held fluid (the run ends there; see
+Reynolds number of any channel, and where a deflation drew a suction beyond vacuum in a
+collapsing segment while the others still held fluid (the run ends there; see
 :class:`softseq_ros.dynamic.path.DynamicPath`), or why the point was refused (the pump filled a
 segment past its curve before the channels let the fluid on). The figure (``rates.png``)
 colours the flow x radius grid by the leading segment and writes the sequence type and the

@@ -16,8 +16,11 @@ where the channels are short and wide, so it is integrated by scipy's Radau (imp
 error-controlled, its step chosen by the error, never fixed), one integration across as many
 commands as keep the flow the same: a pump ramp costs a few steps once the transients decay.
 
-Volumes are checked after every step: a segment that leaves its model's range ends the
+Volumes are checked after every step: a segment pushed past the end of its curve ends the
 integration with :class:`NetworkDomainError` (the quasi-static solver refuses such a volume too).
+A segment drawn below its rest volume collapses (a stiff line below its rest pressure), so a
+fast withdrawal pulls the far segments' fluid through the channels instead of failing; only
+suction beyond vacuum is refused.
 """
 
 from dataclasses import dataclass
@@ -41,6 +44,17 @@ ATOL_SHARE = 1e-3
 SAME_FLOW = 1e-9
 # The solver is never asked to step beyond this horizon [s] at once.
 HORIZON_S = 1.0e9
+# A segment drawn below its rest volume (the syringe withdrawing faster than the channels let
+# the far segments' fluid follow) collapses: its pressure falls below its rest pressure along
+# a line this many times as steep as its curve is on average. Stiff, so the undershoot stays
+# small, and finite, so the suction pulls the others' fluid through the channels.
+COLLAPSE_STIFFENING = 1.0e3
+# Suction beyond vacuum (gauge below minus one standard atmosphere) the water cannot follow:
+# it would boil. A collapse that deep is refused.
+VACUUM_GAUGE_PA = -101325.0
+# The fluid moves between the segments (a transient runs) while the exchange beyond the pump's
+# flow exceeds this share of the pump's flow and the integrator's absolute tolerance per second.
+QUIET_SHARE_OF_FLOW = 1.0e-6
 
 
 class NetworkDomainError(UserError):
@@ -84,6 +98,12 @@ class NetworkFlow:
         # tiny arrays outweighs the arithmetic, and the right-hand side runs thousands of times.
         self._pressure_of = [s.pressure for s in self.segments]
         self._bounds = list(zip(self.rest.tolist(), self.full.tolist()))
+        self._collapse = [COLLAPSE_STIFFENING * _mean_stiffness(s) for s in self.segments]
+        # Whether the last watched step had fluid moving between the segments (a transient),
+        # and a step end the integrator reached beyond the time asked, watched once time gets
+        # there (unless the flow changes first: then that step never happens).
+        self.exchanging = False
+        self._unwatched = False
         self._steady = [None if law.inertance > 0.0 else law.flow for law in self.laws]
         # The last two balances computed, keyed by (t, state): Radau evaluates the rates at
         # each accepted step's end, which the step's checks need again (the other entry
@@ -104,7 +124,12 @@ class NetworkFlow:
         return others + [self.rest_total + injected - sum(others)]
 
     def pressures(self, volumes: FloatArray) -> FloatArray:
-        """Each segment's gauge pressure [Pa], its volume clipped to its model's range."""
+        """
+        Each segment's gauge pressure [Pa] at ``volumes`` [m^3].
+
+        Above a segment's curve its last pressure (the integration refuses such a volume);
+        below its rest volume, collapsing under suction (COLLAPSE_STIFFENING).
+        """
         asked = np.asarray(volumes, dtype=float).tolist()
         # The rig asks for the pressures of the volumes now, which are known already.
         if self._now is not None and asked == self._now[0].tolist():
@@ -112,8 +137,14 @@ class NetworkFlow:
         return np.array(self._pressure_list(asked))
 
     def _pressure_list(self, volumes: list[float]) -> list[float]:
-        return [float(pressure(min(max(v, lo), hi)))
-                for pressure, v, (lo, hi) in zip(self._pressure_of, volumes, self._bounds)]
+        pressures = []
+        for pressure, v, (lo, hi), collapse in zip(self._pressure_of, volumes, self._bounds,
+                                                   self._collapse):
+            if v < lo:
+                pressures.append(float(pressure(lo)) + collapse * (v - lo))
+            else:
+                pressures.append(float(pressure(min(v, hi))))
+        return pressures
 
     def channel_flows(self, y: FloatArray, pressures: FloatArray) -> FloatArray:
         """Each channel's flow [m^3/s], segment j to j + 1."""
@@ -165,11 +196,13 @@ class NetworkFlow:
         A flow within round-off of the present one (a ramp's next command) keeps the present
         integration going; another one starts a new one from the state now.
         """
-        if abs(flow - self.flow) > SAME_FLOW * max(abs(flow), abs(self.flow)) \
-                or self._solver is None:
+        changed = abs(flow - self.flow) > SAME_FLOW * max(abs(flow), abs(self.flow))
+        if changed or self._solver is None:
             self.flow = float(flow)
             self._origin = (self.t, self.injected)
             self._solver = None
+            if changed:
+                self._restart_watch()
 
     def inject_now(self, volume: float) -> None:
         """Put ``volume`` [m^3] into the base segment at once (a command that came late)."""
@@ -179,6 +212,8 @@ class NetworkFlow:
         self._origin = (self.t, self.injected)
         self._solver = None
         self._now = None
+        if abs(volume) > JUMP_SHARE * self.v_scale:
+            self._restart_watch()
 
     def set_volumes(self, volumes: Sequence[float], injected: float) -> None:
         """Put the segments at ``volumes`` at rest (no channel flow): a resume."""
@@ -188,9 +223,16 @@ class NetworkFlow:
         self._origin = (self.t, self.injected)
         self._solver = None
         self._now = None
+        self._restart_watch()
 
     def advance(self, t: float) -> None:
-        """Integrate to time ``t`` [s] with the current supply flow."""
+        """
+        Integrate to time ``t`` [s] with the current supply flow.
+
+        The steps are watched (domain, snap-throughs, Reynolds numbers) up to ``t`` only: the
+        integrator's last step may end beyond it, with a flow that a command at ``t`` changes.
+        A :class:`NetworkDomainError` leaves the state at the last instant reached.
+        """
         if t <= self.t:
             return
         if self._solver is None:
@@ -198,17 +240,29 @@ class NetworkFlow:
                                  rtol=self.rtol, atol=self.atol)
             self._dense = None
             self._recent = []
+            self._unwatched = False
         solver = self._solver
-        while solver.t < t:
-            message = solver.step()
-            if solver.status == 'failed':
-                raise NetworkDomainError(f'the network integration failed at '
-                                         f'{solver.t:.6g} s: {message}')
-            self.steps += 1
-            # Fetched only when an output falls inside the step: a step that passes no
-            # output, or one whose end is the output, needs no interpolant.
-            self._dense = _PENDING
-            self._after_step(solver.t, solver.y)
+        try:
+            if self._unwatched and solver.t <= t:
+                self._unwatched = False
+                self._after_step(solver.t, solver.y)
+            while solver.t < t:
+                message = solver.step()
+                if solver.status == 'failed':
+                    raise NetworkDomainError(f'the network integration failed at '
+                                             f'{solver.t:.6g} s: {message}')
+                self.steps += 1
+                # Fetched only when an output falls inside the step: a step that passes no
+                # output, or one whose end is the output, needs no interpolant.
+                self._dense = _PENDING
+                if solver.t <= t:
+                    self._after_step(solver.t, solver.y)
+                else:
+                    self._unwatched = True
+        except NetworkDomainError:
+            # The next call starts again from the last instant reached.
+            self._solver = None
+            raise
         if self._dense is not None and solver.t > t:
             if self._dense is _PENDING:
                 self._dense = _Interpolant(solver.dense_output())
@@ -219,30 +273,57 @@ class NetworkFlow:
         self.t = t
         self.injected = self._injected_at(t)
         self._now = None
-        for j, flow in enumerate(self._current()[2].tolist()):
-            self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
 
     def take_snaps(self) -> list['DynamicSnap']:
         """The snap-throughs completed since the last call."""
         found, self.new_snaps = self.new_snaps, []
         return found
 
-    def _after_step(self, t: float, y: FloatArray) -> None:
-        """Refuse a volume beyond its segment's curve; watch for snap-throughs."""
-        volumes, pressures, _, rates = self._balance(t, y)
+    def _restart_watch(self) -> None:
+        """
+        The flow or the state changed at once: watch the state now with its new rates.
+
+        What the exchange was before (a calm step long ago, say) says nothing about it after:
+        an episode that starts now starts here.
+        """
+        self._recent = []
+        self._unwatched = False
+        self._after_step(self.t, self.y, fresh=True)
+
+    def _after_step(self, t: float, y: FloatArray, fresh: bool = False) -> None:
+        """
+        Check one step's end, watch it, keep each channel's peak Reynolds number.
+
+        A volume beyond its segment's curve, or suction beyond vacuum, is refused; the
+        exchange between the segments says whether a transient runs and finds snap-throughs.
+        ``fresh``: the rates changed at once at ``t`` (see :meth:`_restart_watch`).
+        """
+        volumes, pressures, flows, rates = self._balance(t, y)
         injected = self._injected_at(t)
         slack = 1e-9 * self.v_scale
-        outside = np.flatnonzero((volumes < self.rest - slack) | (volumes > self.full + slack))
-        if outside.size:
-            i = int(outside[0])
-            edge = 'its rest volume' if volumes[i] < self.rest[i] else 'the end of its curve'
+        beyond = np.flatnonzero(volumes > self.full + slack)
+        if beyond.size:
+            i = int(beyond[0])
             raise NetworkDomainError(
-                f'segment {self.segments[i].name} passes {edge} at {t:.6g} s '
+                f'segment {self.segments[i].name} passes the end of its curve at {t:.6g} s '
                 f'({volumes[i]:.6g} m^3, injected {injected:.6g} m^3)')
+        sucked = np.flatnonzero(pressures < VACUUM_GAUGE_PA)
+        if sucked.size:
+            i = int(sucked[0])
+            raise NetworkDomainError(
+                f'segment {self.segments[i].name} collapses under suction beyond vacuum at '
+                f'{t:.6g} s ({volumes[i]:.6g} m^3, rest {self.rest[i]:.6g} m^3, injected '
+                f'{injected:.6g} m^3): the syringe draws faster than the channels let the '
+                'fluid follow')
+        for j, flow in enumerate(flows.tolist()):
+            self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
         # The tip's rate from mass: the pump's flow less the others'.
         volume_rates = np.append(rates[:self.n - 1], self.flow - float(np.sum(rates[:self.n - 1])))
-        snap = self.snaps.observe(t, injected, volumes, float(pressures[0]),
-                                  exchange_flow(volume_rates, self.flow), self.flow)
+        exchange = exchange_flow(volume_rates, self.flow)
+        self.exchanging = exchange > max(QUIET_SHARE_OF_FLOW * abs(self.flow),
+                                         float(self.atol[0]))
+        snap = self.snaps.observe(t, injected, volumes, float(pressures[0]), exchange,
+                                  self.flow, fresh)
         if snap is not None:
             self.new_snaps.append(snap)
 
@@ -300,6 +381,13 @@ class _Interpolant:
         return y
 
 
+def _mean_stiffness(segment: Segment) -> float:
+    """The segment's largest pressure over its volume range [Pa/m^3]: its average stiffness."""
+    volumes = np.linspace(segment.rest_volume, segment.max_volume, 65)
+    largest = max(abs(float(segment.pressure(v))) for v in volumes)
+    return max(largest, 1.0) / (segment.max_volume - segment.rest_volume)
+
+
 def time_constant(resistance: float, compliances: Sequence[float]) -> float:
     """R C1 C2 / (C1 + C2): how fast two compliant segments joined by R even out [s]."""
     c1, c2 = compliances
@@ -316,6 +404,13 @@ def damping_ratio(resistance: float, inertance: float, compliances: Sequence[flo
 # this many times the pump's flow, and more of it than this share of the volume scale.
 SNAP_EXCHANGE_PER_FLOW = 5.0
 SNAP_SHARE_OF_SCALE = 1e-3
+# An episode that begins with a change of the pump's flow is a snap-through only if its
+# exchange then rises to more than this many times where it began (an instability gathers
+# speed; fluid evening out after the change does not).
+SNAP_ACCELERATION = 2.0
+# An injection smaller than this share of the volume scale is round-off (a command that names
+# the volume the integration reached), not a jump of the state.
+JUMP_SHARE = 1e-9
 
 
 @dataclass
@@ -356,16 +451,23 @@ class SnapWatcher:
         # (time, injected, exchange, volumes, pressure) of the steps of the episode under way
         self._episode: list[tuple[float, float, float, FloatArray, float]] | None = None
         self._last: tuple[float, float, float, FloatArray, float] | None = None
+        self._fresh_start = False   # the episode under way began with a change of flow
 
     def observe(self, t: float, injected: float, volumes: FloatArray, pressure: float,
-                exchange: float, supply_flow: float) -> DynamicSnap | None:
-        """One step's state; a snap when an episode of fast exchange has just ended."""
+                exchange: float, supply_flow: float, fresh: bool = False) -> DynamicSnap | None:
+        """
+        One step's state; a snap when an episode of fast exchange has just ended.
+
+        ``fresh``: the flow or the state changed at once at ``t``, so an episode begins here,
+        not at the last calm step before.
+        """
         fast = exchange > SNAP_EXCHANGE_PER_FLOW * abs(supply_flow) and exchange > 0.0
         sample = (t, injected, exchange, volumes.copy(), pressure)
         if fast:
             if self._episode is None:
                 # The episode starts at the last calm step: the state before the snap.
-                self._episode = [self._last] if self._last is not None else []
+                self._episode = [self._last] if self._last is not None and not fresh else []
+                self._fresh_start = fresh
             self._episode.append(sample)
             self._last = sample
             return None
@@ -383,6 +485,11 @@ class SnapWatcher:
                                                  * np.diff(times))])
         total = float(moved[-1])
         if total <= SNAP_SHARE_OF_SCALE * self.v_scale:
+            return None
+        # An episode that began with a change of the flow (or a jump of the state) is the
+        # fluid evening out, fastest where it begins, unless its exchange then gathers speed
+        # as an instability's does. One that began while the flow stayed is a snap-through.
+        if self._fresh_start and rates.max() <= SNAP_ACCELERATION * rates[0]:
             return None
         t10, t90 = np.interp([0.1 * total, 0.9 * total], moved, times)
         first, last = episode[0], episode[-1]

@@ -72,10 +72,10 @@ class DynamicPath:
     j's largest Reynolds number over the samples; ``steps`` the integrator's steps.
 
     ``drained`` (None when every sample was reached) says why the path ends before the last
-    sample time: the syringe drew a segment below its rest volume while the others still held
-    fluid the channels had not yet let through. No segment model covers a volume below rest,
-    and any finite flow does this at the end of a deflation to nothing injected (the far
-    segments always lag), so the rows end at the last sample before it.
+    sample time: the syringe drew so fast that a segment, collapsing below its rest volume,
+    pulled a suction beyond vacuum while the others still held fluid the channels had not yet
+    let through (softseq_ros.dynamic.flow: a collapse short of that is followed), so the rows
+    end at the last sample before it.
     """
 
     time_s: FloatArray
@@ -162,10 +162,7 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
             while leg < len(legs) and legs[leg][1] <= t:
                 boundary = float(legs[leg][1])
                 fluid.advance(boundary)
-                # The integrator may have stepped past the boundary with the old flow, and
-                # the network watches its steps: an episode it saw start there never
-                # happened, since the flow changes now.
-                snaps.extend(s for s in fluid.take_snaps() if s.start_s <= boundary)
+                snaps.extend(fluid.take_snaps())
                 leg += 1
                 fluid.set_flow(float(legs[leg][2]) if leg < len(legs) else 0.0)
             fluid.advance(float(t))
@@ -174,9 +171,7 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
                 raise
             drained, reached = str(err), i
             break
-        # An episode begun on steps past a change of flow and closed on the steps after it
-        # ends before it starts: not a snap-through of this path either.
-        snaps.extend(s for s in fluid.take_snaps() if s.end_s >= s.start_s)
+        snaps.extend(fluid.take_snaps())
         volumes[i] = fluid.volumes()
         flows[i] = fluid.flows()
         pressure[i] = fluid.syringe_pressure()

@@ -120,7 +120,12 @@ class ActuatorCore:
         """Let the model's time run to ``now``; outputs only when its state moved."""
         if self.waiting:
             return []
-        snaps = self.model.advance(now)
+        try:
+            snaps = self.model.advance(now)
+        except CommandRefusedError as err:
+            # Time alone carried the model out of its range (a transient past a segment's
+            # curve): the state stays at its last good instant, and the log says why.
+            return self.refuse('domain', f'state held: {err}')
         if snaps is None:
             return []
         outputs = self._outputs(now, snaps)

@@ -250,9 +250,11 @@ class DynamicModel:
     injected volume there, evenly since the last command, and keeps pushing it (as a pump on
     a ramp does) for as long again; then it holds. A command older than the model's time (a
     late message) puts its difference into the base segment at once. The model advances at
-    ``rate_hz`` on its driver's clock; a snap-through (softseq_ros.dynamic.flow.DynamicSnap) is
-    reported when it has run its course. Its reach and end stop are the quasi-static ones
-    (``reach``): a transient may still carry a segment past its curve, which is refused then.
+    ``rate_hz`` on its driver's clock and says its state at that rate while a transient runs
+    (fluid moving between the segments), else with the commands' answers; a snap-through
+    (softseq_ros.dynamic.flow.DynamicSnap) is reported when it has run its course. Its reach
+    and end stop are the quasi-static ones (``reach``): a transient may still carry a segment
+    past its curve, which is refused then.
     """
 
     def __init__(self, segments: Sequence[Segment], names: Sequence[str],
@@ -310,12 +312,20 @@ class DynamicModel:
         return self._take_snaps()
 
     def advance(self, now_ns: int) -> list[Snap] | None:
-        """Let the fluid move until ``now_ns``; None when no time passed."""
+        """
+        Let the fluid move until ``now_ns``; None when there is nothing new to say.
+
+        That is, unless a transient runs (fluid moving between the segments) or a snap-through
+        ended: while the segments only follow the pump, the commands' answers say it all.
+        """
         t = self._seconds(now_ns)
         if t <= self.flow_network.t:
             return None
         self._run_to(t)
-        return self._take_snaps()
+        snaps = self._take_snaps()
+        if not snaps and not self.flow_network.exchanging:
+            return None
+        return snaps
 
     def _take_snaps(self) -> list[TimedSnap]:
         origin = self._origin_ns or 0
