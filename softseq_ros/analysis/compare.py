@@ -1,14 +1,17 @@
 """
 Two recordings side by side: the same metrics, their difference (``softseq compare A B``).
 
-For two resolutions of one scene, two scenes, or a quasi-static run against a later dynamic
-model. Values are shown in mL, kPa, mJ and mm; the difference is B minus A.
+For two resolutions of one scene, two scenes, or a quasi-static run against a dynamic one.
+Values are shown in mL, kPa, mJ, mm and ms; the difference is B minus A. When either bag is
+dynamic (a scene with a fluid network) the table adds its transients: each snap-through's
+duration, fluid moved and peak exchange, and the lag behind the quasi-static path, which needs
+the scene (``-`` without it, and for a bag that has no such row).
 """
 
 import os
 
 from softseq_ros.analysis.recording import load_recording
-from softseq_ros.analysis.report import recording_metrics
+from softseq_ros.analysis.report import recording_metrics, scene_notes
 
 
 def _rows(metrics: dict) -> dict[str, tuple[object, str]]:
@@ -41,6 +44,31 @@ def _rows(metrics: dict) -> dict[str, tuple[object, str]]:
     return rows
 
 
+def _transient_rows(metrics: dict) -> dict[str, tuple[object, str]]:
+    """A dynamic recording's transients, quantity -> (value in display units, unit)."""
+    transients = metrics.get('transients')
+    if transients is None:
+        return {}
+    rows: dict[str, tuple[object, str]] = {}
+    for number, snap in enumerate(transients['snaps'], start=1):
+        key = f'snap {number} in time ({snap["direction"]})'
+        rows[f'{key} injected at its start'] = (snap['injected_m3'] * 1e6, 'mL')
+        rows[f'{key} duration (10-90 %)'] = (snap['duration_s'] * 1e3, 'ms')
+        rows[f'{key} fluid moved'] = (snap['fluid_moved_m3'] * 1e6, 'mL')
+        rows[f'{key} peak exchange'] = (snap['peak_exchange_m3_per_s'] * 1e6, 'mL/s')
+        delay = snap['delay_injected_m3']
+        rows[f'{key} late behind the quasi-static snap'] = (
+            delay * 1e6 if delay is not None else None, 'mL')
+    lag = transients['lag'] or {}
+    for where, label in (('off_snaps', 'off the snaps'), ('at_snaps', 'at the snaps')):
+        spread = lag.get(where) or {}
+        for statistic in ('largest', 'median'):
+            value = spread.get(f'{statistic}_m3')
+            rows[f'lag behind the quasi-static path {label}, {statistic}'] = (
+                value * 1e6 if value is not None else None, 'mL')
+    return rows
+
+
 def _cell(value: object) -> str:
     if value is None:
         return '-'
@@ -50,22 +78,44 @@ def _cell(value: object) -> str:
 
 
 def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
-                 namespace_a: str | None = None,
-                 namespace_b: str | None = None) -> tuple[dict, dict, str]:
-    """Metrics of both bags and a Markdown table of them side by side."""
-    metrics_a = recording_metrics(load_recording(bag_a, namespace_a))
-    metrics_b = recording_metrics(load_recording(bag_b, namespace_b))
+                 namespace_a: str | None = None, namespace_b: str | None = None,
+                 scene: object | None = None) -> tuple[dict, dict, str]:
+    """
+    Metrics of both bags and a Markdown table of them side by side.
+
+    ``scene`` (a loaded scene whose segments made both bags) gives a dynamic bag's lag behind
+    the quasi-static path; it is checked against each bag as the report checks it.
+    """
+    recording_a = load_recording(bag_a, namespace_a)
+    recording_b = load_recording(bag_b, namespace_b)
+    emap = None
+    notes_a = notes_b = []
+    if scene is not None:
+        notes_a, notes_b = scene_notes(recording_a, scene), scene_notes(recording_b, scene)
+        from softseq_ros.quasistatic.solve import build_map
+
+        emap = build_map(scene.segments, scene.solver.resolution)
+    metrics_a = recording_metrics(recording_a, scene, emap)
+    metrics_b = recording_metrics(recording_b, scene, emap)
+    metrics_a['notes'].extend(notes_a)
+    metrics_b['notes'].extend(notes_b)
     rows_a, rows_b = _rows(metrics_a), _rows(metrics_b)
     keys = list(rows_a) + [key for key in rows_b if key not in rows_a]
+    timed_a, timed_b = _transient_rows(metrics_a), _transient_rows(metrics_b)
+    rows_a.update(timed_a)
+    rows_b.update(timed_b)
+    timed = list(timed_a) + [key for key in timed_b if key not in timed_a]
     lines = [f'A: {bag_a}', f'B: {bag_b}', '',
              '| quantity | unit | A | B | B - A |', '|---|---|---:|---:|---:|']
-    for key in keys:
+    for key in keys + timed:
         a, unit = rows_a.get(key, (None, rows_b.get(key, (None, ''))[1]))
         b = rows_b.get(key, (None, unit))[0]
         numeric = isinstance(a, (int, float)) and isinstance(b, (int, float)) and \
             not isinstance(a, bool)
         if numeric:
             difference = _cell(float(b) - float(a))
+        elif a is None and b is None and key in timed:
+            difference = '-'
         elif a is None or b is None:
             difference = 'only in ' + ('B' if a is None else 'A')
         else:

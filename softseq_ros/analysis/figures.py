@@ -6,7 +6,8 @@ gauge. Inflation is drawn solid in blue, deflation dashed in orange throughout; 
 an arrow from the state before to the state after. Figures: the PV curve (Fig. 4A / 6), each
 segment's volume and curvature against the injected volume (Fig. 3), the v1-v2 plane with stable
 and unstable equilibria and lines of constant total volume (Fig. 1B / 4B), the tentacle's shape
-at the camera's steps (Fig. 7) and the time series.
+at the camera's steps (Fig. 7), the time series and, for a dynamic bag, the transients around
+its snap-throughs in time.
 
 Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot: it costs half a
 second to import), and long recordings are thinned to a few thousand points per line, keeping
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 
 from softseq_ros.analysis.metrics import snap_rows
 from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
+from softseq_ros.analysis.transients import Transients, TransientWindow, transient_windows
 
 ML = 1e6
 KPA = 1e-3
@@ -31,6 +33,9 @@ STYLE = {INFLATION: {'color': 'tab:blue', 'ls': '-'},
          DEFLATION: {'color': 'tab:orange', 'ls': '--'}}
 GAUGE = 'gauge pressure [kPa]'
 INJECTED = 'injected volume [mL]'
+# Snaps a transients figure shows side by side (more would be too narrow to read).
+MAX_TRANSIENT_SNAPS = 4
+SEGMENT_COLOURS = ['tab:green', 'tab:purple', 'tab:brown', 'tab:cyan', 'tab:olive']
 
 
 @dataclass(frozen=True)
@@ -184,9 +189,8 @@ def plot_segments(recording: Recording, out: Path, svg: bool = False) -> list[Pa
     fig, axes = _figure(6.4, 5.8, 2, 1, {'top': 0.93, 'bottom': 0.09}, sharex=True)
     u = recording.state_injected * ML
     rest = recording.volumes[0]
-    colours = ['tab:green', 'tab:purple', 'tab:brown', 'tab:cyan', 'tab:olive']
     for j, name in enumerate(recording.segment_names):
-        colour = colours[j % len(colours)]
+        colour = SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)]
         _draw_legs(axes[0, 0], recording, u, (recording.volumes[:, j] - rest[j]) * ML,
                    label=f'{name}, ', color=colour)
         if recording.curvatures.shape[0] == recording.volumes.shape[0]:
@@ -332,6 +336,57 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = False) -> list[
     return _save(fig, out, svg)
 
 
+def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ...],
+                    channel_names: tuple[str, ...], out: Path, svg: bool = False) -> list[Path]:
+    """
+    Each snap in time: gauge pressure and channel flow above, segment volumes below.
+
+    Time runs from the snap's start; dashed: the quasi-static volumes at the same injected
+    volume (when the scene was given).
+    """
+    count = len(windows)
+    width = 3.6 * count + 0.6
+    # Fixed margins in inches, whatever the number of panels: room for both y labels.
+    fig, axes = _figure(width, 6.0, 2, count,
+                        {'left': 0.75 / width, 'right': 1 - 0.65 / width, 'top': 0.88,
+                         'bottom': 0.09, 'wspace': 0.55}, sharex='col')
+    for column, window in enumerate(windows):
+        snap = window.snap
+        # Short snaps read in ms, long ones in s.
+        scale, unit = (1e3, 'ms') if snap.window_s[1] - snap.window_s[0] < 2.0 else (1.0, 's')
+        top, bottom = axes[0, column], axes[1, column]
+        top.plot(window.time_s * scale, window.pressure * KPA, 'k-', lw=1.3,
+                 label='gauge pressure (syringe)')
+        if window.flow.size:
+            flow_axis = top.twinx()
+            for j, name in enumerate(channel_names):
+                flow_axis.plot(window.flow_time_s * scale, window.flow[:, j] * ML, '-', lw=1.1,
+                               color=f'C{j + 3}', label=f'flow {name}')
+            flow_axis.set_ylabel('channel flow, towards the tip [mL/s]', fontsize=8)
+            flow_axis.tick_params(labelsize=7)
+            flow_axis.legend(fontsize=6, loc='lower right')
+        for j, name in enumerate(segment_names):
+            colour = SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)]
+            bottom.plot(window.time_s * scale, window.volumes[:, j] * ML, '-', lw=1.4,
+                        color=colour, label=name)
+            if window.quasi_static_volumes is not None:
+                bottom.plot(window.time_s * scale, window.quasi_static_volumes[:, j] * ML, '--',
+                            lw=1.0, color=colour, label=f'{name}, quasi-static')
+        for ax in (top, bottom):
+            ax.axvline(0.0, color='0.5', lw=0.8, ls=':')
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=7)
+        top.set_title(f'snap {snap.number} ({snap.direction}) at {snap.injected * ML:.2f} mL\n'
+                      f'10-90 %: {snap.duration_s * 1e3:.4g} ms', fontsize=8)
+        top.legend(fontsize=6, loc='upper right')
+        bottom.legend(fontsize=6)
+        bottom.set_xlabel(f"time from the snap's start [{unit}]", fontsize=8)
+    axes[0, 0].set_ylabel(GAUGE, fontsize=8)
+    axes[1, 0].set_ylabel('segment volume, total [mL]', fontsize=8)
+    fig.suptitle('Snap-throughs in time (dotted: start; dashed: quasi-static)', fontsize=10)
+    return _save(fig, out, svg)
+
+
 def _draw(name: str, args: tuple) -> list[Path]:
     return _FIGURE_FUNCTIONS[name](*args)
 
@@ -397,20 +452,26 @@ def thinned(recording: Recording) -> Recording:
         curvature_time_s=curvature_time[curves] if curvature_time.size else curvature_time,
         curvature_injected=(curvature_injected[curves] if curvature_injected.size
                             else curvature_injected),
-        snap_rows=snaps)
+        snap_rows=snaps, channel_flows=None)
 
 
 def write_figures(recording: Recording, emap: object | None, directory: Path,
                   experiment: object | None = None, svg: bool = False,
-                  workers: object | None = None) -> list[Path]:
+                  workers: object | None = None,
+                  transients: Transients | None = None) -> list[Path]:
     """
     All figures of a run into ``directory`` (PNG, and SVG as well with ``svg``).
+
+    ``transients`` (a dynamic recording's, with a snap in time) add ``transients.png``.
 
     Drawing is most of a report's time: with ``workers`` (from
     :func:`softseq_ros.analysis.figure_workers.start_workers`) the figures are drawn in those
     processes, in parallel.
     """
     directory.mkdir(parents=True, exist_ok=True)
+    # Windows are cut from the whole recording: thinning could lose a short snap.
+    windows = transient_windows(recording, transients, MAX_TRANSIENT_SNAPS, MAX_POINTS) \
+        if transients is not None else []
     recording = thinned(recording)
     model = ModelCurves.from_map(emap) if emap is not None else None
     jobs = [('pv', (recording, model, directory / 'pv.png', experiment, svg)),
@@ -418,18 +479,22 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
             ('volume_split', (recording, model, directory / 'volume_split.png', svg)),
             ('shapes', (recording, directory / 'shapes.png', svg)),
             ('timeseries', (recording, directory / 'timeseries.png', svg))]
+    if windows:
+        jobs.append(('transients', (windows, recording.segment_names, transients.channel_names,
+                                    directory / 'transients.png', svg)))
     if workers is None:
         return [path for name, args in jobs for path in _draw(name, args)]
-    # Two halves of about equal drawing time, PNG or SVG: shapes and time series against the
-    # other three.
-    order = [3, 4, 0, 1, 2]
-    drawn = workers.apply(_draw_split, ([jobs[i] for i in order], 2))
+    # Two halves of about equal drawing time, PNG or SVG: shapes and time series (and the
+    # transients) against the other three.
+    order = [3, 4, 0, 1, 2] if not windows else [3, 4, 5, 0, 1, 2]
+    drawn = workers.apply(_draw_split, ([jobs[i] for i in order], len(order) - 3))
     by_job = dict(zip(order, drawn))
     return [path for index in range(len(jobs)) for path in by_job[index]]
 
 
 _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': plot_volume_split,
-                     'shapes': plot_shapes, 'timeseries': plot_timeseries}
+                     'shapes': plot_shapes, 'timeseries': plot_timeseries,
+                     'transients': plot_transients}
 
 
 def _save(fig: object, out: Path, svg: bool) -> list[Path]:

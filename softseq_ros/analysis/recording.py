@@ -13,6 +13,11 @@ kept. The scene the actuator said it runs (``actuator/scene``, published once wh
 so usually before the first command) is kept whenever it was said: it describes the actuator,
 not one run. The JSON the String topics carry is read with the codecs that write it
 (:mod:`softseq_ros.rig.wire`).
+
+A bag of a scene with a fluid network (docs/dynamic.md) also holds the channel flows
+(:class:`ChannelFlows`) and snap-through events in time, whose JSON carries ``start_ns``,
+``duration_s``, ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``; a quasi-static bag has
+neither, and reads as it always did.
 """
 
 from dataclasses import dataclass, field
@@ -71,6 +76,21 @@ class Snapshot:
         return self.points[-1]
 
 
+@dataclass
+class ChannelFlows:
+    """
+    The flows through a fluid network's channels (``actuator/channel_flows``), base to tip.
+
+    ``flow`` [m^3/s] is positive towards the tip, ``drop`` [Pa] is the pressure drop along the
+    channel; both (n, channels), one row per time in ``time_s``.
+    """
+
+    names: tuple[str, ...]       # '<segment>_to_<segment>'
+    time_s: FloatArray
+    flow: FloatArray
+    drop: FloatArray
+
+
 @dataclass(frozen=True)
 class RecordedScene:
     """The scene an actuator said it runs: name, segments base to tip, their SHA-256."""
@@ -116,6 +136,8 @@ class Recording:
     # The distinct scenes the actuator said it runs, in the order said (none in older bags;
     # more than one when an actuator was restarted on other segments during the recording).
     scenes: list[RecordedScene] = field(default_factory=list)
+    # A scene with a fluid network only: the flows through its channels.
+    channel_flows: ChannelFlows | None = None
 
     @property
     def scene(self) -> RecordedScene | None:
@@ -187,7 +209,10 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
                           (contract.EVENTS, StringDecoder), (contract.PUMP_STATUS, StringDecoder),
                           (contract.SNAPSHOTS, PoseArrayDecoder),
                           (contract.SNAPSHOT_STEPS, StringDecoder),
-                          (contract.SCENE, StringDecoder)):
+                          (contract.SCENE, StringDecoder),
+                          (contract.CHANNEL_FLOWS,
+                           lambda t: JointStateDecoder(t, ('velocity', 'effort'),
+                                                       log_times=False))):
         if names[spec] in bag.channels:
             optional[spec] = decoder(names[spec])
             decoders.append(optional[spec])
@@ -274,8 +299,23 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
             names[contract.SNAPSHOTS])
     if contract.SCENE in optional:
         recording.scenes = _scenes(optional[contract.SCENE].messages, names[contract.SCENE])
+    if contract.CHANNEL_FLOWS in optional:
+        recording.channel_flows = _channel_flows(optional[contract.CHANNEL_FLOWS],
+                                                 names[contract.CHANNEL_FLOWS], t0, ignored)
     recording.pump_time_s = _seconds(pump_stamp, t0, in_place=True)
     return recording
+
+
+def _channel_flows(decoder: JointStateDecoder, topic: str, t0: int,
+                   ignored: dict[str, int]) -> ChannelFlows | None:
+    flows = decoder.release()
+    stamps = flows.get('stamp_ns', np.zeros(0, np.int64))
+    if not stamps.size:
+        return None
+    keep = stamps >= t0
+    _count_ignored(ignored, topic, keep)
+    return ChannelFlows(decoder.names, _seconds(stamps[keep], t0), flows['velocity'][keep],
+                        flows['effort'][keep])
 
 
 def _seconds(stamps: NDArray[np.int64], t0: int, in_place: bool = False) -> FloatArray:
@@ -362,7 +402,12 @@ def _status(text: str, log_time_ns: int, t0: int) -> tuple[float, str, str]:
 
 
 def _events(messages: list[tuple[int, str]], topic: str) -> list[dict]:
-    """The snap-through events as their JSON objects (they carry no stamp to sort out by)."""
+    """
+    The snap-through events as their JSON objects (they carry no stamp to sort out by).
+
+    A snap in time keeps its optional keys (``start_ns``, ``duration_s``, ...); a quasi-static
+    one has none.
+    """
     return [SNAP_THROUGH_JSON.fields(_decode(SNAP_THROUGH_JSON, topic, number, text, log_time))
             for number, (log_time, text) in enumerate(messages, start=1)]
 

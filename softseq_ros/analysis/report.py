@@ -4,6 +4,11 @@ The report of a rig bag: metrics.json, report.md, summary.txt and the figures.
 ``metrics.json`` holds every number in SI (m^3, Pa gauge, J, m, s); ``report.md`` and the
 summary show the same numbers in mL, kPa and mm for people.
 
+A dynamic bag (a scene with a fluid network) also gets its transients
+(:mod:`softseq_ros.analysis.transients`): ``transients`` in metrics.json, lines in the summary,
+a section in report.md and the figure ``transients.png``; a quasi-static bag's report has none
+of them.
+
 A scene given for the report must be the one that made the bag: when the bag records the
 scene its actuator ran (``actuator/scene``), a scene whose segments have another digest is
 refused (:class:`SceneMismatchError`) before anything is written or assembled. A bag that
@@ -22,6 +27,7 @@ import yaml
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import Trace, TraceError, analyse, segment_limits
 from softseq_ros.analysis.recording import Recording, load_recording
+from softseq_ros.analysis.transients import Transients, analyse_transients
 from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
 from softseq_ros.segments.identity import segments_sha256, short
@@ -29,6 +35,7 @@ from softseq_ros.segments.identity import segments_sha256, short
 ML = 1e6
 KPA = 1e-3
 MM = 1e3
+MS = 1e3
 
 
 class ReferenceFileError(UserError):
@@ -70,6 +77,20 @@ def check_scene(recording: Recording, scene: object) -> list[str]:
     return notes
 
 
+def scene_notes(recording: Recording, scene: object) -> list[str]:
+    """
+    :func:`check_scene`, and SceneMismatchError when the bag's segments are not the scene's.
+
+    A bag that records no scene can only be checked by its segments' names.
+    """
+    notes = check_scene(recording, scene)
+    if scene.segment_names != recording.segment_names:
+        raise SceneMismatchError(f"{recording.path}: the bag's segments "
+                                 f'{", ".join(recording.segment_names)} are not the '
+                                 f'scene\'s {", ".join(scene.segment_names)}')
+    return notes
+
+
 def recording_trace(recording: Recording) -> Trace:
     """The states of a recording as a :class:`Trace`."""
     curvatures = recording.curvatures if recording.curvatures.shape[0] == \
@@ -80,8 +101,13 @@ def recording_trace(recording: Recording) -> Trace:
 
 
 def recording_metrics(recording: Recording, scene: object | None = None,
-                      emap: object | None = None) -> dict:
-    """Every number of a recording (first cycle), SI units, gauge pressures."""
+                      emap: object | None = None, transients: Transients | None = None) -> dict:
+    """
+    Every number of a recording (first cycle), SI units, gauge pressures.
+
+    ``transients``: the recording's, when already analysed (the report draws them too);
+    otherwise a dynamic recording's are analysed here.
+    """
     trace = recording_trace(recording)
     try:
         result = analyse(trace)
@@ -136,6 +162,11 @@ def recording_metrics(recording: Recording, scene: object | None = None,
                 f'the recording reads as {metrics["sequence_type"]}, the scene classifies as '
                 f'{metrics["sequence_type_of_scene"]} over its whole range (the pump may not '
                 'cover it)')
+    if transients is None:
+        transients = analyse_transients(recording, emap)
+    if transients is not None:
+        metrics['transients'] = transients.metrics
+        metrics['warnings'].extend(transients.warnings)
     return metrics
 
 
@@ -239,15 +270,12 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     notes = []
     if scene is not None:
         # Before the equilibrium set is assembled and before anything is written.
-        notes = check_scene(recording, scene)
-        if scene.segment_names != recording.segment_names:
-            raise SceneMismatchError(f"{bag}: the bag's segments "
-                                     f'{", ".join(recording.segment_names)} are not the '
-                                     f'scene\'s {", ".join(scene.segment_names)}')
+        notes = scene_notes(recording, scene)
         from softseq_ros.quasistatic.solve import build_map
 
         emap = build_map(scene.segments, scene.solver.resolution)
-    metrics = recording_metrics(recording, scene, emap)
+    transients = analyse_transients(recording, emap)
+    metrics = recording_metrics(recording, scene, emap, transients)
     metrics['notes'].extend(notes)
     if experiment is not None:
         metrics['warnings'].extend(experiment.warnings)
@@ -260,7 +288,7 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     if figures:
         from softseq_ros.analysis.figures import write_figures
 
-        written = write_figures(recording, emap, out, experiment, svg, workers)
+        written = write_figures(recording, emap, out, experiment, svg, workers, transients)
     metrics['figures'] = [p.name for p in written]
     (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json) + '\n')
     text = summary_text(metrics)
@@ -283,6 +311,71 @@ def _ml(value: float | None, digits: int = 2) -> str:
 
 def _kpa(value: float | None, digits: int = 2) -> str:
     return '-' if value is None else f'{value * KPA:.{digits}f} kPa'
+
+
+def _ms(value: float | None) -> str:
+    if value is None or not np.isfinite(value):
+        return '-'
+    shown = value * MS
+    return f'{shown:.0f} ms' if shown >= 100 else f'{shown:.3g} ms'
+
+
+def _ml_per_s(value: float | None) -> str:
+    return '-' if value is None or not np.isfinite(value) else f'{value * ML:.4g} mL/s'
+
+
+def _share(spread: dict) -> str:
+    return (f'{_ml(spread["largest_m3"], 4)} ({spread["largest_share_of_range"] * 100:.3g} % '
+            f'of the range), median {_ml(spread["median_m3"], 4)}')
+
+
+def _peak_channel(peaks: dict, show: object) -> str:
+    """The channel with the largest peak, in display units (``show``), naming the channel."""
+    found = {name: value for name, value in peaks.items() if value is not None}
+    if not found:
+        return '-'
+    name = max(found, key=lambda key: abs(found[key]))
+    return f'{show(found[name])} ({name})'
+
+
+def _delay(snap: dict) -> str:
+    if snap['delay_injected_m3'] is None:
+        return ''
+    return (f'; late by {_ml(snap["delay_injected_m3"], 3)} injected after the quasi-static '
+            f'snap at {_ml(snap["quasi_static_injected_m3"], 3)}')
+
+
+def _transient_lines(transients: dict) -> list[str]:
+    """The summary's lines on a dynamic recording's transients."""
+    snaps = transients['snaps']
+    channels = ', '.join(transients['channels']) or 'none recorded'
+    lines = [f'transients (fluid network; channels {channels}): {len(snaps)} snap-through'
+             f'{"s" if len(snaps) != 1 else ""} in time']
+    for number, snap in enumerate(snaps, start=1):
+        lines.append(
+            f'  snap {number} ({snap["direction"]}) at {_ml(snap["injected_m3"], 3)}, '
+            f't = {snap["start_time_s"]:.3f} s: 10-90 % in {_ms(snap["duration_s"])}, '
+            f'{_ml(snap["fluid_moved_m3"], 3)} moved, peak exchange '
+            f'{_ml_per_s(snap["peak_exchange_m3_per_s"])}, gauge pressure '
+            f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])}')
+        lines.append(
+            f'    peak channel flow {_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)}'
+            f', peak pressure drop {_peak_channel(snap["peak_pressure_drop_pa"], _kpa)}'
+            + _delay(snap))
+    lag = transients['lag']
+    if lag is None:
+        lines.append('  lag behind the quasi-static path: needs the scene (--scene)')
+        return lines
+    parts = []
+    for key, where in (('off_snaps', 'off the snaps'), ('at_snaps', 'at the snaps')):
+        if lag[key] is not None:
+            parts.append(f'{where} largest {_share(lag[key])}')
+    lines.append('  lag behind the quasi-static path (segment volume at the same injected '
+                 'volume): ' + ('; '.join(parts) or '-'))
+    if lag['quasi_static_snaps_not_followed_m3']:
+        lines.append('  quasi-static snaps the recording never followed: '
+                     + ', '.join(_ml(u, 3) for u in lag['quasi_static_snaps_not_followed_m3']))
+    return lines
 
 
 def summary_text(metrics: dict) -> str:
@@ -323,6 +416,8 @@ def summary_text(metrics: dict) -> str:
     else:
         lines.append('snap-throughs: none')
     lines.append(f'hysteresis area: {metrics["hysteresis_area_j"] * 1e3:.4f} mJ')
+    if 'transients' in metrics:
+        lines.extend(_transient_lines(metrics['transients']))
     first, later = _first_cycle_steps(metrics)
     for step in first:
         tip = step['tip_m']
@@ -371,6 +466,51 @@ def _check_text(check: dict) -> str:
     return f'{check["what"]}: recorded {check["recorded"]}, reported {check["reported"]} ({mark})'
 
 
+def _transient_markdown(transients: dict) -> list[str]:
+    lines = ['', '## Transients (fluid network)', '',
+             'Snap-throughs in time as the actuator reported them: duration from 10 % to 90 % '
+             'of the fluid moved; peak channel flow (positive towards the tip) and pressure '
+             'drop within the window shown in `transients.png`; late by: injected volume '
+             'pumped between the quasi-static snap and the start of this one.', '']
+    if transients['snaps']:
+        lines += ['| snap | direction | start | injected | duration | fluid moved | '
+                  'peak exchange | gauge pressure | peak channel flow | peak pressure drop | '
+                  'late by |', '|---:|---|---:|---:|---:|---:|---:|---|---|---|---:|']
+        for number, snap in enumerate(transients['snaps'], start=1):
+            lines.append(
+                f'| {number} | {snap["direction"]} | {snap["start_time_s"]:.3f} s | '
+                f'{_ml(snap["injected_m3"], 3)} | {_ms(snap["duration_s"])} | '
+                f'{_ml(snap["fluid_moved_m3"], 3)} | '
+                f'{_ml_per_s(snap["peak_exchange_m3_per_s"])} | '
+                f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '
+                f'{_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)} | '
+                f'{_peak_channel(snap["peak_pressure_drop_pa"], _kpa)} | '
+                f'{_ml(snap["delay_injected_m3"], 3)} |')
+    else:
+        lines.append('No snap-through in time was reported.')
+    lag = transients['lag']
+    lines += ['', 'Lag behind the quasi-static path: the largest difference of a segment '
+              'volume from the quasi-static one at the same injected volume.', '']
+    if lag is None:
+        lines.append('Not computed: it needs the scene (`--scene`).')
+        return lines
+    lines += ['| where | largest | median | states |', '|---|---:|---:|---:|']
+    for key, where in (('off_snaps', 'off the snaps'), ('at_snaps', 'at the snaps')):
+        spread = lag[key]
+        if spread is None:
+            lines.append(f'| {where} | - | - | 0 |')
+            continue
+        lines.append(f'| {where} | {_ml(spread["largest_m3"], 4)} '
+                     f'({spread["largest_share_of_range"] * 100:.3g} %) | '
+                     f'{_ml(spread["median_m3"], 4)} '
+                     f'({spread["median_share_of_range"] * 100:.3g} %) | {spread["states"]} |')
+    if lag['quasi_static_snaps_not_followed_m3']:
+        lines += ['', 'Quasi-static snaps the recording never followed: '
+                  + ', '.join(_ml(u, 3) for u in lag['quasi_static_snaps_not_followed_m3'])
+                  + '.']
+    return lines
+
+
 def markdown(metrics: dict) -> str:
     """report.md: the summary as a short document with tables."""
     lines = [f'# Report of `{metrics["bag"]}`', '',
@@ -403,6 +543,8 @@ def markdown(metrics: dict) -> str:
             lines.append(f'| {_ml(snap["injected_m3"], 3)} | {snap["direction"]} | '
                          f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '
                          f'{_ml(snap["fluid_moved_m3"], 3)} |')
+    if 'transients' in metrics:
+        lines += _transient_markdown(metrics['transients'])
     first, later = _first_cycle_steps(metrics)
     if first:
         lines += ['', '## Steps (camera snapshots, first cycle)', '',
@@ -445,5 +587,5 @@ def markdown(metrics: dict) -> str:
 
 
 __all__ = ['Experiment', 'SceneMismatchError', 'against_reference', 'check_scene',
-           'load_reference', 'markdown', 'recording_metrics', 'recording_trace', 'summary_text',
-           'write_report']
+           'load_reference', 'markdown', 'recording_metrics', 'recording_trace', 'scene_notes',
+           'summary_text', 'write_report']

@@ -1,0 +1,165 @@
+"""
+The transients of a dynamic bag in the report and in ``softseq compare``: snap durations as the
+actuator measured them, the lag behind the quasi-static path, the transients figure; and a
+quasi-static bag's report without any of it.
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from softseq_ros.analysis.compare import compare_bags
+from softseq_ros.analysis.recording import load_recording
+from softseq_ros.analysis.report import markdown, recording_metrics, summary_text, write_report
+from softseq_ros.bag.reader import read_bag
+from softseq_ros.batch import BatchRun
+from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.scene.validation import YamlLoader
+
+FIG1 = Path(__file__).resolve().parents[1] / 'config' / 'fig1_asymmetric.yaml'
+# Wide enough that the pair snaps within seconds, narrow enough that it lags visibly.
+CHANNEL = {'length_m': 0.01, 'radius_m': 0.5e-3}
+TOP = 3.0e-5          # past the quasi-static snap-through of inflation at 26.4 mL
+FAST = 2e-7           # 0.2 mL/s
+
+
+def fig1_with_network(directory: Path, flow: float, rate_hz: float) -> Path:
+    """The Fig. 1 asymmetric pair joined by CHANNEL, inflated at ``flow`` to TOP (a file)."""
+    data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+    # The same injected volume per output at both flows: the slow run is no longer.
+    data['pump'].update({'flow_rate_m3_per_s': flow, 'legs': [{'inflate_to_m3': TOP}],
+                         'rate_hz': rate_hz})
+    data['camera'] = {'rate_hz': 0.1}
+    data['network'] = {'channels': [CHANNEL], 'rate_hz': rate_hz}
+    path = directory / f'fig1_network_{flow:g}.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def run(scene_file: Path, out: Path) -> Path:
+    BatchRun(load_scene(scene_file), out, start_time_ns=0).run()
+    return out
+
+
+@pytest.fixture(scope='module')
+def fast(tmp_path_factory) -> tuple[Path, Path]:
+    """(scene file, bag) at 0.2 mL/s, 50 Hz."""
+    directory = tmp_path_factory.mktemp('fast')
+    scene_file = fig1_with_network(directory, FAST, 50.0)
+    return scene_file, run(scene_file, directory / 'bag')
+
+
+@pytest.fixture(scope='module')
+def slow(tmp_path_factory) -> tuple[Path, Path]:
+    """(scene file, bag) at 0.02 mL/s, 5 Hz."""
+    directory = tmp_path_factory.mktemp('slow')
+    scene_file = fig1_with_network(directory, FAST / 10, 5.0)
+    return scene_file, run(scene_file, directory / 'bag')
+
+
+@pytest.fixture(scope='module')
+def quasi_static(tmp_path_factory) -> Path:
+    directory = tmp_path_factory.mktemp('quasi_static')
+    data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+    data['pump'].update({'flow_rate_m3_per_s': 1e-6, 'legs': [{'inflate_to_m3': TOP}]})
+    data['camera'] = {'rate_hz': 0.1}
+    path = directory / 'fig1.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return run(path, directory / 'bag')
+
+
+def events_in(bag: Path) -> list[dict]:
+    """The snap-through events, read with the general reader (not the analysis's)."""
+    return [json.loads(m.msg.data) for m in read_bag(bag, ['/actuator/events'])]
+
+
+def test_the_report_of_a_dynamic_bag_shows_the_measured_snap_durations(fast, tmp_path):
+    _, bag = fast
+    metrics, summary = write_report(bag, tmp_path / 'report')
+    events = events_in(bag)
+    assert len(events) == 1 and events[0]['duration_s'] > 0
+    transients = metrics['transients']
+    assert transients['channels'] == ['bottom_to_top']
+    snaps = transients['snaps']
+    assert [s['duration_s'] for s in snaps] == [e['duration_s'] for e in events]
+    assert [s['fluid_moved_m3'] for s in snaps] == [e['fluid_moved_m3'] for e in events]
+    assert [s['start_time_s'] for s in snaps] == [e['start_ns'] / 1e9 for e in events]
+    snap = snaps[0]
+    # Fluid flows from the top into the bottom through the channel: against its direction.
+    peak_flow = snap['peak_channel_flow_m3_per_s']['bottom_to_top']
+    assert peak_flow < 0
+    assert abs(peak_flow) == pytest.approx(snap['peak_exchange_m3_per_s'], rel=0.05)
+    # Without the scene there is no quasi-static path to lag behind.
+    assert transients['lag'] is None and snap['delay_injected_m3'] is None
+    assert f'10-90 % in {events[0]["duration_s"] * 1e3:.0f} ms' in summary
+    assert 'lag behind the quasi-static path: needs the scene' in summary
+    report = (tmp_path / 'report' / 'report.md').read_text()
+    assert '## Transients (fluid network)' in report
+    assert '![transients.png](transients.png)' in report
+    figure = tmp_path / 'report' / 'transients.png'
+    assert figure.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert 'transients.png' in metrics['figures']
+    written = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
+    assert written['transients']['snaps'][0]['duration_s'] == events[0]['duration_s']
+
+
+def test_the_lag_shrinks_when_the_pump_is_ten_times_slower(fast, slow):
+    # Both scenes have the same segments (only the pump differs): one map serves both.
+    scene = load_scene(fast[0])
+    emap = build_map(scene.segments, scene.solver.resolution)
+    every = [recording_metrics(load_recording(bag), load_scene(scene_file), emap)
+             for scene_file, bag in (fast, slow)]
+    lags = [metrics['transients'] for metrics in every]
+    quick, slower = lags
+    # The dynamic snap comes after the quasi-static one (26.39 mL), by a positive volume.
+    for lag in lags:
+        snap = lag['snaps'][0]
+        assert snap['quasi_static_injected_m3'] == pytest.approx(2.639e-5, abs=2e-8)
+        assert snap['delay_injected_m3'] == pytest.approx(
+            snap['injected_m3'] - snap['quasi_static_injected_m3'])
+        assert snap['delay_injected_m3'] > 0
+    # Off the snaps the state trails the slow manifold by about its time constant times the
+    # pump's flow: first order, ten times less.
+    for statistic in ('largest_m3', 'median_m3'):
+        ratio = quick['lag']['off_snaps'][statistic] / slower['lag']['off_snaps'][statistic]
+        assert 5 < ratio < 20, (statistic, ratio)
+    assert 1e-3 < quick['lag']['off_snaps']['largest_share_of_range'] < 1e-2
+    # A snap passes through a fold: it comes late by a delay that shrinks like Q^(2/3)
+    # (10^(2/3) = 4.6).
+    delays = [lag['snaps'][0]['delay_injected_m3'] for lag in lags]
+    assert 3 < delays[0] / delays[1] < 10
+    # At the snaps the distance is the jump itself: most of the volume range at both rates.
+    for lag in lags:
+        assert lag['lag']['at_snaps']['largest_share_of_range'] > 0.5
+        assert lag['lag']['quasi_static_snaps_not_followed_m3'] == []
+    delay = quick['snaps'][0]['delay_injected_m3']
+    assert f'late by {delay * 1e6:.3f} mL injected after the quasi-static snap' in \
+        summary_text(every[0])
+    off = quick['lag']['off_snaps']['largest_m3']
+    assert f'| off the snaps | {off * 1e6:.4f} mL' in markdown(every[0])
+
+
+def test_compare_shows_the_snap_durations_and_a_quasi_static_bag_has_no_transients(
+        fast, quasi_static):
+    _, bag = fast
+    metrics_a, metrics_b, table = compare_bags(quasi_static, bag)
+    assert 'transients' not in metrics_a
+    duration = events_in(bag)[0]['duration_s']
+    row = next(line for line in table.splitlines() if 'duration (10-90 %)' in line)
+    assert row.split('|')[3:5] == [' - ', f' {duration * 1e3:.4g} ']
+    # Without the scene there is no quasi-static path to measure the lag against.
+    lag_rows = [line for line in table.splitlines() if 'lag behind the quasi-static' in line]
+    assert len(lag_rows) == 4
+    assert all(line.endswith('| - | - | - |') for line in lag_rows)
+    _, _, same = compare_bags(quasi_static, quasi_static)
+    assert 'in time' not in same and 'lag' not in same
+
+
+def test_a_quasi_static_report_has_no_transients(quasi_static, tmp_path):
+    metrics, summary = write_report(quasi_static, tmp_path / 'report', figures=False)
+    assert 'transients' not in metrics
+    assert 'transients' not in summary
+    assert 'Transients' not in (tmp_path / 'report' / 'report.md').read_text()
