@@ -177,8 +177,13 @@ def _compare(args: argparse.Namespace) -> int:
 
     from softseq_ros.analysis.compare import compare_bags
 
+    scene = None
+    if args.scene is not None:
+        from softseq_ros.scene.loader import load_scene
+
+        scene = load_scene(args.scene)
     metrics_a, metrics_b, table = compare_bags(args.a, args.b, args.namespace_a,
-                                               args.namespace_b)
+                                               args.namespace_b, scene=scene)
     print(table, end='')
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -353,6 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument('b', type=Path, help='second bag directory')
     compare.add_argument('--namespace-a', help='rig namespace in A when it holds several')
     compare.add_argument('--namespace-b', help='rig namespace in B when it holds several')
+    compare.add_argument('--scene', help='the scene (file or shipped name) whose segments made '
+                         'both bags: with it a dynamic bag also shows its lag behind the '
+                         'quasi-static path')
     compare.add_argument('--out', type=Path, help='folder for compare.md and compare.json')
     compare.set_defaults(handler=_compare)
 

@@ -163,3 +163,16 @@ def test_a_quasi_static_report_has_no_transients(quasi_static, tmp_path):
     assert 'transients' not in metrics
     assert 'transients' not in summary
     assert 'Transients' not in (tmp_path / 'report' / 'report.md').read_text()
+
+
+def test_softseq_compare_with_the_scene_shows_the_lag(fast, quasi_static, capsys):
+    from softseq_ros.cli import main
+
+    scene_file, bag = fast
+    assert main(['compare', str(quasi_static), str(bag), '--scene', str(scene_file)]) == 0
+    table = capsys.readouterr().out
+    lag_rows = [line for line in table.splitlines() if 'lag behind the quasi-static' in line]
+    assert len(lag_rows) == 4
+    # Measured for the dynamic bag (B), absent for the quasi-static one (A).
+    assert all(line.split('|')[3].strip() == '-' and float(line.split('|')[4]) > 0.0
+               for line in lag_rows)

@@ -106,18 +106,29 @@ def snap_rows(injected: FloatArray, volumes: FloatArray,
 
 
 def detect_snaps(trace: Trace, v_range: float) -> list[dict]:
-    """Snap-throughs found in the recorded volumes themselves (not from the events topic)."""
+    """
+    Snap-throughs found in the recorded volumes themselves (not from the events topic).
+
+    A run of consecutive snap rows is one snap-through: a recording in time (a scene with a
+    network) holds many states while the fluid moves; a quasi-static one lands at one command.
+    """
     rows, moved = snap_rows(trace.injected, trace.volumes, v_range)
-    snaps = []
+    runs: list[tuple[int, int, float]] = []   # (first row, last row, fluid moved)
     for row, fluid in zip(rows.tolist(), moved.tolist()):
+        if runs and row == runs[-1][1] + 1:
+            runs[-1] = (runs[-1][0], row, runs[-1][2] + fluid)
+        else:
+            runs.append((row, row, fluid))
+    snaps = []
+    for first, last, fluid in runs:
         snaps.append({
-            'injected_m3': float(trace.injected[row]),
-            'direction': 'inflation' if trace.sign[row] > 0 else 'deflation',
+            'injected_m3': float(trace.injected[first]),
+            'direction': 'inflation' if trace.sign[first] > 0 else 'deflation',
             'fluid_moved_m3': float(fluid),
-            'from_volumes_m3': trace.volumes[row - 1].tolist(),
-            'to_volumes_m3': trace.volumes[row].tolist(),
-            'from_pressure_pa': float(trace.pressure[row - 1]),
-            'to_pressure_pa': float(trace.pressure[row]),
+            'from_volumes_m3': trace.volumes[first - 1].tolist(),
+            'to_volumes_m3': trace.volumes[last].tolist(),
+            'from_pressure_pa': float(trace.pressure[first - 1]),
+            'to_pressure_pa': float(trace.pressure[last]),
         })
     return snaps
 
