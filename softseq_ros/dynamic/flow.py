@@ -86,6 +86,7 @@ class NetworkFlow:
         self.t = 0.0
         self.injected = 0.0
         self.flow = 0.0
+        self._y_pending = False
         self.y = np.concatenate([self.rest[:-1], np.zeros(len(self.inertial))])
         self.peak_reynolds = [0.0] * len(self.laws)
         self.steps = 0
@@ -198,6 +199,7 @@ class NetworkFlow:
         """
         changed = abs(flow - self.flow) > SAME_FLOW * max(abs(flow), abs(self.flow))
         if changed or self._solver is None:
+            self._materialise()
             self.flow = float(flow)
             self._origin = (self.t, self.injected)
             self._solver = None
@@ -206,6 +208,7 @@ class NetworkFlow:
 
     def inject_now(self, volume: float) -> None:
         """Put ``volume`` [m^3] into the base segment at once (a command that came late)."""
+        self._materialise()
         self.y = self.y.copy()
         self.y[0] += volume
         self.injected += volume
@@ -242,6 +245,9 @@ class NetworkFlow:
             self._recent = []
             self._unwatched = False
         solver = self._solver
+        if solver.t < t:
+            # The state now lies in the step about to be left behind.
+            self._materialise()
         try:
             if self._unwatched and solver.t <= t:
                 self._unwatched = False
@@ -264,12 +270,10 @@ class NetworkFlow:
             self._solver = None
             raise
         if self._dense is not None and solver.t > t:
-            if self._dense is _PENDING:
-                self._dense = _Interpolant(solver.dense_output())
-            y = self._dense(t)
+            # Interpolated when someone asks: a tick in which nothing is said needs no state.
+            self._y, self._y_pending = None, True
         else:
-            y = solver.y
-        self.y = np.asarray(y, dtype=float)
+            self._y, self._y_pending = np.asarray(solver.y, dtype=float), False
         self.t = t
         self.injected = self._injected_at(t)
         self._now = None
@@ -329,6 +333,23 @@ class NetworkFlow:
 
     # ------------------------------------------------------------------ the state now
 
+    @property
+    def y(self) -> FloatArray:
+        """The state now: the volumes but the tip's, then the inertial channels' flows."""
+        self._materialise()
+        return self._y
+
+    @y.setter
+    def y(self, value: FloatArray) -> None:
+        self._y, self._y_pending = value, False
+
+    def _materialise(self) -> None:
+        """Interpolate the state at ``t`` within the integrator's last step, if not yet done."""
+        if self._y_pending:
+            if self._dense is _PENDING:
+                self._dense = _Interpolant(self._solver.dense_output())
+            self._y, self._y_pending = np.asarray(self._dense(self.t), dtype=float), False
+
     def _current(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Volumes, pressures and channel flows of the state now (computed once per state)."""
         if self._now is None:
@@ -341,7 +362,10 @@ class NetworkFlow:
 
     def volumes(self) -> FloatArray:
         """The segment volumes [m^3] now."""
-        return self._current()[0].copy()
+        if self._now is not None:
+            return self._now[0].copy()
+        # No segment's pressure is needed for the volumes alone.
+        return np.array(self._volume_list(self.y.tolist(), self.injected))
 
     def flows(self) -> FloatArray:
         """The channel flows [m^3/s] now."""
@@ -363,22 +387,29 @@ class _Interpolant:
 
     scipy's generic call checks and reshapes its argument on every call, which costs more
     than the cubic itself; the rig asks for one instant per output. Radau's interpolant is
-    y_old + Q [x, x^2, x^3], x = (t - t_old) / h, evaluated here with the same operations.
-    Another interpolant is called as it is.
+    y_old + Q [x, x^2, x^3], x = (t - t_old) / h, evaluated here on plain floats (the same
+    terms, summed in another order: equal to round-off). Another interpolant is called as it
+    is.
     """
 
     def __init__(self, dense: DenseOutput) -> None:
         self.dense = dense
         self.fast = all(hasattr(dense, name) for name in ('t_old', 'h', 'Q', 'order', 'y_old'))
+        if self.fast:
+            # Plain floats: a network's state has a handful of entries.
+            self.rows = dense.Q.tolist()
+            self.start = dense.y_old.tolist()
 
     def __call__(self, t: float) -> FloatArray:
         dense = self.dense
         if not self.fast:
             return dense(t)
         x = (t - dense.t_old) / dense.h
-        y = np.dot(dense.Q, np.cumprod(np.full(dense.order + 1, x)))
-        y += dense.y_old
-        return y
+        powers = [x]
+        for _ in range(dense.order):
+            powers.append(powers[-1] * x)
+        return np.array([start + sum(q * p for q, p in zip(row, powers))
+                         for start, row in zip(self.start, self.rows)])
 
 
 def _mean_stiffness(segment: Segment) -> float:

@@ -40,18 +40,24 @@ class Material(Protocol):
         ...
 
 
+# A stretch given as a float stays one (a single volume, as the fluid network asks thousands
+# of times): numpy's handling of a scalar costs ten times the arithmetic.
+def _as_stretch(stretch: ArrayLike) -> float | NDArray[np.float64]:
+    return float(stretch) if isinstance(stretch, float) else np.asarray(stretch, dtype=float)
+
+
 def _invariants(stretch: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    lam = np.asarray(stretch, dtype=float)
+    lam = _as_stretch(stretch)
     return 2.0 * lam**2 + lam**-4, lam**4 + 2.0 * lam**-2
 
 
 def _di1(stretch: ArrayLike) -> NDArray[np.float64]:
-    lam = np.asarray(stretch, dtype=float)
+    lam = _as_stretch(stretch)
     return 4.0 * lam - 4.0 * lam**-5
 
 
 def _di2(stretch: ArrayLike) -> NDArray[np.float64]:
-    lam = np.asarray(stretch, dtype=float)
+    lam = _as_stretch(stretch)
     return 4.0 * lam**3 - 4.0 * lam**-3
 
 

@@ -9,6 +9,7 @@ assembles.
 """
 
 from abc import ABC, abstractmethod
+from bisect import bisect_right
 from dataclasses import dataclass
 import math
 
@@ -262,6 +263,8 @@ class TabulatedSegment(Segment):
         self._e = self._p.antiderivative()
         self._k = PchipInterpolator(vol, cur, extrapolate=False)
         self._dk = self._k.derivative()
+        self._p_at = _PiecewiseAtOne(self._p)
+        self._k_at = _PiecewiseAtOne(self._k)
 
     def smoothed(self, pressures: ArrayLike, *, noise_std_pa: float | None = None,
                  prominence_pa: float | None = None) -> 'TabulatedSegment':
@@ -308,6 +311,8 @@ class TabulatedSegment(Segment):
 
     def pressure(self, v: ArrayLike) -> FloatArray:
         """Gauge pressure at volume v, in Pa (clamped to the table's range)."""
+        if isinstance(v, float):   # numpy's float64 too
+            return self._p_at(min(max(float(v), self.rest_volume), self.max_volume))
         return self._p(self._clip(v))
 
     def stiffness(self, v: ArrayLike) -> FloatArray:
@@ -320,6 +325,8 @@ class TabulatedSegment(Segment):
 
     def curvature(self, v: ArrayLike) -> FloatArray:
         """Curvature, in 1/m."""
+        if isinstance(v, float):
+            return self._k_at(min(max(float(v), self.rest_volume), self.max_volume))
         return self._k(self._clip(v))
 
     def curvature_slope(self, v: ArrayLike) -> FloatArray:
@@ -333,6 +340,31 @@ class TabulatedSegment(Segment):
         flats = [(float(self.volumes[i]), float(self.volumes[i + 1]))
                  for i in range(secant.size) if secant[i] == 0.0]
         return turns, flats
+
+
+class _PiecewiseAtOne:
+    """
+    A piecewise polynomial (scipy's PPoly) at one volume given as a float: the same
+    polynomial of the same interval, by Horner's rule on plain floats (equal to round-off).
+
+    The fluid network asks for one segment's pressure at one volume thousands of times; the
+    general call's checks and array handling cost ten times the arithmetic there.
+    """
+
+    def __init__(self, poly: PchipInterpolator) -> None:
+        self.breaks = poly.x.tolist()
+        self.last = len(self.breaks) - 2
+        self.coefficients = poly.c.T.tolist()   # per interval, highest power first
+
+    def __call__(self, v: float) -> float:
+        if v != v:
+            return v
+        interval = min(max(bisect_right(self.breaks, v) - 1, 0), self.last)
+        offset = v - self.breaks[interval]
+        value = 0.0
+        for coefficient in self.coefficients[interval]:
+            value = value * offset + coefficient
+        return value
 
 
 class _SmoothSegment(Segment):
@@ -430,6 +462,9 @@ class BalloonSegment(_SmoothSegment):
 
     def stretch(self, v: ArrayLike) -> FloatArray:
         """Equibiaxial stretch of the membrane at volume v."""
+        if isinstance(v, float):   # one volume: plain floats, as the fluid network asks
+            return math.cbrt(min(max(float(v), self.rest_volume), self.max_volume)
+                             / self.rest_volume)
         return np.cbrt(np.clip(np.asarray(v, dtype=float), self.rest_volume, self.max_volume)
                        / self.rest_volume)
 
