@@ -469,8 +469,8 @@ def rig_section(sizes, folder):
              f'`BatchRun` of config/paper.yaml with the network block above added in memory '
              f'(pump at 50 Hz, camera at 10 Hz, every topic recorded to a bag), programme '
              f'{" -> ".join(describe(leg) for leg in legs)} (at the end of the withdrawal the '
-             'base segment collapses below its rest volume and pulls the tip\'s fluid through '
-             'the channel). Between the pump\'s commands the actuator speaks at its rate while '
+             "base segment collapses below its rest volume and pulls the tip's fluid through "
+             "the channel). Between the pump's commands the actuator speaks at its rate while "
              'fluid moves between the segments. The quasi-static run '
              'is the same programme without the network.', '',
              '| model | actuator rate [Hz] | rig time [s] | wall [s] | messages '

@@ -344,10 +344,10 @@ class TabulatedSegment(Segment):
 
 class _PiecewiseAtOne:
     """
-    A piecewise polynomial (scipy's PPoly) at one volume given as a float: the same
-    polynomial of the same interval, by Horner's rule on plain floats (equal to round-off).
+    A piecewise polynomial (scipy's PPoly) at one volume given as a float.
 
-    The fluid network asks for one segment's pressure at one volume thousands of times; the
+    The same polynomial of the same interval, by Horner's rule on plain floats (equal to
+    round-off). The fluid network asks for one segment's pressure at one volume thousands of times; the
     general call's checks and array handling cost ten times the arithmetic there.
     """
 
