@@ -347,8 +347,8 @@ class _PiecewiseAtOne:
     A piecewise polynomial (scipy's PPoly) at one volume given as a float.
 
     The same polynomial of the same interval, by Horner's rule on plain floats (equal to
-    round-off). The fluid network asks for one segment's pressure at one volume thousands of times; the
-    general call's checks and array handling cost ten times the arithmetic there.
+    round-off). The fluid network asks for one segment's pressure at one volume thousands
+    of times; the general call's checks and array handling cost ten times the arithmetic.
     """
 
     def __init__(self, poly: PchipInterpolator) -> None:
