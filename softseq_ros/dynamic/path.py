@@ -26,6 +26,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.dynamic.flow import DynamicSnap, NetworkDomainError, NetworkFlow
 from softseq_ros.errors import UserError
+from softseq_ros.quasistatic.solve import path_columns as quasistatic_columns
+from softseq_ros.quasistatic.solve import write_rows
 from softseq_ros.scene.network import NetworkSettings
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.segments.models import Segment
@@ -227,24 +229,15 @@ def path_columns(names: Sequence[str]) -> list[str]:
     with the time first and each channel's flow before the event column.
     """
     flows = [f'flow_{a}_to_{b}_m3_per_s' for a, b in zip(names[:-1], names[1:])]
-    return (['time_s', 'injected_m3', 'pressure_pa'] + [f'volume_{n}_m3' for n in names]
-            + [f'curvature_{n}_per_m' for n in names] + flows + ['event'])
+    return ['time_s'] + quasistatic_columns(names)[:-1] + flows + ['event']
 
 
 def write_path(out: str | Path, path: DynamicPath, names: Sequence[str]) -> None:
     """One row per sample; ``event`` is ``snap`` where a snap-through started."""
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with out.open('w', newline='') as handle:
-        writer = csv.writer(handle)
-        writer.writerow(path_columns(names))
-        for i in range(path.time_s.size):
-            writer.writerow([repr(float(path.time_s[i])), repr(float(path.injected[i])),
-                             repr(float(path.pressure[i])),
-                             *(repr(float(x)) for x in path.volumes[i]),
-                             *(repr(float(x)) for x in path.curvatures[i]),
-                             *(repr(float(x)) for x in path.channel_flows[i]),
-                             'snap' if path.snap[i] else ''])
+    write_rows(out, path_columns(names), (
+        ((path.time_s[i], path.injected[i], path.pressure[i], *path.volumes[i],
+          *path.curvatures[i], *path.channel_flows[i]), 'snap' if path.snap[i] else '')
+        for i in range(path.time_s.size)))
 
 
 def snaps_file(out: str | Path) -> Path:

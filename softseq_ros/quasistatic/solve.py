@@ -8,7 +8,7 @@ volume-history CSV files of ``softseq solve``.
 
 import csv
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,15 +44,24 @@ def path_columns(names: Sequence[str]) -> list[str]:
             + [f'curvature_{n}_per_m' for n in names] + ['event'])
 
 
-def write_path(path: str | Path, solved: SolvedPath, names: Sequence[str]) -> None:
-    """Write one row per commanded volume: injected, pressure, volumes, curvatures, event."""
+def write_rows(path: str | Path, header: Sequence[str],
+               rows: Iterable[tuple[Sequence[float], str]]) -> None:
+    """
+    A solved path's CSV: ``header``, then per row its numbers (exact: repr) and its event.
+
+    The folder is made when missing. The quasi-static and the dynamic paths both write so.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open('w', newline='') as handle:
         writer = csv.writer(handle)
-        writer.writerow(path_columns(names))
-        for i in range(solved.injected.size):
-            writer.writerow([repr(float(solved.injected[i])), repr(float(solved.pressure[i])),
-                             *(repr(float(x)) for x in solved.volumes[i]),
-                             *(repr(float(x)) for x in solved.curvatures[i]),
-                             'snap' if solved.snap[i] else ''])
+        writer.writerow(header)
+        for numbers, event in rows:
+            writer.writerow([*(repr(float(x)) for x in numbers), event])
+
+
+def write_path(path: str | Path, solved: SolvedPath, names: Sequence[str]) -> None:
+    """Write one row per commanded volume: injected, pressure, volumes, curvatures, event."""
+    write_rows(path, path_columns(names), (
+        ((solved.injected[i], solved.pressure[i], *solved.volumes[i], *solved.curvatures[i]),
+         'snap' if solved.snap[i] else '') for i in range(solved.injected.size)))
