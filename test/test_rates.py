@@ -110,3 +110,21 @@ def test_a_scene_without_a_network_is_refused_in_one_line(tmp_path, capsys):
                      '--out', str(tmp_path / 'map')]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'the scene has no network block' in err[0]
+
+
+def test_a_dask_cluster_maps_the_same_rows_as_local_processes(tmp_path):
+    from distributed import LocalCluster
+
+    from softseq_ros.analysis.rates import run_rates
+
+    scene = shipped(tmp_path, 2.0e-5)
+    grid = dict(flows=[3e-9, 1e-7], radii=[0.2e-3], samples_per_leg=60, progress=None)
+    local = run_rates(scene, workers=1, **grid)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
+        remote = run_rates(scene, scheduler=cluster.scheduler_address, **grid)
+    # The same numbers whichever worker ran them (the run time aside).
+    for ours, theirs in zip(local, remote):
+        ours.pop('wall_s'), theirs.pop('wall_s')
+        assert ours == theirs
+    assert [row['leading_segment'] for row in local] == ['tip', 'base']
