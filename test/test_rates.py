@@ -118,7 +118,7 @@ def test_a_dask_cluster_maps_the_same_rows_as_local_processes(tmp_path):
     from softseq_ros.analysis.rates import run_rates
 
     scene = shipped(tmp_path, 2.0e-5)
-    grid = dict(flows=[3e-9, 1e-7], radii=[0.2e-3], samples_per_leg=60, progress=None)
+    grid = {'flows': [3e-9, 1e-7], 'radii': [0.2e-3], 'samples_per_leg': 60, 'progress': None}
     local = run_rates(scene, workers=1, **grid)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster:
