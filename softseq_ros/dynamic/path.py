@@ -26,8 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.dynamic.flow import DynamicSnap, NetworkDomainError, NetworkFlow
 from softseq_ros.errors import UserError
-from softseq_ros.quasistatic.solve import path_columns as quasistatic_columns
-from softseq_ros.quasistatic.solve import write_rows
+from softseq_ros.scene.csv_columns import write_rows
 from softseq_ros.scene.network import NetworkSettings
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.segments.models import Segment
@@ -229,7 +228,8 @@ def path_columns(names: Sequence[str]) -> list[str]:
     with the time first and each channel's flow before the event column.
     """
     flows = [f'flow_{a}_to_{b}_m3_per_s' for a, b in zip(names[:-1], names[1:])]
-    return ['time_s'] + quasistatic_columns(names)[:-1] + flows + ['event']
+    return (['time_s', 'injected_m3', 'pressure_pa'] + [f'volume_{n}_m3' for n in names]
+            + [f'curvature_{n}_per_m' for n in names] + flows + ['event'])
 
 
 def write_path(out: str | Path, path: DynamicPath, names: Sequence[str]) -> None:

@@ -6,16 +6,15 @@ nodes and the batch runner configure the solver the same way) and that reads and
 volume-history CSV files of ``softseq solve``.
 """
 
-import csv
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
-from softseq_ros.scene.csv_columns import read_columns
+from softseq_ros.scene.csv_columns import read_columns, write_rows
 from softseq_ros.segments.models import Segment
 
 INJECTED_COLUMN = 'injected_m3'
@@ -42,22 +41,6 @@ def path_columns(names: Sequence[str]) -> list[str]:
     """Column names of a solved-path CSV for segments ``names`` (base to tip)."""
     return (['injected_m3', 'pressure_pa'] + [f'volume_{n}_m3' for n in names]
             + [f'curvature_{n}_per_m' for n in names] + ['event'])
-
-
-def write_rows(path: str | Path, header: Sequence[str],
-               rows: Iterable[tuple[Sequence[float], str]]) -> None:
-    """
-    A solved path's CSV: ``header``, then per row its numbers (exact: repr) and its event.
-
-    The folder is made when missing. The quasi-static and the dynamic paths both write so.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open('w', newline='') as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        for numbers, event in rows:
-            writer.writerow([*(repr(float(x)) for x in numbers), event])
 
 
 def write_path(path: str | Path, solved: SolvedPath, names: Sequence[str]) -> None:

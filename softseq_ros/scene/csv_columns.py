@@ -1,6 +1,8 @@
 """
 Numeric columns from the project's CSV files: segment tables, volume histories, measured curves.
 
+And the one writer of a solved path's rows (:func:`write_rows`), in the same format.
+
 All of them share one format: an optional block of ``#`` comment lines (provenance), a header
 row naming the columns (extra columns are allowed), then rows of numbers. Every problem is
 reported as one line that starts with the file name and names the row and column.
@@ -9,7 +11,7 @@ reported as one line that starts with the file name and names the row and column
 import csv
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -83,3 +85,19 @@ def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueErro
     if not rows:
         raise error(f'{path}: no rows below the header')
     return numeric_columns(path, header, rows, columns, error)
+
+
+def write_rows(path: str | Path, header: Sequence[str],
+               rows: Iterable[tuple[Sequence[float], str]]) -> None:
+    """
+    A solved path's CSV: ``header``, then per row its numbers (exact: repr) and its event.
+
+    The folder is made when missing. The quasi-static and the dynamic paths both write so.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open('w', newline='') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for numbers, event in rows:
+            writer.writerow([*(repr(float(x)) for x in numbers), event])
