@@ -48,6 +48,7 @@ def _solve(args: argparse.Namespace) -> int:
 
 def _solve_network(args: argparse.Namespace, scene: Any) -> int:
     """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
+    from softseq_ros.dynamic.network import LAMINAR_REYNOLDS
     from softseq_ros.dynamic.path import (
         PathError,
         history_path,
@@ -57,6 +58,7 @@ def _solve_network(args: argparse.Namespace, scene: Any) -> int:
         write_snaps,
     )
     from softseq_ros.quasistatic.solve import read_history
+    from softseq_ros.scene.network import channel_names
 
     profile = scene.pump.profile
     if args.path is not None:
@@ -77,12 +79,14 @@ def _solve_network(args: argparse.Namespace, scene: Any) -> int:
         print(f'  snap-through at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
               f'{snap.fluid_moved_m3 * 1e6:.3f} mL moved, peak '
               f'{snap.peak_exchange_m3_per_s * 1e6:.4g} mL/s, 10-90 % in {snap.duration_s:.4g} s')
-    names = ', '.join(f'{a}-{b} {re:.0f}' for a, b, re in zip(
-        scene.segment_names[:-1], scene.segment_names[1:], path.peak_reynolds))
-    print(f'  peak Reynolds number per channel: {names}')
-    if max(path.peak_reynolds, default=0.0) > 2300.0:
-        print('softseq solve: warning: a channel left the laminar range (Reynolds number above '
-              '2300): Hagen-Poiseuille underestimates its pressure drop', file=sys.stderr)
+    channels = channel_names(scene.segment_names)
+    print('  peak Reynolds number per channel: ' + ', '.join(
+        f'{name} {peak:.0f}' for name, peak in zip(channels, path.peak_reynolds)))
+    for name, peak in zip(channels, path.peak_reynolds):
+        if peak > LAMINAR_REYNOLDS:
+            print(f'softseq solve: warning: channel {name}: Reynolds number {peak:.0f} above '
+                  f'{LAMINAR_REYNOLDS:.0f}, no longer laminar (its drop follows Blasius only '
+                  'with friction: blasius)', file=sys.stderr)
     if path.drained is not None:
         print(f'softseq solve: warning: the path ends at {path.time_s[-1]:.6g} s '
               f'({path.injected[-1] * 1e6:.4g} mL injected): {path.drained}', file=sys.stderr)
