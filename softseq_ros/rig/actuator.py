@@ -8,8 +8,8 @@ instant, so a listener pairs them exactly): pressure (absolute: gauge +
 ``ambient_pressure_pa``), volumes (with the gauge pressure), curvatures, the channel flows
 of a model with channels, and one :class:`SnapThrough` per snap (with its duration when the
 model lives it in time). The model's warnings (a channel no longer laminar) go to the log.
-A model whose state moves between commands (one with a
-``rate_hz``) is advanced by :meth:`ActuatorCore.tick`, whose outputs carry the tick's time.
+A model whose state moves between commands (one with a ``rate_hz``) is advanced by
+:meth:`ActuatorCore.tick`, whose outputs carry the tick's time.
 
 At start (:meth:`begin`) it says once which scene's segments it runs (name, segment names,
 the SHA-256 of their definitions), on a latched topic, so every recording can name its physics.
@@ -164,7 +164,7 @@ class ActuatorCore:
                 event.fluid_moved_m3 = float(snap.fluid_moved_m3)
                 event.peak_exchange_m3_per_s = float(snap.peak_exchange_m3_per_s)
                 said += (f', {snap.fluid_moved_m3 * 1e6:.3f} mL moved in '
-                         f'{snap.duration_s * 1e3:.3g} ms (10-90 %)')
+                         f'{snap.duration_s:.3g} s (10-90 %)')
             out.append(Notice(self.role, INFO, said))
             if self._send_events:
                 out.append(event)
