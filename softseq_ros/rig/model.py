@@ -337,9 +337,10 @@ class DynamicModel:
     def channel_state(self) -> tuple[list[float], list[float]]:
         """Each channel's flow [m^3/s] towards the tip and pressure drop [Pa] now."""
         network = self.flow_network
+        # The flows first: they compute the state's pressures, which the drops then reuse.
+        flows = [float(q) for q in network.flows()]
         pressures = network.pressures(network.volumes())
-        return ([float(q) for q in network.flows()],
-                [float(pressures[j] - pressures[j + 1]) for j in range(len(network.laws))])
+        return flows, [float(pressures[j] - pressures[j + 1]) for j in range(len(flows))]
 
     def take_warnings(self) -> list[str]:
         """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
