@@ -62,11 +62,16 @@ def test_the_actuator_node_moves_the_fluid_at_its_own_rate_and_publishes_the_flo
                  'the flows of the hold after the last command')
         flows = list(got['/actuator/channel_flows'])
         volumes = list(got['/actuator/volumes'])
-    # The network's rate, not the pump's: several states per command, and states after the
-    # last command (the fluid still moving between the segments during the hold).
-    assert len(flows) > 4 * len(commands)
+    # The network's rate, not the pump's, while fluid moves between the segments: states
+    # between the commands while the top takes the bottom's fluid past its peak, and states
+    # after the last command (the fluid still evening out during the hold).
+    command_stamps = {stamp_ns(c.header) for c in commands}
+    first_command = min(command_stamps)
+    between = [m for m in flows if first_command < stamp_ns(m.header) < last_command
+               and stamp_ns(m.header) not in command_stamps]
+    assert len(flows) > len(commands) and len(between) > 10
     after = [m for m in flows if stamp_ns(m.header) > last_command]
-    assert len(after) > 0.2 * 0.5 * NETWORK_RATE_HZ
+    assert len(after) > 5   # no pump command then: only the network's timer speaks
     # ... evening out: still flowing, ever more slowly.
     assert abs(after[0].velocity[0]) > abs(after[-1].velocity[0]) > 0.0
     if clock == 'sim':
@@ -84,7 +89,8 @@ def test_the_actuator_node_moves_the_fluid_at_its_own_rate_and_publishes_the_flo
 
     flows_once, volumes_once = once(flows), once(volumes)
     paired = [(m, volumes_once[s]) for s, m in flows_once.items() if s in volumes_once]
-    assert len(paired) > 0.5 * len(flows)
+    # actuator/volumes keeps only its latest state (depth 1): a loaded reader misses some.
+    assert len(paired) > 0.2 * len(flows)
     for message, state in paired:
         assert list(message.name) == ['bottom_to_top']
         v_bottom, v_top = state.position
