@@ -121,6 +121,41 @@ def _classify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _graph(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.graph_figure import plot_graph
+    from softseq_ros.quasistatic.graph import transition_graph, write_graph_json
+    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.scene.loader import load_scene
+
+    if args.reversals is not None and args.reversals < 0:
+        raise UserError(f'--reversals must be >= 0, got {args.reversals}')
+    scene = load_scene(args.scene)
+    emap = build_map(scene.segments, scene.solver.resolution)
+    graph = transition_graph(emap)
+    out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}'
+    out.mkdir(parents=True, exist_ok=True)
+    write_graph_json(out / 'graph.json', graph, args.reversals)
+    plot_graph(graph, out / 'graph.png', emap, args.reversals)
+    _warn_unconverged('graph', emap)
+    least = graph.min_reversals()
+    off_path = [b.index for b in graph.branches if not b.default_path]
+    print(f'{scene.name}: {len(graph.branches)} stable branches, {len(graph.snaps())} snaps, '
+          f'{sum(b.default_path for b in graph.branches)} on the default path -> '
+          f'{out / "graph.json"}, {out / "graph.png"}')
+    for index in off_path:
+        reach = graph.history_to(index)
+        if reach.reversals is None:
+            print(f'  branch {index} ({graph.branches[index].label}): no history reaches it')
+        else:
+            turns = ', '.join(f'{v * 1e6:.4g}' for v in reach.history)
+            print(f'  branch {index} ({graph.branches[index].label}): {reach.reversals} '
+                  f'reversals, turning volumes [{turns}] mL')
+    if args.reversals is not None:
+        within = sum(c is not None and c <= args.reversals for c in least.values())
+        print(f'  {within} of {len(graph.branches)} branches within {args.reversals} reversals')
+    return 0
+
+
 def start_time_ns(text: str) -> int:
     """A bag start time: ISO 8601 (``2026-01-01T00:00:00Z``) or seconds since the epoch."""
     try:
@@ -444,6 +479,18 @@ def build_parser() -> argparse.ArgumentParser:
                      'or ~/.cache/softseq/fem)')
     fem.add_argument('--quiet', action='store_true', help='no progress lines')
     fem.set_defaults(handler=_fem)
+
+    graph = sub.add_parser('graph', help='transition graph: every stable branch and snap',
+                           description='Write graph.json (every stable branch with its state '
+                           'label and injected-volume interval, every transition with its '
+                           'volume, fluid moved and energy released, SI; how a history from '
+                           'rest reaches each branch) and graph.png (docs/graph.md).')
+    graph.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
+    graph.add_argument('--out', type=Path, help='output folder (default bags/graph_NAME)')
+    graph.add_argument('--reversals', type=int, metavar='K', help='mark the branches a '
+                       'history from rest with at most K reversals reaches (default: any '
+                       'number)')
+    graph.set_defaults(handler=_graph)
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)

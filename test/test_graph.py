@@ -1,0 +1,336 @@
+"""
+The transition graph (softseq_ros.quasistatic.graph) against answers known without it.
+
+Two identical neo-Hookean balloons make a pitchfork at their common peak (v = sqrt(7) v0 each);
+three Gent balloons with nested hysteresis loops pass their peaks in the order of their peak
+pressures and have branches only a history with reversals reaches; the Fig. 1 asymmetric scene
+has the two hysteresis loops its file documents, each a 2-cycle of snaps, with energies checked
+against the Gent law's closed-form energy. Every proposed history is run through the solver.
+"""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from softseq_ros.cli import main
+from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, inflate_and_deflate
+from softseq_ros.quasistatic.graph import (
+    DEFLATION,
+    END,
+    INFLATION,
+    JOIN,
+    SNAP,
+    piece_labels,
+    stored_energy,
+    transition_graph,
+)
+from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.materials import NeoHookean
+from softseq_ros.segments.models import BalloonSegment
+
+ML = 1e-6
+R = 0.006
+V0 = 4 / 3 * math.pi * R**3
+
+# Three Gent balloons, base to tip: the base has the highest peak and the lowest valley, the
+# tip the lowest peak and the highest valley (the Fig. 1 asymmetric pair with one in between).
+# Inflation passes the peaks tip, middle, base; deflation from the top gives the fluid back
+# tip first, so a history that turns between the middle's and the base's snaps finds states
+# the full inflation and deflation never visit.
+NESTED_SCENE = {
+    'name': 'three_nested_loops',
+    'segments': [
+        {'name': name, 'length_m': 0.074,
+         'balloon': {'material': {'law': 'gent', 'shear_modulus_pa': 60.0e+3, 'jm': jm},
+                     'radius_m': R, 'thickness_m': thickness, 'max_stretch': stretch,
+                     'curvature_per_m_per_m3': 5.0e+5}}
+        for name, jm, thickness, stretch in (('base', 40.0, 0.600e-3, 4.0),
+                                             ('middle', 35.0, 0.582e-3, 3.8),
+                                             ('tip', 30.0, 0.564e-3, 3.6))],
+    'pump': {'flow_rate_m3_per_s': 5.0e-8, 'rate_hz': 50,
+             'legs': [{'inflate_to_m3': 1.0e-4}, {'deflate_to_m3': 0.0}]},
+    'camera': {'rate_hz': 10},
+    'outputs': ['pressure', 'volumes'],
+}
+
+
+@pytest.fixture(scope='module')
+def nested(tmp_path_factory):
+    """The nested scene's file, map and graph (one assembly for the module)."""
+    path = tmp_path_factory.mktemp('nested') / 'three_nested_loops.yaml'
+    path.write_text(yaml.safe_dump(NESTED_SCENE), encoding='utf-8')
+    scene = load_scene(str(path))
+    emap = build_map(scene.segments, scene.solver.resolution)
+    return path, emap, transition_graph(emap)
+
+
+@pytest.fixture(scope='module')
+def asymmetric():
+    emap = build_map(load_scene('fig1_asymmetric').segments)
+    return emap, transition_graph(emap)
+
+
+def run_history(emap, history):
+    """Follow the turning volumes on the solver; the tracker and the snaps on the way."""
+    tracker = Tracker(emap)
+    events = []
+    for volume in history[1:]:
+        events.extend(tracker.move(volume))
+    return tracker, events
+
+
+def inflation_walk(graph):
+    """The branches a monotone inflation from rest visits, in order, with the ends between."""
+    branch, walk = graph.start_branch, []
+    while True:
+        end = graph.end(branch, INFLATION)
+        walk.append((branch, end))
+        if end.kind == END:
+            return walk
+        branch = end.target
+
+
+# --------------------------------------------------------------------------- pitchfork
+
+def test_two_identical_balloons_make_a_pitchfork_at_their_common_peak():
+    segments = [BalloonSegment(n, 0.1, NeoHookean(60e3), R, 0.6e-3, 3.0) for n in ('base', 'tip')]
+    emap = EquilibriumMap(segments)
+    graph = transition_graph(emap)
+    by_label = {b.pieces: b for b in graph.branches}
+    assert set(by_label) == {('rising', 'rising'), ('falling', 'rising'), ('rising', 'falling')}
+    symmetric = by_label[('rising', 'rising')]
+    # Both at the neo-Hookean peak, v = sqrt(7) v0: the symmetric branch ends there.
+    peak = 2 * (math.sqrt(7) - 1) * V0
+    assert symmetric.injected_lo == pytest.approx(0.0, abs=1e-15)
+    assert symmetric.injected_hi == pytest.approx(peak, rel=1e-6)
+    for mirror in (('falling', 'rising'), ('rising', 'falling')):
+        assert by_label[mirror].injected_lo == pytest.approx(peak, rel=1e-6)
+    # Past the peak the symmetric state is unstable (both stiffnesses negative: the energy's
+    # Hessian on v1 + v2 = V, k1 + k2, is negative), and no stable branch holds it.
+    past = np.linspace(1.01, 2.5, 50) * math.sqrt(7) * V0
+    assert np.all(2 * segments[0].stiffness(past) < 0.0)
+    for branch in emap.branches:
+        equal = np.abs(branch.volumes[:, 0] - branch.volumes[:, 1]) < 1e-6 * V0
+        assert not np.any(equal & (branch.volumes[:, 0] > math.sqrt(7) * V0 * 1.001))
+    # Inflation goes on smoothly (a join, no snap) onto the branch where the base takes more.
+    up = graph.end(symmetric.index, INFLATION)
+    assert (up.kind, graph.branches[up.target].pieces) == (JOIN, ('falling', 'rising'))
+    assert up.fluid_moved == 0.0 and up.energy_released == 0.0
+    assert graph.snaps() == []
+    # Its mirror shares every volume, but no history from rest reaches it: both mirrors end
+    # at the domain above and join the symmetric branch below, which always continues on the
+    # base's side, and no snap lands anywhere.
+    other = by_label[('rising', 'falling')]
+    assert not other.default_path
+    assert graph.end(other.index, DEFLATION).target == symmetric.index
+    reach = graph.history_to(other.index)
+    assert reach.reversals is None and reach.history == ()
+    assert 'none is on it' in reach.reason
+    assert graph.min_reversals() == {symmetric.index: 0, up.target: 0, other.index: None}
+
+
+# --------------------------------------------------------------------------- three segments
+
+def test_three_segments_pass_their_peaks_in_the_order_of_their_peak_pressures(nested):
+    _, emap, graph = nested
+    peaks = [max(pc.p_at_hi for pc in s.monotone_pieces() if pc.direction > 0
+                 and pc.v_hi < s.max_volume) for s in emap.segments]
+    assert len(set(peaks)) == 3
+    assert [piece_labels(s) for s in emap.segments] == [['rising-1', 'falling', 'rising-2']] * 3
+    passed, where = [], {}
+    for branch, _ in inflation_walk(graph):
+        for i, piece in enumerate(graph.branches[branch].pieces):
+            if piece != 'rising-1' and i not in passed:
+                passed.append(i)
+                where[i] = graph.branches[branch].injected_lo
+    assert passed == list(np.argsort(peaks)) == [2, 1, 0]
+    assert where[2] < where[1] < where[0]
+    # The first passes its peak smoothly, at its own peak pressure.
+    first = next(end for branch, end in inflation_walk(graph)
+                 if graph.branches[end.target].pieces[2] == 'falling')
+    assert first.kind == JOIN
+    assert first.pressure_before == pytest.approx(peaks[2], rel=1e-9)
+
+
+def test_every_reachable_branch_is_reached_by_its_proposed_history(nested):
+    _, emap, graph = nested
+    least = graph.min_reversals()
+    for branch in graph.branches:
+        reach = graph.history_to(branch.index)
+        if reach.reversals is None:
+            continue
+        assert reach.history[0] == 0.0
+        assert len(reach.history) == reach.reversals + 2
+        assert least[branch.index] == reach.reversals
+        tracker, _ = run_history(emap, reach.history)
+        assert tracker.branch == branch.index, reach
+    # Monotone inflation reaches exactly the inflation walk's branches; one reversal more
+    # than the default path visits: the nested loops hold states only a turn reaches.
+    assert graph.reachable(0) == {b for b, _ in inflation_walk(graph)}
+    default = {b.index for b in graph.branches if b.default_path}
+    assert default < graph.reachable(1)
+    assert graph.reachable(1) < graph.reachable(3)
+
+
+def test_every_transition_of_the_nested_scene_is_reproduced_by_the_tracker(nested):
+    _, emap, graph = nested
+    snaps = graph.snaps()
+    assert len(snaps) == 12
+    crossed = 0
+    for snap in snaps:
+        reach = graph.history_across(snap)
+        if reach is None:
+            # Only snaps out of branches no history reaches are left out.
+            assert graph.min_reversals()[snap.source] is None
+            continue
+        tracker, events = run_history(emap, reach.history)
+        assert tracker.branch == snap.target
+        hits = [e for e in events if abs(e.injected - snap.injected) < 1e-12 * ML]
+        assert len(hits) == 1, (snap, events)
+        np.testing.assert_allclose(hits[0].to_volumes, snap.volumes_after, rtol=0,
+                                   atol=1e-9 * ML)
+        moved = 0.5 * np.sum(np.abs(hits[0].to_volumes - hits[0].from_volumes))
+        assert snap.fluid_moved == pytest.approx(moved, rel=1e-9)
+        assert snap.energy_released > 0.0
+        crossed += 1
+    assert crossed == 12
+    # Joins too: a history across one ends on its target, with no snap at its volume.
+    for join in (t for t in graph.transitions if t.kind == JOIN):
+        reach = graph.history_across(join)
+        if reach is None:
+            assert graph.min_reversals()[join.source] is None
+            continue
+        tracker, events = run_history(emap, reach.history)
+        assert tracker.branch == join.target
+        assert not [e for e in events if abs(e.injected - join.injected) < 1e-12 * ML]
+
+
+def test_softseq_graph_proposes_a_history_that_softseq_solve_lands_on(nested, tmp_path,
+                                                                        capsys):
+    path, emap, graph = nested
+    assert main(['graph', str(path), '--out', str(tmp_path / 'g'), '--reversals', '1']) == 0
+    data = json.loads((tmp_path / 'g' / 'graph.json').read_text(encoding='utf-8'))
+    assert (tmp_path / 'g' / 'graph.png').stat().st_size > 10_000
+    assert len(data['branches']) == len(graph.branches) == 21
+    # A branch no monotone inflation and deflation visits, which one reversal reaches.
+    off = [b for b in data['branches'] if not b['default_path'] and b['min_reversals'] == 1]
+    assert off, 'the nested scene has a branch only a turning history reaches'
+    target = off[0]
+    assert target['reachable_within_reversals'] is True
+    history = target['history_injected_m3']
+    csv_path = tmp_path / 'history.csv'
+    csv_path.write_text('injected_m3\n' + ''.join(f'{v!r}\n' for v in history),
+                        encoding='utf-8')
+    out = tmp_path / 'solved.csv'
+    assert main(['solve', str(path), '--path', str(csv_path), '--out', str(out)]) == 0
+    with open(out, encoding='utf-8') as handle:
+        last = list(csv.DictReader(row for row in handle if not row.startswith('#')))[-1]
+    names = [s.name for s in emap.segments]
+    landed = np.array([float(last[f'volume_{n}_m3']) for n in names])
+    total = history[-1] + emap.total_rest_volume
+    expected = emap.read(target['index'], np.array([total])).volumes[0]
+    np.testing.assert_allclose(landed, expected, rtol=0, atol=1e-12)
+    # ... and not on the branch the default path holds at that volume.
+    others = [b.index for b in graph.branches if b.default_path
+              and b.injected_lo <= history[-1] <= b.injected_hi]
+    assert others
+    for index in others:
+        assert np.max(np.abs(emap.read(index, np.array([total])).volumes[0] - landed)) > 1 * ML
+    printed = capsys.readouterr().out
+    assert f"branch {target['index']} ({target['label']}): 1 reversals" in printed
+
+
+def test_the_shipped_three_segment_scene_has_one_branch_and_no_snap():
+    # Jm 16 is below the peak's onset: each curve rises monotonically, so the graph is one
+    # branch from rest to the end of the domain, and no snap exists to reproduce.
+    emap = build_map(load_scene('three_segments').segments)
+    graph = transition_graph(emap)
+    assert [b.pieces for b in graph.branches] == [('rising', 'rising', 'rising')]
+    assert [t.kind for t in graph.transitions] == [END, END]
+    assert graph.branches[0].injected_hi == pytest.approx(emap.injected_range[1], rel=1e-12)
+    inflation, deflation = inflate_and_deflate(emap, 201)
+    assert set(inflation.branch) == set(deflation.branch) == {0}
+
+
+# --------------------------------------------------------------------------- Fig. 1 asymmetric
+
+def gent_energy(segment, v):
+    """The thin balloon's stored energy in closed form: 4 pi R^2 H W(lam), Gent's W."""
+    lam = (v / segment.rest_volume) ** (1 / 3)
+    mu, jm = segment.material.mu, segment.material.jm
+    w = -0.5 * mu * jm * math.log(1 - (2 * lam**2 + lam**-4 - 3) / jm)
+    return 4 * math.pi * segment.radius**2 * segment.thickness * w
+
+
+def test_the_asymmetric_pair_has_its_hysteresis_loops_as_two_cycles_of_snaps(asymmetric):
+    emap, graph = asymmetric
+    up = sorted((t for t in graph.snaps() if t.direction == INFLATION), key=lambda t: t.injected)
+    down = sorted((t for t in graph.snaps() if t.direction == DEFLATION),
+                  key=lambda t: t.injected)
+    # config/fig1_asymmetric.yaml: snaps at 26.4 and 38.7 mL inflating, 5.2 and 35.2 deflating
+    # (from a scan to about 0.1 mL).
+    np.testing.assert_allclose([t.injected / ML for t in up], [26.4, 38.7], atol=0.1)
+    np.testing.assert_allclose([t.injected / ML for t in down], [5.2, 35.2], atol=0.1)
+    first = up[0]
+    np.testing.assert_allclose(
+        (np.array(first.volumes_before) - emap.rest_volumes)[0] / ML, 2.0, atol=0.1)
+    np.testing.assert_allclose(
+        (np.array(first.volumes_after) - emap.rest_volumes)[0] / ML, 25.7, atol=0.1)
+    # Each loop: inflating from the state one deflation snap lands on meets the inflation
+    # snap, and deflating from where that lands meets the deflation snap, which lands back.
+    for rise, fall in ((up[0], down[0]), (up[1], down[1])):
+        assert graph.next_snap(rise.target, DEFLATION) == fall
+        assert graph.next_snap(fall.target, INFLATION) == rise
+        assert rise.default_path and fall.default_path
+    assert graph.next_snap(graph.start_branch, INFLATION) == up[0]
+    # The solver's default path finds the same snaps at the same volumes.
+    inflation, deflation = inflate_and_deflate(emap, 2001)
+    found = sorted(e.injected for e in inflation.events + deflation.events)
+    np.testing.assert_allclose(found, sorted(t.injected for t in graph.snaps()), rtol=0,
+                               atol=1e-12 * ML)
+
+
+def test_snap_energy_and_fluid_agree_with_the_closed_form(asymmetric):
+    emap, graph = asymmetric
+    for snap in graph.snaps():
+        before = sum(gent_energy(s, v) for s, v in zip(emap.segments, snap.volumes_before))
+        after = sum(gent_energy(s, v) for s, v in zip(emap.segments, snap.volumes_after))
+        assert snap.energy_released == pytest.approx(before - after, rel=1e-8)
+        assert snap.energy_released > 0.0
+        assert sum(snap.volumes_before) == pytest.approx(sum(snap.volumes_after), rel=1e-12)
+        moved = 0.5 * sum(abs(a - b) for a, b in zip(snap.volumes_after, snap.volumes_before))
+        assert snap.fluid_moved == pytest.approx(moved, rel=1e-12)
+        # The quadrature itself, from rest, against the closed form.
+        assert stored_energy(emap.segments, np.array(snap.volumes_before)) == pytest.approx(
+            before, rel=1e-10)
+    largest = max(graph.snaps(), key=lambda t: t.fluid_moved)
+    assert largest.injected == pytest.approx(26.39 * ML, abs=0.01 * ML)
+    assert largest.fluid_moved == pytest.approx(23.6 * ML, abs=0.1 * ML)
+
+
+def test_softseq_graph_writes_si_json_and_the_figure(tmp_path, capsys):
+    assert main(['graph', 'fig1_asymmetric', '--out', str(tmp_path)]) == 0
+    data = json.loads((tmp_path / 'graph.json').read_text(encoding='utf-8'))
+    assert data['segments'] == ['bottom', 'top']
+    assert data['pieces']['bottom'] == ['rising-1', 'falling', 'rising-2']
+    assert len(data['branches']) == 9 and len(data['transitions']) == 18
+    branch = data['branches'][0]
+    assert {'injected_lo_m3', 'injected_hi_m3', 'gauge_pressure_lo_pa', 'label', 'pieces',
+            'default_path', 'min_reversals', 'history_injected_m3'} <= set(branch)
+    snaps = [t for t in data['transitions'] if t['kind'] == SNAP]
+    assert len(snaps) == 4
+    assert {'injected_m3', 'fluid_moved_m3', 'energy_released_j', 'volumes_before_m3',
+            'gauge_pressure_after_pa'} <= set(snaps[0])
+    assert all(t['energy_released_j'] > 0 for t in snaps)
+    assert (tmp_path / 'graph.png').stat().st_size > 10_000
+    assert '9 stable branches, 4 snaps, 9 on the default path' in capsys.readouterr().out
+
+
+def test_softseq_graph_refuses_a_negative_number_of_reversals(tmp_path, capsys):
+    assert main(['graph', 'fig1_asymmetric', '--out', str(tmp_path), '--reversals', '-1']) == 2
+    assert '--reversals must be >= 0, got -1' in capsys.readouterr().err
