@@ -14,6 +14,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/config/params', glob('config/params/*.yaml')),
         ('share/' + PACKAGE + '/config/segments', glob('config/segments/*.csv')),
         ('share/' + PACKAGE + '/config/library', glob('config/library/*.csv')),
         ('share/' + PACKAGE + '/config/reference', glob('config/reference/*.yaml')),

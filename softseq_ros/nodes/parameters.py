@@ -5,10 +5,21 @@ Every rig node derives from :class:`ParameterNode`, which declares its parameter
 descriptors (description, range, read-only) and validates every value, at start and at run
 time, in one set-parameters callback that answers with a reason naming the parameter
 (``rate_hz: must be > 0, got 0``). Rates accept integers and doubles (``-p rate_hz:=100``).
+
+A node's parameters on the command line (``-p node:name:=value``) are matched here, not by rcl:
+rcl reads the prefix as the node's fully qualified name at the root (``syringe_pump`` is
+``/syringe_pump``), so under ``-r __ns:=/rig_b`` it reaches no node, and it refuses a prefix
+with a slash (``rig_b/syringe_pump``) outright. :func:`split_ros_arguments` takes these rules
+out of the arguments rcl sees; a node takes those whose prefix is its name (in any namespace) or
+its fully qualified name, with or without the leading slash. rcl still reads every value
+(:func:`read_rules`), and the node gets them as parameter overrides, which win over a
+``--params-file``. The file's keys stay rcl's: the fully qualified name
+(``/rig_b/syringe_pump``), ``/**`` or a wildcard form such as ``/**/syringe_pump``.
 """
 
 from dataclasses import dataclass
 import math
+import re
 from typing import Any, Callable, Sequence
 
 from rcl_interfaces.msg import (
@@ -18,8 +29,10 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
 
 from softseq_ros.errors import UserError
 from softseq_ros.rig.contract import OUTPUT_NAMES
@@ -29,6 +42,159 @@ from softseq_ros.scene.loader import Scene, load_scene
 
 class NodeConfigError(UserError):
     """A node configuration that cannot run; the message names the parameter."""
+
+
+# rcl's ROS arguments that take a value (rcl/arguments.h), so that a value is never read as a
+# flag; the others (--enable-rosout-logs, ...) stand alone.
+_VALUE_FLAGS = frozenset({'-r', '--remap', '-p', '--param', '--params-file', '-e', '--enclave',
+                          '--log-level', '--log-config-file', '--log-file-name'})
+_PARAM_FLAGS = frozenset({'-p', '--param'})
+_REMAP_FLAGS = frozenset({'-r', '--remap'})
+
+
+@dataclass(frozen=True)
+class ParameterRule:
+    """One ``-p [node:]name:=value`` as given; ``node`` is '' for a rule for every node."""
+
+    node: str
+    name: str
+    value: str
+
+    @property
+    def text(self) -> str:
+        """The rule as the user typed it."""
+        return f'{self.node}:{self.name}:={self.value}' if self.node else \
+            f'{self.name}:={self.value}'
+
+    def matches(self, node_name: str, fqn: str) -> bool:
+        """
+        True when the rule is meant for the node ``node_name`` (fully qualified: ``fqn``).
+
+        A prefix without a slash is a node name in any namespace (what ``-p camera:rate_hz:=30``
+        means to someone who also gave ``-r __ns:=/rig2``); one with a slash is a fully
+        qualified name, the leading slash optional.
+        """
+        if not self.node:
+            return True
+        if '/' not in self.node:
+            return self.node == node_name
+        return '/' + self.node.lstrip('/') == fqn
+
+
+@dataclass(frozen=True)
+class RosArguments:
+    """A command line split into what rcl reads and the node-prefixed parameter rules."""
+
+    rcl_args: list[str]
+    rules: list[ParameterRule]          # the node-prefixed ones, in the given order
+    global_rules: list[ParameterRule]   # those for every node (left to rcl)
+    remaps: list[tuple[str, str, str]]  # (node prefix or '', '__ns' or '__node', value)
+
+    def rules_for(self, node_name: str, fqn: str) -> list[ParameterRule]:
+        """The node-prefixed rules meant for this node."""
+        return [rule for rule in self.rules if rule.matches(node_name, fqn)]
+
+
+def _parameter_rule(text: str) -> ParameterRule | None:
+    """A rule from ``[node:]name:=value``; None when it is no rule rcl would accept."""
+    head, separator, value = text.partition(':=')
+    if not separator:
+        return None
+    node, _, name = head.rpartition(':')
+    return ParameterRule(node, name, value)
+
+
+def split_ros_arguments(args: Sequence[str]) -> RosArguments:
+    """
+    Split a command line (argv or a node's cli_args) for rcl and for our node matching.
+
+    The node-prefixed ``-p`` rules are taken out (a prefix holding an rcl wildcard stays, for
+    rcl to refuse with its own words); everything else is passed on unchanged.
+    """
+    rcl_args: list[str] = []
+    rules: list[ParameterRule] = []
+    global_rules: list[ParameterRule] = []
+    remaps: list[tuple[str, str, str]] = []
+    in_ros_args = False
+    tokens = list(args)
+    index = 0
+    while index < len(tokens):
+        token = tokens[index]
+        index += 1
+        if token == '--ros-args':
+            in_ros_args = True
+        elif in_ros_args and token == '--':
+            in_ros_args = False
+        elif in_ros_args and token in _VALUE_FLAGS and index < len(tokens):
+            value = tokens[index]
+            index += 1
+            if token in _PARAM_FLAGS:
+                rule = _parameter_rule(value)
+                if rule is not None and rule.node and '*' not in rule.node:
+                    rules.append(rule)
+                    continue
+                if rule is not None and not rule.node:
+                    global_rules.append(rule)
+            elif token in _REMAP_FLAGS:
+                head, separator, target = value.partition(':=')
+                prefix, _, key = head.rpartition(':')
+                if separator and key in ('__ns', '__node', '__name'):
+                    remaps.append((prefix, '__ns' if key == '__ns' else '__node', target))
+            rcl_args += [token, value]
+            continue
+        rcl_args.append(token)
+    return RosArguments(rcl_args, rules, global_rules, remaps)
+
+
+def node_fqn(node_name: str, namespace: str,
+             remaps: Sequence[tuple[str, str, str]]) -> tuple[str, str]:
+    """
+    The name and fully qualified name a node will get, by rcl's remapping rules.
+
+    As rcl_node_init: the name is remapped first (``[node:]__node:=``), then the namespace
+    (``[node:]__ns:=``) with prefixes matched against the remapped name; ``remaps`` holds the
+    node's own arguments' rules before the process's, and the first matching rule wins.
+    """
+    name = next((value for prefix, key, value in remaps
+                 if key == '__node' and prefix in ('', node_name)), node_name)
+    namespace = next((value for prefix, key, value in remaps
+                      if key == '__ns' and prefix in ('', name)), namespace or '/')
+    namespace = '/' + namespace.strip('/')
+    return name, namespace.rstrip('/') + '/' + name
+
+
+def check_rule_values(rules: Sequence[ParameterRule]) -> None:
+    """Refuse, naming the rule as typed, a value rcl cannot read (without a node or context)."""
+    for rule in rules:
+        try:
+            remove_ros_args(['-', '--ros-args', '-p', f'{rule.name}:={rule.value}'])
+        except Exception as err:
+            raise NodeConfigError(rcl_reason(err, rule.text)) from None
+
+
+def read_rules(rules: Sequence[ParameterRule], context: Any = None) -> list[Parameter]:
+    """
+    The typed values of ``rules``, read by rcl exactly as it reads any ``-p`` value.
+
+    A short-lived node that hears nothing else reads them under neutral names (so that none
+    can touch its own use_sim_time); its error for a value rcl cannot parse is rclpy's
+    RCLInvalidROSArgsError. A value rcl cannot read is a NodeConfigError naming the rule.
+    """
+    if not rules:
+        return []
+    check_rule_values(rules)
+    args = ['--ros-args']
+    for index, rule in enumerate(rules):
+        args += ['-p', f'value_{index}:={rule.value}']
+    reader = Node('softseq_parameter_reader', context=context, cli_args=args,
+                  use_global_arguments=False, enable_rosout=False,
+                  start_parameter_services=False,
+                  automatically_declare_parameters_from_overrides=True)
+    try:
+        values = [reader.get_parameter(f'value_{index}') for index in range(len(rules))]
+    finally:
+        reader.destroy_node()
+    return [Parameter(rule.name, value.type_, value.value) for rule, value in zip(rules, values)]
 
 
 def outputs_reason(value: list[str]) -> str | None:
@@ -89,8 +255,34 @@ class ParameterNode(Node):
     """A node whose parameters carry descriptors and are validated with a reason."""
 
     def __init__(self, node_name: str, **node_kwargs: Any) -> None:
-        """Create the node (keywords go to rclpy's Node) and install the validation."""
-        super().__init__(node_name, **node_kwargs)
+        """
+        Create the node (keywords go to rclpy's Node) and install the validation.
+
+        Node-prefixed ``-p`` rules among its own ``cli_args`` are matched as on the command line
+        (:func:`split_ros_arguments`); one meant for another node is refused.
+        """
+        local = split_ros_arguments(node_kwargs.get('cli_args') or [])
+        self.parameter_rules: list[ParameterRule] = []
+        if local.rules:
+            name, fqn = node_fqn(node_name, node_kwargs.get('namespace') or '', local.remaps)
+            self.parameter_rules = local.rules_for(name, fqn)
+            for rule in local.rules:
+                if rule not in self.parameter_rules:
+                    raise NodeConfigError(f'-p {rule.text}: this node is {fqn}, not '
+                                          f'{rule.node}')
+            node_kwargs['cli_args'] = local.rcl_args
+            read = read_rules(self.parameter_rules, node_kwargs.get('context'))
+            node_kwargs['parameter_overrides'] = read + list(
+                node_kwargs.get('parameter_overrides') or [])
+        try:
+            super().__init__(node_name, **node_kwargs)
+        except InvalidParameterTypeException as err:
+            # rclpy declares use_sim_time itself, before any callback of ours could check it.
+            raise NodeConfigError(use_sim_time_reason(str(err))) from None
+        fqn_now = self.get_fully_qualified_name()
+        if local.rules and local.rules_for(self.get_name(), fqn_now) != self.parameter_rules:
+            # The process's own remapping moved the node after the rules were matched.
+            raise NodeConfigError(f'-p {local.rules[0].text}: the node is {fqn_now}, not {fqn}')
         self._rules: dict[str, _Rule] = {}
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._post_set)
@@ -191,6 +383,37 @@ class ParameterNode(Node):
 
     def _parameters_changed(self, parameters: list[Parameter]) -> None:
         """Apply accepted changes; nodes override this for their dynamic parameters."""
+
+
+def rcl_reason(err: Exception, rule_text: str | None = None) -> str:
+    """
+    The reason rcl gives for refusing an argument, in one line (``rule_text``: the rule as typed).
+
+    rclpy's RCLError is not part of its public API: it is known by its name here, and any
+    other exception is raised again. rcl reads ``-p`` values as YAML, so a string holding YAML
+    (the pump's legs) needs its own quotes: the reason says so when the value refused is a YAML
+    list or mapping.
+    """
+    if type(err).__name__ not in ('RCLError', 'RCLInvalidROSArgsError'):
+        raise err
+    text = ' '.join(str(err).split(', at ')[0].split())
+    rule = re.search(r"rule: '(?:-p|--param) ([^']*)'", text)
+    if rule is None:
+        return text
+    reason = text.split('Error: ', 1)[-1]
+    rule_text = rule_text or rule[1]
+    value = rule_text.partition(':=')[2].lstrip()
+    hint = ('; quote a value that is YAML text, e.g. -p "legs:=\'[{inflate_to_m3: 5.0e-6}]\'"'
+            if value[:1] in ('[', '{') else '')
+    return f'-p {rule_text}: rcl cannot read the value ({reason}){hint}'
+
+
+def use_sim_time_reason(message: str) -> str:
+    """Our one line for a ``use_sim_time`` that is no boolean, from rclpy's type error."""
+    # rclpy words it "Trying to set parameter 'use_sim_time' to 'maybe' of type 'STRING', ...".
+    got = re.search(r"to '(.*)' of type '(\w+)'", message)
+    detail = f', got {got[2].lower()} {got[1]!r}' if got else ''
+    return f'use_sim_time: must be true or false{detail}'
 
 
 def _bounds_text(minimum: float | None, maximum: float | None, open_minimum: bool) -> str:

@@ -30,6 +30,8 @@ from rclpy.validate_topic_name import validate_topic_name
 from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
 from softseq_ros.bag.writer import BagWriter, BagWriterError
+from softseq_ros.nodes.parameters import NodeConfigError
+from softseq_ros.nodes.runner import build_nodes, init_ros
 from softseq_ros.rig import contract
 
 # The topics recorded when the `topics` parameter is not given: every topic of the rig's
@@ -92,9 +94,11 @@ def message_class(type_name: str) -> type:
 class Recorder(Node):
     """Subscribe to a list of topics and write everything received into one bag."""
 
+    NODE_NAME = 'recorder'
+
     def __init__(self, **node_kwargs: Any) -> None:
         """Declare parameters, open the bag and start looking for the topics."""
-        super().__init__('recorder', **node_kwargs)
+        super().__init__(self.NODE_NAME, **node_kwargs)
         topics = self.declare_parameter(
             'topics', list(RIG_TOPICS), ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
@@ -230,16 +234,22 @@ def main(args: list[str] | None = None) -> None:
     # KeyboardInterrupt could land inside a chunk being written; the shutdown alone stops the
     # recording between two callbacks, with every chunk whole.
     signal.signal(signal.SIGINT, _stop_by_shutdown)
-    rclpy.init(args=args)
+    arguments = init_ros(args, 'recorder')
+    built: list[Recorder] = []
     node = None
     exit_code = 0
     try:
         executor = SingleThreadedExecutor()
-        node = Recorder()
+        build_nodes([Recorder], arguments, built)
+        node = built[0]
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except NodeConfigError as err:
+        # A -p rule that would change nothing: refused in one line, as the rig's nodes do.
+        print(f'recorder: error: {err}', file=sys.stderr)
+        exit_code = 2
     except (BagWriterError, MessageDefinitionError) as err:
         # One line, naming the path or the topic; a failed bag is not closed a second time.
         print(f'recorder: {err}', file=sys.stderr)
@@ -250,6 +260,7 @@ def main(args: list[str] | None = None) -> None:
         if rclpy.ok():
             raise
     finally:
+        node = built[0] if built else None
         if node is not None:
             try:
                 node.close_bag()

@@ -10,7 +10,9 @@ drive it from another pump, start the nodes as separate processes.
 
 ``--ros-args -p name:=value`` sets a parameter of every node that declares it (``scene``,
 ``rate_hz``); ``-p camera:rate_hz:=100`` sets it for one node; ``-r __ns:=/rig2`` moves the
-whole rig, topics and services, into ``/rig2``.
+whole rig, topics and services, into ``/rig2``, where ``camera:`` still names the camera (as
+does its fully qualified name, ``/rig2/camera:``). A prefix that names none of the three nodes,
+or a parameter none of the nodes it reaches has, is refused (softseq_ros.nodes.runner).
 """
 
 from softseq_ros.nodes.actuator import ActuatorNode
