@@ -170,7 +170,9 @@ def test_pump_holds_when_the_actuator_falls_silent_and_goes_on_only_when_asked(t
         wall[0] = int(seconds * 1e9)
         outputs = pump.tick(wall[0])
         if answer:
-            pump.handle(state_at(5.0e3), wall[0])
+            # The actuator's answer carries the stamp of the command it answers.
+            pump.handle(SegmentVolumes(wall[0], ('bottom', 'top'), [1e-5, 1e-5], 5.0e3),
+                        wall[0])
         return outputs
 
     tick(0.0)

@@ -5,8 +5,10 @@ Publishes ``pump/command`` (sensor_msgs/JointState, joint ``syringe``: injected 
 and signed flow [m^3/s]) at ``rate_hz`` and ``pump/status`` (JSON with state, reason and
 stamp; transient_local, depth 1: a late joiner gets the current state only). Listens to
 ``actuator/volumes`` for the actuator's gauge pressure: its relief valve (``max_pressure_pa``)
-and its feedback (it holds after ``feedback_timeout_s`` without it; ``open_loop`` for a pump
-with no actuator). The programme (legs at ``flow_rate_m3_per_s``,
+and its feedback, which is only the actuator's answer to this pump's own commands, checked
+against the scene's segments (it holds on an answer that cannot be trusted, and after
+``feedback_timeout_s`` without a good one; ``open_loop`` for a pump with no actuator; the
+rules are softseq_ros.rig.pump's). The programme (legs at ``flow_rate_m3_per_s``,
 repeated ``cycles`` times) comes from the scene unless the parameters give it.
 
 Services (std_srvs/Trigger): ``~/start`` (idle or held -> running), ``~/hold`` (running ->
@@ -25,6 +27,7 @@ from softseq_ros.rig import contract
 from softseq_ros.rig.build import pump_core
 from softseq_ros.rig.model import actuator_model
 from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
+from softseq_ros.rig.wire import NS_PER_S
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import legs_from_text
 from softseq_ros.scene.programme import Leg
@@ -105,7 +108,11 @@ class SyringePumpNode(CoreNode):
             'Stop when the commanded injected volume would exceed this [m^3] '
             "(default: where the segments' inflation ends).", minimum=0.0,
             open_minimum=True)
+        # Warnings name the feedback topic as resolved here.
         self.connect(scene.outputs)
+        volumes = self.subscription(contract.VOLUMES)
+        if volumes is not None:
+            self.core.feedback_topic = volumes.topic_name
         for name, request in (('start', self.core.start), ('stop', self.core.stop),
                               ('hold', self.core.hold), ('reset', self.core.reset)):
             self.create_service(Trigger, f'~/{name}', self._service(request))
@@ -139,6 +146,16 @@ class SyringePumpNode(CoreNode):
         if now == 0 and self._use_sim_time:
             return  # no /clock received yet: the time is unknown
         self.send(self.core.tick(now))
+
+    def _receive(self, topic: contract.Topic, decode: Any, msg: Any) -> None:
+        if topic is not contract.VOLUMES:
+            super()._receive(topic, decode, msg)
+            return
+        # Field by field, not through the decoded value: that keeps one gauge pressure, and
+        # a message whose pressures (effort) do not match its joints must be seen as such.
+        stamp = msg.header.stamp
+        self.send(self.core.feedback(self.now_ns(), stamp.sec * NS_PER_S + stamp.nanosec,
+                                     tuple(msg.name), list(msg.position), list(msg.effort)))
 
     def _parameters_changed(self, parameters: list[Parameter]) -> None:
         for parameter in parameters:

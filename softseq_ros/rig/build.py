@@ -99,7 +99,7 @@ def pump_core(scene: Scene, model: ActuatorModel | None = None,
         max_pressure_pa=settings.get('max_pressure_pa', DEFAULT_MAX_PRESSURE_PA),
         max_injected_m3=settings.get('max_injected_m3', default_stop),
         feedback_timeout_s=settings.get('feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S),
-        open_loop=settings.get('open_loop', False),
+        open_loop=settings.get('open_loop', False), segment_names=scene.segment_names,
         **({'feedback_clock': settings['feedback_clock']} if 'feedback_clock' in settings
            else {}))
     return core, rate_hz

@@ -6,14 +6,26 @@ minus the time spent held, so a hold pauses the programme and ``start`` resumes 
 ``tick`` commands the current volume, also when idle, held or stopped (with flow 0), so the
 actuator and a late recorder always see where the pump is.
 
-States (each change is a :class:`PumpStatus`): ``idle`` (not started), ``running``, ``held``
-(paused; ``start`` resumes), ``finished`` (the programme is over), ``stopped`` (by ``stop`` or a
-safety limit; only ``reset`` leaves it). Safety, as a syringe pump with a pressure sensor:
+States: ``idle`` (not started), ``running``, ``held`` (paused; ``start`` resumes),
+``finished`` (the programme is over), ``stopped`` (only ``reset`` leaves it). Every change is a
+:class:`PumpStatus`, and what makes the pump change, with the state it enters and the reason it
+gives, is one table, :data:`REACTIONS` (documented in docs/faults.md). Safety, as a syringe
+pump with a pressure sensor:
 
-- it stops when the actuator's gauge pressure (from its segment volumes message: the gauge
-  pressure the actuator computed, so no second ambient pressure can disagree with it) exceeds
-  ``max_pressure_pa``, and when the commanded volume would exceed ``max_injected_m3``;
-- it holds when it has heard no pressure for ``feedback_timeout_s`` while running (the
+- it stops when a gauge pressure heard on the actuator's volumes (the gauge pressure the
+  actuator computed, so no second ambient pressure can disagree with it) exceeds
+  ``max_pressure_pa``, ``+inf`` included, whoever sent it: stopping never pushes fluid; and
+  when the commanded volume would exceed ``max_injected_m3``;
+- feedback is the actuator's *answer to this pump*: the actuator stamps its state with the
+  stamp of the command it answers, so only a message stamped like one of the pump's last
+  :data:`RECENT_COMMANDS` commands, not answered before, counts. Anything else (another
+  publisher, a replayed recording, the actuator's states between commands) keeps no pump
+  running;
+- feedback that cannot be trusted (segment names that are not the scene's, arrays of the
+  wrong length, a volume that is NaN, infinite or negative, a pressure that is NaN, infinite
+  or below vacuum) is no feedback: an answer like that holds the pump at once, any other such
+  message is warned about once per kind of fault, naming the topic and what is wrong;
+- it holds when no trustworthy answer came for ``feedback_timeout_s`` while running (the
   actuator died, or the topic is cut), and says why; only ``start`` resumes it. ``open_loop``
   runs without any feedback, for a pump with no actuator behind it.
 
@@ -22,10 +34,11 @@ so that a simulated clock running 1000x faster does not make a healthy actuator 
 None: the driver's own time, as the batch runner wants for reproducible runs).
 """
 
+from collections import deque
 from dataclasses import dataclass
 import math
 import time
-from typing import Callable
+from typing import Callable, Sequence
 
 from softseq_ros.rig import contract
 from softseq_ros.rig.values import (
@@ -45,6 +58,50 @@ DEFAULT_MAX_PRESSURE_PA = 100.0e3
 # An actuator answers every command within milliseconds; two seconds of silence while the
 # pump pushes fluid is a dead or disconnected actuator.
 DEFAULT_FEEDBACK_TIMEOUT_S = 2.0
+# How many of its last commands the pump takes answers to. The actuator's command queue keeps
+# 1000, so no answer comes later than that behind the newest command it got; ten times as many
+# leave room for commands in flight and for an actuator answering what it buffered at start.
+RECENT_COMMANDS = 10 * contract.PUMP_COMMAND.qos.depth
+# A gauge pressure below minus one standard atmosphere would be an absolute pressure below
+# vacuum: no liquid in the segments can be there.
+VACUUM_GAUGE_PA = -contract.DEFAULT_AMBIENT_PRESSURE_PA
+
+IDLE, RUNNING, HELD, FINISHED, STOPPED = 'idle', 'running', 'held', 'finished', 'stopped'
+STATES = (IDLE, RUNNING, HELD, FINISHED, STOPPED)
+
+
+@dataclass(frozen=True)
+class Reaction:
+    """One row of the pump's table: what happened, the state it enters and the reason it gives."""
+
+    cause: str       # the row's name, as docs/faults.md and the tests name it
+    state: str
+    reason: str      # str.format template ('' for none); the status and the log show it
+    level: str       # the log level of the change: a change the pump made by itself warns
+    when: str        # what happened, in words
+
+
+REACTIONS: dict[str, Reaction] = {reaction.cause: reaction for reaction in (
+    Reaction('reset', IDLE, '', INFO, 'the pump starts, or ~/reset'),
+    Reaction('start', RUNNING, '', INFO,
+             '~/start from idle or held, or the first tick with autostart'),
+    Reaction('hold', HELD, '', INFO, '~/hold while running'),
+    Reaction('silent', HELD,
+             'no pressure from the actuator for {timeout:g} s (feedback_timeout_s){why}; '
+             'call ~/start to go on', WARNING,
+             'no trustworthy answer to its commands for feedback_timeout_s while running'),
+    Reaction('untrusted', HELD,
+             '{topic}: {fault}; feedback that cannot be trusted is no feedback; '
+             'call ~/start to go on', WARNING,
+             'an answer to its command that cannot be trusted, while running'),
+    Reaction('finished', FINISHED, '', INFO, 'the programme is over'),
+    Reaction('over_pressure', STOPPED,
+             'gauge pressure {gauge:.6g} Pa exceeds max_pressure_pa {limit:.6g} Pa', WARNING,
+             'a gauge pressure above max_pressure_pa (+inf too) while running or held'),
+    Reaction('end_stop', STOPPED, 'injected volume reached max_injected_m3 {limit:.6g} m^3',
+             WARNING, 'the commanded volume would exceed max_injected_m3'),
+    Reaction('stop', STOPPED, 'requested', INFO, '~/stop'),
+)}
 
 
 @dataclass(frozen=True)
@@ -57,7 +114,11 @@ class Reply:
 
 
 class PumpCore:
-    """The syringe pump without ROS: ``tick(now)``, ``handle(SegmentVolumes, now)``, requests."""
+    """
+    The syringe pump without ROS: ``tick(now)``, ``handle(SegmentVolumes, now)``, requests.
+
+    ``feedback`` takes a volumes message field by field, as a node receives it.
+    """
 
     role = contract.PUMP
 
@@ -66,8 +127,15 @@ class PumpCore:
                  max_injected_m3: float = math.inf,
                  feedback_timeout_s: float = DEFAULT_FEEDBACK_TIMEOUT_S,
                  open_loop: bool = False,
-                 feedback_clock: Callable[[], int] | None = time.monotonic_ns) -> None:
-        """A pump at rest (idle) at the programme's start volume."""
+                 feedback_clock: Callable[[], int] | None = time.monotonic_ns,
+                 segment_names: Sequence[str] | None = None,
+                 feedback_topic: str = contract.VOLUMES.name) -> None:
+        """
+        A pump at rest (idle) at the programme's start volume.
+
+        ``segment_names``: the scene's segments, base to tip, that feedback must name (None:
+        not checked); ``feedback_topic``: the topic's name as warnings give it.
+        """
         self.profile = profile
         self.autostart = autostart
         self.max_pressure_pa = max_pressure_pa
@@ -76,8 +144,16 @@ class PumpCore:
         self.open_loop = open_loop
         self._feedback_clock = feedback_clock
         self._last_feedback: int | None = None
+        self.segment_names = None if segment_names is None else tuple(segment_names)
+        self.feedback_topic = feedback_topic
+        # The stamps of the last commands, and those of them not answered yet.
+        self._sent: deque[int] = deque()
+        self._unanswered: set[int] = set()
+        self._warned: set[str] = set()       # kinds of untrusted feedback already warned about
+        self._last_fault: str | None = None  # since the last trustworthy answer
+        self._foreign = 0                    # plausible ones that answered no command, too
         self.duration_s = profile.duration()
-        self.state = 'idle'
+        self.state = IDLE
         self.reason = ''
         self._elapsed_ns = 0           # run time accumulated before the current run
         self._running_since: int | None = None
@@ -90,19 +166,20 @@ class PumpCore:
 
     def begin(self, now: int) -> list[Output]:
         """The first status (idle), for the drivers to publish before any tick."""
-        self._set_state(now, 'idle')
+        self._enter(now, 'reset')
         return self._take()
 
     def _take(self) -> list[Output]:
         out, self._out = self._out, []
         return out
 
-    def _set_state(self, now: int, state: str, reason: str = '') -> None:
-        self.state, self.reason = state, reason
-        status = PumpStatus(now, state, reason)
-        # A state the pump entered by itself, for a reason, is worth a warning.
-        level = WARNING if reason and reason != 'requested' else INFO
-        self._out.append(Notice(self.role, level, f'pump {status.text}'))
+    def _enter(self, now: int, cause: str, **fields: object) -> None:
+        """Enter the state of the table's row ``cause``; ``fields`` fill in its reason."""
+        reaction = REACTIONS[cause]
+        reason = reaction.reason.format(**fields)
+        self.state, self.reason = reaction.state, reason
+        status = PumpStatus(now, reaction.state, reason)
+        self._out.append(Notice(self.role, reaction.level, f'pump {status.text}'))
         self._out.append(status)
 
     @property
@@ -125,9 +202,9 @@ class PumpCore:
         """Pause the programme (running -> held)."""
         return self._reply(*self._hold(now))
 
-    def stop(self, now: int, reason: str = 'requested') -> Reply:
+    def stop(self, now: int) -> Reply:
         """Stop where the pump is; only ``reset`` leaves the stopped state."""
-        return self._reply(*self._stop(now, reason))
+        return self._reply(*self._stop(now, 'stop'))
 
     def reset(self, now: int) -> Reply:
         """Back to idle at the programme's start volume and run time 0."""
@@ -135,8 +212,9 @@ class PumpCore:
         self._running_since = None
         self._frozen_volume = None
         self._started = False
-        self._set_state(now, 'idle')
-        return self._reply(True, 'idle')
+        self._warned.clear()
+        self._enter(now, 'reset')
+        return self._reply(True, IDLE)
 
     def _reply(self, success: bool, message: str) -> Reply:
         return Reply(success, message, self._take())
@@ -144,30 +222,31 @@ class PumpCore:
     # The requests' state changes; their outputs wait in self._out for the caller to take.
 
     def _start(self, now: int) -> tuple[bool, str]:
-        if self.state in ('idle', 'held'):
+        if self.state in (IDLE, HELD):
             self._running_since = now
             self._started = True
             # The actuator gets a full timeout to answer the first command of this run.
             self._last_feedback = self._feedback_time(now)
-            self._set_state(now, 'running')
-            return True, 'running'
-        if self.state == 'running':
+            self._last_fault, self._foreign = None, 0
+            self._enter(now, 'start')
+            return True, RUNNING
+        if self.state == RUNNING:
             return True, 'already running'
         return False, f'cannot start while {self.status}; call ~/reset first'
 
     def _hold(self, now: int) -> tuple[bool, str]:
-        if self.state != 'running':
+        if self.state != RUNNING:
             return False, f'cannot hold while {self.status}'
         self._pause(now)
-        self._set_state(now, 'held')
-        return True, 'held'
+        self._enter(now, 'hold')
+        return True, HELD
 
-    def _stop(self, now: int, reason: str) -> tuple[bool, str]:
-        if self.state == 'stopped':
+    def _stop(self, now: int, cause: str, **fields: object) -> tuple[bool, str]:
+        if self.state == STOPPED:
             return True, f'already {self.status}'
         self._frozen_volume = self._volume_at(now)
         self._pause(now)
-        self._set_state(now, 'stopped', reason)
+        self._enter(now, cause, **fields)
         return True, self.status
 
     def _feedback_time(self, now: int) -> int:
@@ -191,40 +270,117 @@ class PumpCore:
     # ---------------------------------------------------------------- inputs and ticks
 
     def handle(self, value: SegmentVolumes, now: int) -> list[Output]:
-        """The actuator's state: stop when its gauge pressure exceeds ``max_pressure_pa``."""
-        gauge = value.gauge_pa
-        if not math.isfinite(gauge):
+        """The actuator's state (its gauge pressure stands for every segment's)."""
+        names = value.names
+        pressures = [value.gauge_pa] * len(names) if names else [value.gauge_pa]
+        return self.feedback(now, value.stamp_ns, names, value.volumes_m3, pressures)
+
+    def feedback(self, now: int, stamp_ns: int, names: Sequence[str],
+                 volumes_m3: Sequence[float], gauge_pa: Sequence[float]) -> list[Output]:
+        """
+        A message on the actuator's volumes, field by field (``gauge_pa``: one per joint).
+
+        A pressure above ``max_pressure_pa`` stops the pump whoever sent it; only a
+        trustworthy answer to one of the pump's recent commands counts as feedback, and an
+        untrustworthy one holds a running pump (the module's docstring has the rules).
+        """
+        limit = self.max_pressure_pa
+        if self.state in (RUNNING, HELD):
+            for gauge in gauge_pa:
+                if gauge > limit:
+                    self._stop(now, 'over_pressure', gauge=gauge, limit=limit)
+                    return self._take()
+        unanswered = self._unanswered
+        answer = stamp_ns in unanswered
+        if answer:
+            unanswered.remove(stamp_ns)
+        fault = self._fault(names, volumes_m3, gauge_pa)
+        if fault is not None:
+            kind, text = fault
+            if answer and self.state == RUNNING and not self.open_loop:
+                self._pause(now)
+                self._warned.add(kind)  # the status says it; no second warning
+                self._enter(now, 'untrusted', topic=self.feedback_topic, fault=text)
+                return self._take()
+            self._last_fault = text
+            if kind not in self._warned:
+                self._warned.add(kind)
+                return [Notice(self.role, WARNING, f'{self.feedback_topic}: {text}: not taken '
+                                                   'as feedback (said once per kind of fault)')]
+            return []
+        if not answer:
+            self._foreign += 1
             return []
         self._last_feedback = self._feedback_time(now)
-        if gauge > self.max_pressure_pa and self.state in ('running', 'held'):
-            return self.stop(now, f'gauge pressure {gauge:.6g} Pa exceeds max_pressure_pa '
-                                  f'{self.max_pressure_pa:.6g} Pa').outputs
+        self._last_fault, self._foreign = None, 0
         return []
+
+    def _fault(self, names: Sequence[str], volumes: Sequence[float],
+               pressures: Sequence[float]) -> tuple[str, str] | None:
+        """(kind, what is wrong) with a volumes message, or None when it can be trusted."""
+        expected = self.segment_names
+        if expected is not None and names is not expected and tuple(names) != expected:
+            return 'names', (f"joint names {list(names)} are not the scene's segments "
+                             f'{list(expected)}')
+        if not names:
+            return 'names', 'no joints'
+        if len(volumes) != len(names):
+            return 'volumes length', f'{len(volumes)} volumes (position) for {len(names)} joints'
+        if len(pressures) != len(names):
+            return 'pressures length', (f'{len(pressures)} pressures (effort) for {len(names)} '
+                                        'joints')
+        # One chained comparison per value in the common case (it is false for NaN too).
+        for name, volume in zip(names, volumes):
+            if not 0.0 <= volume < math.inf:
+                if not math.isfinite(volume):
+                    return 'volume not finite', f'volume of {name} is {volume}'
+                return 'volume negative', f'volume of {name} is negative ({volume:.6g} m^3)'
+        for gauge in pressures:
+            if not VACUUM_GAUGE_PA <= gauge < math.inf:
+                if gauge < VACUUM_GAUGE_PA:
+                    return 'pressure below vacuum', (f'gauge pressure {gauge:.6g} Pa is below '
+                                                     f'vacuum ({VACUUM_GAUGE_PA:.6g} Pa)')
+                return 'pressure not finite', f'gauge pressure is {gauge}'
+        return None
+
+    def _silent_why(self) -> str:
+        if self._last_fault is not None:
+            return (f'; what came on {self.feedback_topic} could not be trusted '
+                    f'({self._last_fault})')
+        if self._foreign:
+            return (f'; the {self._foreign} messages on {self.feedback_topic} in that time '
+                    "answered none of the pump's commands")
+        return ''
+
+    def _sent_command(self, stamp: int) -> None:
+        sent = self._sent
+        if len(sent) == RECENT_COMMANDS:
+            self._unanswered.discard(sent.popleft())
+        sent.append(stamp)
+        self._unanswered.add(stamp)
 
     def tick(self, now: int) -> list[Output]:
         """The command for ``now``: injected volume and signed flow (and any state change)."""
-        if self.autostart and not self._started and self.state == 'idle':
+        if self.autostart and not self._started and self.state == IDLE:
             self._start(now)
-        if self.state == 'running' and not self.open_loop and self._feedback_lost(now):
+        if self.state == RUNNING and not self.open_loop and self._feedback_lost(now):
             self._pause(now)
-            self._set_state(now, 'held', f'no pressure from the actuator for '
-                                         f'{self.feedback_timeout_s:g} s (feedback_timeout_s); '
-                                         'call ~/start to go on')
+            self._enter(now, 'silent', timeout=self.feedback_timeout_s, why=self._silent_why())
         run_time = self.run_time_s(now)
         volume, programme_flow = self.profile.command_at(run_time)
         if self._frozen_volume is not None:
             volume = self._frozen_volume
         flow = 0.0
-        if self.state == 'running':
+        if self.state == RUNNING:
             if volume > self.max_injected_m3:
                 self._frozen_volume = volume = self.max_injected_m3
-                self._stop(now, 'injected volume reached max_injected_m3 '
-                                f'{self.max_injected_m3:.6g} m^3')
+                self._stop(now, 'end_stop', limit=self.max_injected_m3)
             elif run_time >= self.duration_s:
                 self._pause(now)
-                self._set_state(now, 'finished')
+                self._enter(now, 'finished')
             else:
                 flow = programme_flow
         self.volume_m3 = volume
+        self._sent_command(now)
         self._out.append(PumpCommand(now, volume, flow))
         return self._take()
