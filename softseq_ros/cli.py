@@ -48,7 +48,7 @@ def _solve(args: argparse.Namespace) -> int:
 
 def _solve_network(args: argparse.Namespace, scene: Any) -> int:
     """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
-    from softseq_ros.dynamic.network import LAMINAR_REYNOLDS
+    from softseq_ros.dynamic.network import laminar_range_warning
     from softseq_ros.dynamic.path import (
         PathError,
         history_path,
@@ -58,7 +58,7 @@ def _solve_network(args: argparse.Namespace, scene: Any) -> int:
         write_snaps,
     )
     from softseq_ros.quasistatic.solve import read_history
-    from softseq_ros.scene.network import channel_names
+    from softseq_ros.scene.network import LAMINAR, channel_names
 
     profile = scene.pump.profile
     if args.path is not None:
@@ -82,11 +82,10 @@ def _solve_network(args: argparse.Namespace, scene: Any) -> int:
     channels = channel_names(scene.segment_names)
     print('  peak Reynolds number per channel: ' + ', '.join(
         f'{name} {peak:.0f}' for name, peak in zip(channels, path.peak_reynolds)))
-    for name, peak in zip(channels, path.peak_reynolds):
-        if peak > LAMINAR_REYNOLDS:
-            print(f'softseq solve: warning: channel {name}: Reynolds number {peak:.0f} above '
-                  f'{LAMINAR_REYNOLDS:.0f}, no longer laminar (its drop follows Blasius only '
-                  'with friction: blasius)', file=sys.stderr)
+    for name, peak, tube in zip(channels, path.peak_reynolds, scene.network.channels):
+        line = laminar_range_warning(name, peak, tube.friction != LAMINAR)
+        if line is not None:
+            print(f'softseq solve: warning: {line}', file=sys.stderr)
     if path.drained is not None:
         print(f'softseq solve: warning: the path ends at {path.time_s[-1]:.6g} s '
               f'({path.injected[-1] * 1e6:.4g} mL injected): {path.drained}', file=sys.stderr)

@@ -7,11 +7,13 @@ friction, and the limits of near-zero resistance and near-zero flow.
 import json
 import math
 from pathlib import Path
+import re
 
 import numpy as np
 import pytest
 import yaml
 
+from softseq_ros import cli
 from softseq_ros.bag.reader import bag_summary, read_bag
 from softseq_ros.batch import BatchRun
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
@@ -33,7 +35,10 @@ def fig1_with_network(tmp_path: Path, network: dict, flow: float = 2e-7,
     data['pump'].update({'flow_rate_m3_per_s': flow, 'legs': [{'inflate_to_m3': top}]})
     data['camera'] = {'rate_hz': 1}
     data['network'] = network
-    return scene_from_dict(data, tmp_path / 'fig1_network.yaml')
+    # Written out too, for the commands that take a scene file.
+    path = tmp_path / 'fig1_network.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return scene_from_dict(data, path)
 
 
 def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_path):
@@ -146,7 +151,7 @@ def test_the_friction_law_is_checked_in_the_scene(tmp_path):
                                                     'friction': 'moody'}]})
 
 
-def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path):
+def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path, capsys):
     # A wide short channel: the snap-through's exchange reaches Reynolds numbers in the
     # thousands. Warned once, with the channel's name and what to do.
     channel = {'length_m': 0.01, 'radius_m': 1.0e-3}
@@ -157,6 +162,16 @@ def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path):
     assert 'channel bottom_to_top' in turbulent[0] and 'friction: blasius' in turbulent[0]
     peak = float(turbulent[0].split('Reynolds number ')[1].split()[0])
     assert peak > LAMINAR_REYNOLDS
+    # `softseq solve` on the scene says the same, in the same words (its peak is its own).
+    assert cli.main(['solve', str(tmp_path / 'fig1_network.yaml'),
+                     '--out', str(tmp_path / 'path.csv')]) == 0
+    solved = [line for line in capsys.readouterr().err.splitlines() if 'no longer laminar' in line]
+
+    def worded(line: str) -> str:
+        return re.sub(r'number \d+', 'number N', line)
+
+    said = turbulent[0][turbulent[0].index('channel '):]   # after the node's name
+    assert [worded(line) for line in solved] == [f'softseq solve: warning: {worded(said)}']
     # With Blasius's law the channel says it follows it, and the turbulent drop slows the
     # exchange: the snap takes longer.
     channel['friction'] = BLASIUS

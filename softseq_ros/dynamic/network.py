@@ -35,6 +35,16 @@ BLASIUS_COEFFICIENT = 0.316     # Darcy friction factor = 0.316 Re^(-1/4)
 BLASIUS_EXPONENT = 1.75         # the drop rises as |q|^(7/4)
 
 
+def laminar_range_warning(channel: str, peak_reynolds: float, turbulent_law: bool) -> str | None:
+    """The line saying that a channel's flow left the laminar range, or None while it stayed."""
+    if not peak_reynolds > LAMINAR_REYNOLDS:
+        return None
+    law = ('its friction follows Blasius' if turbulent_law else
+           'the laminar law underestimates its drop: give it friction: blasius')
+    return (f'channel {channel}: Reynolds number {peak_reynolds:.0f} above '
+            f'{LAMINAR_REYNOLDS:.0f}, no longer laminar ({law})')
+
+
 @dataclass(frozen=True)
 class TubeLaw:
     """The coefficients of one tube's pressure drop: L dq/dt + friction(q) + a q |q|."""

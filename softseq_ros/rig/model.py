@@ -28,7 +28,7 @@ import math
 from typing import Protocol, Sequence
 
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
-from softseq_ros.dynamic.network import LAMINAR_REYNOLDS
+from softseq_ros.dynamic.network import laminar_range_warning
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
@@ -346,12 +346,10 @@ class DynamicModel:
         """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
         lines = []
         for j, peak in enumerate(self.flow_network.peak_reynolds):
-            if peak > LAMINAR_REYNOLDS and not self._warned[j]:
+            line = laminar_range_warning(self.channel_names[j], peak, self._turbulent[j])
+            if line is not None and not self._warned[j]:
                 self._warned[j] = True
-                law = ('its friction follows Blasius' if self._turbulent[j] else
-                       'the laminar law underestimates its drop: give it friction: blasius')
-                lines.append(f'channel {self.channel_names[j]}: Reynolds number {peak:.0f} '
-                             f'above {LAMINAR_REYNOLDS:.0f}, no longer laminar ({law})')
+                lines.append(line)
         return lines
 
     def state(self) -> ModelState:
