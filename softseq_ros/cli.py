@@ -293,10 +293,14 @@ def _rates(args: argparse.Namespace) -> int:
 
 
 def _play(args: argparse.Namespace) -> int:
-    from softseq_ros.nodes.player import play
+    from softseq_ros.stopping import HeldSignals
 
-    result = play(str(args.bag), rate=args.rate, loop=args.loop, clock=args.clock,
-                  topics=args.topics, wait_s=args.wait_for_subscribers)
+    # Held from before rclpy loads: a signal inside its import would end in an ImportError.
+    with HeldSignals() as held:
+        from softseq_ros.nodes.player import play
+
+        result = play(str(args.bag), rate=args.rate, loop=args.loop, clock=args.clock,
+                      topics=args.topics, wait_s=args.wait_for_subscribers, held=held)
     print(f'{args.bag}: {result.messages} messages replayed in {result.loops} pass(es)')
     return 0
 
@@ -306,10 +310,18 @@ def _recover(args: argparse.Namespace) -> int:
 
     result = recover(args.bag)
     if result.was_complete:
-        print(f'{args.bag}: complete, {result.message_count} messages; metadata.yaml rewritten')
-    else:
-        print(f'{args.bag}: recovered {result.message_count} messages into {result.mcap_path}'
-              f' (damaged original kept as {result.damaged_copy})')
+        print(f'{args.bag}: complete, {result.message_count} messages, every chunk passes its '
+              'CRC; metadata.yaml rewritten')
+        return 0
+    lost = result.dropped_messages
+    dropped = (f'dropped: {len(result.dropped)} part(s), '
+               f'{"an unknown number of" if lost is None else lost} messages'
+               if result.dropped or lost else 'nothing in the file dropped')
+    print(f'{args.bag}: recovered {result.message_count} messages into {result.mcap_path}'
+          f' (damaged original kept as {result.damaged_copy}); {dropped}; '
+          f'{result.stop_reason}')
+    for part in result.dropped:
+        print(f'  dropped {part.describe()}')
     return 0
 
 

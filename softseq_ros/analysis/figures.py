@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from softseq_ros.analysis.metrics import snap_rows
 from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
 from softseq_ros.analysis.transients import Transients, TransientWindow, transient_windows
+from softseq_ros.errors import OutputWriteError, writing
 
 ML = 1e6
 KPA = 1e-3
@@ -394,12 +395,18 @@ def _draw(name: str, args: tuple) -> list[Path]:
 def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
     """Draw ``jobs[:split]`` here and the rest in a fork (which has matplotlib loaded)."""
     ours, theirs = jobs[:split], jobs[split:]
+    # The fork's one-line error (a figure it could not write) comes back through a pipe.
+    read_end, write_end = os.pipe() if theirs else (-1, -1)
     child = os.fork() if theirs else 0
     if theirs and child == 0:
         status = 0
         try:
+            os.close(read_end)
             for name, args in theirs:
                 _draw(name, args)
+        except OutputWriteError as err:
+            os.write(write_end, str(err).encode()[:4096])
+            status = 2
         except BaseException:  # noqa: BLE001 - reported through the exit status
             import traceback
 
@@ -407,11 +414,19 @@ def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
             status = 1
         finally:
             os._exit(status)
-    drawn = [_draw(name, args) for name, args in ours]
     if theirs:
-        _, status = os.waitpid(child, 0)
-        if status != 0:
-            raise RuntimeError(f'drawing {", ".join(n for n, _ in theirs)} failed (see above)')
+        os.close(write_end)
+    try:
+        drawn = [_draw(name, args) for name, args in ours]
+    finally:
+        if theirs:
+            _, status = os.waitpid(child, 0)
+            message = os.read(read_end, 4096).decode(errors='replace')
+            os.close(read_end)
+    if theirs and status != 0:
+        if message:
+            raise OutputWriteError(message)
+        raise RuntimeError(f'drawing {", ".join(n for n, _ in theirs)} failed (see above)')
     return drawn + [_outputs(name, args) for name, args in theirs]
 
 
@@ -499,9 +514,11 @@ _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': p
 
 def _save(fig: object, out: Path, svg: bool) -> list[Path]:
     # zlib's fastest level: a fifth of a figure's time at the default level, for 7 % more bytes.
-    fig.savefig(out, dpi=110, pil_kwargs={'compress_level': 1})
+    with writing(out):
+        fig.savefig(out, dpi=110, pil_kwargs={'compress_level': 1})
     written = [out]
     if svg:
-        fig.savefig(out.with_suffix('.svg'))
+        with writing(out.with_suffix('.svg')):
+            fig.savefig(out.with_suffix('.svg'))
         written.append(out.with_suffix('.svg'))
     return written

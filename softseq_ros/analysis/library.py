@@ -17,13 +17,14 @@ import json
 import os
 from pathlib import Path
 import re
+import stat
 import sys
 from typing import TextIO
 
 import numpy as np
 
 from softseq_ros.analysis.metrics import Trace, analyse
-from softseq_ros.errors import UserError
+from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.parallel import run_jobs
 
 SWEEP_POINTS = 2001
@@ -46,8 +47,47 @@ class Entry:
     index: int = 0
 
 
-def library_entries(source: str | os.PathLike, length_m: float | None = None) -> list[Entry]:
-    """The segments of a folder of tables or of a scene file."""
+def _regular_text(path: Path) -> str | None:
+    """
+    The text of ``path`` if it is a regular file, else None.
+
+    Opened without blocking and checked on the open descriptor: a FIFO named like a table
+    would block ``open`` until a writer appears, and a check before opening could be raced.
+    """
+    descriptor = os.open(path, os.O_RDONLY | getattr(os, 'O_NONBLOCK', 0))
+    try:
+        if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+            return None
+        os.set_blocking(descriptor, True)
+        with open(descriptor, 'rb', closefd=False) as stream:
+            data = stream.read()
+    finally:
+        os.close(descriptor)
+    try:
+        return data.decode('utf-8-sig')
+    except UnicodeDecodeError as err:
+        raise LibraryError(f'{path}: not UTF-8 text (byte {err.start}); save the table as '
+                           'UTF-8 CSV') from None
+
+
+def _kind(path: Path) -> str:
+    mode = path.stat().st_mode
+    for test, name in ((stat.S_ISFIFO, 'a FIFO'), (stat.S_ISDIR, 'a folder'),
+                       (stat.S_ISSOCK, 'a socket'), (stat.S_ISCHR, 'a character device'),
+                       (stat.S_ISBLK, 'a block device')):
+        if test(mode):
+            return name
+    return 'not a regular file'
+
+
+def library_entries(source: str | os.PathLike, length_m: float | None = None,
+                    notes: TextIO | None = sys.stderr) -> list[Entry]:
+    """
+    The segments of a folder of tables or of a scene file.
+
+    Only regular files are read: a FIFO, folder, socket or device named ``*.csv`` is skipped
+    with a note on ``notes``.
+    """
     path = Path(source)
     if path.is_file():
         from softseq_ros.scene.loader import load_scene
@@ -56,12 +96,20 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None) ->
         return [Entry(s.name, None, s.length, str(path), i) for i, s in enumerate(scene.segments)]
     if not path.is_dir():
         raise LibraryError(f'{path}: neither a folder of segment tables nor a scene file')
-    tables = sorted(path.glob('*.csv'))
-    if len(tables) < 1:
-        raise LibraryError(f'{path}: no segment tables (*.csv) in this folder')
+    texts = {}
+    for table in sorted(path.glob('*.csv')):
+        text = _regular_text(table)
+        if text is None:
+            if notes is not None:
+                notes.write(f'library: note: {table} is {_kind(table)}, not a table file; '
+                            'skipped\n')
+            continue
+        texts[table] = text
+    if len(texts) < 1:
+        raise LibraryError(f'{path}: no segment tables (*.csv regular files) in this folder')
     entries = []
-    for table in tables:
-        found = _LENGTH_LINE.search(table.read_text())
+    for table, text in texts.items():
+        found = _LENGTH_LINE.search(text)
         length = float(found.group(1)) if found else length_m
         if length is None:
             raise LibraryError(f'{table}: no "# length_m:" line; give the length with '
@@ -222,13 +270,16 @@ def write_library(source: str | os.PathLike, out: str | os.PathLike, triples: bo
                   length_m: float | None = None, processes: int | None = None,
                   progress: TextIO | None = sys.stderr) -> tuple[list[dict], str]:
     """Run the library and write library.md, library.json and library.png into ``out``."""
-    entries = library_entries(source, length_m)
+    entries = library_entries(source, length_m, progress)
     out = Path(out)
     results = run_library(entries, triples, processes, progress)
-    out.mkdir(parents=True, exist_ok=True)
+
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
     table = library_markdown(results)
-    (out / 'library.md').write_text(f'# Segment library `{source}`\n\nPressures are gauge.\n\n'
-                                    + table + '\n![library](library.png)\n')
-    (out / 'library.json').write_text(json.dumps(results, indent=2) + '\n')
-    library_figure(results, [e.name for e in entries], out / 'library.png')
+    write_text(out / 'library.md', f'# Segment library `{source}`\n\nPressures are gauge.\n\n'
+               + table + '\n![library](library.png)\n')
+    write_text(out / 'library.json', json.dumps(results, indent=2) + '\n')
+    with writing(out / 'library.png'):
+        library_figure(results, [e.name for e in entries], out / 'library.png')
     return results, table

@@ -28,7 +28,7 @@ from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import Trace, TraceError, analyse, segment_limits
 from softseq_ros.analysis.recording import Recording, load_recording
 from softseq_ros.analysis.transients import Transients, analyse_transients
-from softseq_ros.errors import UserError
+from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.rig import contract
 from softseq_ros.segments.identity import segments_sha256, short
 
@@ -283,17 +283,18 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
                                         recording.snapshots)
     if reference is not None:
         metrics['reference'] = against_reference(metrics, reference)
-    out.mkdir(parents=True, exist_ok=True)
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
     written = []
     if figures:
         from softseq_ros.analysis.figures import write_figures
 
         written = write_figures(recording, emap, out, experiment, svg, workers, transients)
     metrics['figures'] = [p.name for p in written]
-    (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json) + '\n')
+    write_text(out / 'metrics.json', json.dumps(metrics, indent=2, default=_json) + '\n')
     text = summary_text(metrics)
-    (out / 'summary.txt').write_text(text + '\n')
-    (out / 'report.md').write_text(markdown(metrics))
+    write_text(out / 'summary.txt', text + '\n')
+    write_text(out / 'report.md', markdown(metrics))
     return metrics, text
 
 

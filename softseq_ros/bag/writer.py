@@ -25,9 +25,15 @@ SIGKILL everything written more than about that long ago is on disk;
 :func:`softseq_ros.bag.recovery.recover` rebuilds a complete bag from such a truncated file.
 Message and QoS forms (CDR bytes, offered QoS, rosbag2's YAML) live in
 :mod:`softseq_ros.bag.forms`.
+
+A bag in use: the writer holds a POSIX record lock (``fcntl.lockf``) on its .mcap file from
+creation to close. The kernel drops it when the writer's process ends, however it ends, so a
+killed recording is recoverable at once, while :func:`softseq_ros.bag.recovery.recover` refuses
+a file whose lock is held (:func:`lock_state`) instead of moving it away under a live writer.
 """
 
 from dataclasses import dataclass
+import errno
 from functools import partial
 from importlib.metadata import PackageNotFoundError, version
 import os
@@ -41,6 +47,11 @@ from softseq_ros.errors import UserError
 from .forms import QosFormError, dump_yaml, parse_qos_yaml
 from .mcap_file import ChunkedMcapWriter
 from .msgdefs import canonical_type_name, message_definition, type_description_hash
+
+try:
+    import fcntl
+except ImportError:  # Windows has no fcntl: bags there are written without a lock
+    fcntl = None  # type: ignore[assignment]
 
 METADATA_FILE = 'metadata.yaml'
 METADATA_VERSION = 9
@@ -119,6 +130,7 @@ class BagWriter:
         except OSError as err:
             raise BagWriterError(f'{directory}: cannot create the bag '
                                  f'({err.strerror or err})') from None
+        _lock(self._file, directory / file_name)
         self._directory = directory
         self._mcap_path = directory / file_name
         # The name the file will have in the bag (a recovery writes a temporary file first);
@@ -376,6 +388,43 @@ class BagWriter:
             self._flusher.join()
         if self._failure is not None:
             raise BagWriterError(self._failure)
+
+
+def _lock(stream: BinaryIO, path: Path) -> None:
+    """Mark ``path`` as being written, until ``stream`` is closed or its process ends."""
+    if fcntl is None:
+        return
+    try:
+        fcntl.lockf(stream.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as err:
+        stream.close()
+        raise BagWriterError(f'{path}: cannot lock the bag file for writing '
+                             f'({err.strerror or err})') from None
+
+
+def lock_state(path: str | os.PathLike) -> str:
+    """
+    'locked' while a writer (in another process) holds ``path``'s lock, else 'free'.
+
+    'unknown' where locks cannot be tested (no fcntl, a file system without them). A POSIX
+    lock does not conflict with its own process: a writer in the caller's own process is not
+    seen, and (POSIX semantics) closing this test's descriptor drops that writer's lock.
+    """
+    if fcntl is None:
+        return 'unknown'
+    try:
+        descriptor = os.open(path, os.O_RDONLY)
+    except OSError:
+        return 'unknown'
+    try:
+        fcntl.lockf(descriptor, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError as err:
+        return 'locked' if err.errno in (errno.EACCES, errno.EAGAIN) else 'unknown'
+    else:
+        fcntl.lockf(descriptor, fcntl.LOCK_UN)
+        return 'free'
+    finally:
+        os.close(descriptor)
 
 
 def _qos_profiles(topic: str, qos_profiles_yaml: str) -> list[Any]:

@@ -8,6 +8,12 @@ out as the recorded CDR bytes (rclpy publishes serialized messages as they are),
 order, spaced as recorded divided by ``rate``; with ``clock`` the bag's time is published on
 ``/clock`` (rosgraph_msgs/Clock) before each message, so nodes with ``use_sim_time`` follow
 the recording.
+
+SIGINT and SIGTERM end a replay as they end ``softseq run``: held while rclpy loads and the
+publishers are made (a signal inside an import would leave a half-loaded module and a
+misleading error), then acting between two messages; the replay closes its node and context
+and the command exits 130 or 143. A SIGINT that the parent shell set to be ignored (a
+background job) still stops it, as it stops ``softseq run``.
 """
 
 from dataclasses import dataclass
@@ -25,8 +31,11 @@ import yaml
 from softseq_ros.bag.arrays import BagArrays, open_bag
 from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
+from softseq_ros.stopping import HeldSignals
 
 CLOCK_TOPIC = contract.CLOCK.name
+# Longest sleep between two looks at the stop signals held (a replay at a slow rate sleeps long).
+SIGNAL_POLL_S = 0.05
 # rclpy's TimeSource subscribes to /clock with this QoS.
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 1: ReliabilityPolicy.RELIABLE,
@@ -105,15 +114,29 @@ class BagPlayer(Node):
         self.clock_publisher = self.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS) \
             if clock else None
         self._stop = threading.Event()
+        # Stop signals held by the caller (HeldSignals.pending): non-empty ends the replay.
+        self.signals: list[int] = []
 
     def stop(self) -> None:
         """Ask a running :meth:`play` to end after the current message."""
         self._stop.set()
 
+    def _stopped(self) -> bool:
+        return bool(self.signals) or self._stop.is_set()
+
+    def _sleep(self, seconds: float) -> None:
+        """Sleep, looking at the held stop signals at least every SIGNAL_POLL_S."""
+        deadline = time.monotonic() + seconds
+        while not self._stopped():
+            left = deadline - time.monotonic()
+            if left <= 0.0:
+                return
+            self._stop.wait(min(left, SIGNAL_POLL_S))
+
     def wait_for_subscribers(self, timeout_s: float) -> bool:
         """Wait until every played topic has a subscriber (or the timeout); True if so."""
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and not self._stop.is_set():
+        while time.monotonic() < deadline and not self._stopped():
             if all(p.get_subscription_count() > 0 for p in self.publishers_by_topic.values()):
                 return True
             time.sleep(0.01)
@@ -130,18 +153,20 @@ class BagPlayer(Node):
     def play(self) -> PlayResult:
         """Replay until the bag ends (or forever with ``loop``, until :meth:`stop`)."""
         result = PlayResult()
-        while not self._stop.is_set():
+        while not self._stopped():
             start_wall = time.monotonic()
             first_log = None
             for topic, log_time, data in self._messages():
-                if self._stop.is_set():
+                if self._stopped():
                     break
                 if first_log is None:
                     first_log = log_time
                 due = start_wall + (log_time - first_log) * 1e-9 / self.rate
                 delay = due - time.monotonic()
                 if delay > 0.0:
-                    self._stop.wait(delay)
+                    self._sleep(delay)
+                    if self._stopped():
+                        break
                 if self.clock_publisher is not None:
                     stamp = Clock()
                     stamp.clock.sec, stamp.clock.nanosec = divmod(int(log_time), 1_000_000_000)
@@ -156,30 +181,40 @@ class BagPlayer(Node):
 
 def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
          topics: list[str] | None = None, wait_s: float = 0.0,
-         args: list[str] | None = None) -> PlayResult:
-    """Run a replay in its own rclpy context until it ends or SIGINT/SIGTERM."""
+         args: list[str] | None = None, held: HeldSignals | None = None) -> PlayResult:
+    """
+    Run a replay in its own rclpy context until it ends or SIGINT/SIGTERM.
+
+    A stop signal ends the replay between two messages; once the node and the context are
+    closed, KeyboardInterrupt (SIGINT) or TerminatedError (SIGTERM) is raised. ``held`` is a
+    caller's :class:`HeldSignals` already in force (one that also covered the import of this
+    module); without one, the signals are held from here on.
+    """
+    if held is None:
+        with HeldSignals() as own:
+            return play(bag, rate, loop, clock, topics, wait_s, args, own)
+    held.check()
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+    held.check()
     context = rclpy.Context()
     rclpy.init(args=args, context=context)
     player = None
     try:
         player = BagPlayer(bag, rate=rate, loop=loop, clock=clock, topics=topics,
                            context=context)
+        player.signals = held.pending
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(player)
         spinner = threading.Thread(target=_spin,
                                    args=(executor, ExternalShutdownException, context),
                                    daemon=True)
         spinner.start()
-        if wait_s > 0.0:
-            player.wait_for_subscribers(wait_s)
         try:
-            return player.play()
-        except KeyboardInterrupt:
-            player.stop()
-            raise
+            if wait_s > 0.0:
+                player.wait_for_subscribers(wait_s)
+            result = player.play()
         finally:
             rclpy.try_shutdown(context=context)
             spinner.join(timeout=2.0)
@@ -187,6 +222,8 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
         if player is not None:
             player.destroy_node()
         rclpy.try_shutdown(context=context)
+    held.check()
+    return result
 
 
 def _spin(executor: Any, shutdown: type[BaseException], context: Any) -> None:
