@@ -15,17 +15,23 @@ and says why in its commit.
 """
 
 from concurrent.futures import ProcessPoolExecutor
+import dataclasses
+import functools
 import hashlib
+import itertools
 import json
 import math
 import multiprocessing
+import operator
 import os
 from pathlib import Path
 import sys
+from typing import Callable
 
 from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
+from rosbags.typesys import Stores, get_typestore
 
 from softseq_ros.batch import BatchRun
 
@@ -36,6 +42,49 @@ RELATIVE_TOLERANCE = 1e-9
 WEIGHT_PERIOD = 97   # weights 1..97 make the weighted sum sensitive to where a value changed
 
 
+def _float_template(value: object) -> tuple[str, Callable[[object], tuple]] | None:
+    """
+    For a message type made of floats only (Pose, Point, ...): its skeleton and a float getter.
+
+    A type whose fields are floats and nested such types has one structure for every instance,
+    so its skeleton is built once and its floats are read with one getter: the camera's pose
+    arrays are most of the floats of a bag.
+    """
+    cls = type(value)
+    if cls in _TEMPLATES:
+        return _TEMPLATES[cls]
+    if not dataclasses.is_dataclass(value):
+        return None
+    tokens: list[str] = []
+    paths: list[str] = []
+
+    def walk(message: object, prefix: str) -> bool:
+        tokens.append(type(message).__name__)
+        for field in dataclasses.fields(message):
+            tokens.append(field.name)
+            item = getattr(message, field.name)
+            if type(item) is float:
+                tokens.append('f')
+                paths.append(prefix + field.name)
+            elif not (dataclasses.is_dataclass(item) and walk(item, f'{prefix}{field.name}.')):
+                return False
+        return True
+
+    template = None
+    if walk(value, '') and len(paths) > 1:
+        template = ('\x1f'.join(tokens), operator.attrgetter(*paths))
+    _TEMPLATES[cls] = template
+    return template
+
+
+_TEMPLATES: dict[type, tuple[str, Callable[[object], tuple]] | None] = {}
+
+
+@functools.cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    return tuple(field.name for field in dataclasses.fields(cls))
+
+
 def _flatten(value: object, skeleton: list[str], floats: list[float]) -> None:
     """Split a decoded message into its exact skeleton and its floats, in order."""
     if isinstance(value, float):
@@ -44,41 +93,59 @@ def _flatten(value: object, skeleton: list[str], floats: list[float]) -> None:
     elif isinstance(value, bool | int):
         skeleton.append(repr(value))
     elif isinstance(value, str):
-        try:
-            parsed = json.loads(value)
-        except ValueError:
+        # The rig's JSON payloads are objects; names, frames and texts are kept as they are.
+        if value[:1] != '{':
             skeleton.append(repr(value))
             return
         skeleton.append('json')
-        _flatten(parsed, skeleton, floats)
+        _flatten(json.loads(value), skeleton, floats)
     elif isinstance(value, dict):
         for key in value:
             skeleton.append(repr(key))
             _flatten(value[key], skeleton, floats)
-    elif isinstance(value, list | tuple | bytes):
+    elif isinstance(value, np.ndarray):
+        skeleton.append(f'[{value.size}:{value.dtype.str}')
+        if value.dtype.kind == 'f':
+            floats.extend(value.tolist())
+        else:
+            skeleton.append(value.tobytes().hex())
+    elif isinstance(value, list | tuple):
         skeleton.append(f'[{len(value)}')
-        if all(type(item) is float for item in value):
+        if value and all(type(item) is float for item in value):
             floats.extend(value)
+            return
+        template = _float_template(value[0]) if value else None
+        if template is not None and all(type(item) is type(value[0]) for item in value):
+            skeleton.extend(template[0] for _ in value)
+            floats.extend(itertools.chain.from_iterable(map(template[1], value)))
             return
         for item in value:
             _flatten(item, skeleton, floats)
     elif value is None:
         skeleton.append('None')
-    else:
+    elif dataclasses.is_dataclass(value):
+        template = _float_template(value)
+        if template is not None:
+            skeleton.append(template[0])
+            floats.extend(template[1](value))
+            return
         skeleton.append(type(value).__name__)
-        for slot in value.__slots__:
-            skeleton.append(slot)
-            _flatten(getattr(value, slot), skeleton, floats)
+        for name in _field_names(type(value)):
+            skeleton.append(name)
+            _flatten(getattr(value, name), skeleton, floats)
+    else:
+        raise TypeError(f'cannot fingerprint a {type(value).__name__}')
 
 
 def topic_fingerprints(bag: Path) -> dict[str, dict]:
     """Per topic: message count, a digest of everything but the floats, and sums of the floats."""
+    typestore = get_typestore(Stores.ROS2_JAZZY)
     skeletons: dict[str, hashlib._Hash] = {}
     float_lists: dict[str, list[float]] = {}
     counts: dict[str, int] = {}
     with open(next(bag.glob('*.mcap')), 'rb') as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for _, channel, message, decoded in reader.iter_decoded_messages(log_time_order=True):
+        for schema, channel, message in make_reader(stream).iter_messages(log_time_order=True):
+            decoded = typestore.deserialize_cdr(message.data, schema.name)
             skeleton = [str(message.log_time), str(message.publish_time)]
             _flatten(decoded, skeleton, float_lists.setdefault(channel.topic, []))
             digest = skeletons.setdefault(channel.topic, hashlib.sha256())
@@ -86,19 +153,19 @@ def topic_fingerprints(bag: Path) -> dict[str, dict]:
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
     result = {}
     for topic in sorted(skeletons):
-        values = float_lists[topic]
-        finite = [x for x in values if math.isfinite(x)]
+        values = np.asarray(float_lists[topic], dtype=np.float64)
+        finite = values[np.isfinite(values)]
+        weights = np.arange(values.size) % WEIGHT_PERIOD + 1
         result[topic] = {
             'count': counts[topic],
             'skeleton_sha256': skeletons[topic].hexdigest(),
-            'floats': len(values),
-            'non_finite': [i for i, x in enumerate(values) if not math.isfinite(x)][:20],
-            'sum': math.fsum(finite),
-            'sum_abs': math.fsum(abs(x) for x in finite),
-            'weighted_sum': math.fsum((i % WEIGHT_PERIOD + 1) * x
-                                      for i, x in enumerate(values) if math.isfinite(x)),
-            'min': min(finite, default=0.0),
-            'max': max(finite, default=0.0),
+            'floats': int(values.size),
+            'non_finite': np.flatnonzero(~np.isfinite(values))[:20].tolist(),
+            'sum': math.fsum(finite.tolist()),
+            'sum_abs': math.fsum(np.abs(finite).tolist()),
+            'weighted_sum': math.fsum((weights[np.isfinite(values)] * finite).tolist()),
+            'min': float(finite.min()) if finite.size else 0.0,
+            'max': float(finite.max()) if finite.size else 0.0,
         }
     return result
 
