@@ -11,7 +11,10 @@ import pytest
 
 # Domain 0 is everyone's default, so a stray node elsewhere could join it. 1..101 stays inside
 # the range whose DDS ports are valid on Linux for any participant count (the ROS docs' advice).
-ROS_DOMAIN_ID = 1 + os.getpid() % 101
+# Under pytest-xdist the workers (gw0, gw1, ...) of one run take consecutive domains.
+_WORKER = os.environ.get('PYTEST_XDIST_WORKER', '')
+ROS_DOMAIN_ID = 1 + ((os.getppid() + int(_WORKER[2:])) if _WORKER.startswith('gw')
+                     else os.getpid()) % 101
 
 os.environ['ROS_DOMAIN_ID'] = str(ROS_DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

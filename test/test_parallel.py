@@ -19,6 +19,8 @@ from softseq_ros.parallel import (
     worker_count,
 )
 
+SLOW_JOB_S = 60.0   # a job that a stop must not wait for
+
 # Jobs are module-level functions: worker processes are spawned and import them by name.
 
 
@@ -154,18 +156,20 @@ def test_an_interrupt_stops_the_workers_at_once():
     timer.start()
     try:
         with pytest.raises(KeyboardInterrupt):
-            run_jobs(nap, [0.1, 60.0], workers=2)
+            run_jobs(nap, [0.1, SLOW_JOB_S], workers=2)
     finally:
         timer.cancel()
-    assert time.perf_counter() - start < 10
+    # Well short of the minute the slow job takes, however loaded the machine.
+    assert time.perf_counter() - start < SLOW_JOB_S / 2
     assert multiprocessing.active_children() == []
 
 
 def test_a_failing_job_stops_the_others():
     start = time.perf_counter()
     with pytest.raises(JobError, match=r'^nap x: TypeError'):
-        run_jobs(nap, [60.0, 0.0, 'x'], workers=2, name=lambda seconds: f'nap {seconds}')
-    assert time.perf_counter() - start < 20
+        run_jobs(nap, [SLOW_JOB_S, 0.0, 'x'], workers=2,
+                 name=lambda seconds: f'nap {seconds}')
+    assert time.perf_counter() - start < SLOW_JOB_S / 2
     assert multiprocessing.active_children() == []
 
 
@@ -186,13 +190,11 @@ def test_kept_workers_run_an_initializer_and_calls_until_closed():
 
 def test_the_dask_backend_runs_on_a_local_cluster_of_two_workers():
     pytest.importorskip('distributed')
-    start = time.perf_counter()
     results = run_jobs(late_square, range(5), workers=2, backend='dask')
     assert results == [0, 1, 4, 9, 16]
     with pytest.raises(JobError, match=r'^x=0: ZeroDivisionError') as caught:
         run_jobs(inverse, [1, 0], workers=2, backend='dask', name=lambda x: f'x={x}')
     assert caught.value.index == 1
-    assert time.perf_counter() - start < 20
 
 
 def test_workers_fork_only_while_this_process_runs_one_thread():

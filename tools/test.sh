@@ -14,7 +14,8 @@ unset PYTHONHOME
 ruff check --quiet . || { echo 'test: ruff check failed (see above)' >&2; exit 1; }
 
 status=0
-python -m pytest "$@" || status=$?
+# Two worker processes, one test file each at a time (its module fixtures stay in one process).
+python -m pytest -n "${SOFTSEQ_TEST_WORKERS:-2}" --dist loadfile "$@" || status=$?
 if [[ $status -eq 5 ]]; then
     # pytest's "no tests collected": a filter or path that matches nothing is a mistake, not a pass.
     echo 'test: no test ran (pytest exit 5); check the arguments or the test folder' >&2
