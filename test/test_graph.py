@@ -16,6 +16,9 @@ import numpy as np
 import pytest
 import yaml
 
+from softseq_ros.analysis.recording import load_recording
+from softseq_ros.analysis.report import recording_metrics, summary_text
+from softseq_ros.batch import BatchRun
 from softseq_ros.cli import main
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, inflate_and_deflate
 from softseq_ros.quasistatic.graph import (
@@ -29,7 +32,7 @@ from softseq_ros.quasistatic.graph import (
     transition_graph,
 )
 from softseq_ros.quasistatic.solve import build_map
-from softseq_ros.scene.loader import load_scene
+from softseq_ros.scene.loader import load_scene, scene_from_dict
 from softseq_ros.segments.materials import NeoHookean
 from softseq_ros.segments.models import BalloonSegment
 
@@ -334,3 +337,35 @@ def test_softseq_graph_writes_si_json_and_the_figure(tmp_path, capsys):
 def test_softseq_graph_refuses_a_negative_number_of_reversals(tmp_path, capsys):
     assert main(['graph', 'fig1_asymmetric', '--out', str(tmp_path), '--reversals', '-1']) == 2
     assert '--reversals must be >= 0, got -1' in capsys.readouterr().err
+
+
+def _default_walk(graph, top: float) -> list[int]:
+    """The branches of the graph's inflate-to-``top``-then-deflate-to-rest path, in order."""
+    branch, walk = graph.start_branch, [graph.start_branch]
+    for direction, beyond in ((INFLATION, lambda v: v > top), (DEFLATION, lambda v: v <= 0)):
+        while True:
+            end = graph.end(branch, direction)
+            if end.kind == END or beyond(end.injected):
+                break
+            branch = end.target
+            walk.append(branch)
+    return walk
+
+
+def test_the_report_of_a_rig_bag_lists_the_branches_of_the_graphs_default_path(tmp_path):
+    # The rig (its actuator's tracker) and the graph (the map's branch ends) agree on which
+    # branches an inflation to 65 mL and back visits, in order: a report marks them.
+    data = yaml.safe_load(load_scene('fig1_asymmetric').path.read_text(encoding='utf-8'))
+    data['pump']['flow_rate_m3_per_s'] = 1e-6
+    data['camera'] = {'rate_hz': 1}
+    scene = scene_from_dict(data, tmp_path / 'fast.yaml')
+    BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    emap = build_map(scene.segments, scene.solver.resolution)
+    metrics = recording_metrics(load_recording(tmp_path / 'bag'), scene, emap)
+    visited = [stay['branch'] for stay in metrics['branches_visited']]
+    graph = transition_graph(emap)
+    assert visited == _default_walk(graph, data['pump']['legs'][0]['inflate_to_m3'])
+    assert len(set(visited)) >= 4   # the two snaps each way leave and land on other branches
+    labels = {b.index: b.label for b in graph.branches}
+    assert all(stay['state'] == labels[stay['branch']] for stay in metrics['branches_visited'])
+    assert 'branches visited (softseq graph numbering): #' in summary_text(metrics)

@@ -157,6 +157,10 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         metrics['sequence_type_of_scene'] = classify(emap)
         metrics['segment_pressure_limits_pa'] = segment_limits(list(scene.segments),
                                                                scene.segment_names)
+        from softseq_ros.quasistatic.graph import visits
+
+        # Which stable branches of the scene's transition graph (softseq graph) it went along.
+        metrics['branches_visited'] = visits(emap, recording.state_time_s, recording.volumes)
         if metrics['sequence_type_of_scene'] != metrics['sequence_type']:
             metrics['warnings'].append(
                 f'the recording reads as {metrics["sequence_type"]}, the scene classifies as '
@@ -379,6 +383,9 @@ def _transient_lines(transients: dict) -> list[str]:
     return lines
 
 
+BRANCHES_SHOWN = 12   # stays on a branch listed in the summary; metrics.json has them all
+
+
 def summary_text(metrics: dict) -> str:
     """A few lines a researcher reads first."""
     lines = [f'recording: {metrics["bag"]} (namespace {metrics["namespace"]})']
@@ -417,6 +424,12 @@ def summary_text(metrics: dict) -> str:
     else:
         lines.append('snap-throughs: none')
     lines.append(f'hysteresis area: {metrics["hysteresis_area_j"] * 1e3:.4f} mJ')
+    stays = metrics.get('branches_visited')
+    if stays:
+        shown = ' -> '.join(f'#{s["branch"]} ({s["state"]})' for s in stays[:BRANCHES_SHOWN])
+        more = len(stays) - BRANCHES_SHOWN
+        lines.append(f'branches visited (softseq graph numbering): {shown}'
+                     + (f' and {more} more stays (metrics.json)' if more > 0 else ''))
     if 'transients' in metrics:
         lines.extend(_transient_lines(metrics['transients']))
     first, later = _first_cycle_steps(metrics)

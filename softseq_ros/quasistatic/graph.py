@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from softseq_ros.quasistatic.assembly import Branch, FloatArray
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, inflate_and_deflate
@@ -425,3 +426,55 @@ def write_graph_json(path: str | Path, graph: TransitionGraph,
     """Write :meth:`TransitionGraph.to_dict` as JSON."""
     Path(path).write_text(json.dumps(graph.to_dict(max_reversals), indent=1) + '\n',
                           encoding='utf-8')
+
+
+def branch_labels(emap: EquilibriumMap) -> list[str]:
+    """Each branch's state label (as :attr:`GraphBranch.label`), without building the graph."""
+    per_segment = [piece_labels(s) for s in emap.segments]
+    return [' | '.join(labels[_piece_index(s, piece)]
+                       for labels, s, piece in zip(per_segment, emap.segments, branch.pieces))
+            for branch in emap.branches]
+
+
+def nearest_branches(emap: EquilibriumMap, volumes: FloatArray) -> NDArray[np.int64]:
+    """
+    For each recorded state (segment volumes, one row each), the stable branch nearest to it.
+
+    Only the branches whose total-volume interval holds the row's total are candidates; among
+    them the one whose state at that total is nearest (largest difference of a segment's
+    volume). -1 where no branch holds the total (a state outside the map's range). A rig's
+    quasi-static states lie on their branch; a dynamic run's states between equilibria are
+    given the branch they are closest to.
+    """
+    volumes = np.atleast_2d(np.asarray(volumes, dtype=float))
+    totals = volumes.sum(axis=1)
+    lo, hi = emap.injected_range
+    slack = 1e-9 * max(hi - lo, 1e-300)
+    best = np.full(len(totals), np.inf)
+    nearest = np.full(len(totals), -1, dtype=np.int64)
+    for index, branch in enumerate(emap.branches):
+        holds = np.flatnonzero((branch.lo - slack <= totals) & (totals <= branch.hi + slack))
+        if holds.size == 0:
+            continue
+        states = emap.read(index, np.clip(totals[holds], branch.lo, branch.hi)).volumes
+        distance = np.max(np.abs(states - volumes[holds]), axis=1)
+        closer = distance < best[holds]
+        best[holds[closer]] = distance[closer]
+        nearest[holds[closer]] = index
+    return nearest
+
+
+def visits(emap: EquilibriumMap, time_s: FloatArray, volumes: FloatArray) -> list[dict]:
+    """The branches a recording visited, in order: each stay with its start and end time [s]."""
+    nearest = nearest_branches(emap, volumes)
+    labels = branch_labels(emap)
+    stays: list[dict] = []
+    for row, branch in enumerate(nearest):
+        if branch < 0:
+            continue
+        if stays and stays[-1]['branch'] == branch:
+            stays[-1]['until_s'] = float(time_s[row])
+            continue
+        stays.append({'branch': int(branch), 'state': labels[branch],
+                      'from_s': float(time_s[row]), 'until_s': float(time_s[row])})
+    return stays
