@@ -332,11 +332,21 @@ def _fem(args: argparse.Namespace) -> int:
 
 
 def _scenes(args: argparse.Namespace) -> int:
+    import yaml
+
     from softseq_ros.scene.paths import config_dir, shipped_scenes
 
     print(f'shipped scenes in {config_dir()}:')
-    for name in shipped_scenes():
-        print(f'  {name}')
+    names = shipped_scenes()
+    width = max(map(len, names), default=0)
+    for name in names:
+        # The description as the file gives it, read without building the scene's segments.
+        try:
+            text = yaml.safe_load((config_dir() / f'{name}.yaml').read_text(encoding='utf-8'))
+            described = ' '.join(str(text.get('description', '')).split())
+        except (OSError, ValueError, AttributeError, yaml.YAMLError):
+            described = ''
+        print(f'  {name:<{width}}  {described}'.rstrip())
     return 0
 
 

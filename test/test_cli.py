@@ -204,3 +204,17 @@ def test_only_a_users_mistake_is_one_line_and_exit_2_a_bug_keeps_its_traceback(m
     monkeypatch.setattr(cli, '_scenes', buggy)
     with pytest.raises(ValueError, match='could not be broadcast'):
         cli.main(['scenes'])
+
+
+def test_scenes_lists_each_shipped_scene_with_its_description():
+    import yaml
+
+    from softseq_ros.scene.paths import config_dir, shipped_scenes
+
+    result = run_softseq('scenes')
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()[1:]
+    assert [line.split()[0] for line in lines] == list(shipped_scenes())
+    for name, line in zip(shipped_scenes(), lines):
+        described = yaml.safe_load((config_dir() / f'{name}.yaml').read_text())['description']
+        assert line.split(None, 1)[1] == ' '.join(described.split())
