@@ -16,6 +16,7 @@ from typing import Callable, TextIO
 
 import numpy as np
 
+from softseq_ros.progress import end_progress, write_progress
 from softseq_ros.scene.design import FEM_CODE_VERSION, Design, cache_path
 
 COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m', 'injected_m3', 'cut_curvature_per_m')
@@ -212,14 +213,8 @@ def table_for(design: Design, out: Path | None = None, cache_dir: Path | None = 
             return Path(out), False
         return cached, False
 
-    def show(line: str) -> None:
-        if stream is not None:
-            stream.write('\r' + line)
-            stream.flush()
-
-    result = run_design(design, progress=show)
-    if stream is not None:
-        stream.write('\n')
+    result = run_design(design, progress=lambda line: write_progress(stream, line))
+    end_progress(stream)
     write_table(result, cached)
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
