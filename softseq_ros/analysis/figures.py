@@ -66,7 +66,7 @@ class ModelCurves:
                                         for c in emap.equilibrium_set()))
 
 
-def _figure(width: float, height: float, rows: int = 1, cols: int = 1,  # noqa: ANN201
+def new_figure(width: float, height: float, rows: int = 1, cols: int = 1,  # noqa: ANN201
             margins: dict | None = None, **kwargs: object):
     """A figure on the Agg canvas with fixed margins (automatic layouts cost half the time)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -155,7 +155,7 @@ def _x_limits(ax: object, *ranges: tuple[float, float]) -> None:
 def plot_pv(recording: Recording, model: ModelCurves | None, out: Path,
             experiment: object | None = None, svg: bool = False) -> list[Path]:
     """Gauge pressure against injected volume, inflation and deflation apart, snaps marked."""
-    fig, axes = _figure(6.4, 4.6)
+    fig, axes = new_figure(6.4, 4.6)
     ax = axes[0, 0]
     u = recording.state_injected * ML
     ranges = [(float(u.min()), float(u.max()))]
@@ -181,13 +181,13 @@ def plot_pv(recording: Recording, model: ModelCurves | None, out: Path,
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc='lower right')
     ax.set_title('Pressure-volume curve (Fig. 4A / 6 style); arrows: snap-throughs', fontsize=10)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def plot_segments(recording: Recording, out: Path, svg: bool = False) -> list[Path]:
     """Volume added to each segment and its curvature against injected volume (Fig. 3)."""
     n = len(recording.segment_names)
-    fig, axes = _figure(6.4, 5.8, 2, 1, {'top': 0.93, 'bottom': 0.09}, sharex=True)
+    fig, axes = new_figure(6.4, 5.8, 2, 1, {'top': 0.93, 'bottom': 0.09}, sharex=True)
     u = recording.state_injected * ML
     rest = recording.volumes[0]
     for j, name in enumerate(recording.segment_names):
@@ -205,13 +205,13 @@ def plot_segments(recording: Recording, out: Path, svg: bool = False) -> list[Pa
         ax.legend(fontsize=7, ncol=max(1, n))
     axes[0, 0].set_title('Segment volume and curvature (Fig. 3 style); solid: inflation, '
                          'dashed: deflation', fontsize=9)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path,
                       svg: bool = False) -> list[Path]:
     """v1 against v2 (added volumes): equilibria, constant total volume, the recorded path."""
-    fig, axes = _figure(5.8, 5.6, margins={'left': 0.13, 'bottom': 0.1, 'top': 0.93})
+    fig, axes = new_figure(5.8, 5.6, margins={'left': 0.13, 'bottom': 0.1, 'top': 0.93})
     ax = axes[0, 0]
     names = recording.segment_names
     if len(names) != 2:
@@ -231,7 +231,7 @@ def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path
                             label=None if label in shown else label)
                     shown.add(label)
         limit = max(limit, 0.0)
-    step = _nice_step(2 * limit / 8)
+    step = nice_step(2 * limit / 8)
     for total in np.arange(step, 2 * limit + step, step):
         ax.plot([0, total], [total, 0], color='0.75', lw=0.6, zorder=0)
         if total < limit:
@@ -248,7 +248,7 @@ def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path
     ax.legend(fontsize=7, loc='upper right')
     ax.set_title('Volume distribution (Fig. 1B / 4B style); grey: constant total volume',
                  fontsize=9)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def _segments_instead(fig: object, recording: Recording, out: Path, svg: bool) -> list[Path]:
@@ -263,10 +263,11 @@ def _segments_instead(fig: object, recording: Recording, out: Path, svg: bool) -
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title('Volume distribution', fontsize=10)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
-def _nice_step(raw: float) -> float:
+def nice_step(raw: float) -> float:
+    """1, 2 or 5 times a power of ten, at least ``raw``: a spacing of grid or guide lines."""
     exponent = 10 ** np.floor(np.log10(raw)) if raw > 0 else 1.0
     for factor in (1, 2, 5, 10):
         if raw <= factor * exponent:
@@ -278,7 +279,7 @@ def plot_shapes(recording: Recording, out: Path, svg: bool = False) -> list[Path
     """The backbone at each step: inflation and deflation in two panels, one colour per step."""
     from matplotlib import colormaps
 
-    fig, axes = _figure(9.6, 5.2, 1, 2, {'left': 0.07, 'bottom': 0.3, 'top': 0.88},
+    fig, axes = new_figure(9.6, 5.2, 1, 2, {'left': 0.07, 'bottom': 0.3, 'top': 0.88},
                         sharex=True, sharey=True)
     steps = sorted({s.step for s in recording.snapshots if s.step is not None})
     palette = colormaps['tab10']
@@ -302,7 +303,7 @@ def plot_shapes(recording: Recording, out: Path, svg: bool = False) -> list[Path
     axes[0, 0].set_ylabel('z [mm]')
     _square_limits(axes[0, 0], recording)
     fig.suptitle('Tentacle shape at the camera steps (Fig. 7 style)', fontsize=10)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def _square_limits(ax: object, recording: Recording) -> None:
@@ -319,7 +320,7 @@ def _square_limits(ax: object, recording: Recording) -> None:
 
 def plot_timeseries(recording: Recording, out: Path, svg: bool = False) -> list[Path]:
     """Injected volume, gauge pressure and each segment's total volume against time."""
-    fig, axes = _figure(6.4, 6.4, 3, 1, {'top': 0.95, 'bottom': 0.08}, sharex=True)
+    fig, axes = new_figure(6.4, 6.4, 3, 1, {'top': 0.95, 'bottom': 0.08}, sharex=True)
     rows = _thin(recording.pump_time_s.size)
     axes[0, 0].plot(recording.pump_time_s[rows], recording.pump_injected[rows] * ML, 'k-')
     axes[0, 0].set_ylabel('injected (pump) [mL]')
@@ -334,7 +335,7 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = False) -> list[
     axes[2, 0].legend(fontsize=8)
     for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ...],
@@ -348,7 +349,7 @@ def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ..
     count = len(windows)
     width = 3.6 * count + 0.6
     # Fixed margins in inches, whatever the number of panels: room for both y labels.
-    fig, axes = _figure(width, 6.0, 2, count,
+    fig, axes = new_figure(width, 6.0, 2, count,
                         {'left': 0.75 / width, 'right': 1 - 0.65 / width, 'top': 0.88,
                          'bottom': 0.09, 'wspace': 0.55}, sharex='col')
     for column, window in enumerate(windows):
@@ -385,7 +386,7 @@ def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ..
     axes[0, 0].set_ylabel(GAUGE, fontsize=8)
     axes[1, 0].set_ylabel('segment volume, total [mL]', fontsize=8)
     fig.suptitle('Snap-throughs in time (dotted: start; dashed: quasi-static)', fontsize=10)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def _draw(name: str, args: tuple) -> list[Path]:
@@ -512,7 +513,8 @@ _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': p
                      'transients': plot_transients}
 
 
-def _save(fig: object, out: Path, svg: bool) -> list[Path]:
+def save_figure(fig: object, out: Path, svg: bool) -> list[Path]:
+    """Write ``fig`` as PNG (and SVG), a failed write naming the file; the paths written."""
     # zlib's fastest level: a fifth of a figure's time at the default level, for 7 % more bytes.
     with writing(out):
         fig.savefig(out, dpi=110, pil_kwargs={'compress_level': 1})

@@ -13,38 +13,20 @@ from pathlib import Path
 
 import numpy as np
 
-from softseq_ros.analysis.figures import INJECTED, ML, STYLE
+from softseq_ros.analysis.figures import (
+    INJECTED,
+    ML,
+    STYLE,
+    new_figure,
+    nice_step,
+    save_figure,
+)
 from softseq_ros.analysis.recording import DEFLATION, INFLATION
 from softseq_ros.quasistatic.graph import INFLATION as GRAPH_INFLATION
 from softseq_ros.quasistatic.graph import JOIN, SNAP, GraphBranch, TransitionGraph
 
 _PATH_COLOUR = '0.1'
 _OTHER_COLOUR = '0.65'
-
-
-def _figure(width: float, height: float, cols: int, margins: dict):  # noqa: ANN202
-    """A figure on the Agg canvas (no pyplot: it costs half a second to import)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width, height))
-    FigureCanvasAgg(fig)
-    fig.subplots_adjust(**margins)
-    return fig, fig.subplots(1, cols, squeeze=False)
-
-
-def _save(fig: object, out: Path, svg: bool) -> list[Path]:
-    fig.savefig(out, dpi=110, pil_kwargs={'compress_level': 1})
-    if not svg:
-        return [out]
-    fig.savefig(out.with_suffix('.svg'))
-    return [out, out.with_suffix('.svg')]
-
-
-def _round_step(raw: float) -> float:
-    """1, 2 or 5 times a power of ten, at least ``raw``: the spacing of grey total lines."""
-    power = 10.0 ** np.floor(np.log10(raw))
-    return float(next(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw))
 
 
 def branch_rows(graph: TransitionGraph, label_share: float = 0.0) -> dict[int, float]:
@@ -116,17 +98,17 @@ def plot_graph(graph: TransitionGraph, out: Path, emap: object | None = None,
     # A character of a 6-point label is about 0.05 in; the bars' axes are about 5 to 7 in wide.
     rows = branch_rows(graph, 0.05 / (5.2 if plane else 7.0))
     height = max(3.2, 0.42 * (max(rows.values()) + 2))
-    fig, axes = _figure(13.0 if plane else 8.5, max(height, 5.6 if plane else 0.0),
-                        2 if plane else 1,
-                        margins={'left': 0.05 if plane else 0.07, 'right': 0.98,
-                                 'wspace': 0.18, 'top': 0.9, 'bottom': 0.1})
+    fig, axes = new_figure(13.0 if plane else 8.5, max(height, 5.6 if plane else 0.0),
+                           cols=2 if plane else 1,
+                              margins={'left': 0.05 if plane else 0.07, 'right': 0.98,
+                                    'wspace': 0.18, 'top': 0.9, 'bottom': 0.1})
     _draw_bars(axes[0, 0], graph, rows, max_reversals)
     if plane:
         _draw_plane(axes[0, 1], graph, emap)
     fig.suptitle(f'Transition graph: {len(graph.branches)} stable branches, '
                  f'{len(graph.snaps())} snaps; dark: the default inflate-then-deflate path',
                  fontsize=9)
-    return _save(fig, out, svg)
+    return save_figure(fig, out, svg)
 
 
 def _draw_bars(ax: object, graph: TransitionGraph, rows: dict[int, float],
@@ -199,7 +181,7 @@ def _draw_plane(ax: object, graph: TransitionGraph, emap: object) -> None:
         ax.annotate('', xy=tuple(end), xytext=tuple(start), zorder=3,
                     arrowprops={'arrowstyle': '-|>', 'color': style['color'], 'ls': style['ls'],
                                 'lw': 1.5 if t.default_path else 0.8})
-    step = _round_step(2 * limit / 8) if limit > 0 else 1.0
+    step = nice_step(2 * limit / 8) if limit > 0 else 1.0
     for total in np.arange(step, 2 * limit + step, step):
         ax.plot([0, total], [total, 0], color='0.8', lw=0.5, zorder=0)
     ax.plot([], [], color='tab:red', ls='--', label='unstable equilibria')
