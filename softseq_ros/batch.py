@@ -20,6 +20,8 @@ from typing import Any, Callable, TextIO
 
 from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.writer import BagWriter
+from softseq_ros.errors import UserError
+from softseq_ros.progress import is_terminal, write_progress
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.model import ActuatorModel
@@ -27,10 +29,29 @@ from softseq_ros.rig.routing import Router
 from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
 from softseq_ros.rig.wire import ENCODERS
 from softseq_ros.scene.loader import Scene, load_scene
+from softseq_ros.scene.programme import (
+    MAX_RUN_BYTES,
+    MAX_RUN_MESSAGES,
+    MAX_RUN_S,
+    longest_part,
+)
 from softseq_ros.stopping import HeldSignals
 
 NS_PER_S = 1_000_000_000
 PROGRESS_PERIOD_S = 0.25
+# The last instant a bag can carry: its times are int64 nanoseconds (2262-04-11).
+LAST_NS = 2**63 - 1
+# Bytes a message takes in the bag besides what it carries (MCAP record, chunk, index), and
+# per element of its arrays; for an estimate of the bag's size before a run, not its size.
+_RECORD_BYTES = 80
+_JOINT_BYTES = 48       # a JointState joint: name, position, velocity, effort
+_POSE_BYTES = 56        # a Pose: position and orientation
+_POINT_BYTES = 24       # a marker's point
+_PIXEL_BYTES = 3        # rgb8
+
+
+class LongRunError(UserError):
+    """A run beyond the limits of a batch run (scene/programme.py), refused before it starts."""
 
 
 @dataclass
@@ -98,8 +119,14 @@ class BatchRun:
                  progress: TextIO | None = None, log: TextIO | None = None,
                  start_time_ns: int | None = None, namespace: str = '/',
                  wrap: Callable[[str, Stage], Stage] | None = None,
-                 model: ActuatorModel | None = None) -> None:
-        """Load the scene (unless given loaded) and build the cores; ``out`` must not exist."""
+                 model: ActuatorModel | None = None, allow_long: bool = False) -> None:
+        """
+        Load the scene (unless given loaded) and build the cores; ``out`` must not exist.
+
+        A run longer than :data:`~softseq_ros.scene.programme.MAX_RUN_S` of rig time, or whose
+        bag would hold more than ``MAX_RUN_MESSAGES`` messages or ``MAX_RUN_BYTES`` bytes, is
+        refused here (LongRunError), before anything is written, unless ``allow_long``.
+        """
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         self.out = Path(out)
         self.wrap = wrap
@@ -125,11 +152,65 @@ class BatchRun:
         self.namespace = namespace
         self.start_time_ns = time.time_ns() if start_time_ns is None else int(start_time_ns)
         self._now_ns = self.start_time_ns
+        self._check_length(allow_long)
         if wrap is not None:
             self._wrap_cores(wrap)
         self._router = Router(self.cores, lambda: self._now_ns)
         self._channels: dict[type, _Channel] = {}
         self.warnings: list[str] = []
+
+    def estimate(self) -> tuple[float, float]:
+        """About how many messages and bytes the run's bag will hold (from rates and sizes)."""
+        duration = self.pump.duration_s
+        segments = len(self.scene.segments)
+        answers = self.pump_rate_hz + (self.actuator.rate_hz or 0.0)
+        frames = self.camera.rate_hz or 0.0
+        width, height = self.camera.image_size
+        points = self.camera.points_per_segment * segments + 1
+        # Per topic (relative name): messages per second and bytes per message. Topics that
+        # publish once or per snap-through or trigger are too few to count.
+        per_topic = {
+            'pump/command': (self.pump_rate_hz, _JOINT_BYTES),
+            'actuator/pressure': (answers, 0),
+            'actuator/volumes': (answers, segments * _JOINT_BYTES),
+            'actuator/curvatures': (answers, segments * _JOINT_BYTES),
+            'actuator/channel_flows': (answers, (segments - 1) * _JOINT_BYTES),
+            'camera/backbone': (frames, points * _POSE_BYTES),
+            'camera/markers': (frames, points * _POINT_BYTES),
+            'camera/image': (frames, width * height * _PIXEL_BYTES),
+        }
+        messages = size = 0.0
+        for kind in TOPIC_VALUE_TYPES:
+            if kind.topic.name in per_topic and contract.enabled(kind.topic, self.outputs):
+                rate, payload = per_topic[kind.topic.name]
+                messages += rate * duration
+                size += rate * duration * (_RECORD_BYTES + payload)
+        return messages, size
+
+    def _check_length(self, allow_long: bool) -> None:
+        profile = self.pump.profile  # the scene's, or the one an override gave
+        duration = profile.duration()
+        where = f'{self.scene.path or self.scene.name}: '
+        insist = 'shorten the programme, or insist with --allow-long (allow_long=True)'
+        if duration > MAX_RUN_S and not allow_long:
+            raise LongRunError(f'{where}the programme runs {duration:.3g} s of rig time, more '
+                               f'than {MAX_RUN_S:.0e} s ({longest_part(profile, "pump.")}): '
+                               f'{insist}')
+        if self.start_time_ns < 0 or self.start_time_ns + duration * NS_PER_S > LAST_NS:
+            raise LongRunError(f'{where}start time {self.start_time_ns} ns plus the '
+                               f"programme's {duration:.6g} s is outside what a bag can carry "
+                               f'(int64 ns from 1970 to 2262)')
+        if allow_long:
+            return
+        messages, size = self.estimate()
+        if messages > MAX_RUN_MESSAGES or size > MAX_RUN_BYTES:
+            rates = (f'pump.rate_hz {self.pump_rate_hz:g} Hz, camera.rate_hz '
+                     f'{self.camera.rate_hz or 0:g} Hz, outputs {", ".join(sorted(self.outputs))}')
+            raise LongRunError(f'{where}the bag would hold about {messages:.2g} messages, '
+                               f'{size / 1e9:.3g} GB over {duration:.6g} s of rig time ({rates}), '
+                               f'more than {MAX_RUN_MESSAGES:.0e} messages or '
+                               f'{MAX_RUN_BYTES / 1e9:g} GB: lower the rates or drop outputs, '
+                               f'{insist}')
 
     def _wrap_cores(self, wrap: Callable[[str, Stage], Stage]) -> None:
         # Instance attributes shadow the methods: the router and the loop call the wrappers.
@@ -148,7 +229,7 @@ class BatchRun:
             self._loop(wall_start, held)
         wall = time.perf_counter() - wall_start
         if self.progress is not None:
-            self.progress.write('\n' if _is_terminal(self.progress) else '')
+            self.progress.write('\n' if is_terminal(self.progress) else '')
         counts = {channel.topic: channel.count for channel in self._channels.values()}
         return BatchResult(self.out, (self._now_ns - self.start_time_ns) / NS_PER_S, wall,
                            counts, self.pump.state, self.warnings, self.start_time_ns)
@@ -184,7 +265,7 @@ class BatchRun:
             self.warnings.append(line)
             if self.log is not None:
                 # After a progress line that \r keeps rewriting, start on a line of its own.
-                self.log.write(('\n' if _is_terminal(self.progress) else '') + line + '\n')
+                self.log.write(('\n' if is_terminal(self.progress) else '') + line + '\n')
 
     def _loop(self, wall_start: float, held: HeldSignals) -> None:
         pump, router = self.pump, self._router
@@ -224,23 +305,15 @@ class BatchRun:
         text = (f'{self.scene.name}: {sim:8.1f} / {duration:.1f} s simulated '
                 f'({100.0 * sim / max(duration, 1e-9):3.0f} %), {sim / max(wall, 1e-9):6.0f}x '
                 'real time')
-        if _is_terminal(self.progress):
-            self.progress.write('\r' + text)
-        else:
-            self.progress.write(text + '\n')
-        self.progress.flush()
-
-
-def _is_terminal(stream: TextIO | None) -> bool:
-    return bool(stream is not None and getattr(stream, 'isatty', lambda: False)())
+        write_progress(self.progress, text)
 
 
 def run_scene(scene: 'Scene | str | os.PathLike', out: str | os.PathLike,
               show_progress: bool = True,
-              start_time_ns: int | None = None) -> BatchResult:
-    """Run a scene in batch mode into the bag directory ``out``."""
+              start_time_ns: int | None = None, allow_long: bool = False) -> BatchResult:
+    """Run a scene in batch mode into the bag directory ``out`` (see BatchRun's limits)."""
     return BatchRun(scene, out, progress=sys.stderr if show_progress else None,
-                    log=sys.stderr, start_time_ns=start_time_ns).run()
+                    log=sys.stderr, start_time_ns=start_time_ns, allow_long=allow_long).run()
 
 
-__all__ = ['BatchResult', 'BatchRun', 'qos_yaml', 'run_scene']
+__all__ = ['BatchResult', 'BatchRun', 'LongRunError', 'qos_yaml', 'run_scene']

@@ -2,6 +2,7 @@
 
 import argparse
 from datetime import datetime, timezone
+import math
 from pathlib import Path
 import signal
 import sys
@@ -155,28 +156,45 @@ def _graph(args: argparse.Namespace) -> int:
     return 0
 
 
+class StartTimeError(UserError):
+    """A ``--start-time`` that is no time a bag can carry."""
+
+
+# A bag's times are int64 nanoseconds since 1970: from 1970 to 2262-04-11.
+LAST_START_NS = 2**63 - 1
+
+
 def start_time_ns(text: str) -> int:
-    """A bag start time: ISO 8601 (``2026-01-01T00:00:00Z``) or seconds since the epoch."""
+    """
+    A bag start time: ISO 8601 (``2026-01-01T00:00:00Z``) or seconds since the epoch.
+
+    StartTimeError (one line) for text that is neither, or a time a bag cannot carry: before
+    1970, infinite, or beyond int64 nanoseconds (the year 2262).
+    """
     try:
-        return int(round(float(text) * 1e9))
+        seconds = float(text)
     except ValueError:
-        pass
-    try:
-        when = datetime.fromisoformat(text.replace('Z', '+00:00'))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f'{text!r} is neither ISO 8601 (2026-01-01T00:00:00Z) nor seconds since 1970') \
-            from None
-    if when.tzinfo is None:
-        when = when.replace(tzinfo=timezone.utc)
-    return int(round(when.timestamp() * 1e9))
+        try:
+            when = datetime.fromisoformat(text.replace('Z', '+00:00'))
+        except ValueError:
+            raise StartTimeError(f'--start-time: {text!r} is neither ISO 8601 '
+                                 '(2026-01-01T00:00:00Z) nor seconds since 1970') from None
+        if when.tzinfo is None:
+            when = when.replace(tzinfo=timezone.utc)
+        seconds = when.timestamp()
+    if not math.isfinite(seconds) or not 0.0 <= seconds * 1e9 <= LAST_START_NS:
+        raise StartTimeError(f'--start-time: {text!r} is outside what a bag can carry: from '
+                             f'1970 (0 s) to 2262 ({LAST_START_NS // 10**9} s), as int64 ns')
+    return min(int(round(seconds * 1e9)), LAST_START_NS)
 
 
 def _run(args: argparse.Namespace) -> int:
     from softseq_ros.batch import run_scene
 
+    # Parsed here, not by argparse: a refusal is one line, without the usage text.
+    start = None if args.start_time is None else start_time_ns(args.start_time)
     result = run_scene(args.scene, args.out, show_progress=not args.quiet,
-                       start_time_ns=args.start_time)
+                       start_time_ns=start, allow_long=args.allow_long)
     print(f'{args.out}: {result.sim_duration_s:.1f} s of rig time in {result.wall_s:.1f} s '
           f'({result.speedup:.0f}x real time), {sum(result.message_counts.values())} messages, '
           f'pump {result.pump_state}')
@@ -234,9 +252,11 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _library(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.library import write_library
+    from softseq_ros.parallel import worker_option
 
+    jobs = worker_option('--jobs', args.jobs)
     out = args.out or Path('bags') / f'library_{Path(args.source).stem}'
-    _, table = write_library(args.source, out, args.triples, args.length_m, args.jobs)
+    _, table = write_library(args.source, out, args.triples, args.length_m, jobs)
     print(table, end='')
     print(f'written: {out / "library.md"}, {out / "library.json"}, {out / "library.png"}')
     return 0
@@ -383,9 +403,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument('--out', type=Path, required=True,
                      help='bag directory to create (for example bags/paper)')
     run.add_argument('--quiet', action='store_true', help='no progress line')
-    run.add_argument('--start-time', type=start_time_ns, metavar='TIME',
+    run.add_argument('--start-time', metavar='TIME',
                      help='the simulated clock at the start, as ISO 8601 or seconds since '
                      '1970 (default: now); the same scene and start time give the same bag')
+    run.add_argument('--allow-long', action='store_true',
+                     help='run a programme beyond the limits of a batch run (1e6 s of rig '
+                     'time, 1e8 messages, 10 GB of bag; docs/faults.md) all the same')
     run.add_argument('--no-report', action='store_true', help='skip the summary and figures')
     run.set_defaults(handler=_run)
 
@@ -433,7 +456,8 @@ def build_parser() -> argparse.ArgumentParser:
     library.add_argument('--triples', action='store_true', help='also every ordered triple')
     library.add_argument('--length-m', type=float, help='segment length [m] for tables '
                          'without a "# length_m:" line')
-    library.add_argument('--jobs', type=int, help='worker processes (default: one per core)')
+    library.add_argument('--jobs', metavar='N', help='worker processes, at least 1 (default: '
+                         'one per core)')
     library.add_argument('--out', type=Path, help='output folder (default bags/library_NAME)')
     library.set_defaults(handler=_library)
 

@@ -75,11 +75,33 @@ class FileJobError(JobError, OSError):
     """A job could not read or write a file (an OSError)."""
 
 
+class WorkerCountError(UserError):
+    """A number of workers that is not a whole number >= 1."""
+
+
+def worker_option(option: str, text: str | None) -> int | None:
+    """
+    A command's worker count (``--jobs``, ``--workers``) from its text; None when not given.
+
+    The one rule for all of them: a whole number >= 1, refused in one line naming ``option``
+    (0 or a negative count would otherwise be taken silently as one worker, or run nothing).
+    """
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise WorkerCountError(f'{option}: {text!r} is not a whole number') from None
+    if value < 1:
+        raise WorkerCountError(f'{option}: must be >= 1 (worker processes), got {value}')
+    return value
+
+
 def worker_count(jobs: int, workers: int | None = None) -> int:
     """The workers worth starting: ``workers`` (default one per core), at most one per job."""
     wanted = (os.cpu_count() or 1) if workers is None else int(workers)
     if wanted < 1:
-        raise ValueError(f'workers must be >= 1, got {workers}')
+        raise WorkerCountError(f'workers must be >= 1, got {workers}')
     return max(1, min(wanted, jobs))
 
 

@@ -18,6 +18,7 @@ load it: the report stays a function of its arguments, and as fast.
 """
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -178,15 +179,56 @@ def load_reference(path: str | os.PathLike) -> dict:
     """A reference file (YAML) of what a paper reports; see config/reference/."""
     path = Path(path)
     try:
-        document = yaml.safe_load(path.read_text())
+        document = yaml.safe_load(path.read_text(encoding='utf-8'))
     except OSError as err:
         raise ReferenceFileError(f'{path}: cannot read the reference file ({err.strerror})') \
             from None
-    except yaml.YAMLError as err:
-        raise ReferenceFileError(f'{path}: not valid YAML ({err})') from None
-    if not isinstance(document, dict) or 'reported' not in document:
+    except UnicodeDecodeError as err:
+        raise ReferenceFileError(f'{path}: not UTF-8 text (byte {err.start})') from None
+    except RecursionError:
+        raise ReferenceFileError(f'{path}: nested too deeply to be a reference file') from None
+    except (yaml.YAMLError, ValueError) as err:
+        reason = ' '.join(str(err).split())
+        raise ReferenceFileError(f'{path}: not valid YAML ({reason})') from None
+    if not isinstance(document, dict) or not isinstance(document.get('reported'), dict):
         raise ReferenceFileError(f'{path}: a reference file needs a mapping "reported"')
+    _check_reported(path, document['reported'])
     return document
+
+
+def _check_reported(path: Path, reported: dict) -> None:
+    """Refuse, naming the key, a reported fact of the wrong kind (the comparison needs it)."""
+    from softseq_ros.quasistatic.sequence import SEQUENCE_TYPES
+
+    def refuse(key: str, what: str, value: object) -> None:
+        raise ReferenceFileError(f'{path}: reported.{key}: must be {what}, got {value!r:.60}')
+
+    def volume(key: str, value: object) -> None:
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value) or value < 0:
+            refuse(key, 'a finite volume >= 0 in m^3', value)
+
+    if 'sequence_type' in reported and reported['sequence_type'] not in SEQUENCE_TYPES:
+        refuse('sequence_type', f'one of {", ".join(SEQUENCE_TYPES)}', reported['sequence_type'])
+    for key in ('plateau_onset_injected_m3', 'plateau_onset_tolerance_m3'):
+        if key in reported:
+            volume(key, reported[key])
+    if 'segment_plateau_lower' in reported and \
+            not isinstance(reported['segment_plateau_lower'], str):
+        refuse('segment_plateau_lower', "a segment's name", reported['segment_plateau_lower'])
+    steps = reported.get('steps', [])
+    if not isinstance(steps, list):
+        refuse('steps', 'a list of mappings', steps)
+    for index, entry in enumerate(steps):
+        where = f'steps[{index}]'
+        if not isinstance(entry, dict):
+            refuse(where, 'a mapping with step and volumes', entry)
+        step = entry.get('step')
+        if isinstance(step, bool) or not isinstance(step, int) or step < 1:
+            refuse(f'{where}.step', 'a step number >= 1', step)
+        for key in ('simulation_injected_m3', 'experiment_injected_m3'):
+            if key in entry:
+                volume(f'{where}.{key}', entry[key])
 
 
 def against_reference(metrics: dict, reference: dict) -> dict:

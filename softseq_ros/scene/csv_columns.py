@@ -39,8 +39,13 @@ def read_rows(path: str | Path, error: type[ValueError], what: str,
     if not data:
         raise error(f'{path}: empty {what}, expected a header with {",".join(expected)}')
     reader = csv.reader(data)
-    header = [name.strip() for name in next(reader)]
-    return comments, header, list(reader)
+    try:
+        header = [name.strip() for name in next(reader)]
+        return comments, header, list(reader)
+    except csv.Error as err:
+        # A field beyond csv.field_size_limit() (or a stray quote): no number is that long.
+        raise error(f'{path}: line {reader.line_num} of the data: not a CSV row of numbers '
+                    f'({err})') from None
 
 
 def numeric_columns(path: str | Path, header: list[str], rows: list[list[str]],

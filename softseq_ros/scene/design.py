@@ -59,6 +59,12 @@ WALL_READINGS = ('skin_bands', 'side_walls')
 MODELS = ('unit_cell', 'whole_segment')
 # Bump when a change to the FEM code changes its results, so cached tables are recomputed.
 FEM_CODE_VERSION = '3'
+# Hexahedra of the mesh's box at element_size_m, before the cavity is cut out: refused before
+# meshing above this. 2e6 cells are some 6e6 unknowns, a sparse system beyond a workstation's
+# memory; the shipped designs use 1e3 (unit cell) to 3e4 (whole segment at 0.75 mm).
+MAX_MESH_CELLS = 2_000_000
+# Cells through a thin layer: each adds a plane of cells across the whole mesh.
+MAX_THIN_CELLS = 64
 
 
 class DesignError(SceneError):
@@ -222,6 +228,12 @@ def _geometry(ctx: Context, value: object) -> Geometry:
     return geometry
 
 
+def model_extent_m(geometry: Geometry, model: str) -> tuple[float, float, float]:
+    """The box the mesh fills [m]: along the segment, half the width (symmetry), the height."""
+    along = geometry.pitch_m / 2 if model == 'unit_cell' else geometry.length_m
+    return along, geometry.width_m / 2, geometry.height_m
+
+
 def _mesh(ctx: Context, value: object, geometry: Geometry) -> MeshSettings:
     defaults = MeshSettings()
     raw = ctx.mapping({} if value is None else value, 'mesh', (),
@@ -235,9 +247,18 @@ def _mesh(ctx: Context, value: object, geometry: Geometry) -> MeshSettings:
     if size > geometry.height_m / 4:
         raise ctx.error('mesh.element_size_m', f'must be at most a quarter of height_m '
                                                f'({geometry.height_m / 4:g} m), got {size:g}')
+    extent = model_extent_m(geometry, model)
+    cells = math.prod(math.ceil(side / size) for side in extent)
+    if cells > MAX_MESH_CELLS:
+        smallest = (math.prod(extent) / MAX_MESH_CELLS) ** (1 / 3)
+        raise ctx.error('mesh.element_size_m',
+                        f'{size:g} m gives about {cells:.2g} hexahedra over the {model} '
+                        f'({" x ".join(f"{side * 1e3:g}" for side in extent)} mm), more than '
+                        f'{MAX_MESH_CELLS:.0e}: use at least {smallest:.2g} m')
     thin = raw.get('thin_layer_cells', defaults.thin_layer_cells)
-    if isinstance(thin, bool) or not isinstance(thin, int) or thin < 1:
-        raise ctx.error('mesh.thin_layer_cells', f'must be an integer >= 1, got {thin!r}')
+    if isinstance(thin, bool) or not isinstance(thin, int) or not 1 <= thin <= MAX_THIN_CELLS:
+        raise ctx.error('mesh.thin_layer_cells', f'must be an integer from 1 to '
+                                                 f'{MAX_THIN_CELLS}, got {thin!r:.40}')
     bulk = ctx.number(raw.get('bulk_ratio', defaults.bulk_ratio), 'mesh.bulk_ratio', ge=100.0)
     return MeshSettings(model=model, element_size_m=size, thin_layer_cells=thin,
                         bulk_ratio=bulk)

@@ -25,6 +25,12 @@ ACTIONS = ('inflate', 'deflate', 'hold')
 DEFAULT_FLOW_RATE = 5.0e-8
 # A sampled history longer than this would not fit in a workstation's memory (0.8 GB a column).
 MAX_SAMPLES = 10**8
+# What a batch run (softseq run) takes on without being told to insist: 1e6 s of rig time
+# (11.6 days; the paper's programme is 2610 s), as many messages as solve's samples, and a
+# bag of 10 GB. A rig's own pump node is not bound by them: a real rig may run for weeks.
+MAX_RUN_S = 1.0e6
+MAX_RUN_MESSAGES = MAX_SAMPLES
+MAX_RUN_BYTES = 10.0e9
 
 
 def _finite(value: object, what: str) -> float:
@@ -229,6 +235,29 @@ class PumpProfile:
         else:
             t[-1] = end
         return t, self.injected_at(t)
+
+
+def longest_part(profile: 'PumpProfile', prefix: str = '') -> str:
+    """
+    What makes a programme long, as its keys say it: one leg, or the number of cycles.
+
+    E.g. ``pump.legs[0].inflate_to_m3: 6.5e-05 m^3 at pump.flow_rate_m3_per_s 1e-15 m^3/s
+    takes 6.5e+10 s`` or ``pump.cycles: 1000000 cycles of 2610 s``.
+    """
+    times, volumes = profile.breakpoints()
+    spans = np.diff(times)
+    longest = int(np.argmax(spans))
+    if profile.cycles > 1 and spans[longest] < 0.5 * profile.duration():
+        per_cycle = float(times[-1] - times[-1 - len(profile.legs)])
+        return f'{prefix}cycles: {profile.cycles} cycles of {per_cycle:.6g} s'
+    index = longest % len(profile.legs)
+    leg = profile.legs[index]
+    key = leg_key(index, leg, prefix)
+    if leg.action == 'hold':
+        return f'{key}: {spans[longest]:.6g} s'
+    moved = abs(float(volumes[longest + 1] - volumes[longest]))
+    return (f'{key}: {moved:.6g} m^3 at {prefix}flow_rate_m3_per_s {profile.flow_rate:g} m^3/s '
+            f'takes {spans[longest]:.6g} s')
 
 
 class ProgrammeError(UserError):

@@ -9,6 +9,7 @@ checks each value as it is taken (``ctx.number(raw['rate_hz'], 'pump.rate_hz', g
 import math
 from pathlib import Path
 import re
+import sys
 from typing import Any
 
 import yaml
@@ -25,6 +26,7 @@ UNIT_TOKENS = frozenset({
     'bar', 'mbar', 'psi', 's', 'ms', 'min', 'h', 'hz', 'khz', 'per', 'deg', 'rad', 'px',
 })
 NUMBER_TYPES = (int, float)
+INT64_MAX = 2**63 - 1
 
 
 class SceneError(UserError):
@@ -64,6 +66,10 @@ def read_yaml(path: Path, shown: str) -> Any:
         raise SceneError(f'{shown}: not a UTF-8 text file') from None
     try:
         return yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
+    except RecursionError:
+        # PyYAML nests one Python call per level: thousands of '[' exhaust the stack.
+        raise SceneError(f"{shown}: YAML nested too deeply (more levels than Python's "
+                         f'recursion limit of {sys.getrecursionlimit()})') from None
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else 'YAML'
@@ -71,6 +77,11 @@ def read_yaml(path: Path, shown: str) -> Any:
         raise SceneError(f'{shown}: {where}: {problem}') from None
     except yaml.YAMLError as err:
         raise SceneError(f'{shown}: YAML: {" ".join(str(err).split())}') from None
+    except ValueError as err:
+        # PyYAML's own constructors: an integer of more than 4300 digits, a date like
+        # 2026-13-45. Their messages carry no position.
+        problem = ' '.join(str(err).split(';')[0].split())
+        raise SceneError(f'{shown}: YAML: a value cannot be read ({problem})') from None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -89,6 +100,11 @@ def unit_stem(key: str) -> str:
         if token in UNIT_TOKENS:
             return '_'.join(tokens[:index])
     return '_'.join(tokens)
+
+
+def _digits(value: int) -> int:
+    """About how many decimal digits an integer has (str() refuses beyond 4300 of them)."""
+    return max(1, round(abs(value).bit_length() * math.log10(2)))
 
 
 def type_name(value: object) -> str:
@@ -149,7 +165,13 @@ class Context:
         """A finite number, optionally bounded below."""
         if isinstance(value, bool) or not isinstance(value, NUMBER_TYPES):
             raise self.error(key_path, f'must be a number, got {type_name(value)} {value!r}')
-        number = float(value)
+        try:
+            number = float(value)
+        except OverflowError:
+            # An integer literal beyond a double (10**400): as good as infinite.
+            raise self.error(key_path, f'must be finite, got an integer of about '
+                                       f'{_digits(value)} digits, beyond the range of a float') \
+                from None
         if not math.isfinite(number):
             raise self.error(key_path, f'must be finite, got {number}')
         if gt is not None and not number > gt:
@@ -162,6 +184,10 @@ class Context:
         """An integer (not a bool), optionally bounded below."""
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(key_path, f'must be an integer, got {type_name(value)} {value!r}')
+        if not -INT64_MAX - 1 <= value <= INT64_MAX:
+            # Beyond 64 bits no setting means anything, and a float could not show the bound.
+            raise self.error(key_path, f'must fit in 64 bits (at most {INT64_MAX}), got an '
+                                       f'integer of about {_digits(value)} digits')
         if ge is not None and value < ge:
             raise self.error(key_path, f'must be >= {ge}, got {value}')
         return value
