@@ -345,6 +345,13 @@ def _recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _info(args: argparse.Namespace) -> int:
+    from softseq_ros.bag.info import bag_info, format_info
+
+    print(format_info(bag_info(args.bag)))
+    return 0
+
+
 def _fem(args: argparse.Namespace) -> int:
     from softseq_ros.fem.command import run_fem_command
 
@@ -499,6 +506,15 @@ def build_parser() -> argparse.ArgumentParser:
                              'flush (at most 0.5 s before the kill) is kept.')
     recover.add_argument('bag', type=Path, help='bag directory')
     recover.set_defaults(handler=_recover)
+
+    info = sub.add_parser('info', help='what a bag holds (like ros2 bag info) and the scene '
+                          'that made it',
+                          description='Files, size, storage, compression, duration, start and '
+                          'end, message counts per topic and type, whether the recording '
+                          'finished, the rig namespaces and, from actuator/scene, the scene '
+                          'that made it (name, segments, SHA-256). Needs no ROS.')
+    info.add_argument('bag', type=Path, help='bag directory (or its .mcap file)')
+    info.set_defaults(handler=_info)
 
     fem = sub.add_parser('fem', help='segment table from a segment design (volume-controlled FEM)',
                          description="Compute a segment's pressure-volume and curvature table "

@@ -13,9 +13,12 @@ segments it runs (name and digest).
 Resume: on start the node waits up to ``resume_timeout_s`` for a latched ``actuator/volumes``
 from a live publisher and resumes on the branch nearest those volumes; without one it reads
 ``state_file`` (the core writes it after every change; by default
-``$ROS_HOME/softseq/<namespace>/actuator.json``, ``$ROS_HOME`` being ``~/.ros`` unless set, so
-an actuator killed with ``kill -9`` comes back on its branch); with none, or ``state_file``
-empty, it starts at rest. Commands that arrive while waiting are answered in order afterwards.
+``$ROS_HOME/softseq/<namespace>/actuator.json``, ``$ROS_HOME`` being ``~/.ros`` unless set).
+Only an abnormal end is resumed: destroying the node (a handled SIGINT or SIGTERM) marks the
+file closed, and the next start is at rest without a word; an actuator killed with ``kill -9``
+or crashed comes back on its branch, with a warning naming the file, the volume and how to
+start at rest. With no file, a closed one, or ``state_file`` empty, it starts at rest. Commands
+that arrive while waiting are answered in order afterwards.
 
 An actuator that hears more than one publisher on its command topic (two pumps, or two rigs
 in one namespace) warns once, naming them.
@@ -34,7 +37,7 @@ from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core
-from softseq_ros.rig.values import INFO, WARNING, Notice, Output
+from softseq_ros.rig.values import WARNING
 from softseq_ros.rig.wire import segment_volumes
 
 RESUME_POLL_S = 0.02
@@ -64,8 +67,9 @@ class ActuatorNode(CoreNode):
         state_file = self.declare_text(
             'state_file', str(default_state_file(self.get_namespace(), self.get_name())),
             'File the state is written to after every change and resumed from when no '
-            'actuator/volumes arrives at start (default: in $ROS_HOME/softseq, one per node '
-            'name and namespace); empty: off, every start at rest.', read_only=True)
+            'actuator/volumes arrives at start and the last run did not stop cleanly (a clean '
+            'stop marks it closed; default: in $ROS_HOME/softseq, one per node name and '
+            'namespace); empty: off, every start at rest.', read_only=True)
         self.core = actuator_core(scene, outputs=frozenset(outputs),
                                   ambient_pressure_pa=ambient, state_file=state_file or None)
         # The core's own outputs: those its model can give (no flows without channels).
@@ -116,20 +120,24 @@ class ActuatorNode(CoreNode):
 
     def _resume_poll(self) -> None:
         if self.core.waiting and time.monotonic() >= self._resume_deadline:
-            resumed, notices = self.core.resume_from_file()
-            if not resumed:
-                notices.append(self._notice('no previous state found: starting at rest'))
+            # Starting at rest is the normal case and says nothing; a resume warns itself.
+            _, notices = self.core.resume_from_file()
             self.send(notices)
             self._end_resume()
-
-    def _notice(self, text: str) -> Output:
-        return Notice(self.core.role, INFO, text)
 
     def _end_resume(self) -> None:
         self.destroy_timer(self._resume_timer)
         # Destroyed before the first publication, so the node never hears itself.
         self.destroy_subscription(self._resume_subscription)
         self.send(self.core.end_wait(self.now_ns()))
+
+    def destroy_node(self) -> None:
+        """Mark the state file closed (a clean stop: the next start is at rest), then destroy."""
+        core = getattr(self, 'core', None)
+        if core is not None:
+            for notice in core.close():
+                self.log(notice.level, notice.text)
+        super().destroy_node()
 
     # ---------------------------------------------------------------- graph
 

@@ -31,7 +31,7 @@ from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
 from softseq_ros.bag.writer import BagWriter, BagWriterError
 from softseq_ros.nodes.parameters import NodeConfigError
-from softseq_ros.nodes.runner import build_nodes, init_ros
+from softseq_ros.nodes.runner import build_nodes, exit_with_help, init_ros
 from softseq_ros.rig import contract
 
 # The topics recorded when the `topics` parameter is not given: every topic of the rig's
@@ -95,6 +95,10 @@ class Recorder(Node):
     """Subscribe to a list of topics and write everything received into one bag."""
 
     NODE_NAME = 'recorder'
+    # What --help says of its topics: they are a parameter's, not the contract's.
+    HELP_TOPICS = (
+        'subscribes to the topics of its topics parameter, by default every topic of the '
+        f'rig\'s contract: {", ".join(RIG_TOPICS)}; each once it has a publisher',)
 
     def __init__(self, **node_kwargs: Any) -> None:
         """Declare parameters, open the bag and start looking for the topics."""
@@ -230,6 +234,7 @@ def _stop_by_shutdown(_signum: int, _frame: object) -> None:
 
 def main(args: list[str] | None = None) -> None:
     """Run the recorder until SIGINT/SIGTERM, then close the bag completely."""
+    exit_with_help([Recorder], args, 'recorder')
     # On SIGINT rclpy shuts the executor down and then calls Python's handler, whose
     # KeyboardInterrupt could land inside a chunk being written; the shutdown alone stops the
     # recording between two callbacks, with every chunk whole.

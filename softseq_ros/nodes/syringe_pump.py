@@ -30,7 +30,7 @@ from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSUR
 from softseq_ros.rig.wire import NS_PER_S
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import legs_from_text
-from softseq_ros.scene.programme import Leg
+from softseq_ros.scene.programme import MAX_RUN_S, Leg, longest_part
 from softseq_ros.scene.validation import SceneError
 
 
@@ -61,6 +61,11 @@ class SyringePumpNode(CoreNode):
     """The syringe pump: programme, run/hold/stop state machine and safety limits."""
 
     NODE_NAME = contract.NODE_NAMES[contract.PUMP]
+    # Its std_srvs/Trigger services (~/name), each the core's method of that name; --help
+    # lists them from here.
+    SERVICES: dict[str, str] = {
+        'start': 'idle or held -> running', 'hold': 'running -> held',
+        'stop': '-> stopped', 'reset': "-> idle at the programme's start volume"}
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare parameters (defaults from the scene), build the core, start the timer."""
@@ -113,12 +118,16 @@ class SyringePumpNode(CoreNode):
         volumes = self.subscription(contract.VOLUMES)
         if volumes is not None:
             self.core.feedback_topic = volumes.topic_name
-        for name, request in (('start', self.core.start), ('stop', self.core.stop),
-                              ('hold', self.core.hold), ('reset', self.core.reset)):
-            self.create_service(Trigger, f'~/{name}', self._service(request))
+        for name in self.SERVICES:
+            self.create_service(Trigger, f'~/{name}', self._service(getattr(self.core, name)))
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
         self._timer = self.create_timer(1.0 / self.rate_hz, self.tick)
         self.send(self.core.begin(self.now_ns()))
+        if self.core.duration_s > MAX_RUN_S:
+            # A rig may run for days, so this is said, not refused (softseq run refuses it).
+            self.get_logger().warning(
+                f'the programme runs {self.core.duration_s:.6g} s of rig time, more than '
+                f'{MAX_RUN_S:g} s ({longest_part(self.core.profile, "pump.")})')
         self.configured = True
 
     @property

@@ -18,7 +18,12 @@ Resume: a restarted actuator must stay on the branch its history put it on (hyst
 While :attr:`waiting` (the driver looks for a previous state), commands are buffered and
 answered in order once the wait ends (:meth:`end_wait`). ``state_file`` (None: off; the
 actuator node gives one in the ROS home by default) makes the core write its state there after
-every change, atomically, and :meth:`resume_from_file` read it back.
+every change, atomically, and :meth:`resume_from_file` read it back. A clean stop
+(:meth:`close`) writes the last state once more with ``"closed": true``: only an actuator that
+ended abnormally (a crash, ``kill -9``) is resumed, loudly; after a clean stop the next run
+starts at rest, as one experiment after another must. The flag is written into the file, not
+by removing or renaming it, so the last state stays readable where the user expects it and
+one atomic replace marks both the state and how the run ended.
 
 Bad commands (NaN, negative, volumes outside the segment models) are refused with a throttled
 warning; the state stays where it was.
@@ -183,10 +188,23 @@ class ActuatorCore:
         """Change the ambient pressure added to the gauge pressure."""
         self.ambient_pressure_pa = ambient_pa
 
-    def _save(self, outputs: list[Output]) -> None:
+    def close(self) -> list[Output]:
+        """
+        Mark the state file closed (a clean stop): the next start is at rest, not resumed.
+
+        Written also when nothing changed in this run, so that a run that resumed and then
+        stopped cleanly leaves a closed file; not while still :attr:`waiting`, when the model
+        holds no state of its own yet and the file the last run left is still to be read.
+        """
+        outputs: list[Output] = []
+        if self.state_file is not None and not self.waiting:
+            self._save(outputs, closed=True)
+        return outputs
+
+    def _save(self, outputs: list[Output], closed: bool = False) -> None:
         """Write the state atomically, so a kill mid-write leaves the previous one."""
         data = json.dumps({'names': list(self.names), 'segments_sha256': self.segments_sha256,
-                           **self.model.saved()})
+                           **self.model.saved(), 'closed': closed})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
         try:
             if not self._state_folder_made:
@@ -231,13 +249,20 @@ class ActuatorCore:
                              f'resumed from {source} at {injected * 1e6:.4f} mL injected')]
 
     def resume_from_file(self) -> tuple[bool, list[Output]]:
-        """Resume from ``state_file`` when there is one that fits."""
+        """
+        Resume from ``state_file`` when the last run there ended abnormally and its state fits.
+
+        A closed file (the last run stopped cleanly) gives (False, []): a start at rest needs
+        no word. A resume is a warning naming the file, the volume and how to start at rest.
+        """
         if self.state_file is None or not self.state_file.is_file():
             return False, []
         try:
             saved = json.loads(self.state_file.read_text(encoding='utf-8'))
+            if saved.get('closed') is True:
+                return False, []
             names, volumes = list(saved['names']), [float(v) for v in saved['volumes_m3']]
-        except (OSError, ValueError, KeyError, TypeError) as err:
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
             return False, [Notice(self.role, WARNING, f'state_file {self.state_file}: '
                                                       f'unreadable ({err}); starting at rest')]
         written_for = saved.get('segments_sha256')
@@ -246,4 +271,11 @@ class ActuatorCore:
             return False, [Notice(self.role, WARNING, f'state_file {self.state_file} was '
                                   f'written for other segments (sha256 {str(written_for)[:12]}, '
                                   f'these are {self.segments_sha256[:12]}); starting at rest')]
-        return self.resume_from(names, volumes, f'state_file {self.state_file}')
+        resumed, notices = self.resume_from(names, volumes, f'state_file {self.state_file}')
+        if resumed:
+            # Loud: a resumed state is physics the user did not ask for in this run.
+            notices = [Notice(self.role, WARNING, f'{notice.text}: the last run there did not '
+                              'stop cleanly (crash or kill); to start at rest instead, delete '
+                              f'{self.state_file} or start with --ros-args -p "state_file:=\'\'"')
+                       for notice in notices]
+        return resumed, notices

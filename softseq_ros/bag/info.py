@@ -1,0 +1,242 @@
+"""
+``softseq info BAG``: what ``ros2 bag info`` shows of a bag, and what the rig knows of it.
+
+The rosbag2 part: files, size, storage, duration, start and end, message count, and per topic
+its type and count (from metadata.yaml as rosbag2's tools read it, or from a scan of the .mcap
+when the recording did not finish: softseq_ros.bag.reader.bag_summary). Ours: the MCAP chunk
+compression, whether the bag is complete (metadata.yaml written and an MCAP summary section at
+the end of every file, which only a recorder that closed its bag writes), the rig namespaces it
+holds (where a ``pump/command`` or an ``actuator/scene`` topic is) and, per namespace, the scene
+that made it: the actuator's latched ``actuator/scene`` (scene name, its segments base to tip,
+the SHA-256 of their definitions: softseq_ros.segments.identity).
+
+Needs no ROS: the .mcap files are read with the mcap library and std_msgs/String is one CDR
+string. A path that holds no MCAP bag (a sqlite3 bag, a stray folder) or a file that is no
+MCAP, and a metadata.yaml that cannot be read, are a :class:`BagInfoError` in one line.
+"""
+
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+import io
+import os
+from pathlib import Path
+import struct
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Chunk, Footer, Message
+from mcap.stream_reader import StreamReader
+import yaml
+
+from softseq_ros.bag.reader import METADATA_FILE, BagReadError, BagSummary, bag_summary
+from softseq_ros.errors import UserError
+from softseq_ros.rig import contract
+from softseq_ros.rig.wire import SCENE_IDENTITY_JSON, PayloadError
+
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+
+
+class BagInfoError(UserError):
+    """A path that holds no readable MCAP bag; the message names it and says why."""
+
+
+@dataclass(frozen=True)
+class SceneSaid:
+    """One scene identity an actuator published in the bag, with the namespace it ran in."""
+
+    namespace: str
+    scene: str
+    segments: tuple[str, ...]
+    segments_sha256: str
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    """Everything ``softseq info`` prints of one bag."""
+
+    path: Path
+    files: tuple[Path, ...]
+    size_bytes: int
+    summary: BagSummary
+    compression: tuple[str, ...]            # MCAP chunk compressions used ('none' unchunked)
+    has_metadata: bool                      # metadata.yaml written (rosbag2 reads the bag)
+    files_without_summary: tuple[Path, ...]  # .mcap files whose writer never closed them
+    storage: str = 'mcap'
+    ros_distro: str = ''
+    namespaces: tuple[str, ...] = ()
+    scenes: tuple[SceneSaid, ...] = field(default_factory=tuple)
+
+    @property
+    def complete(self) -> bool:
+        """True when the recorder closed the bag: metadata.yaml and every MCAP summary."""
+        return self.has_metadata and not self.files_without_summary
+
+
+def _mcap_files(path: Path) -> tuple[Path, tuple[Path, ...]]:
+    """The bag folder and its .mcap files (in metadata.yaml's order when it lists them)."""
+    if path.is_file():
+        if path.suffix != '.mcap':
+            raise BagInfoError(f'{path}: not a bag (give the bag folder or its .mcap file)')
+        return path.parent, (path,)
+    if not path.is_dir():
+        raise BagInfoError(f'{path}: no such bag folder')
+    files = tuple(sorted(path.glob('*.mcap')))
+    if not files:
+        others = sorted(p.name for p in path.glob('*.db3'))
+        why = (f'a sqlite3 bag ({", ".join(others)}); softseq reads MCAP bags only'
+               if others else 'no .mcap file in it')
+        raise BagInfoError(f'{path}: not an MCAP bag: {why}')
+    return path, files
+
+
+def _check_magic(file: Path) -> None:
+    with open(file, 'rb') as stream:
+        head = stream.read(len(MCAP_MAGIC))
+    if head != MCAP_MAGIC:
+        raise BagInfoError(f'{file}: not an MCAP file (it does not start with the MCAP magic)')
+
+
+def _chunk_compressions(file: Path) -> tuple[set[str], bool]:
+    """The compressions of a file's chunks and whether it has a summary (a closed file)."""
+    try:
+        with open(file, 'rb') as stream:
+            summary = make_reader(stream).get_summary()
+    except (McapError, struct.error, ValueError, EOFError, OSError):
+        summary = None
+    if summary is not None:
+        return {index.compression or 'none' for index in summary.chunk_indexes}, True
+    # Never closed: the chunks written so far say how they are compressed.
+    found: set[str] = set()
+    with open(file, 'rb') as stream:
+        try:
+            records = StreamReader(io.BufferedReader(stream), emit_chunks=True).records
+            for record in records:
+                if isinstance(record, Chunk):
+                    found.add(record.compression or 'none')
+                elif isinstance(record, Footer):
+                    break
+        except Exception:  # noqa: S110 - the damaged tail of an unfinished file ends the scan
+            pass
+    return found, False
+
+
+def _cdr_string(data: bytes) -> str:
+    """The text of a std_msgs/String in CDR (4-byte encapsulation, length with its NUL)."""
+    (length,) = struct.unpack_from('<I', data, 4)
+    return data[8:8 + max(length - 1, 0)].decode('utf-8', errors='replace')
+
+
+def _scenes(files: tuple[Path, ...], namespaces: tuple[str, ...]) -> tuple[SceneSaid, ...]:
+    """The distinct scene identities said on each namespace's actuator/scene, in order."""
+    wanted = {contract.resolve(contract.SCENE.name, ns): ns for ns in namespaces}
+    said: list[SceneSaid] = []
+    for file in files:
+        channels: dict[int, str] = {}
+        with open(file, 'rb') as stream:
+            try:
+                for record in StreamReader(io.BufferedReader(stream)).records:
+                    if isinstance(record, Channel) and record.topic in wanted:
+                        channels[record.id] = record.topic
+                    elif isinstance(record, Message) and record.channel_id in channels:
+                        topic = channels[record.channel_id]
+                        try:
+                            value = SCENE_IDENTITY_JSON.decode(_cdr_string(record.data),
+                                                               stamp_ns=record.log_time)
+                        except (PayloadError, struct.error):
+                            continue  # a garbled identity names no scene
+                        scene = SceneSaid(wanted[topic], value.scene, tuple(value.segments),
+                                          value.segments_sha256)
+                        if scene not in said:
+                            said.append(scene)
+            except Exception:  # noqa: S110 - the damaged tail of an unfinished file ends it
+                pass
+    return tuple(said)
+
+
+def _ros_distro(folder: Path) -> tuple[str, str]:
+    try:
+        document = yaml.safe_load((folder / METADATA_FILE).read_text(encoding='utf-8'))
+        info = document['rosbag2_bagfile_information']
+        return str(info.get('storage_identifier') or 'mcap'), str(info.get('ros_distro') or '')
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return 'mcap', ''
+
+
+def bag_info(path: str | os.PathLike) -> BagInfo:
+    """Read what ``softseq info`` shows of the bag at ``path`` (a folder or its .mcap file)."""
+    folder, files = _mcap_files(Path(path))
+    for file in files:
+        _check_magic(file)
+    has_metadata = (folder / METADATA_FILE).is_file()
+    try:
+        summary = bag_summary(folder)
+    except BagReadError as err:
+        raise BagInfoError(str(err)) from None
+    compressions: set[str] = set()
+    unclosed = []
+    for file in files:
+        found, closed = _chunk_compressions(file)
+        compressions |= found
+        if not closed:
+            unclosed.append(file)
+    topics = tuple(summary.topics)
+    namespaces = tuple(sorted(set(contract.find_namespaces(topics))
+                              | set(contract.find_namespaces(topics, contract.SCENE.name))))
+    storage, distro = _ros_distro(folder) if has_metadata else ('mcap', '')
+    return BagInfo(
+        path=folder, files=files, size_bytes=sum(f.stat().st_size for f in files),
+        summary=summary, compression=tuple(sorted(compressions)) or ('none',),
+        has_metadata=has_metadata, files_without_summary=tuple(unclosed), storage=storage,
+        ros_distro=distro, namespaces=namespaces, scenes=_scenes(files, namespaces))
+
+
+def _size_text(size: int) -> str:
+    for unit in ('B', 'KiB', 'MiB', 'GiB'):
+        if size < 1024 or unit == 'GiB':
+            return f'{size:.1f} {unit}' if unit != 'B' else f'{size} B'
+        size /= 1024
+    return f'{size} B'
+
+
+def _time_text(ns: int) -> str:
+    moment = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
+    return f'{moment.strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]} UTC ({ns // 10**9}.{ns % 10**9:09d})'
+
+
+def format_info(info: BagInfo) -> str:
+    """The text ``softseq info`` prints, laid out as ``ros2 bag info`` lays out its own."""
+    summary = info.summary
+    rows = [
+        ('Files', ', '.join(f.name for f in info.files)),
+        ('Bag size', _size_text(info.size_bytes)),
+        ('Storage id', info.storage + (f' (ROS {info.ros_distro})' if info.ros_distro else '')),
+        ('Compression', ', '.join(info.compression) + ' (MCAP chunks)'),
+        ('Duration', f'{summary.duration_ns / 1e9:.9f} s'),
+        ('Start', _time_text(summary.start_ns) if summary.message_count else '-'),
+        ('End', _time_text(summary.end_ns) if summary.message_count else '-'),
+        ('Messages', str(summary.message_count)),
+    ]
+    if info.complete:
+        rows.append(('Complete', 'yes (metadata.yaml and the MCAP summary written)'))
+    else:
+        missing = ([] if info.has_metadata else [f'no {METADATA_FILE}']) + [
+            f'{f.name} has no MCAP summary' for f in info.files_without_summary]
+        rows.append(('Complete', f'no: {"; ".join(missing)} (the recording did not finish; '
+                                 'counts are from a scan; softseq recover BAG repairs it)'))
+    rows.append(('Namespaces', ', '.join(info.namespaces) or '- (no rig topics)'))
+    if info.scenes:
+        for index, scene in enumerate(info.scenes):
+            rows.append(('Scene' if index == 0 else '',
+                         f'{scene.scene or "(unnamed)"} in {scene.namespace}: segments '
+                         f'{", ".join(scene.segments)} (base to tip), segments SHA-256 '
+                         f'{scene.segments_sha256}'))
+    else:
+        rows.append(('Scene', f'- (no {contract.SCENE.name} message in the bag)'))
+    width = max(len(name) for name, _ in rows) + 2
+    lines = [f'{name + ":" if name else "":<{width}}{value}' for name, value in rows]
+    lines.append('Topic information:')
+    for topic in sorted(summary.topics):
+        entry = summary.topics[topic]
+        lines.append(f'  Topic: {topic} | Type: {entry.type_name} | '
+                     f'Count: {entry.message_count} | Serialization Format: cdr')
+    return '\n'.join(lines)

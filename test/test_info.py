@@ -1,0 +1,127 @@
+"""
+``softseq info BAG`` on real bags made by the batch runner: what ros2 bag info shows, and ours.
+
+The expected values come from elsewhere: the counts from rosbags' reader of the same bag, the
+start time the run was given, the digest from the scene's segments
+(softseq_ros.segments.identity), the compression from the mcap library's own summary.
+"""
+
+from pathlib import Path
+import shutil
+
+from mcap.reader import make_reader
+import pytest
+from rosbags.rosbag2 import Reader
+import yaml
+
+from softseq_ros import cli
+from softseq_ros.batch import BatchRun
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.identity import segments_sha256
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+START_NS = 1_795_000_000 * 10**9   # 2026-11-18 11:06:40 UTC
+
+
+@pytest.fixture(scope='module')
+def made(tmp_path_factory):
+    """A scene pumped 0 -> 50 mL -> 0 at 20 mL/s (5 s) and its batch bag in /rig_b."""
+    folder = tmp_path_factory.mktemp('info')
+    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text(encoding='utf-8'))
+    scene['name'] = 'fast_asymmetric'
+    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=50,
+                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
+    scene['camera'] = {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5]}
+    path = folder / 'fast_asymmetric.yaml'
+    path.write_text(yaml.safe_dump(scene), encoding='utf-8')
+    bag = folder / 'bag'
+    BatchRun(path, bag, start_time_ns=START_NS, namespace='/rig_b').run()
+    return path, bag
+
+
+def _info(bag, capsys) -> tuple[int, str, str]:
+    code = cli.main(['info', str(bag)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _field(out: str, name: str) -> str:
+    return next(line.split(':', 1)[1].strip() for line in out.splitlines()
+                if line.startswith(f'{name}:'))
+
+
+def test_info_shows_topics_counts_times_compression_and_the_scene(made, capsys):
+    scene_path, bag = made
+    code, out, err = _info(bag, capsys)
+    assert code == 0, err
+    with Reader(bag) as reader:
+        expected = {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
+        total = reader.message_count
+    for topic, (type_name, count) in expected.items():
+        assert f'Topic: {topic} | Type: {type_name} | Count: {count} |' in out
+    assert len([line for line in out.splitlines() if 'Topic: ' in line]) == len(expected)
+    assert _field(out, 'Messages') == str(total)
+    assert _field(out, 'Start').endswith('(1795000000.000000000)')
+    assert _field(out, 'Start').startswith('2026-11-18 11:06:40.000 UTC')
+    # 0 -> 50 -> 0 mL at 20 mL/s: the last command 5 s after the first.
+    assert _field(out, 'Duration') == '5.000000000 s'
+    assert _field(out, 'End').endswith('(1795000005.000000000)')
+    with open(next(bag.glob('*.mcap')), 'rb') as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    assert _field(out, 'Compression') == f'{chunks[0].compression} (MCAP chunks)'
+    assert _field(out, 'Complete').startswith('yes')
+    assert _field(out, 'Namespaces') == '/rig_b'
+    digest = segments_sha256(load_scene(scene_path).segments)
+    assert _field(out, 'Scene') == (f'fast_asymmetric in /rig_b: segments bottom, top (base to '
+                                    f'tip), segments SHA-256 {digest}')
+
+
+def test_info_on_an_unfinished_recording_says_it_is_incomplete(made, tmp_path, capsys):
+    _, bag = made
+    killed = tmp_path / 'killed'
+    killed.mkdir()
+    mcap = next(bag.glob('*.mcap'))
+    data = mcap.read_bytes()
+    # What a killed recorder leaves: no metadata.yaml, the file cut before its summary.
+    with open(mcap, 'rb') as stream:
+        summary_start = make_reader(stream).get_summary().chunk_indexes[-1].chunk_start_offset
+    (killed / mcap.name).write_bytes(data[:summary_start])
+    code, out, err = _info(killed, capsys)
+    assert code == 0, err
+    complete = _field(out, 'Complete')
+    assert complete.startswith('no: no metadata.yaml; ')
+    assert f'{mcap.name} has no MCAP summary' in complete
+    assert 'softseq recover' in complete
+    # The scene is said at the start: an unfinished bag still names it.
+    assert _field(out, 'Scene').startswith('fast_asymmetric in /rig_b: ')
+
+
+def test_info_refuses_a_damaged_or_foreign_bag_in_one_line(made, tmp_path, capsys):
+    _, bag = made
+    garbage = tmp_path / 'garbage'
+    garbage.mkdir()
+    (garbage / 'garbage_0.mcap').write_bytes(b'not an mcap file at all')
+    code, out, err = _info(garbage, capsys)
+    assert code == 2 and out == ''
+    assert err == (f'softseq info: error: {garbage / "garbage_0.mcap"}: not an MCAP file (it '
+                   'does not start with the MCAP magic)\n')
+
+    sqlite = tmp_path / 'sqlite'
+    sqlite.mkdir()
+    (sqlite / 'sqlite_0.db3').write_bytes(b'SQLite format 3\x00')
+    code, out, err = _info(sqlite, capsys)
+    assert code == 2
+    assert err == (f'softseq info: error: {sqlite}: not an MCAP bag: a sqlite3 bag '
+                   '(sqlite_0.db3); softseq reads MCAP bags only\n')
+
+    broken = tmp_path / 'broken'
+    shutil.copytree(bag, broken)
+    (broken / 'metadata.yaml').write_text('rosbag2_bagfile_information: {version: 9}\n',
+                                          encoding='utf-8')
+    code, out, err = _info(broken, capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert err.startswith(f'softseq info: error: {broken / "metadata.yaml"}: ')
+
+    code, out, err = _info(tmp_path / 'nowhere', capsys)
+    assert code == 2
+    assert err == f'softseq info: error: {tmp_path / "nowhere"}: no such bag folder\n'
