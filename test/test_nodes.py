@@ -142,6 +142,9 @@ def call_trigger(node: Node, service: str) -> Trigger.Response:
     return future.result()
 
 
+MOVING_COMMANDS = 20   # the fewest commands with flow a comparison with the solver needs
+
+
 def check_against_solver(emap: EquilibriumMap, commands, pressures, volumes, curvatures):
     """
     Received actuator outputs equal the solver swept over the received commands.
@@ -171,7 +174,9 @@ def check_against_solver(emap: EquilibriumMap, commands, pressures, volumes, cur
         # A latched topic of depth 1 keeps only the latest state: a starved reader may miss
         # states in between, and what it gets must still be right.
         share = 0.9 if topic.qos.depth > 1 else 0.2
-        assert moving > 55 and np.sum(injected[rows] > 0.0) >= share * moving, \
+        # The pump ticks on the wall clock: on a loaded machine it skips ticks (a 1.2 s
+        # programme at 100 Hz gave 42 commands, not 120), so some commands, not a count.
+        assert moving >= MOVING_COMMANDS and np.sum(injected[rows] > 0.0) >= share * moving, \
             f'only {len(rows)} {topic.name} outputs answer the {len(injected)} commands received'
     rows, found = paired(volumes)
     np.testing.assert_allclose([m.position for m in found], path.volumes[rows], rtol=1e-9,
