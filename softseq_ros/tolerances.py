@@ -31,10 +31,10 @@ class Tolerances:
     # Volumes closer than this share of the volume scale are the same (branch ends, joins).
     same_volume: float = 1e-9
     # A snap-through's redistribution flow starts this share of the volume scale off the fold,
-    # is integrated (Radau) to these tolerances in scaled units, and is at rest when the
-    # scaled pressures balance to this; a state is stable when the cofactor sum of its scaled
-    # stiffnesses exceeds this; the branch it lands on lies within this share of the volume
-    # scale of where the flow came to rest.
+    # is integrated (LSODA, Radau where it fails) to these tolerances in scaled units, and is
+    # at rest when the scaled pressures balance to this; a state is stable when the cofactor
+    # sum of its scaled stiffnesses exceeds this; the branch it lands on lies within this
+    # share of the volume scale of where the flow came to rest.
     fold_offset: float = 1e-6
     flow_rtol: float = 1e-7
     flow_atol: float = 1e-12

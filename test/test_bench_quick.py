@@ -81,6 +81,13 @@ QUICK = {
          r'\| quasi-static \| \(pump 50\) \| \d+ \| \d+\.\d \| [\d,]+ \| \*\*\d+x\*\* \|',
          r'\| network \| 200 \| \d+ \| \d+\.\d \| [\d,]+ \| \*\*\d+x\*\* \|'],
         ['bench/dynamic_results.md']),
+    'bench_graph.py': (
+        ['# Equilibrium map and transition graph: N peaked segments',
+         '| N | law | configurations tried / brute force | branches | snaps | map + graph [s] |'],
+        [r'\| 2 \| table \| 8 / 9 \| 9 \| 4 \| \d+\.\d\d \| \d+\.\d\d \| \d+\.\d\d \| '
+         r'\d+\.\d\d \| \d\.\d{3} \(\d+\.\dx\) \| yes \|',
+         r'\| 3 \| table \| 20 / 27 \| 21 \| 12 \| \d+\.\d\d \| \d+\.\d\d \| - \|'],
+        ['bench/graph_results.md']),
     'bench_fem.py': (
         ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
          '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],

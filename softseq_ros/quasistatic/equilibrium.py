@@ -146,6 +146,10 @@ class EquilibriumMap:
         self.p_scale = numerics.p_scale
         self._tol_v = numerics.tol_v
         assembly = Assembly(numerics, self.resolution)
+        # How many piece configurations the assembly examined, of the product of every
+        # segment's piece count (a brute-force enumeration's).
+        self.configurations_tried = len(assembly.configurations)
+        self.configurations_possible = math.prod(len(p) for p in numerics.pieces)
         self._curves = assembly.curves
         self.branches: list[Branch] = assembly.branches
         if not self.branches:

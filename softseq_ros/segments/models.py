@@ -98,6 +98,17 @@ class Segment(ABC):
         """Volumes where the model is less smooth than elsewhere (a table's rows)."""
         return np.empty(0)
 
+    def pressure_cubics(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """
+        The pressure as a piecewise polynomial, when it is one; None for a closed-form model.
+
+        Breaks (m + 1,), coefficients of the pressure (k, m) and of the stiffness (k - 1, m).
+        Coefficients in scipy's PPoly layout (highest power of v - breaks[i] first), so a
+        solver can evaluate many volumes with array arithmetic alone (:func:`evaluate_cubics`
+        gives the numbers :meth:`pressure` and :meth:`stiffness` give).
+        """
+        return None
+
     def definition(self) -> dict[str, object]:
         """
         What defines this segment, as exact JSON-able values (floats round-trip through JSON).
@@ -306,6 +317,10 @@ class TabulatedSegment(Segment):
         """The table's volumes: PCHIP is only once differentiable there."""
         return self.volumes
 
+    def pressure_cubics(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """PCHIP's breaks (the table's volumes), its cubics and their derivatives."""
+        return self._p.x, self._p.c, self._dp.c
+
     def _clip(self, v: ArrayLike) -> FloatArray:
         return np.clip(np.asarray(v, dtype=float), self.rest_volume, self.max_volume)
 
@@ -340,6 +355,25 @@ class TabulatedSegment(Segment):
         flats = [(float(self.volumes[i]), float(self.volumes[i + 1]))
                  for i in range(secant.size) if secant[i] == 0.0]
         return turns, flats
+
+
+def evaluate_cubics(breaks: FloatArray, coefficients: FloatArray, v: FloatArray) -> FloatArray:
+    """
+    A piecewise polynomial (scipy's PPoly layout) at volumes ``v`` inside its breaks.
+
+    The same interval and the same floating-point operations in the same order as scipy's
+    PPoly (powers of v - breaks[i] built up by products, terms added from the constant up),
+    so the same numbers to the bit, without the call's checks and array handling.
+    """
+    i = np.clip(np.searchsorted(breaks, v, side='right') - 1, 0, breaks.size - 2)
+    offset = v - breaks[i]
+    order = coefficients.shape[0]
+    value = coefficients[order - 1, i]
+    power = None
+    for m in range(order - 2, -1, -1):
+        power = offset if power is None else power * offset
+        value = value + coefficients[m, i] * power
+    return value
 
 
 class _PiecewiseAtOne:
