@@ -40,34 +40,18 @@ ML = 1e-6
 R = 0.006
 V0 = 4 / 3 * math.pi * R**3
 
-# Three Gent balloons, base to tip: the base has the highest peak and the lowest valley, the
-# tip the lowest peak and the highest valley (the Fig. 1 asymmetric pair with one in between).
-# Inflation passes the peaks tip, middle, base; deflation from the top gives the fluid back
-# tip first, so a history that turns between the middle's and the base's snaps finds states
-# the full inflation and deflation never visit.
-NESTED_SCENE = {
-    'name': 'three_nested_loops',
-    'segments': [
-        {'name': name, 'length_m': 0.074,
-         'balloon': {'material': {'law': 'gent', 'shear_modulus_pa': 60.0e+3, 'jm': jm},
-                     'radius_m': R, 'thickness_m': thickness, 'max_stretch': stretch,
-                     'curvature_per_m_per_m3': 5.0e+5}}
-        for name, jm, thickness, stretch in (('base', 40.0, 0.600e-3, 4.0),
-                                             ('middle', 35.0, 0.582e-3, 3.8),
-                                             ('tip', 30.0, 0.564e-3, 3.6))],
-    'pump': {'flow_rate_m3_per_s': 5.0e-8, 'rate_hz': 50,
-             'legs': [{'inflate_to_m3': 1.0e-4}, {'deflate_to_m3': 0.0}]},
-    'camera': {'rate_hz': 10},
-    'outputs': ['pressure', 'volumes'],
-}
-
-
 @pytest.fixture(scope='module')
-def nested(tmp_path_factory):
-    """The nested scene's file, map and graph (one assembly for the module)."""
-    path = tmp_path_factory.mktemp('nested') / 'three_nested_loops.yaml'
-    path.write_text(yaml.safe_dump(NESTED_SCENE), encoding='utf-8')
-    scene = load_scene(str(path))
+def nested():
+    """
+    The shipped three_nested_loops scene's file, map and graph (one assembly for the module).
+
+    Three Gent balloons, base to tip from the highest peak and lowest valley to the lowest
+    peak and highest valley: inflation passes the peaks tip, middle, base, and a history that
+    turns between the middle's and the base's snaps finds states the full inflation and
+    deflation never visit.
+    """
+    scene = load_scene('three_nested_loops')
+    path = scene.path
     emap = build_map(scene.segments, scene.solver.resolution)
     return path, emap, transition_graph(emap)
 
