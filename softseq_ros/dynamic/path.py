@@ -158,25 +158,41 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
     reached = samples.size
     # The flow of the leg under way, or zero once the schedule has run out.
     fluid.set_flow(float(legs[0][2]) if legs and schedule.times[0] <= 0.0 else 0.0)
-    for i, t in enumerate(samples):
+    i = 0
+    while i < samples.size:
         try:
-            while leg < len(legs) and legs[leg][1] <= t:
-                boundary = float(legs[leg][1])
-                fluid.advance(boundary)
+            while leg < len(legs) and legs[leg][1] <= samples[i]:
+                fluid.advance(float(legs[leg][1]))
                 snaps.extend(fluid.take_snaps())
                 leg += 1
                 fluid.set_flow(float(legs[leg][2]) if leg < len(legs) else 0.0)
-            fluid.advance(float(t))
         except NetworkDomainError as err:
             if fluid.flow >= 0.0:
                 raise
             drained, reached = str(err), i
             break
-        snaps.extend(fluid.take_snaps())
-        volumes[i] = fluid.volumes()
-        flows[i] = fluid.flows()
-        pressure[i] = fluid.syringe_pressure()
-        injected[i] = fluid.injected
+        # The samples of the leg under way, read at once.
+        stop = int(np.searchsorted(samples, legs[leg][1], side='left')) if leg < len(legs) \
+            else samples.size
+        times = samples[i:stop]
+        try:
+            states = fluid.advance_through(times)
+        except NetworkDomainError as err:
+            if fluid.flow >= 0.0:
+                raise
+            states = err.rows
+            drained, reached = str(err), i + states.shape[0]
+            # What a sample-by-sample run had taken by its last sample.
+            last = times[states.shape[0] - 1] if states.shape[0] else -np.inf
+            snaps.extend(s for s in fluid.take_snaps() if s.end_s <= last)
+        else:
+            snaps.extend(fluid.take_snaps())
+        rows = slice(i, i + states.shape[0])
+        injected[rows], volumes[rows], flows[rows], pressure[rows] = fluid.read_states(
+            times[:states.shape[0]], states)
+        if drained is not None:
+            break
+        i = stop
     samples, volumes, flows = samples[:reached], volumes[:reached], flows[:reached]
     pressure, injected = pressure[:reached], injected[:reached]
     curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, k]), dtype=float)
