@@ -86,10 +86,11 @@ def test_a_real_peak_is_not_flagged():
 
     scene = load_scene('fig1_asymmetric')
     verdict = classify(EquilibriumMap(scene.segments))
-    # Balloon laws declare no noise: the depth is reported, nothing is flagged.
+    # Balloon laws have no noise (not an unknown one): the depth is reported, nothing flagged.
     lines, warnings = robustness_lines(verdict, smallest_features(list(scene.segments)))
-    assert verdict == 'asymmetric' and not warnings
-    assert all('smallest peak-valley depth' in line for line in lines)
+    assert verdict == 'asymmetric' and not warnings and len(lines) == 2
+    assert all('smallest peak-valley depth' in line and
+               line.endswith('noise none (a closed-form law)') for line in lines)
     assert smallest_features(list(load_scene('paper').segments)) == []
 
 

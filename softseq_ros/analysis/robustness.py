@@ -15,8 +15,11 @@ import re
 
 import numpy as np
 
+from softseq_ros.segments.models import TabulatedSegment
+
 # A feature below this many noise deviations may be noise itself.
 NOISE_FACTOR = 3.0
+CLOSED_FORM = 'a closed-form law'   # a segment's noise source when it is no table
 _NOISE_LINE = re.compile(r'^\s*#\s*noise_std_pa\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
 
 
@@ -67,7 +70,9 @@ def smallest_features(segments: list, scene_entries: list[dict] | None = None) -
         entry = scene_entries[index] if scene_entries and index < len(scene_entries) else None
         noise = _declared_noise(segment, entry)
         source = 'declared'
-        if noise is None:
+        if noise is None and not isinstance(segment, TabulatedSegment):
+            noise, source = 0.0, CLOSED_FORM   # a law's curve has no measurement noise
+        elif noise is None:
             noise, source = _estimated_noise(segment), 'estimated from the table rows'
         features.append(Feature(segment.name, float(depth), float(volume), noise, source))
     return features
@@ -83,10 +88,14 @@ def robustness_lines(verdict: str, features: list[Feature]) -> tuple[list[str], 
         return [], []
     lines, warnings = [], []
     for feature in features:
-        noise = (f'{feature.noise_pa:.3g} Pa ({feature.noise_source})'
-                 if feature.noise_pa is not None else 'unknown')
+        if feature.noise_source == CLOSED_FORM:
+            noise = f'none ({CLOSED_FORM})'
+        elif feature.noise_pa is not None:
+            noise = f'{feature.noise_pa:.3g} Pa ({feature.noise_source})'
+        else:
+            noise = 'unknown (too few table rows to estimate it)'
         lines.append(f'robustness: segment {feature.segment}: smallest peak-valley depth '
-                     f'{feature.depth_pa:.3g} Pa (at {feature.at_volume_m3:.6g} m^3), table '
+                     f'{feature.depth_pa:.3g} Pa (at {feature.at_volume_m3:.6g} m^3), '
                      f'noise {noise}')
         if feature.noise_pa is not None and feature.depth_pa < NOISE_FACTOR * feature.noise_pa:
             warnings.append(
