@@ -112,6 +112,9 @@ def test_a_stop_signal_leaves_a_complete_bag(tmp_path, monkeypatch, stop):
         recorder.send_signal(getattr(signal, stop))
         log, _ = recorder.communicate(timeout=TIMEOUT_S)
         assert recorder.returncode == 0, log
+        # A clean stop says so, and says nothing else (no failed publish on /rosout).
+        assert f'closed {output} with {len(volumes) + 1} messages' in log, log
+        assert 'Failed' not in log and 'rosout' not in log, log
     finally:
         if recorder is not None and recorder.poll() is None:
             recorder.kill()

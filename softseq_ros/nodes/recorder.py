@@ -215,17 +215,21 @@ class Recorder(Node):
         self._bag.write(topic, cdr_bytes, received_ns,
                         int(info.get('source_timestamp') or received_ns))
 
-    def close_bag(self) -> None:
+    def close_bag(self, log: bool = True) -> str | None:
         """
         Finish the bag (summary, metadata.yaml); safe to call more than once.
 
-        Raises BagWriterError when the bag could not be written completely (a full disk):
-        what was flushed before is on disk, for ``softseq recover``.
+        Returns the line that says so (logged here unless ``log`` is False), None when the
+        bag was closed before. Raises BagWriterError when the bag could not be written
+        completely (a full disk): what was flushed before is on disk, for ``softseq recover``.
         """
-        if not self._bag.closed:
-            self._bag.close()
-            self.get_logger().info(
-                f'closed {self._output} with {self._bag.message_count} messages')
+        if self._bag.closed:
+            return None
+        self._bag.close()
+        line = f'closed {self._output} with {self._bag.message_count} messages'
+        if log:
+            self.get_logger().info(line)
+        return line
 
 
 def _stop_by_shutdown(_signum: int, _frame: object) -> None:
@@ -267,13 +271,19 @@ def main(args: list[str] | None = None) -> None:
     finally:
         node = built[0] if built else None
         if node is not None:
+            closed = None
             try:
-                node.close_bag()
+                closed = node.close_bag(log=False)
             except BagWriterError as err:
                 if not exit_code:
                     print(f'recorder: {err}', file=sys.stderr)
                     exit_code = 1
+            name = node.get_name()
             node.destroy_node()
+            if closed is not None:
+                # Logged once the node is gone: after a Ctrl-C the context is shut down, and
+                # the node's logger would fail to publish the line on /rosout.
+                rclpy.logging.get_logger(name).info(closed)
         rclpy.try_shutdown()
     if exit_code:
         sys.exit(exit_code)
