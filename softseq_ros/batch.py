@@ -282,10 +282,14 @@ class BatchRun:
         # The actuator names its scene first, then the pump gives its status.
         self._record(router.run(self.actuator.begin(start) + pump.begin(start)))
         while True:
-            if stop_signals:
-                held.check()
             clock = min(clocks)
             now, _, core, period = clock
+            # A stop acts only between two instants: every core due at the last one has
+            # ticked, so the bag holds the whole of each instant it reached, as a run that goes
+            # on holds it (a stop between the pump's and the camera's tick of one instant
+            # would leave that instant's frame out).
+            if stop_signals and now > self._now_ns:
+                held.check()
             self._now_ns = now
             self._record(router.run(core.tick(now)))
             clock[0] = now + period

@@ -121,4 +121,9 @@ def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
         else:
             difference = 'same' if a == b else 'differs'
         lines.append(f'| {key} | {unit} | {_cell(a)} | {_cell(b)} | {difference} |')
+    # What either analysis skipped as unusable is said under the table, not only in metrics.
+    for label, recording in (('A', recording_a), ('B', recording_b)):
+        skipped = recording.skipped_lines()
+        if skipped:
+            lines += ['', f'{label} skipped:'] + [f'- {line}' for line in skipped]
     return metrics_a, metrics_b, '\n'.join(lines) + '\n'

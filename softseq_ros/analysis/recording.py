@@ -14,6 +14,11 @@ so usually before the first command) is kept whenever it was said: it describes 
 not one run. The JSON the String topics carry is read with the codecs that write it
 (:mod:`softseq_ros.rig.wire`).
 
+What cannot be used is skipped and said (``skipped``, by topic and reason; the report and the
+comparison list it): pump commands or volumes without positions (or volumes without
+pressures), rows whose positions or pressures are NaN or infinite, and String payloads larger
+than :data:`MAX_PAYLOAD_BYTES`. A bag with no usable pump command or volumes left is refused.
+
 A bag of a scene with a fluid network (docs/dynamic.md) also holds the channel flows
 (:class:`ChannelFlows`) and snap-through events in time, whose JSON carries ``start_ns``,
 ``duration_s``, ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``; a quasi-static bag has
@@ -21,6 +26,7 @@ neither, and reads as it always did.
 """
 
 from dataclasses import dataclass, field
+from functools import partial
 import os
 from pathlib import Path
 from typing import Any
@@ -52,6 +58,9 @@ NS_PER_S = 1_000_000_000
 # Pressure messages read to find the ambient pressure (absolute minus gauge): it is constant.
 AMBIENT_SAMPLES = 2000
 INFLATION, DEFLATION = 'inflation', 'deflation'
+# The largest String payload (events, status, steps, scene) read: the rig's JSON is a few
+# hundred bytes; a payload of megabytes is no rig message and is skipped, not parsed.
+MAX_PAYLOAD_BYTES = 64 * 1024
 
 
 class RecordingError(UserError):
@@ -138,6 +147,14 @@ class Recording:
     scenes: list[RecordedScene] = field(default_factory=list)
     # A scene with a fluid network only: the flows through its channels.
     channel_flows: ChannelFlows | None = None
+    # Messages left out as unusable: topic -> reason -> count.
+    skipped: dict[str, dict[str, int]] = field(default_factory=dict)
+
+    def skipped_lines(self) -> list[str]:
+        """One line per topic and reason of what was skipped, for a report's warnings."""
+        return [f'{topic}: {count} message{"s" if count != 1 else ""} skipped ({why})'
+                for topic, reasons in sorted(self.skipped.items())
+                for why, count in sorted(reasons.items())]
 
     @property
     def scene(self) -> RecordedScene | None:
@@ -198,18 +215,20 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
 
     # Only what the analysis uses is kept: on a 10^7-message bag every column costs 18 MB.
     pump = JointStateDecoder(names[contract.PUMP_COMMAND], ('position', 'velocity'),
-                             log_times=False, signs=('velocity',))
+                             log_times=False, signs=('velocity',), required=('position',))
     state = JointStateDecoder(names[contract.VOLUMES], ('position', 'effort'), log_times=False,
-                              mean=('effort',))
+                              mean=('effort',), required=('position', 'effort'))
+    strings = partial(StringDecoder, max_bytes=MAX_PAYLOAD_BYTES)
     decoders: list = [pump, state]
     optional = {}
     for spec, decoder in ((contract.CURVATURES,
-                           lambda t: JointStateDecoder(t, ('position',), log_times=False)),
+                           lambda t: JointStateDecoder(t, ('position',), log_times=False,
+                                                       required=('position',))),
                           (contract.PRESSURE, lambda t: FluidPressureDecoder(t, AMBIENT_SAMPLES)),
-                          (contract.EVENTS, StringDecoder), (contract.PUMP_STATUS, StringDecoder),
+                          (contract.EVENTS, strings), (contract.PUMP_STATUS, strings),
                           (contract.SNAPSHOTS, PoseArrayDecoder),
-                          (contract.SNAPSHOT_STEPS, StringDecoder),
-                          (contract.SCENE, StringDecoder),
+                          (contract.SNAPSHOT_STEPS, strings),
+                          (contract.SCENE, strings),
                           (contract.CHANNEL_FLOWS,
                            lambda t: JointStateDecoder(t, ('velocity', 'effort'),
                                                        log_times=False))):
@@ -221,14 +240,18 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     except BagArrayError as err:
         raise RecordingError(str(err)) from None
 
-    commands = pump.release()
-    if not commands.get('stamp_ns', np.zeros(0)).size:
-        raise RecordingError(f'{path}: no {names[contract.PUMP_COMMAND]} messages: not a rig '
-                             'recording, or the pump never ran')
-    states = state.release()
-    if not states.get('stamp_ns', np.zeros(0)).size:
-        raise RecordingError(f'{path}: no {names[contract.VOLUMES]} messages: the actuator did '
-                             'not run or its volumes were not recorded')
+    skipped: dict[str, dict[str, int]] = {}
+    for decoder in decoders:
+        for why, count in getattr(decoder, 'skipped', {}).items():
+            _count_skipped(skipped, decoder.topic, why, count)
+    commands = _finite_rows(pump.release(), ('position',), names[contract.PUMP_COMMAND],
+                            skipped)
+    _refuse_unusable(path, names[contract.PUMP_COMMAND], commands, skipped,
+                     'not a rig recording, or the pump never ran')
+    states = _finite_rows(state.release(), ('position', 'effort'), names[contract.VOLUMES],
+                          skipped)
+    _refuse_unusable(path, names[contract.VOLUMES], states, skipped,
+                     'the actuator did not run or its volumes were not recorded')
     # Arrays are taken as views where possible and converted in place: on a long bag every
     # extra column is tens of MB.
     pump_stamp = commands['stamp_ns']
@@ -257,13 +280,14 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         curvature_time_s=np.zeros(0), curvatures=np.zeros((0, volumes.shape[1])),
         namespace=ns, state_flow_sign=flow_sign[index],
         counts={topic: info.message_count for topic, info in bag.channels.items()},
-        ignored=ignored, start_ns=t0)
+        ignored=ignored, start_ns=t0, skipped=skipped)
     del index
     recording.backbone_count = bag.channels[names[contract.BACKBONE]].message_count \
         if names[contract.BACKBONE] in bag.channels else 0
 
     if contract.CURVATURES in optional:
-        curves = optional[contract.CURVATURES].release()
+        curves = _finite_rows(optional[contract.CURVATURES].release(), ('position',),
+                              names[contract.CURVATURES], skipped)
         if curves.get('stamp_ns', np.zeros(0)).size:
             stamps, values = curves['stamp_ns'], curves['position']
             del curves
@@ -281,8 +305,11 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
                 recording.curvatures = values
             del stamps
     if contract.PRESSURE in optional:
-        recording.ambient_pressure_pa = _ambient(optional[contract.PRESSURE].result(),
-                                                 state_stamp, recording.pressure)
+        # Only the first AMBIENT_SAMPLES are read: what is skipped is counted among those.
+        recording.ambient_pressure_pa = _ambient(
+            _finite_rows(optional[contract.PRESSURE].result(), ('fluid_pressure',),
+                         names[contract.PRESSURE], skipped),
+            state_stamp, recording.pressure)
     recording.state_time_s = _seconds(state_stamp, t0, in_place=True)
     if recording.curvature_time_s.size == 0 and recording.curvatures.shape[0]:
         recording.curvature_time_s = recording.state_time_s
@@ -316,6 +343,41 @@ def _channel_flows(decoder: JointStateDecoder, topic: str, t0: int,
     _count_ignored(ignored, topic, keep)
     return ChannelFlows(decoder.names, _seconds(stamps[keep], t0), flows['velocity'][keep],
                         flows['effort'][keep])
+
+
+def _count_skipped(skipped: dict[str, dict[str, int]], topic: str, why: str,
+                   count: int) -> None:
+    if count:
+        reasons = skipped.setdefault(topic, {})
+        reasons[why] = reasons.get(why, 0) + count
+
+
+def _finite_rows(columns: dict[str, np.ndarray], fields: tuple[str, ...], topic: str,
+                 skipped: dict[str, dict[str, int]]) -> dict[str, np.ndarray]:
+    """The columns without rows whose ``fields`` hold a NaN or an infinity (counted)."""
+    rows = columns.get('stamp_ns', np.zeros(0)).size
+    if not rows:
+        return columns
+    bad = np.zeros(rows, dtype=bool)
+    for name in fields:
+        values = columns[name]
+        bad |= ~np.isfinite(values.reshape(rows, -1)).all(axis=1)
+    if not bad.any():
+        return columns
+    _count_skipped(skipped, topic, f'{" or ".join(fields)} not finite (NaN or infinite)',
+                   int(np.count_nonzero(bad)))
+    keep = ~bad
+    return {name: values[keep] for name, values in columns.items()}
+
+
+def _refuse_unusable(path: Path, topic: str, columns: dict[str, np.ndarray],
+                     skipped: dict[str, dict[str, int]], otherwise: str) -> None:
+    if columns.get('stamp_ns', np.zeros(0)).size:
+        return
+    if topic in skipped:
+        reasons = ', '.join(f'{count} {why}' for why, count in sorted(skipped[topic].items()))
+        raise RecordingError(f'{path}: no usable {topic} messages: all skipped ({reasons})')
+    raise RecordingError(f'{path}: no {topic} messages: {otherwise}')
 
 
 def _seconds(stamps: NDArray[np.int64], t0: int, in_place: bool = False) -> FloatArray:

@@ -126,6 +126,7 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         'duration_s': float(recording.pump_time_s[-1]),
         'message_counts': dict(sorted(recording.counts.items())),
         'ignored_from_before_the_first_pump_command': recording.ignored,
+        'skipped_as_unusable': recording.skipped,
         'ambient_pressure_pa': recording.ambient_pressure_pa,
         'recorded_scene': recording.scene.as_dict() if recording.scene else None,
         **result,
@@ -147,6 +148,8 @@ def recording_metrics(recording: Recording, scene: object | None = None,
             'the actuator was restarted on other segments during the recording: '
             + ', '.join(_named(r.scene, r.segments_sha256) for r in recording.scenes)
             + '; recorded_scene is the first')
+    # What the analysis could not use (a foreign publisher's messages, say), topic by topic.
+    metrics['warnings'].extend(recording.skipped_lines())
     if recording.ignored:
         metrics['warnings'].append(
             'left out, stamped before the first pump command (latched from an earlier run): '

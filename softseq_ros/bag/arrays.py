@@ -211,17 +211,21 @@ class FixedLayoutDecoder(_Decoder):
     """
 
     def __init__(self, topic: str, limit: int | None = None, log_times: bool = True,
-                 mean: Iterable[str] = ()) -> None:
+                 mean: Iterable[str] = (), required: Iterable[str] = ()) -> None:
         """
         Keep at most ``limit`` messages.
 
         ``log_times`` False drops the log time column, and a field named in ``mean`` is kept
         as its mean over the array (n, 1): less memory on long bags where only that is needed.
+        A message whose field named in ``required`` is empty is left out and counted in
+        :attr:`skipped` (a foreign publisher's JointState without positions, say).
         """
         super().__init__(topic)
         self.limit = limit
         self.log_times = log_times
         self.mean = frozenset(mean)
+        self.required = frozenset(required)
+        self.skipped: dict[str, int] = {}   # why -> messages left out
         self.signs: frozenset[str] = frozenset()
         self._columns = _Columns()
         self._reserve = 0
@@ -250,6 +254,10 @@ class FixedLayoutDecoder(_Decoder):
         first = chunk[int(starts[0]):int(starts[0]) + size].tobytes()
         cursor = _Cursor(first, where)
         text, fields = self._layout(cursor)
+        empty = sorted(name for name, _, count in fields if name in self.required and not count)
+        if empty:
+            self._skip_empty(chunk, starts, size, log_times, where, empty, fields)
+            return
         if self.text is None:
             self.text = text
         elif text != self.text:
@@ -310,6 +318,18 @@ class FixedLayoutDecoder(_Decoder):
                 columns.arrays[name][at] = values
         columns.used += n
 
+    def _skip_empty(self, chunk: Bytes, starts: Ints, size: int, log_times: Ints, where: str,
+                    empty: list[str], fields: list[tuple[str, int, int]]) -> None:
+        # Messages of one size may still differ in layout: only those whose own required
+        # field is empty are left out.
+        if starts.size > 1:
+            for row in range(starts.size):
+                self._add_group(chunk, starts[row:row + 1], size, log_times[row:row + 1],
+                                where)
+            return
+        why = f'no {" or ".join(empty)}'
+        self.skipped[why] = self.skipped.get(why, 0) + 1
+
     def result(self) -> dict[str, np.ndarray]:
         """Columns: log_time_ns, stamp_ns and the float64 fields, in file order."""
         return self._columns.result()
@@ -326,14 +346,15 @@ class JointStateDecoder(FixedLayoutDecoder):
 
     def __init__(self, topic: str, fields: Iterable[str] = ('position', 'velocity', 'effort'),
                  limit: int | None = None, log_times: bool = True,
-                 mean: Iterable[str] = (), signs: Iterable[str] = ()) -> None:
+                 mean: Iterable[str] = (), signs: Iterable[str] = (),
+                 required: Iterable[str] = ()) -> None:
         """
         Read ``fields`` of every message (see :class:`FixedLayoutDecoder` for the rest).
 
         A field in ``signs`` keeps only the sign of its first value, as int8 (the direction
         of a flow, for one eighth of the memory).
         """
-        super().__init__(topic, limit, log_times, mean)
+        super().__init__(topic, limit, log_times, mean, required)
         self.fields = tuple(fields)
         self.signs = frozenset(signs)
 
@@ -362,15 +383,27 @@ class FluidPressureDecoder(FixedLayoutDecoder):
 
 
 class StringDecoder(_Decoder):
-    """std_msgs/String, one by one: a list of (log_time_ns, text)."""
+    """
+    std_msgs/String, one by one: a list of (log_time_ns, text).
 
-    def __init__(self, topic: str) -> None:
+    A message larger than ``max_bytes`` (the rig's JSON payloads are a few hundred bytes) is
+    left out and counted in :attr:`skipped`, not decoded: a foreign publisher's megabytes
+    would otherwise be held and parsed as they are.
+    """
+
+    def __init__(self, topic: str, max_bytes: int | None = None) -> None:
         super().__init__(topic)
+        self.max_bytes = max_bytes
         self.messages: list[tuple[int, str]] = []
+        self.skipped: dict[str, int] = {}   # why -> messages left out
 
     def _take(self, chunk: Bytes, starts: Ints, sizes: Ints, log_times: Ints,
               where: str) -> None:
         for start, size, log_time in zip(starts.tolist(), sizes.tolist(), log_times.tolist()):
+            if self.max_bytes is not None and size > self.max_bytes:
+                why = f'larger than {self.max_bytes} bytes'
+                self.skipped[why] = self.skipped.get(why, 0) + 1
+                continue
             cursor = _Cursor(chunk[start:start + size].tobytes(), where)
             self.messages.append((log_time, cursor.string()))
 
