@@ -296,12 +296,7 @@ class NetworkFlow:
         """
         if t <= self.t:
             return
-        if self._solver is None:
-            self._solver = self._new_solver()
-            self._dense = None
-            self._recent = []
-            self._unwatched = False
-        solver = self._solver
+        solver = self._current_solver()
         if solver.t < t:
             # The state now lies in the step about to be left behind.
             self._materialise()
@@ -335,6 +330,15 @@ class NetworkFlow:
         self.injected = self._injected_at(t)
         self._now = None
 
+    def _current_solver(self) -> 'Radau | _ScalarRadau':
+        """The integrator of the current flow, started afresh after a change of flow."""
+        if self._solver is None:
+            self._solver = self._new_solver()
+            self._dense = None
+            self._recent = []
+            self._unwatched = False
+        return self._solver
+
     def advance_through(self, times: Sequence[float] | FloatArray) -> FloatArray:
         """
         Integrate through ``times`` [s] (in order) and return the state at each (one row each).
@@ -354,12 +358,7 @@ class NetworkFlow:
         if k == times.size:
             return rows
         end = float(times[-1])
-        if self._solver is None:
-            self._solver = self._new_solver()
-            self._dense = None
-            self._recent = []
-            self._unwatched = False
-        solver = self._solver
+        solver = self._current_solver()
         # The state now lies in a step that is about to be left behind.
         self._materialise()
         try:

@@ -21,7 +21,13 @@ from numpy.typing import NDArray
 from scipy.interpolate import PPoly
 from scipy.optimize import brentq
 
-from softseq_ros.segments.models import Piece, Segment, evaluate_cubics
+from softseq_ros.segments.models import (
+    Piece,
+    Segment,
+    at_piece_ends,
+    evaluate_cubics,
+    newton_start,
+)
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
 
 FloatArray = NDArray[np.float64]
@@ -151,14 +157,8 @@ class PieceInverse:
         breaks, pressure, stiffness = self.cubics
         piece = self.piece
         sign = float(piece.direction)
-        lo = np.full(target.shape, piece.v_lo)
-        hi = np.full(target.shape, piece.v_hi)
-        span = piece.p_at_hi - piece.p_at_lo
-        guess = piece.v_lo + (piece.v_hi - piece.v_lo) * np.clip(
-            (target - piece.p_at_lo) / span, 0.0, 1.0) if span else 0.5 * (lo + hi)
-        x = np.broadcast_to(guess, target.shape).astype(float)
         ulps = self.tolerances.round_off_ulps
-        floor = ulps * np.finfo(float).eps * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+        lo, hi, x, floor = newton_start(piece, target, ulps)
         converged = False
         # Only the pressures not done yet are iterated: a done one no longer moves.
         x, lo, hi = x.ravel().copy(), lo.ravel(), hi.ravel()
@@ -185,8 +185,7 @@ class PieceInverse:
             lo[active], hi[active] = la, ha
         x = x.reshape(target.shape)
         self.log.record('inversion', converged)
-        x = np.where(target == piece.p_at_lo, piece.v_lo, x)
-        return np.where(target == piece.p_at_hi, piece.v_hi, x)
+        return at_piece_ends(piece, target, x)
 
     def _cubic(self, rows: list[list[float]], v: float) -> float:
         """One cubic at one volume: :func:`evaluate_cubics`' operations on Python floats."""

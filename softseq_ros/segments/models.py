@@ -50,6 +50,35 @@ class Piece:
         return max(self.p_at_lo, self.p_at_hi)
 
 
+def newton_start(piece: Piece, target: FloatArray,
+                 ulps: float) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """
+    Where the safeguarded Newton on ``piece`` starts for pressures ``target``.
+
+    The bracket (lo, hi: the piece's ends), the first guess (linear in the pressure across the
+    piece) and the residual that counts as round-off; shared by every inversion of a piece.
+    """
+    lo = np.full(target.shape, piece.v_lo)
+    hi = np.full(target.shape, piece.v_hi)
+    span = piece.p_at_hi - piece.p_at_lo
+    guess = piece.v_lo + (piece.v_hi - piece.v_lo) * np.clip(
+        (target - piece.p_at_lo) / span, 0.0, 1.0) if span else 0.5 * (lo + hi)
+    x = np.broadcast_to(guess, target.shape).astype(float)
+    floor = ulps * np.finfo(float).eps * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+    return lo, hi, x, floor
+
+
+def at_piece_ends(piece: Piece, target: FloatArray, volumes: FloatArray) -> FloatArray:
+    """
+    ``volumes``, with a pressure at one of the piece's ends mapped to that end exactly.
+
+    Near a peak the pressure is flat to round-off over a stretch of volume, and the junctions
+    between pieces must agree.
+    """
+    volumes = np.where(target == piece.p_at_lo, piece.v_lo, volumes)
+    return np.where(target == piece.p_at_hi, piece.v_hi, volumes)
+
+
 class Segment(ABC):
     """One inflatable segment: its PV curve, stored energy and curvature."""
 
@@ -165,14 +194,8 @@ class Segment(ABC):
             raise ValueError('a flat piece has no inverse')
         target = np.asarray(p, dtype=float)
         sign = float(piece.direction)
-        lo = np.full(target.shape, piece.v_lo)
-        hi = np.full(target.shape, piece.v_hi)
-        span = piece.p_at_hi - piece.p_at_lo
-        guess = piece.v_lo + (piece.v_hi - piece.v_lo) * np.clip(
-            (target - piece.p_at_lo) / span, 0.0, 1.0) if span else 0.5 * (lo + hi)
-        x = np.broadcast_to(guess, target.shape).astype(float)
         ulps = tolerances.round_off_ulps
-        floor = ulps * np.finfo(float).eps * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+        lo, hi, x, floor = newton_start(piece, target, ulps)
         converged = False
         for _ in range(tolerances.inversion_steps):
             residual = sign * (self.pressure(x) - target)
@@ -191,10 +214,7 @@ class Segment(ABC):
             x = np.where(done, x, np.where(inside, step, 0.5 * (lo + hi)))
         if log is not None:
             log.record('inversion', converged)
-        # A pressure at a piece's end maps to that end exactly: near a peak the pressure is flat to
-        # round-off over a stretch of volume, and the junctions between pieces must agree.
-        x = np.where(target == piece.p_at_lo, piece.v_lo, x)
-        return np.where(target == piece.p_at_hi, piece.v_hi, x)
+        return at_piece_ends(piece, target, x)
 
     def _arclength(self, v: FloatArray) -> FloatArray:
         """Cumulative length along the PV curve, volume and pressure scaled by their ranges."""
