@@ -382,6 +382,15 @@ class FluidPressureDecoder(FixedLayoutDecoder):
         return frame_id, [('fluid_pressure', offset, 1), ('variance', offset + 8, 1)]
 
 
+def string_text(data: bytes, where: str) -> str:
+    """
+    The text of one std_msgs/String in CDR, checked as every decoder here checks its fields.
+
+    Raises BagArrayError naming ``where`` when the bytes are no such message.
+    """
+    return _Cursor(data, where).string()
+
+
 class StringDecoder(_Decoder):
     """
     std_msgs/String, one by one: a list of (log_time_ns, text).

@@ -28,6 +28,7 @@ from mcap.records import Channel, Chunk, Footer, Message
 from mcap.stream_reader import StreamReader
 import yaml
 
+from softseq_ros.bag.arrays import BagArrayError, string_text
 from softseq_ros.bag.reader import METADATA_FILE, BagReadError, BagSummary, bag_summary
 from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
@@ -120,12 +121,6 @@ def _chunk_compressions(file: Path) -> tuple[set[str], bool]:
     return found, False
 
 
-def _cdr_string(data: bytes) -> str:
-    """The text of a std_msgs/String in CDR (4-byte encapsulation, length with its NUL)."""
-    (length,) = struct.unpack_from('<I', data, 4)
-    return data[8:8 + max(length - 1, 0)].decode('utf-8', errors='replace')
-
-
 def _scenes(files: tuple[Path, ...], namespaces: tuple[str, ...]) -> tuple[SceneSaid, ...]:
     """The distinct scene identities said on each namespace's actuator/scene, in order."""
     wanted = {contract.resolve(contract.SCENE.name, ns): ns for ns in namespaces}
@@ -140,9 +135,9 @@ def _scenes(files: tuple[Path, ...], namespaces: tuple[str, ...]) -> tuple[Scene
                     elif isinstance(record, Message) and record.channel_id in channels:
                         topic = channels[record.channel_id]
                         try:
-                            value = SCENE_IDENTITY_JSON.decode(_cdr_string(record.data),
-                                                               stamp_ns=record.log_time)
-                        except (PayloadError, struct.error):
+                            text = string_text(record.data, f'{file}: {topic}')
+                            value = SCENE_IDENTITY_JSON.decode(text, stamp_ns=record.log_time)
+                        except (PayloadError, BagArrayError):
                             continue  # a garbled identity names no scene
                         scene = SceneSaid(wanted[topic], value.scene, tuple(value.segments),
                                           value.segments_sha256)

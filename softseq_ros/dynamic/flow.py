@@ -305,14 +305,7 @@ class NetworkFlow:
                 self._unwatched = False
                 self._after_step(solver.t, solver.y)
             while solver.t < t:
-                message = solver.step()
-                if solver.status == 'failed':
-                    raise NetworkDomainError(f'the network integration failed at '
-                                             f'{solver.t:.6g} s: {message}')
-                self.steps += 1
-                # Fetched only when an output falls inside the step: a step that passes no
-                # output, or one whose end is the output, needs no interpolant.
-                self._dense = _PENDING
+                self._step(solver)
                 if solver.t <= t:
                     self._after_step(solver.t, solver.y)
                 else:
@@ -338,6 +331,16 @@ class NetworkFlow:
             self._recent = []
             self._unwatched = False
         return self._solver
+
+    def _step(self, solver: 'Radau | _ScalarRadau') -> None:
+        """One integrator step; its interpolant is fetched only when an output falls inside."""
+        message = solver.step()
+        if solver.status == 'failed':
+            raise NetworkDomainError(f'the network integration failed at {solver.t:.6g} s: '
+                                     f'{message}')
+        self.steps += 1
+        # A step that passes no output, or whose end is the output, needs no interpolant.
+        self._dense = _PENDING
 
     def advance_through(self, times: Sequence[float] | FloatArray) -> FloatArray:
         """
@@ -379,12 +382,7 @@ class NetworkFlow:
                 k = at_end
                 if k == times.size:
                     break
-                message = solver.step()
-                if solver.status == 'failed':
-                    raise NetworkDomainError(f'the network integration failed at '
-                                             f'{solver.t:.6g} s: {message}')
-                self.steps += 1
-                self._dense = _PENDING
+                self._step(solver)
                 self._unwatched = True
         except NetworkDomainError as err:
             self._solver = None
