@@ -39,12 +39,17 @@ AMBIENT = 101325.0
 pytestmark = pytest.mark.ros
 
 
-def wait_for(condition, what: str, timeout: float = TIMEOUT_S) -> None:
-    """Poll ``condition`` until true; fail naming ``what`` after ``timeout`` seconds."""
+def wait_for(condition, what: str, timeout: float = TIMEOUT_S, explain=None) -> None:
+    """
+    Poll ``condition`` until true; fail naming ``what`` after ``timeout`` seconds.
+
+    ``explain`` (optional) returns text that says what was seen instead, for the failure.
+    """
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:
-            raise AssertionError(f'timed out waiting for {what}')
+            seen = f'; {explain()}' if explain is not None else ''
+            raise AssertionError(f'timed out waiting for {what}{seen}')
         time.sleep(0.01)
 
 
@@ -90,6 +95,12 @@ def stamp_ns(header) -> int:
 def status_states(messages) -> list[str]:
     """The states of received pump/status messages (JSON)."""
     return [json.loads(m.data)['state'] for m in messages]
+
+
+def status_history(messages) -> str:
+    """The received pump/status messages as 'state (reason)', for a failure message."""
+    statuses = [json.loads(m.data) for m in messages]
+    return 'pump states: ' + ', '.join(f"{s['state']} ({s.get('reason', '')})" for s in statuses)
 
 
 class Collector(Node):
@@ -244,7 +255,7 @@ def test_rig_in_one_process_matches_the_solver(context, tmp_path):
         response = call_trigger(collector, '/syringe_pump/start')
         assert response.success, response.message
         wait_for(lambda: 'finished' in status_states(got['/pump/status']),
-                 'the programme to finish')
+                 'the programme to finish', explain=lambda: status_history(got['/pump/status']))
         n_commands = len(got['/pump/command'])
         wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
                  'the actuator outputs of every command')
@@ -498,7 +509,8 @@ def test_two_namespaced_rigs_run_side_by_side_without_crosstalk(context, tmp_pat
         for collector, namespace in zip(collectors, ('/rig1', '/rig2')):
             statuses = collector.received[f'{namespace}/pump/status']
             wait_for(lambda s=statuses: 'finished' in status_states(s),
-                     f'the programme of {namespace} to finish')
+                     f'the programme of {namespace} to finish',
+                     explain=lambda s=statuses: status_history(s))
         time.sleep(0.3)
     peaks = []
     for collector, namespace in zip(collectors, ('/rig1', '/rig2')):

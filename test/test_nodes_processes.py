@@ -22,6 +22,7 @@ from test_nodes import (
     check_against_solver,
     check_poses,
     spinning,
+    status_history,
     status_states,
     wait_for,
     write_scene,
@@ -68,6 +69,23 @@ def node_processes(env, log_dir: Path):
                 process.wait()
 
 
+# The 3 s programme, with room for a loaded machine (two test workers and four processes).
+PROGRAMME_TIMEOUT_S = 60.0
+# The pump holds when the actuator has not answered for this long. On a loaded machine a node
+# process can stall for seconds; these tests are about the outputs, not about a dead actuator
+# (test_pump_feedback holds the pump to its default timeout).
+PATIENT_FEEDBACK_TIMEOUT_S = 30.0
+
+
+def _log_tails(log_dir: Path, lines: int = 5) -> str:
+    """The last lines of every node log in ``log_dir``, for a failure message."""
+    tails = []
+    for log in sorted(log_dir.glob('*.log')):
+        text = log.read_text(encoding='utf-8', errors='replace').splitlines()[-lines:]
+        tails.append(f'{log.name}: ' + ' | '.join(text))
+    return '; '.join(tails)
+
+
 RUN_TOPICS = ['pump/command', 'pump/status', 'actuator/pressure', 'actuator/volumes',
               'actuator/curvatures', 'camera/backbone']
 
@@ -91,7 +109,9 @@ def _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers):
                  f'{pump_subscribers} subscriptions to /pump/command')
         assert call_trigger(collector, '/syringe_pump/start').success
         wait_for(lambda: 'finished' in status_states(got['/pump/status']),
-                 'the programme to finish')
+                 'the programme to finish', timeout=PROGRAMME_TIMEOUT_S,
+                 explain=lambda: status_history(got['/pump/status'])
+                 + '; ' + _log_tails(tmp_path))
         n_commands = len(got['/pump/command'])
         wait_for(lambda: len(got['/actuator/curvatures']) >= n_commands - 5,
                  'the actuator outputs of every command')
@@ -111,7 +131,8 @@ def _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers):
 def test_console_script_nodes_match_the_solver(context, ros_env, tmp_path):
     def start_nodes(start, scene_path):
         return [start('actuator', 'actuator', scene=scene_path, resume_timeout_s=0.2),
-                start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false'),
+                start('pump', 'syringe_pump', scene=scene_path, rate_hz=100, autostart='false',
+                      feedback_timeout_s=PATIENT_FEEDBACK_TIMEOUT_S),
                 start('camera', 'camera', scene=scene_path, rate_hz=20)]
 
     _, got, _ = _run_programme(context, ros_env, tmp_path, start_nodes, pump_subscribers=2)
@@ -233,7 +254,8 @@ def test_rig_runs_the_three_nodes_in_one_process_with_state_triggered_frames(
     def start_nodes(start, scene_path):
         # A global -p reaches every node that declares it; node:name:= only that node.
         return [start('rig', 'rig', scene=scene_path, rate_hz=50, autostart='false',
-                      resume_timeout_s=0.0, **{'camera:frame_trigger': 'state'})]
+                      resume_timeout_s=0.0, feedback_timeout_s=PATIENT_FEEDBACK_TIMEOUT_S,
+                      **{'camera:frame_trigger': 'state'})]
 
     # Inside the rig, commands go straight to the actuator: it has no DDS subscription, and
     # only the collector subscribes to /pump/command.
