@@ -8,23 +8,30 @@ From a notebook or a script::
     path = softseq_ros.solve(scene, [0.0, 2.5e-5, 6.5e-5])  # injected volumes [m^3]
     print(path.pressure, path.volumes, path.events)         # gauge Pa, m^3 per segment, snaps
     result = softseq_ros.run(scene, 'bags/mine')            # the whole rig, recorded to a bag
+    recording = softseq_ros.load_recording('bags/mine')     # the bag's rig topics as arrays
 
-Nothing here imports ROS; ``run`` steps the rig's cores without rclpy.
+Nothing here imports ROS; ``run`` steps the rig's cores without rclpy. Each function imports
+what it needs when first called, so ``import softseq_ros`` stays cheap. Launch-free tests of
+the ROS nodes have their helpers in :mod:`softseq_ros.testing`.
 """
 
-import os
-from typing import TYPE_CHECKING, Any, Sequence
+import typing as _typing
 
-if TYPE_CHECKING:
+if _typing.TYPE_CHECKING:
+    from collections.abc import Sequence
+    from os import PathLike
+    from typing import Any
+
+    from softseq_ros.analysis.recording import load_recording  # noqa: F401 - for type checkers
     from softseq_ros.batch import BatchResult
     from softseq_ros.quasistatic.equilibrium import SolvedPath
     from softseq_ros.scene.loader import Scene
 
 __version__ = '0.1.0'
-__all__ = ['load_scene', 'run', 'solve']
+__all__ = ['load_recording', 'load_scene', 'run', 'solve']
 
 
-def load_scene(scene: 'str | os.PathLike | Scene') -> 'Scene':
+def load_scene(scene: 'str | PathLike | Scene') -> 'Scene':
     """A validated scene from a YAML file or a shipped scene's name (a Scene is returned as is)."""
     from softseq_ros.scene.loader import Scene
     from softseq_ros.scene.loader import load_scene as _load
@@ -32,7 +39,7 @@ def load_scene(scene: 'str | os.PathLike | Scene') -> 'Scene':
     return scene if isinstance(scene, Scene) else _load(scene)
 
 
-def solve(scene: 'str | os.PathLike | Scene', injected: Sequence[float],
+def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float]',
           resolution: int | None = None) -> 'SolvedPath':
     """
     The quasi-static path along a history of injected volumes [m^3], from rest.
@@ -49,8 +56,8 @@ def solve(scene: 'str | os.PathLike | Scene', injected: Sequence[float],
     return Tracker(emap).sweep(injected)
 
 
-def run(scene: 'str | os.PathLike | Scene', out: str | os.PathLike, *,
-        start_time_ns: int | None = None, overrides: dict[str, dict[str, Any]] | None = None,
+def run(scene: 'str | PathLike | Scene', out: 'str | PathLike', *,
+        start_time_ns: int | None = None, overrides: 'dict[str, dict[str, Any]] | None' = None,
         namespace: str = '/') -> 'BatchResult':
     """
     Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
@@ -64,3 +71,23 @@ def run(scene: 'str | os.PathLike | Scene', out: str | os.PathLike, *,
 
     return BatchRun(scene, out, overrides=overrides, start_time_ns=start_time_ns,
                     namespace=namespace).run()
+
+
+# Loaded on first use: the bag readers and numpy take about a second to import.
+_LAZY = {'load_recording': 'softseq_ros.analysis.recording'}
+
+
+def __getattr__(name: str) -> _typing.Any:
+    """``load_recording`` (softseq_ros.analysis.recording's), imported when first asked for."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -1,6 +1,8 @@
 """The package-level entry points a notebook uses: load_scene, solve, run."""
 
 from dataclasses import replace
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -65,3 +67,32 @@ def test_run_takes_a_scene_changed_in_memory_as_it_is(tmp_path):
     # The whole programme took half the time the file's flow rate would take.
     assert result.sim_duration_s == pytest.approx(changed.pump.profile.duration(), rel=1e-3)
     assert result.sim_duration_s < 0.51 * scene.pump.profile.duration()
+
+
+def test_the_top_level_shows_the_notebook_functions_only(ros_env):
+    # A fresh interpreter: in this one, other tests' imports add submodules as attributes.
+    code = ('import softseq_ros, sys; '
+            'print(sorted(n for n in dir(softseq_ros) if not n.startswith("_"))); '
+            'print(sorted(n for n in vars(softseq_ros) if not n.startswith("_"))); '
+            'print("softseq_ros.analysis.recording" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', code], env=ros_env, capture_output=True,
+                         text=True, check=True).stdout.splitlines()
+    public = ['load_recording', 'load_scene', 'run', 'solve']
+    assert out == [repr(public), repr(['load_scene', 'run', 'solve']), 'False']
+    assert sorted(softseq_ros.__all__) == public
+
+
+def test_load_recording_at_the_top_level_is_the_analysis_loader(tmp_path):
+    from softseq_ros.analysis.recording import load_recording
+
+    assert softseq_ros.load_recording is load_recording
+    softseq_ros.run('fig1_none', tmp_path / 'bag', start_time_ns=0,
+                    overrides={'pump': {'flow_rate_m3_per_s': 2.0e-5},
+                               'camera': {'rate_hz': 1.0}})
+    recording = softseq_ros.load_recording(tmp_path / 'bag')
+    assert recording.segment_names == ('bottom', 'top')
+    # Every state is the rest volumes plus what the pump injected (linear segments, 3 : 5).
+    np.testing.assert_allclose(recording.volumes.sum(axis=1) - 2.0e-5,
+                               recording.state_injected, atol=1e-15)
+    with pytest.raises(AttributeError, match="no attribute 'load_recordings'"):
+        softseq_ros.load_recordings  # noqa: B018

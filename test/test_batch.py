@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rosbags.rosbag2 import Reader
-from test_nodes import spinning, wait_for
 import yaml
 
 from softseq_ros.analysis.recording import load_recording
@@ -30,6 +29,7 @@ from softseq_ros.rig.values import Notice
 from softseq_ros.rig.wire import encode, pump_command
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
+from softseq_ros.testing import spinning, wait_for
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 # A quasi-static scene has no channels: no channel flows.

@@ -239,7 +239,7 @@ def _start_writer(tmp_path: Path, directory: Path, mode: str, ros_env) -> subpro
 
 
 def test_recover_refuses_a_bag_whose_writer_is_alive_and_never_moves_it(tmp_path, ros_env):
-    from test_nodes import wait_for
+    from softseq_ros.testing import wait_for
 
     directory = tmp_path / 'live'
     writer = _start_writer(tmp_path, directory, 'open', ros_env)
@@ -373,9 +373,9 @@ def test_play_stopped_by_a_signal_exits_as_run_does(context, rig_bag, ros_env, s
                                                     word, ignored):
     from rclpy.node import Node
     from rosgraph_msgs.msg import Clock
-    from test_nodes import spinning, wait_for
 
     from softseq_ros.nodes.player import CLOCK_QOS
+    from softseq_ros.testing import spinning, wait_for
 
     listener = Node('play_signal_listener', context=context)
     ticks: list[int] = []

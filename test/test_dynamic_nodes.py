@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from scenes import write_scene
-from test_nodes import Collector, call_trigger, spinning, stamp_ns, status_states, wait_for
+from test_nodes import status_states
 
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.sim_clock import SimClockNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.scene.loader import load_scene
+from softseq_ros.testing import Collector, call_trigger, spinning, stamp_ns, wait_for
 
 pytestmark = pytest.mark.ros
 

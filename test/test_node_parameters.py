@@ -19,7 +19,7 @@ import pytest
 from rcl_interfaces.srv import GetParameters
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
-from test_nodes import Collector, call_trigger, spinning, status_states, wait_for, write_scene
+from test_nodes import status_states, write_scene
 from test_nodes_processes import STARTUP_TIMEOUT_S
 
 from softseq_ros.nodes.parameters import (
@@ -31,6 +31,7 @@ from softseq_ros.nodes.parameters import (
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import load_scene
+from softseq_ros.testing import Collector, call_trigger, spinning, wait_for
 
 PARAMS_EXAMPLE = Path(__file__).resolve().parent.parent / 'config' / 'params' / \
     'params_example.yaml'

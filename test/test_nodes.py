@@ -6,21 +6,18 @@ command volumes the test received, closed forms for the pump programme and the p
 and the kinematics module for the backbone geometry.
 """
 
-from contextlib import contextmanager
 import json
 import math
-import threading
 import time
 
 import numpy as np
 import pytest
 from rclpy.exceptions import InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from scenes import inside_the_hysteresis_loop, write_scene
 from sensor_msgs.msg import JointState
-from std_srvs.srv import Trigger
 
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.camera import CameraNode
@@ -32,64 +29,11 @@ from softseq_ros.rig import contract
 from softseq_ros.rig.render import SEGMENT_RGB, SideViewRenderer
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.kinematics import backbone_batch
+from softseq_ros.testing import TIMEOUT_S, Collector, call_trigger, spinning, stamp_ns, wait_for
 
-TIMEOUT_S = 15.0
 AMBIENT = 101325.0
 
 pytestmark = pytest.mark.ros
-
-
-def wait_for(condition, what: str, timeout: float = TIMEOUT_S, explain=None) -> None:
-    """
-    Poll ``condition`` until true; fail naming ``what`` after ``timeout`` seconds.
-
-    ``explain`` (optional) returns text that says what was seen instead, for the failure.
-    """
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            seen = f'; {explain()}' if explain is not None else ''
-            raise AssertionError(f'timed out waiting for {what}{seen}')
-        time.sleep(0.01)
-
-
-@contextmanager
-def spinning(context, *nodes):
-    """Spin ``nodes`` on a SingleThreadedExecutor in a thread; shut down, join, destroy."""
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-
-    stopping = threading.Event()
-
-    def spin() -> None:
-        try:
-            executor.spin()
-        except ExternalShutdownException:
-            pass
-        except Exception:
-            # The shutdown below destroys the executor's guard condition, and a callback just
-            # finishing may still trigger it (rclpy's InvalidHandle): the end of the spin.
-            if not stopping.is_set():
-                raise
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
-    try:
-        yield executor
-    finally:
-        # Order matters: a node destroyed (or a context shut down) while the executor thread
-        # still waits on it can abort the process. Stop the executor, join, then destroy.
-        stopping.set()
-        executor.shutdown(timeout_sec=10.0)
-        thread.join(timeout=10.0)
-        for node in nodes:
-            node.destroy_node()
-
-
-def stamp_ns(header) -> int:
-    """A header's stamp in nanoseconds."""
-    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
 def status_states(messages) -> list[str]:
@@ -103,31 +47,6 @@ def status_history(messages) -> str:
     return 'pump states: ' + ', '.join(f"{s['state']} ({s.get('reason', '')})" for s in statuses)
 
 
-class Collector(Node):
-    """
-    Subscribes to rig topics with their contract QoS (deeper queues) and keeps everything.
-
-    ``topics`` are contract names, resolved in ``namespace``; ``received`` is keyed by the
-    absolute names.
-    """
-
-    def __init__(self, topics, context, namespace: str = '/', name: str = 'collector') -> None:
-        super().__init__(name, context=context)
-        self.received = {}
-        self.subscriptions_by_topic = {}
-        for topic in topics:
-            spec = contract.TOPICS_BY_NAME[topic]
-            absolute = contract.resolve(topic, namespace)
-            qos = qos_profile(spec.qos)
-            qos.depth = 1000
-            self.received[absolute] = []
-            self.subscriptions_by_topic[absolute] = self.create_subscription(
-                message_class(spec.type_name), absolute, self.received[absolute].append, qos)
-
-    def matched(self, topic: str) -> bool:
-        return self.subscriptions_by_topic[topic].get_publisher_count() > 0
-
-
 def rclpy_spin_once(node: Node) -> None:
     """Handle what is ready for ``node`` (a node no executor spins), waiting at most 0.1 s."""
     executor = SingleThreadedExecutor(context=node.context)
@@ -137,20 +56,6 @@ def rclpy_spin_once(node: Node) -> None:
     finally:
         executor.remove_node(node)
         executor.shutdown()
-
-
-def call_trigger(node: Node, service: str) -> Trigger.Response:
-    """
-    Call a std_srvs/Trigger service from a node that an executor is spinning.
-
-    The client stays until the node is destroyed: destroying it here, while the executor's
-    thread may be adding it to a wait set, can kill that thread (rclpy's InvalidHandle).
-    """
-    client = node.create_client(Trigger, service)
-    assert client.wait_for_service(timeout_sec=TIMEOUT_S), f'{service} not available'
-    future = client.call_async(Trigger.Request())
-    wait_for(future.done, f'the answer of {service}')
-    return future.result()
 
 
 MOVING_COMMANDS = 20   # the fewest commands with flow a comparison with the solver needs

@@ -17,14 +17,10 @@ import sys
 import numpy as np
 import pytest
 from test_nodes import (
-    Collector,
-    call_trigger,
     check_against_solver,
     check_poses,
-    spinning,
     status_history,
     status_states,
-    wait_for,
     write_scene,
 )
 import yaml
@@ -32,6 +28,7 @@ import yaml
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.paths import config_dir
+from softseq_ros.testing import Collector, call_trigger, spinning, wait_for
 
 pytestmark = pytest.mark.ros
 

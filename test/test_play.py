@@ -7,12 +7,12 @@ from mcap.reader import make_reader
 import pytest
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from test_nodes import spinning, wait_for
 import yaml
 
 from softseq_ros.batch import run_scene
 from softseq_ros.nodes.player import CLOCK_QOS, BagPlayer, PlayError, message_class, qos_from_bag
 from softseq_ros.rig import contract
+from softseq_ros.testing import spinning, wait_for
 
 pytestmark = pytest.mark.ros
 CONFIG = Path(__file__).resolve().parents[1] / 'config'

@@ -17,7 +17,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from scenes import write_scene
 from sensor_msgs.msg import JointState
-from test_nodes import Collector, call_trigger, spinning, stamp_ns, wait_for
 
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.core_node import qos_profile
@@ -28,6 +27,7 @@ from softseq_ros.rig.pump import REACTIONS, RECENT_COMMANDS, STATES
 from softseq_ros.rig.values import WARNING, Notice, PumpCommand, PumpStatus, SegmentVolumes
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.programme import Leg
+from softseq_ros.testing import Collector, call_trigger, spinning, stamp_ns, wait_for
 
 NAMES = ('bottom', 'top')           # the segments of test/scenes.py's scene
 GOOD_VOLUMES = [1.2e-5, 1.1e-5]

@@ -18,7 +18,6 @@ import pytest
 from rclpy.node import Node
 from scenes import inside_the_hysteresis_loop
 from sensor_msgs.msg import JointState
-from test_nodes import Collector, spinning, wait_for
 from test_nodes_processes import STARTUP_TIMEOUT_S, node_processes
 
 from softseq_ros.nodes.core_node import qos_profile
@@ -27,6 +26,7 @@ from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core
 from softseq_ros.rig.values import WARNING, PumpCommand
 from softseq_ros.scene.loader import load_scene
+from softseq_ros.testing import Collector, spinning, wait_for
 
 pytestmark = pytest.mark.ros
 
