@@ -17,10 +17,10 @@ import signal
 import sys
 from typing import Any, Sequence
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import InvalidTopicNameException, ParameterUninitializedException
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -109,9 +109,15 @@ class Recorder(Node):
                 description='Topics to record (relative names are resolved in the node '
                             'namespace; default: every topic of the rig).'),
         ).value
+        # Declared without a value when not given, so its type cannot be static: rclpy's
+        # get_parameters service answers nothing at all (not even the other names asked for)
+        # when one of them is a statically typed parameter without a value. Its type is
+        # checked here instead.
+        self.add_on_set_parameters_callback(_check_types_parameter)
         self.declare_parameter(
-            'types', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
-                type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
+            'types', None, ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True, dynamic_typing=True,
+                additional_constraints='a list of strings, or not set',
                 description='Message types (pkg/msg/Type), one per entry of topics; an empty '
                             'entry or a missing list means: take the type from the graph.'))
         output = self.declare_parameter(
@@ -124,10 +130,7 @@ class Recorder(Node):
                 type=ParameterType.PARAMETER_STRING, read_only=True,
                 description='MCAP chunk compression: zstd, lz4 or none.'),
         ).value
-        try:
-            types = list(self.get_parameter('types').value)
-        except ParameterUninitializedException:
-            types = []
+        types = list(self.get_parameter('types').value or [])
         if types and len(types) != len(topics):
             raise BagWriterError(
                 f'parameter types: {len(types)} entries for {len(topics)} topics; give one type '
@@ -230,6 +233,16 @@ class Recorder(Node):
         if log:
             self.get_logger().info(line)
         return line
+
+
+def _check_types_parameter(parameters: list[Parameter]) -> SetParametersResult:
+    for parameter in parameters:
+        if parameter.name == 'types' and parameter.type_ not in (
+                Parameter.Type.STRING_ARRAY, Parameter.Type.NOT_SET):
+            return SetParametersResult(
+                successful=False, reason=f'types: must be a list of strings, got '
+                f'{parameter.type_.name.lower()} {parameter.value!r}')
+    return SetParametersResult(successful=True)
 
 
 def _stop_by_shutdown(_signum: int, _frame: object) -> None:
