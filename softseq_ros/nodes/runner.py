@@ -107,8 +107,10 @@ class _DryNode(Node):
             return Parameter(name, value=False)
         if name not in self._dry_declared:
             raise _DeclarationsOverError(name)
-        default = self._dry_declared[name][0]
+        default, descriptor = self._dry_declared[name]
         if default is None:
+            if descriptor.dynamic_typing:
+                return Parameter(name)   # as rclpy: a dynamically typed one reads as not set
             raise ParameterUninitializedException(name)
         return Parameter(name, value=default)
 
