@@ -5,13 +5,29 @@ For two resolutions of one scene, two scenes, or a quasi-static run against a dy
 Values are shown in mL, kPa, mJ, mm and ms; the difference is B minus A. When either bag is
 dynamic (a scene with a fluid network) the table adds its transients: each snap-through's
 duration, fluid moved and peak exchange, and the lag behind the quasi-static path, which needs
-the scene (``-`` without it, and for a bag that has no such row).
+the scene (``-`` without it, and for a bag that has no such row). A metric that does not apply
+to a bag (a switch where no segment takes over, a plateau on a curve that never levels off)
+shows as ``does not apply``, with the reason under the table.
 """
 
+from dataclasses import dataclass
 import os
 
 from softseq_ros.analysis.recording import load_recording
-from softseq_ros.analysis.report import recording_metrics, scene_notes
+from softseq_ros.analysis.report import not_applicable_reason, recording_metrics, scene_notes
+
+
+@dataclass(frozen=True)
+class DoesNotApply:
+    """A table cell for a metric that does not apply to a bag, and why."""
+
+    reason: str
+
+
+def _value(metrics: dict, key: str, value: object) -> object:
+    """``value``, or DoesNotApply with the reason when metric ``key`` does not apply."""
+    reason = not_applicable_reason(metrics, key)
+    return DoesNotApply(reason) if value is None and reason else value
 
 
 def _rows(metrics: dict) -> dict[str, tuple[object, str]]:
@@ -23,16 +39,21 @@ def _rows(metrics: dict) -> dict[str, tuple[object, str]]:
         'pressure at peak injection (gauge)': (metrics['peak_injection']['pressure_pa'] * 1e-3,
                                                'kPa'),
         'snap-throughs': (metrics['snap_count'], ''),
-        'hysteresis area': (metrics['hysteresis_area_j'] * 1e3, 'mJ'),
     }
+    area = metrics['hysteresis_area_j']
+    rows['hysteresis area'] = (_value(metrics, 'hysteresis_area_j',
+                                      None if area is None else area * 1e3), 'mJ')
     switch = metrics.get('switch')
-    rows['switch volume'] = (switch['injected_m3'] * 1e6 if switch else None, 'mL')
-    rows['segment taking over at the switch'] = (switch['segment_taking_over'] if switch
-                                                 else None, '')
-    plateau = metrics.get('plateau') or {}
-    rows['plateau pressure (gauge)'] = (plateau.get('pressure_pa', 0.0) * 1e-3, 'kPa')
-    onset = plateau.get('onset_injected_m3')
-    rows['plateau reached (95 %)'] = (onset * 1e6 if onset is not None else None, 'mL')
+    rows['switch volume'] = (_value(metrics, 'switch',
+                                    switch['injected_m3'] * 1e6 if switch else None), 'mL')
+    rows['segment taking over at the switch'] = (
+        _value(metrics, 'switch', switch['segment_taking_over'] if switch else None), '')
+    plateau = metrics.get('plateau')
+    rows['plateau pressure (gauge)'] = (
+        _value(metrics, 'plateau', plateau['pressure_pa'] * 1e-3 if plateau else None), 'kPa')
+    rows['plateau reached (95 %)'] = (
+        _value(metrics, 'plateau', plateau['onset_injected_m3'] * 1e6 if plateau else None),
+        'mL')
     for number, snap in enumerate(metrics['snaps'], start=1):
         rows[f'snap {number} ({snap["direction"]})'] = (snap['injected_m3'] * 1e6, 'mL')
         rows[f'snap {number} fluid moved'] = (snap['fluid_moved_m3'] * 1e6, 'mL')
@@ -72,6 +93,8 @@ def _transient_rows(metrics: dict) -> dict[str, tuple[object, str]]:
 def _cell(value: object) -> str:
     if value is None:
         return '-'
+    if isinstance(value, DoesNotApply):
+        return 'does not apply'
     if isinstance(value, float):
         return f'{value:.4g}'
     return str(value)
@@ -105,6 +128,7 @@ def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
     rows_a.update(timed_a)
     rows_b.update(timed_b)
     timed = list(timed_a) + [key for key in timed_b if key not in timed_a]
+    reasons: dict[tuple[str, str], str] = {}   # (bag, reason) -> the first row it explains
     lines = [f'A: {bag_a}', f'B: {bag_b}', '',
              '| quantity | unit | A | B | B - A |', '|---|---|---:|---:|---:|']
     for key in keys + timed:
@@ -112,7 +136,14 @@ def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
         b = rows_b.get(key, (None, unit))[0]
         numeric = isinstance(a, (int, float)) and isinstance(b, (int, float)) and \
             not isinstance(a, bool)
-        if numeric:
+        missing = [label for label, value in (('A', a), ('B', b))
+                   if isinstance(value, DoesNotApply)]
+        for label, value in (('A', a), ('B', b)):
+            if isinstance(value, DoesNotApply) and (label, value.reason) not in reasons:
+                reasons[(label, value.reason)] = key
+        if missing:
+            difference = f'does not apply in {" and ".join(missing)}'
+        elif numeric:
             difference = _cell(float(b) - float(a))
         elif a is None and b is None and key in timed:
             difference = '-'
@@ -121,6 +152,9 @@ def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
         else:
             difference = 'same' if a == b else 'differs'
         lines.append(f'| {key} | {unit} | {_cell(a)} | {_cell(b)} | {difference} |')
+    if reasons:
+        lines += ['', 'Does not apply:']
+        lines += [f'- {label}, {key}: {reason}' for (label, reason), key in reasons.items()]
     # What either analysis skipped as unusable is said under the table, not only in metrics.
     for label, recording in (('A', recording_a), ('B', recording_b)):
         skipped = recording.skipped_lines()

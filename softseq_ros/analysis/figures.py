@@ -492,9 +492,12 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
     model = ModelCurves.from_map(emap) if emap is not None else None
     jobs = [('pv', (recording, model, directory / 'pv.png', experiment, svg)),
             ('segments', (recording, directory / 'segments.png', svg)),
-            ('volume_split', (recording, model, directory / 'volume_split.png', svg)),
-            ('shapes', (recording, directory / 'shapes.png', svg)),
-            ('timeseries', (recording, directory / 'timeseries.png', svg))]
+            ('volume_split', (recording, model, directory / 'volume_split.png', svg))]
+    # A figure with nothing to show is not drawn: no snapshot (a scene without trigger
+    # volumes) leaves no shapes to draw.
+    if recording.snapshots:
+        jobs.append(('shapes', (recording, directory / 'shapes.png', svg)))
+    jobs.append(('timeseries', (recording, directory / 'timeseries.png', svg)))
     if windows:
         jobs.append(('transients', (windows, recording.segment_names, transients.channel_names,
                                     directory / 'transients.png', svg)))
@@ -502,10 +505,15 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
         return [path for name, args in jobs for path in _draw(name, args)]
     # Two halves of about equal drawing time, PNG or SVG: shapes and time series (and the
     # transients) against the other three.
-    order = [3, 4, 0, 1, 2] if not windows else [3, 4, 5, 0, 1, 2]
-    drawn = workers.apply(_draw_split, ([jobs[i] for i in order], len(order) - 3))
-    by_job = dict(zip(order, drawn))
-    return [path for index in range(len(jobs)) for path in by_job[index]]
+    first = [job for job in jobs if job[0] in SECOND_HALF]
+    order = first + [job for job in jobs if job[0] not in SECOND_HALF]
+    drawn = dict(zip((name for name, _ in order),
+                     workers.apply(_draw_split, (order, len(first)))))
+    return [path for name, _ in jobs for path in drawn[name]]
+
+
+# Drawn by the worker's fork while the worker draws the rest (about half the time each).
+SECOND_HALF = ('shapes', 'timeseries', 'transients')
 
 
 _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': plot_volume_split,

@@ -6,6 +6,10 @@ volume, gauge pressure, segment volumes and curvatures, and whether each was on 
 a deflation leg), so a bag and a quasi-static sweep of the solver are measured the same way.
 Metrics are taken over the first inflation leg and the deflation leg that follows it (the first
 cycle); every value is SI (m^3, Pa, J, m) and every pressure is gauge.
+
+A metric that does not apply to a run is None, never a number, and ``not_applicable`` names it
+with the reason: a switch in a sequence where no segment takes over, a plateau on a straight,
+peaked or still steepening curve, a hysteresis area without a deflation.
 """
 
 from dataclasses import dataclass, field
@@ -15,7 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.errors import UserError
-from softseq_ros.quasistatic.sequence import RECORDED_HYSTERESIS_TOLERANCE, sequence_type
+from softseq_ros.quasistatic.sequence import (
+    PARTIAL_SHARE_CHANGE,
+    RECORDED_HYSTERESIS_TOLERANCE,
+    sequence_type,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -23,14 +31,20 @@ FloatArray = NDArray[np.float64]
 SHARE_BINS = 200
 # The switch is the largest change of a share across this many bins (a tenth of the leg).
 SWITCH_WINDOW_BINS = SHARE_BINS // 10
-# A share change smaller than this over the whole leg names no switch.
-MIN_SWITCH_CHANGE = 0.05
+# A switch is where one segment takes over: a share that changes by more than the partial
+# sequence's threshold over the leg (quasistatic.sequence), the rule that names the type.
 # A snap moves more fluid between segments at one command than this many times the command's
 # step, and more than this share of the injected range.
 SNAP_EXCHANGE_PER_STEP = 5.0
 SNAP_SHARE_OF_RANGE = 1e-3
-# The plateau is reached where the pressure first comes within this share of its final value.
+# The plateau is reached where the pressure first comes within this share of its level.
 PLATEAU_SHARE = 0.95
+# A plateau is level: somewhere after its steepest rise the pressure's slope (over a tenth of
+# the leg) falls below this share of that steepest slope. A straight line (1.0) or a
+# square-root-like softening curve (0.16) has none; the paper's combined curve reaches 0.03.
+PLATEAU_SLOPE_SHARE = 0.1
+# The slope is taken over this many bins of the leg (a tenth of it, as the switch's window).
+PLATEAU_WINDOW_BINS = SWITCH_WINDOW_BINS
 
 
 class TraceError(UserError):
@@ -174,8 +188,14 @@ def analyse(trace: Trace, v_range: float | None = None) -> dict:
                                        for j in range(v_up.shape[1])])
             gap = float(np.max(np.abs(v_dn_at - v_up[inside])))
             hysteresis = _area(u_up, p_up, lo, hi) - _area(u_dn, cols_dn[:, 0], lo, hi)
-    result['hysteresis_area_j'] = float(hysteresis)
-    result['hysteresis_volume_gap_m3'] = gap
+    not_applicable: dict[str, str] = {}
+    if has_deflation:
+        result['hysteresis_area_j'] = float(hysteresis)
+        result['hysteresis_volume_gap_m3'] = gap
+    else:
+        result['hysteresis_area_j'] = result['hysteresis_volume_gap_m3'] = None
+        not_applicable['hysteresis_area_j'] = ('no deflation was recorded after the first '
+                                               'inflation: there is no loop to measure')
     result['snaps'] = snaps
     result['snap_count'] = len(snaps)
 
@@ -184,8 +204,13 @@ def analyse(trace: Trace, v_range: float | None = None) -> dict:
     result['sequence_type'] = sequence_type(bool(snaps), gap,
                                             RECORDED_HYSTERESIS_TOLERANCE * v_range, share)
     result['deflation_recorded'] = bool(has_deflation)
-    result['switch'] = _switch(middle, share, trace.segment_names)
-    result['plateau'] = _plateau(u_up, p_up)
+    result['switch'], why = _switch(middle, share, trace.segment_names)
+    if why:
+        not_applicable['switch'] = why
+    result['plateau'], why = _plateau(u_up, p_up)
+    if why:
+        not_applicable['plateau'] = why
+    result['not_applicable'] = not_applicable
     return result
 
 
@@ -197,21 +222,29 @@ def _area(u: FloatArray, p: FloatArray, lo: float, hi: float) -> float:
     return float(np.trapezoid(pp, uu))
 
 
-def _switch(middle: FloatArray, share: FloatArray, names: tuple[str, ...]) -> dict | None:
+def _switch(middle: FloatArray, share: FloatArray,
+            names: tuple[str, ...]) -> tuple[dict | None, str]:
     """
-    Where a segment's share of the inflow changes most.
+    Where a segment's share of the inflow changes most, or None and why it does not apply.
 
     That is the largest change of a share across a window of a tenth of the leg, placed at the
-    window's centre.
+    window's centre. It applies only where a segment takes over: where some share changes by
+    more than the partial sequence's threshold over the leg (the rule that names the type).
     """
     half = SWITCH_WINDOW_BINS // 2
+    if share.shape[1] < 2:
+        return None, 'one segment: there is nothing to switch between'
     if middle.size <= 2 * half + 1:
-        return None
+        return None, (f'the inflation leg has too few distinct volumes ({middle.size} bins '
+                      'of the inflow left) to follow the shares of the inflow')
+    overall = float(np.max(np.ptp(share, axis=0)))
+    if overall <= PARTIAL_SHARE_CHANGE:
+        return None, (f"no segment's share of the inflow changes by more than "
+                      f'{PARTIAL_SHARE_CHANGE:g} over inflation (at most {overall:.2f}): the '
+                      'segments fill together, none takes over')
     change = share[2 * half:] - share[:-2 * half]
     centre = middle[half:-half]
     size = np.abs(change)
-    if float(np.max(size)) < MIN_SWITCH_CHANGE:
-        return None
     row, _ = np.unravel_index(int(np.argmax(size)), size.shape)
     gainer = int(np.argmax(change[row]))
     return {
@@ -220,26 +253,68 @@ def _switch(middle: FloatArray, share: FloatArray, names: tuple[str, ...]) -> di
         'shares_before': [float(x) for x in share[row]],
         'shares_after': [float(x) for x in share[row + 2 * half]],
         'window_m3': float(middle[2 * half] - middle[0]),
-    }
+    }, ''
 
 
-def _plateau(u: FloatArray, p: FloatArray) -> dict | None:
-    """The pressure at the end of inflation and where it first came within 5 % of it."""
-    if u.size < 4:
-        return None
-    final = float(p[-1])
-    reached = np.flatnonzero(p >= PLATEAU_SHARE * final) if final > 0 else np.zeros(0, int)
-    span = u[-1] - u[0]
-    first = u <= u[0] + 0.1 * span
-    last = u >= u[-1] - 0.2 * span
-    slope_first = _slope(u[first], p[first])
-    slope_last = _slope(u[last], p[last])
+def _plateau(u: FloatArray, p: FloatArray) -> tuple[dict | None, str]:
+    """
+    The level the inflation's pressure settles at, or None and why there is none.
+
+    The curve's slope is taken over windows of a tenth of the leg. A plateau needs the pressure
+    never to fall on the way (a fall of more than 5 % of the highest pressure so far is a peak,
+    not a plateau), and a level stretch after the steepest rise: a window whose slope is below
+    PLATEAU_SLOPE_SHARE of the steepest. Its pressure is the pressure at the flattest window's
+    centre; ``onset_injected_m3`` is where the pressure first reached 95 % of it, ``level_m3``
+    the stretch around it that stays level.
+    """
+    if u.size < 4 or np.ptp(u) <= 0:
+        return None, f'the inflation leg has {u.size} distinct volumes, too few for a plateau'
+    highest = np.maximum.accumulate(p)
+    fall = highest - p
+    worst = int(np.argmax(fall))
+    if highest[worst] > 0 and fall[worst] > (1 - PLATEAU_SHARE) * highest[worst]:
+        top = int(np.argmax(p[:worst + 1]))
+        return None, (f'the pressure falls during inflation, from {p[top] * 1e-3:.4g} kPa at '
+                      f'{u[top] * 1e6:.4g} mL to {p[worst] * 1e-3:.4g} kPa at '
+                      f'{u[worst] * 1e6:.4g} mL: a peak, not a plateau')
+    grid = np.linspace(u[0], u[-1], SHARE_BINS + 1)
+    sampled = np.interp(grid, u, p)
+    width = PLATEAU_WINDOW_BINS
+    slope = (sampled[width:] - sampled[:-width]) / (grid[width:] - grid[:-width])
+    centre = 0.5 * (grid[width:] + grid[:-width])
+    steepest = int(np.argmax(slope))
+    if slope[steepest] <= 0:
+        return None, 'the gauge pressure does not rise during inflation'
+    after = np.abs(slope[steepest:])
+    flattest = steepest + int(np.argmin(after))
+    share = float(abs(slope[flattest]) / slope[steepest])
+    if share > PLATEAU_SLOPE_SHARE:
+        return None, (f'the pressure does not level off: after its steepest rise '
+                      f'({slope[steepest] * 1e-9:.3g} kPa/mL) its slope never falls below '
+                      f"{share * 100:.0f} % of it, where a plateau's falls below "
+                      f'{PLATEAU_SLOPE_SHARE * 100:.0f} %')
+    level = np.abs(slope) <= PLATEAU_SLOPE_SHARE * slope[steepest]
+    first = last = flattest
+    while first > 0 and level[first - 1]:
+        first -= 1
+    while last < level.size - 1 and level[last + 1]:
+        last += 1
+    pressure = float(np.interp(centre[flattest], u, p))
+    if flattest == slope.size - 1:
+        pressure = float(p[-1])   # level to the end: the pressure the inflation ends at
+    reached = np.flatnonzero(p >= PLATEAU_SHARE * pressure)
+    first_window = u <= u[0] + 0.1 * (u[-1] - u[0])
+    last_window = u >= u[-1] - 0.2 * (u[-1] - u[0])
+    slope_first = _slope(u[first_window], p[first_window])
+    slope_last = _slope(u[last_window], p[last_window])
     return {
-        'pressure_pa': final,
-        'onset_injected_m3': float(u[reached[0]]) if reached.size else None,
+        'pressure_pa': pressure,
+        'onset_injected_m3': float(u[reached[0]]),
+        'level_m3': [float(grid[first]), float(grid[last + width])],
+        'slope_share_of_steepest': share,
         'slope_ratio_end_to_start': (slope_last / slope_first
                                      if slope_first and math.isfinite(slope_last) else None),
-    }
+    }, ''
 
 
 def _slope(u: FloatArray, p: FloatArray) -> float:

@@ -246,10 +246,13 @@ def against_reference(metrics: dict, reference: dict) -> dict:
     if 'plateau_onset_injected_m3' in reported:
         target = float(reported['plateau_onset_injected_m3'])
         tolerance = float(reported.get('plateau_onset_tolerance_m3', 0.1 * target))
-        checks.append({'what': 'combined PV plateau reached (95 % of the final pressure) at',
-                       'reported_m3': target, 'recorded_m3': onset,
-                       'difference_m3': None if onset is None else onset - target,
-                       'agrees': onset is not None and abs(onset - target) <= tolerance})
+        check = {'what': 'combined PV plateau reached (95 % of its pressure) at',
+                 'reported_m3': target, 'recorded_m3': onset,
+                 'difference_m3': None if onset is None else onset - target,
+                 'agrees': onset is not None and abs(onset - target) <= tolerance}
+        if onset is None:
+            check['recorded_does_not_apply'] = not_applicable_reason(metrics, 'plateau')
+        checks.append(check)
     order = reported.get('segment_plateau_lower')
     if order:
         switch = metrics.get('switch') or {}
@@ -259,9 +262,12 @@ def against_reference(metrics: dict, reference: dict) -> dict:
         agrees = taking == lower
         if limits:
             agrees = agrees and limits.get(lower, np.inf) == min(limits.values())
-        checks.append({'what': 'segment with the lower plateau (takes the inflow after the '
-                       'switch)', 'reported': lower, 'recorded': taking,
-                       'segment_pressure_limits_pa': limits or None, 'agrees': bool(agrees)})
+        check = {'what': 'segment with the lower plateau (takes the inflow after the switch)',
+                 'reported': lower, 'recorded': taking,
+                 'segment_pressure_limits_pa': limits or None, 'agrees': bool(agrees)}
+        if taking is None:
+            check['recorded_does_not_apply'] = not_applicable_reason(metrics, 'switch')
+        checks.append(check)
     steps = {(s['step'], s['direction']): s for s in _first_cycle_steps(metrics)[0]}
     for entry in reported.get('steps', []):
         shot = steps.get((int(entry['step']), 'inflation'))
@@ -451,6 +457,8 @@ def summary_text(metrics: dict) -> str:
     if switch:
         lines.append(f'switch: at {_ml(switch["injected_m3"])} injected, '
                      f'{switch["segment_taking_over"]} takes over the inflow')
+    else:
+        lines.append(f'switch: {_not_applied(metrics, "switch")}')
     peak = metrics['peak_injection']
     split = ', '.join(f'{name} {share * 100:.0f} %' for name, share in
                       zip(metrics['segments'], peak['share_of_added_volume']))
@@ -458,8 +466,12 @@ def summary_text(metrics: dict) -> str:
                  f'added volume split {split}')
     plateau = metrics.get('plateau')
     if plateau:
-        lines.append(f'plateau: {_kpa(plateau["pressure_pa"])} gauge at the end of inflation, '
+        level = plateau.get('level_m3')
+        stretch = (f', level from {_ml(level[0], 1)} to {_ml(level[1], 1)}' if level else '')
+        lines.append(f'plateau: {_kpa(plateau["pressure_pa"])} gauge{stretch}, '
                      f'95 % of it reached at {_ml(plateau["onset_injected_m3"])}')
+    else:
+        lines.append(f'plateau: {_not_applied(metrics, "plateau")}')
     if metrics['snaps']:
         for snap in metrics['snaps']:
             lines.append(f'snap-through at {_ml(snap["injected_m3"], 3)} ({snap["direction"]}): '
@@ -468,7 +480,7 @@ def summary_text(metrics: dict) -> str:
                          'moved between segments')
     else:
         lines.append('snap-throughs: none')
-    lines.append(f'hysteresis area: {metrics["hysteresis_area_j"] * 1e3:.4f} mJ')
+    lines.append(f'hysteresis area: {_mj(metrics, "hysteresis_area_j")}')
     stays = metrics.get('branches_visited')
     if stays:
         shown = ' -> '.join(f'#{s["branch"]} ({s["state"]})' for s in stays[:BRANCHES_SHOWN])
@@ -508,6 +520,21 @@ def summary_text(metrics: dict) -> str:
     return '\n'.join(lines)
 
 
+def not_applicable_reason(metrics: dict, key: str) -> str | None:
+    """Why metric ``key`` does not apply to the run, None when it applies."""
+    return (metrics.get('not_applicable') or {}).get(key)
+
+
+def _not_applied(metrics: dict, key: str) -> str:
+    """A metric's absence in words: 'does not apply (why)'."""
+    return f'does not apply ({not_applicable_reason(metrics, key) or "not measured"})'
+
+
+def _mj(metrics: dict, key: str) -> str:
+    value = metrics.get(key)
+    return _not_applied(metrics, key) if value is None else f'{value * 1e3:.4f} mJ'
+
+
 def _first_cycle_steps(metrics: dict) -> tuple[list[dict], int]:
     first = [step for step in metrics['steps'] if step.get('cycle', 1) == 1]
     return first, len(metrics['steps']) - len(first)
@@ -516,13 +543,19 @@ def _first_cycle_steps(metrics: dict) -> tuple[list[dict], int]:
 def _check_text(check: dict) -> str:
     mark = {True: 'agrees', False: 'differs', None: ''}.get(check.get('agrees'), '')
     if 'recorded_m3' in check:
-        parts = [f'{check["what"]}: recorded {_ml(check["recorded_m3"], 1)}']
+        recorded = _ml(check['recorded_m3'], 1)
+        if check.get('recorded_does_not_apply'):
+            recorded = f'none (does not apply: {check["recorded_does_not_apply"]})'
+        parts = [f'{check["what"]}: recorded {recorded}']
         for key in ('reported_m3', 'simulation_reported_m3', 'experiment_reported_m3'):
             if key in check:
                 label = key.replace('_reported_m3', '').replace('reported_m3', 'reported')
                 parts.append(f'{label or "reported"} {_ml(check[key], 1)}')
         return ', '.join(parts) + (f' ({mark})' if mark else '')
-    return f'{check["what"]}: recorded {check["recorded"]}, reported {check["reported"]} ({mark})'
+    recorded = check['recorded']
+    if check.get('recorded_does_not_apply'):
+        recorded = f'none (does not apply: {check["recorded_does_not_apply"]})'
+    return f'{check["what"]}: recorded {recorded}, reported {check["reported"]} ({mark})'
 
 
 def _transient_markdown(transients: dict) -> list[str]:
@@ -586,11 +619,14 @@ def markdown(metrics: dict) -> str:
     switch = metrics.get('switch')
     lines.append("| switch (largest change of a segment's share of the inflow) | "
                  + (f'{_ml(switch["injected_m3"])}, {switch["segment_taking_over"]} takes over'
-                    if switch else '-') + ' |')
-    plateau = metrics.get('plateau') or {}
-    lines.append(f'| plateau pressure (end of inflation) | {_kpa(plateau.get("pressure_pa"))} |')
-    lines.append(f'| plateau reached (95 %) at | {_ml(plateau.get("onset_injected_m3"))} |')
-    lines.append(f'| hysteresis area | {metrics["hysteresis_area_j"] * 1e3:.4f} mJ |')
+                    if switch else _not_applied(metrics, 'switch')) + ' |')
+    plateau = metrics.get('plateau')
+    if plateau:
+        lines.append(f'| plateau pressure | {_kpa(plateau["pressure_pa"])} |')
+        lines.append(f'| plateau reached (95 %) at | {_ml(plateau["onset_injected_m3"])} |')
+    else:
+        lines.append(f'| plateau | {_not_applied(metrics, "plateau")} |')
+    lines.append(f'| hysteresis area | {_mj(metrics, "hysteresis_area_j")} |')
     lines.append(f'| snap-throughs | {metrics["snap_count"]} |')
     for name, limit in (metrics.get('segment_pressure_limits_pa') or {}).items():
         lines.append(f'| {name}: highest pressure of its curve (peak or plateau) | '
@@ -646,5 +682,5 @@ def markdown(metrics: dict) -> str:
 
 
 __all__ = ['Experiment', 'SceneMismatchError', 'against_reference', 'check_scene',
-           'load_reference', 'markdown', 'recording_metrics', 'recording_trace', 'scene_notes',
-           'summary_text', 'write_report']
+           'load_reference', 'markdown', 'not_applicable_reason', 'recording_metrics',
+           'recording_trace', 'scene_notes', 'summary_text', 'write_report']
