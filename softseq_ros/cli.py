@@ -113,7 +113,7 @@ def _classify(args: argparse.Namespace) -> int:
     verdict = classify(emap)
     _warn_unconverged('classify', emap)
     print(f'{scene.name}: {verdict}')
-    lines, warnings = robustness_lines(verdict, scene_features(scene))
+    lines, warnings = robustness_lines(verdict, *scene_features(scene, emap))
     for line in lines:
         print(line)
     for warning in warnings:

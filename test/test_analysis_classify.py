@@ -82,15 +82,22 @@ def test_a_verdict_on_noise_wiggles_is_flagged(tmp_path):
 
 
 def test_a_real_peak_is_not_flagged():
+    from softseq_ros.analysis.robustness import scene_features
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene('fig1_asymmetric')
-    verdict = classify(EquilibriumMap(scene.segments))
-    # Balloon laws have no noise (not an unknown one): the depth is reported, nothing flagged.
-    lines, warnings = robustness_lines(verdict, smallest_features(list(scene.segments)))
-    assert verdict == 'asymmetric' and not warnings and len(lines) == 2
-    assert all('smallest peak-valley depth' in line and
-               line.endswith('noise none (a closed-form law)') for line in lines)
+    emap = EquilibriumMap(scene.segments)
+    verdict = classify(emap)
+    # Balloon laws have no noise (not an unknown one): the features the verdict rests on are
+    # named with their depth (the peak less the valley of each balloon), nothing is flagged.
+    used, unused = scene_features(scene, emap)
+    lines, warnings = robustness_lines(verdict, used, unused)
+    assert verdict == 'asymmetric' and not warnings and len(lines) == 2 and not unused
+    depths = {f.segment: f.depth_pa for f in used}
+    assert depths == pytest.approx({'bottom': 7665.0 - 6242.0, 'top': 7290.0 - 6528.0},
+                                   abs=2.0)
+    assert all('noise none (a closed-form law)' in line and 'snap-through' in line
+               for line in lines)
     assert smallest_features(list(load_scene('paper').segments)) == []
 
 
@@ -112,3 +119,133 @@ def test_one_rule_decides_the_sequence_type_of_solved_paths_and_recordings():
     assert sequence_type(False, 2e-9, 1e-9, even) == 'asymmetric'
     assert sequence_type(False, 1e-9, 1e-9, even) == 'none'
     assert SOLVED_HYSTERESIS_TOLERANCE < RECORDED_HYSTERESIS_TOLERANCE
+
+
+# ----------------------------------------------------------------- a measured-looking balloon
+#
+# A latex balloon as a pressure sensor of 1 mbar resolution records it: the Gent model of a
+# thin spherical membrane (A. N. Gent, Rubber Chem. Technol. 69 (1996) 59; the balloon law of
+# softseq_ros.segments.materials.Gent), p = 2 (mu H / R) (1/l - 1/l^7) / (1 - (2 l^2 + l^-4 - 3)
+# / Jm) at stretch l = (v / v0)^(1/3). Jm = 67 puts the valley a third below the peak; mu H / R
+# is set for a peak of 87 kPa, so the valley lies 29 kPa below it. 56 rows evenly spaced in
+# stretch from 1 to 5 (as a radius measurement gives: dense before the peak, sparse after it;
+# at the end the pressure rises past the peak again), rounded to 100 Pa (1 mbar). A model, not
+# a measurement: no published table of such a curve was at hand.
+JM = 67.0
+PEAK_PA = 87.0e3
+QUANTUM_PA = 100.0       # 1 mbar
+REST_M3 = 4.0 / 3.0 * np.pi * 0.005**3
+
+
+def _gent_shape(stretch: np.ndarray) -> np.ndarray:
+    i1 = 2 * stretch**2 + stretch**-4
+    return 2 * (1 / stretch - 1 / stretch**7) / (1 - (i1 - 3) / JM)
+
+
+def _balloon(stretch: np.ndarray, scale: float = 1.0,
+             quantum: float | None = QUANTUM_PA) -> tuple[np.ndarray, np.ndarray]:
+    peak = _gent_shape(np.linspace(1.0, 2.0, 20001)).max()
+    pressure = scale * PEAK_PA * _gent_shape(stretch) / peak
+    if quantum:
+        pressure = np.round(pressure / quantum) * quantum
+    return REST_M3 * stretch**3, pressure
+
+
+def _balloon_table(path: Path, scale: float = 1.0) -> Path:
+    volume, pressure = _balloon(np.linspace(1.0, 5.0, 56), scale)
+    rows = ['volume_m3,pressure_pa,curvature_per_m']
+    rows += [f'{v:.17g},{p:.17g},{2e5 * (v - REST_M3):.17g}' for v, p in zip(volume, pressure)]
+    path.write_text('\n'.join(rows) + '\n')
+    return path
+
+
+def test_a_smooth_curve_has_next_to_no_noise_however_unevenly_sampled():
+    from softseq_ros.analysis.robustness import estimated_noise
+
+    rng = np.random.default_rng(7)
+    stretch = np.concatenate([[1.0], np.sort(rng.uniform(1.0, 5.0, 54)), [5.0]])
+    volume, pressure = _balloon(stretch, quantum=None)
+    # The peak and valley are curved enough that second differences read them as 100s of Pa
+    # of noise; the local fits' residuals stay below 10^-4 of the peak.
+    assert estimated_noise(volume, pressure) < 1e-4 * PEAK_PA
+    volume, pressure = _balloon(np.linspace(1.0, 5.0, 56), quantum=None)
+    assert estimated_noise(volume, pressure) < 1e-4 * PEAK_PA
+
+
+def test_quantisation_reads_as_the_quantisation_noise():
+    from softseq_ros.analysis.robustness import estimated_noise
+
+    volume, pressure = _balloon(np.linspace(1.0, 5.0, 56))
+    # A 1 mbar quantum is uniform noise of deviation 100 Pa / sqrt(12) = 28.9 Pa.
+    expected = QUANTUM_PA / np.sqrt(12.0)
+    assert 0.6 * expected < estimated_noise(volume, pressure) < 1.6 * expected
+    # White noise of a known deviation is found too (56 rows: within about a third).
+    rng = np.random.default_rng(11)
+    volume, smooth = _balloon(np.linspace(1.0, 5.0, 56), quantum=None)
+    for deviation in (30.0, 300.0):
+        noisy = smooth + rng.normal(0.0, deviation, smooth.size)
+        assert 0.6 * deviation < estimated_noise(volume, noisy) < 1.5 * deviation
+
+
+def test_a_real_peak_and_valley_measured_at_1_mbar_is_not_flagged(tmp_path):
+    from softseq_ros.analysis.robustness import scene_features
+
+    strong = _balloon_table(tmp_path / 'latex.csv')
+    weak = _balloon_table(tmp_path / 'latex_weaker.csv', scale=0.95)
+    scene_path = tmp_path / 'latex_pair.yaml'
+    scene_path.write_text(f"""name: latex_pair
+segments:
+  - {{name: strong, length_m: 0.1, table: {strong}}}
+  - {{name: weak, length_m: 0.1, table: {weak}}}
+pump:
+  flow_rate_m3_per_s: 1.0e-6
+  legs: [{{inflate_to_m3: 2.0e-5}}, {{deflate_to_m3: 0.0}}]
+""")
+    from softseq_ros.scene.loader import load_scene
+
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    verdict = classify(emap)
+    used, unused = scene_features(scene, emap)
+    lines, warnings = robustness_lines(verdict, used, unused)
+    assert verdict == 'asymmetric'
+    # The verdict rests on each balloon's one peak-valley, about 29 kPa deep (and 27.6 kPa for
+    # the weaker one), not on the equal readings the quantisation makes.
+    assert sorted(f.segment for f in used) == ['strong', 'weak'] and not unused
+    depth = {f.segment: f.depth_pa for f in used}
+    assert depth['strong'] == pytest.approx(29.0e3, abs=0.3e3)
+    assert depth['weak'] == pytest.approx(0.95 * 29.0e3, abs=0.3e3)
+    assert all(f.noise_source == 'estimated from the table rows' for f in used)
+    assert all(10.0 < f.noise_pa < 60.0 for f in used)
+    assert not warnings
+    assert lines[0].startswith('robustness: the asymmetric verdict rests on segment strong: '
+                               'peak 86.9 kPa')
+    assert 'snap-through' in lines[0]
+
+
+def test_a_verdict_resting_on_noise_sized_features_is_flagged(tmp_path):
+    from softseq_ros.analysis.robustness import scene_features
+    from softseq_ros.scene.loader import load_scene
+
+    noise = 50.0
+    noisy = _table(tmp_path / 'noisy.csv', SEGMENTS / 'paper_top.csv', noise_pa=noise, every=6,
+                   seed=3)
+    scene_path = tmp_path / 'noisy_pair.yaml'
+    scene_path.write_text(f"""name: noisy_pair
+segments:
+  - {{name: bottom, length_m: 0.111, table: {SEGMENTS / 'paper_bottom.csv'}}}
+  - {{name: top, length_m: 0.111, table: {noisy}}}
+pump:
+  flow_rate_m3_per_s: 1.0e-6
+  legs: [{{inflate_to_m3: 6.0e-5}}, {{deflate_to_m3: 0.0}}]
+""")
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    verdict = classify(emap)
+    used, unused = scene_features(scene, emap)
+    lines, warnings = robustness_lines(verdict, used, unused)
+    # The paper's partial pair turns asymmetric or symmetric on noise wiggles alone: what it
+    # rests on is noise-sized, and said so.
+    assert verdict in ('symmetric', 'asymmetric') and used
+    assert all(f.segment == 'top' and f.depth_pa < NOISE_FACTOR * f.noise_pa for f in used)
+    assert len(warnings) == 1 and 'may be noise' in warnings[0] and 'segment top' in warnings[0]

@@ -1,37 +1,156 @@
 """
-How robust a sequence verdict is: the smallest pressure feature it rests on, against the noise.
+How robust a sequence verdict is: the peak-valley features it rests on, against the noise.
 
-A symmetric or asymmetric verdict rests on the peaks and valleys of the segments' PV curves;
-each one, however small, is taken seriously by the solver. The smallest feature is the smallest
-pressure change of a monotone piece next to an interior extremum (a peak-valley depth). It is
-compared with the table's noise: the ``noise_std_pa`` a segment declares (its ``smoothing``
-block in the scene, or a ``# noise_std_pa: X`` comment line in its table), else an estimate
-from the table's rows (second differences, which a smooth table keeps far below its features).
+A symmetric or asymmetric verdict rests on peaks and valleys of the segments' PV curves. A
+*feature* is one falling stretch of a curve, from a peak to the valley after it (flat rows, such
+as two equal readings of a quantised sensor, neither start nor end one); its depth is the
+pressure the curve loses there. The features a verdict rests on are those the solver's paths
+use (:func:`deciding_features`): a segment that jumps across a feature in a snap-through, or
+whose volume goes through one (losing volume while the total grows). A wiggle that no path uses
+decides nothing, however small it is.
+
+Each feature is compared with its segment's noise: the ``noise_std_pa`` a segment declares (its
+``smoothing`` block in the scene, or a ``# noise_std_pa: X`` comment line in its table), else an
+estimate from the table's rows (:func:`estimated_noise`: the residuals of local cubic fits, which
+a smooth curve keeps near zero however curved it is). A closed-form law has no noise. The
+verdict is flagged when even the most significant feature it rests on (the deepest against its
+noise) is within NOISE_FACTOR noise deviations.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 import re
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from softseq_ros.segments.models import TabulatedSegment
 
 # A feature below this many noise deviations may be noise itself.
 NOISE_FACTOR = 3.0
 CLOSED_FORM = 'a closed-form law'   # a segment's noise source when it is no table
+ESTIMATED = 'estimated from the table rows'
 _NOISE_LINE = re.compile(r'^\s*#\s*noise_std_pa\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
+# The local fits of the noise estimate: a cubic through this many rows either side of a row
+# (the row itself left out), so a smooth curve's residual is of the order h^4 p''''.
+FIT_SIDE = 3
+FIT_DEGREE = 3
+# Residuals beyond this many deviations are the curve's own sharp corners, not noise: they are
+# left out, and the deviation of what remains is scaled to a normal distribution's (3-sigma
+# clipping keeps 0.9866 of its deviation).
+CLIP_DEVIATIONS = 3.0
+CLIPPED_DEVIATION_SHARE = 0.9866
+# Features listed per verdict; the others are counted.
+FEATURES_SHOWN = 4
 
 
 @dataclass
 class Feature:
-    """The smallest peak-valley depth of one segment."""
+    """One peak-valley feature of a segment's curve: peak, valley, depth, and the noise."""
 
     segment: str
     depth_pa: float
-    at_volume_m3: float
+    peak_m3: float
+    peak_pa: float
+    valley_m3: float
+    valley_pa: float
     noise_pa: float | None
     noise_source: str
+    # What the solver's paths do with it: snap-throughs across it, (leg, injected volume [m^3]),
+    # and the injected volumes between which the segment goes through it on inflation.
+    snaps: list[tuple[str, float]] = field(default_factory=list)
+    through_m3: tuple[float, float] | None = None
+
+    @property
+    def used(self) -> bool:
+        """Whether a path of the solver uses the feature."""
+        return bool(self.snaps) or self.through_m3 is not None
+
+    @property
+    def uses(self) -> str:
+        """What the solver's paths do with the feature, in words."""
+        parts = []
+        for leg in ('inflation', 'deflation'):
+            at = [_ml(u) for kind, u in self.snaps if kind == leg]
+            if at:
+                parts.append(f'snap-through{"s" if len(at) > 1 else ""} across it on {leg} '
+                             f'at {", ".join(at)} injected')
+        if self.through_m3 is not None:
+            parts.append(f'the segment goes through it, losing volume, on inflation from '
+                         f'{_ml(self.through_m3[0])} to {_ml(self.through_m3[1])} injected')
+        return '; '.join(parts)
+
+    @property
+    def at_volume_m3(self) -> float:
+        """Where the feature starts: its peak's volume."""
+        return self.peak_m3
+
+    @property
+    def significance(self) -> float:
+        """Depth in noise deviations (infinite without noise)."""
+        if not self.noise_pa:
+            return np.inf if self.noise_pa is not None else 0.0
+        return self.depth_pa / self.noise_pa
+
+
+def peak_valleys(segment: object) -> list[tuple[float, float, float, float]]:
+    """
+    The falling stretches of a segment's curve, base to top.
+
+    Each is (peak volume, peak pressure, valley volume, valley pressure), built from the
+    curve's monotone pieces: a flat piece neither starts nor ends a stretch, so a falling
+    stretch broken by equal readings is one feature.
+    """
+    stretches: list[list[float]] = []
+    previous = 0   # the direction of the last piece that was not flat
+    for piece in segment.monotone_pieces():
+        if piece.direction == 0:
+            continue
+        if piece.direction < 0:
+            if previous < 0 and stretches:
+                stretches[-1][2:] = [piece.v_hi, piece.p_at_hi]
+            else:
+                stretches.append([piece.v_lo, piece.p_at_lo, piece.v_hi, piece.p_at_hi])
+        previous = piece.direction
+    return [tuple(float(x) for x in stretch) for stretch in stretches]
+
+
+def estimated_noise(volumes: ArrayLike, pressures: ArrayLike) -> float | None:
+    """
+    The deviation of a table's pressure noise [Pa], from leave-one-out local cubic fits.
+
+    Each row's pressure is predicted by a cubic through the FIT_SIDE rows either side of it; the
+    residual, divided by its standard deviation in units of the noise's (the fit's own
+    uncertainty included, for rows spaced however unevenly), is noise plus what the cubic
+    cannot follow. A smooth curve leaves next to nothing (of the order h^4 p''''); its sharpest
+    corners, a few rows, are clipped at CLIP_DEVIATIONS. None with too few rows.
+    """
+    v = np.asarray(volumes, dtype=float)
+    p = np.asarray(pressures, dtype=float)
+    if v.size < 2 * FIT_SIDE + 3:
+        return None
+    rows = np.arange(FIT_SIDE, v.size - FIT_SIDE)
+    offsets = np.concatenate([np.arange(-FIT_SIDE, 0), np.arange(1, FIT_SIDE + 1)])
+    neighbours = rows[:, None] + offsets[None, :]
+    half_span = 0.5 * (v[rows + FIT_SIDE] - v[rows - FIT_SIDE])[:, None]
+    x = (v[neighbours] - v[rows][:, None]) / half_span
+    design = x[..., None] ** np.arange(FIT_DEGREE + 1)
+    normal = np.einsum('nki,nkj->nij', design, design)
+    inverse = np.linalg.inv(normal)
+    coefficients = np.einsum('nij,nkj,nk->ni', inverse, design, p[neighbours])
+    # Var(p_i - fit(v_i)) = s^2 (1 + [(X^T X)^-1]_00): the row's noise and the fit's.
+    residual = (p[rows] - coefficients[:, 0]) / np.sqrt(1.0 + inverse[:, 0, 0])
+    deviation = 1.4826 * float(np.median(np.abs(residual)))
+    for _ in range(50):
+        kept = residual[np.abs(residual) <= CLIP_DEVIATIONS * deviation]
+        if not kept.size:
+            break
+        clipped = float(np.sqrt(np.mean(kept**2))) / CLIPPED_DEVIATION_SHARE
+        if abs(clipped - deviation) <= 1e-12 * max(deviation, 1e-300):
+            deviation = clipped
+            break
+        deviation = clipped
+    return deviation
 
 
 def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
@@ -47,67 +166,157 @@ def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
     return None
 
 
-def _estimated_noise(segment: object) -> float | None:
-    pressures = getattr(segment, 'pressures', None)
-    if pressures is None or len(pressures) < 5:
-        return None
-    # For white noise of deviation s, p[i-1] - 2 p[i] + p[i+1] has deviation s * sqrt(6); the
-    # median absolute deviation keeps the knees of a smooth curve from counting.
-    second = np.diff(np.asarray(pressures), 2)
-    return float(1.4826 * np.median(np.abs(second - np.median(second))) / np.sqrt(6.0))
+def segment_noise(segment: object, scene_entry: dict | None = None) -> tuple[float | None, str]:
+    """A segment's pressure noise [Pa] and where it comes from (declared, estimated, a law)."""
+    noise = _declared_noise(segment, scene_entry)
+    if noise is not None:
+        return noise, 'declared'
+    if not isinstance(segment, TabulatedSegment):
+        return 0.0, CLOSED_FORM   # a law's curve has no measurement noise
+    return estimated_noise(segment.volumes, segment.pressures), ESTIMATED
+
+
+def segment_features(segment: object, scene_entry: dict | None = None) -> list[Feature]:
+    """Every peak-valley feature of one segment, with its noise."""
+    stretches = peak_valleys(segment)
+    if not stretches:
+        return []
+    noise, source = segment_noise(segment, scene_entry)
+    return [Feature(segment.name, peak_p - valley_p, peak_v, peak_p, valley_v, valley_p,
+                    noise, source) for peak_v, peak_p, valley_v, valley_p in stretches]
+
+
+def _entry(scene_entries: list[dict] | None, index: int) -> dict | None:
+    if scene_entries and index < len(scene_entries) and isinstance(scene_entries[index], dict):
+        return scene_entries[index]
+    return None
 
 
 def smallest_features(segments: list, scene_entries: list[dict] | None = None) -> list[Feature]:
-    """Per segment with a peak or valley: its smallest peak-valley depth and the noise."""
-    features = []
+    """Per segment with a peak-valley feature: its shallowest one, and the noise."""
+    found = []
     for index, segment in enumerate(segments):
-        pieces = segment.monotone_pieces()
-        if len(pieces) < 2:
-            continue
-        depths = [(abs(pc.p_at_hi - pc.p_at_lo), pc.v_lo if k else pc.v_hi)
-                  for k, pc in enumerate(pieces)]
-        depth, volume = min(depths)
-        entry = scene_entries[index] if scene_entries and index < len(scene_entries) else None
-        noise = _declared_noise(segment, entry)
-        source = 'declared'
-        if noise is None and not isinstance(segment, TabulatedSegment):
-            noise, source = 0.0, CLOSED_FORM   # a law's curve has no measurement noise
-        elif noise is None:
-            noise, source = _estimated_noise(segment), 'estimated from the table rows'
-        features.append(Feature(segment.name, float(depth), float(volume), noise, source))
-    return features
+        features = segment_features(segment, _entry(scene_entries, index))
+        if features:
+            found.append(min(features, key=lambda f: f.depth_pa))
+    return found
 
 
-def robustness_lines(verdict: str, features: list[Feature]) -> tuple[list[str], list[str]]:
+def _ml(volume: float) -> str:
+    return f'{volume * 1e6:.4g} mL'
+
+
+def deciding_features(emap: object, scene_entries: list[dict] | None = None,
+                      samples: int = 4001) -> tuple[list[Feature], list[Feature]]:
     """
-    Lines that say what the verdict rests on, and warnings when that is near the noise.
+    The features the solver's paths use, and those they do not, over the scene's range.
 
-    Monotone curves give no lines: such a verdict rests on no peak or valley a wiggle could fake.
+    The paths are the ones ``classify`` judges (inflation from rest to the end of the range and
+    back). A feature is used when a segment's volume jumps across it in a snap-through (from
+    before its peak to past its valley, or back), or when a segment's volume on the inflation
+    path lies inside it: the segment loses volume while the total grows there.
     """
-    if not features:
+    from softseq_ros.quasistatic.equilibrium import inflate_and_deflate
+
+    segments = list(emap.segments)
+    features = [segment_features(segment, _entry(scene_entries, index))
+                for index, segment in enumerate(segments)]
+    if not any(features):
+        return [], []
+    inflation, deflation = inflate_and_deflate(emap, samples)
+    tolerance = 1e-9 * float(emap.v_scale)
+    for leg, path in (('inflation', inflation), ('deflation', deflation)):
+        for event in path.events:
+            before, after = np.asarray(event.from_volumes), np.asarray(event.to_volumes)
+            crossed = []
+            for j, found in enumerate(features):
+                lo, hi = sorted((before[j], after[j]))
+                crossed += [f for f in found if lo < f.valley_m3 - tolerance
+                            and f.peak_m3 + tolerance < hi]
+            if not crossed:
+                # The fold itself: the feature with an end nearest to its segment's volume.
+                nearest = min((min(abs(before[j] - f.peak_m3), abs(before[j] - f.valley_m3)),
+                               j, k) for j, found in enumerate(features)
+                              for k, f in enumerate(found))
+                crossed = [features[nearest[1]][nearest[2]]]
+            for feature in crossed:
+                feature.snaps.append((leg, float(event.injected)))
+    volumes = np.asarray(inflation.volumes)
+    for j, found in enumerate(features):
+        for feature in found:
+            inside = (volumes[:, j] > feature.peak_m3 + tolerance) & \
+                (volumes[:, j] < feature.valley_m3 - tolerance)
+            if inside.any():
+                where = np.asarray(inflation.injected)[inside]
+                feature.through_m3 = (float(where[0]), float(where[-1]))
+    flat = [f for found in features for f in found]
+    return [f for f in flat if f.used], [f for f in flat if not f.used]
+
+
+def _pa(value: float) -> str:
+    return f'{value * 1e-3:.3g} kPa' if abs(value) >= 1e3 else f'{value:.3g} Pa'
+
+
+def _noise_text(feature: Feature) -> str:
+    if feature.noise_source == CLOSED_FORM:
+        return f'noise none ({CLOSED_FORM})'
+    if feature.noise_pa is None:
+        return 'noise unknown (too few table rows to estimate it)'
+    times = (f', {feature.significance:.3g} x the noise' if feature.noise_pa > 0 else '')
+    return f'noise {_pa(feature.noise_pa)} ({feature.noise_source}){times}'
+
+
+def _feature_text(feature: Feature) -> str:
+    return (f'segment {feature.segment}: peak {feature.peak_pa * 1e-3:.4g} kPa at '
+            f'{_ml(feature.peak_m3)}, valley {feature.valley_pa * 1e-3:.4g} kPa at '
+            f'{_ml(feature.valley_m3)}: depth {_pa(feature.depth_pa)}, {_noise_text(feature)}')
+
+
+def robustness_lines(verdict: str, used: list[Feature],
+                     unused: list[Feature] | None = None) -> tuple[list[str], list[str]]:
+    """
+    Lines that say which features the verdict rests on, and a warning when they are noise-sized.
+
+    ``used``: the features the solver's paths use (:func:`deciding_features`); ``unused``: the
+    others, counted in one line. Monotone curves give no lines: such a verdict rests on no peak
+    or valley a wiggle could fake. The verdict is flagged when even its most significant
+    feature (deepest against its noise) is within NOISE_FACTOR noise deviations.
+    """
+    unused = unused or []
+    if not used and not unused:
         return [], []
     lines, warnings = [], []
-    for feature in features:
-        if feature.noise_source == CLOSED_FORM:
-            noise = f'none ({CLOSED_FORM})'
-        elif feature.noise_pa is not None:
-            noise = f'{feature.noise_pa:.3g} Pa ({feature.noise_source})'
-        else:
-            noise = 'unknown (too few table rows to estimate it)'
-        lines.append(f'robustness: segment {feature.segment}: smallest peak-valley depth '
-                     f'{feature.depth_pa:.3g} Pa (at {feature.at_volume_m3:.6g} m^3), '
-                     f'noise {noise}')
-        if feature.noise_pa is not None and feature.depth_pa < NOISE_FACTOR * feature.noise_pa:
+    ranked = sorted(used, key=lambda f: (-f.significance, -f.depth_pa))
+    for feature in ranked[:FEATURES_SHOWN]:
+        lines.append(f'robustness: the {verdict} verdict rests on {_feature_text(feature)} '
+                     f'({feature.uses})')
+    if len(ranked) > FEATURES_SHOWN:
+        rest = ranked[FEATURES_SHOWN:]
+        lines.append(f'robustness: and on {len(rest)} more features, the shallowest '
+                     f'{_pa(min(f.depth_pa for f in rest))}')
+    if unused:
+        deepest = max(unused, key=lambda f: f.depth_pa)
+        segments = sorted({f.segment for f in unused})
+        lines.append(f'robustness: {len(unused)} peak-valley feature'
+                     f'{"s" if len(unused) != 1 else ""} of segment'
+                     f'{"s" if len(segments) != 1 else ""} {", ".join(segments)} play no part '
+                     f'in the verdict (no path snaps across or goes through them; the deepest '
+                     f'{_pa(deepest.depth_pa)})')
+    if ranked:
+        best = ranked[0]
+        if best.noise_pa is not None and best.depth_pa < NOISE_FACTOR * best.noise_pa:
             warnings.append(
-                f'the {verdict} verdict rests on a feature of segment {feature.segment} '
-                f'({feature.depth_pa:.3g} Pa) near or below {NOISE_FACTOR:g} x its noise '
-                f'({feature.noise_pa:.3g} Pa): it may be noise; smooth the table '
-                '(smoothing: {} in the scene)')
+                f'the {verdict} verdict rests on features no deeper than {NOISE_FACTOR:g} x '
+                f'their noise: the most significant, of segment {best.segment} at '
+                f'{_ml(best.peak_m3)}, is {_pa(best.depth_pa)} deep against a noise of '
+                f'{_pa(best.noise_pa)} ({best.noise_source}): it may be noise; smooth the '
+                'table (smoothing: {} in the scene)')
     return lines, warnings
 
 
-def scene_features(scene: object) -> list[Feature]:
-    """:func:`smallest_features` of a loaded scene, reading its segment entries for noise."""
+def scene_features(scene: object, emap: object | None = None) -> tuple[list[Feature],
+                                                                        list[Feature]]:
+    """:func:`deciding_features` of a loaded scene, reading its segment entries for noise."""
     import yaml
 
     entries = None
@@ -116,5 +325,8 @@ def scene_features(scene: object) -> list[Feature]:
             entries = (yaml.safe_load(Path(scene.path).read_text()) or {}).get('segments')
         except (OSError, yaml.YAMLError, AttributeError):
             entries = None
-    return smallest_features(list(scene.segments), entries if isinstance(entries, list)
-                             else None)
+    if emap is None:
+        from softseq_ros.quasistatic.solve import build_map
+
+        emap = build_map(scene.segments, scene.solver.resolution)
+    return deciding_features(emap, entries if isinstance(entries, list) else None)
