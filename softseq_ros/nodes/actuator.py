@@ -33,6 +33,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Parameter
 
 from softseq_ros.nodes.core_node import CoreNode, message_class, qos_profile
+from softseq_ros.nodes.diagnostics import Health
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
@@ -48,6 +49,19 @@ class ActuatorNode(CoreNode):
     """Tracks the equilibrium of the scene's segments under the commanded injected volume."""
 
     NODE_NAME = contract.NODE_NAMES[contract.ACTUATOR]
+
+    DIAGNOSTIC_TASK = 'actuator'
+
+    def health(self) -> Health:
+        """For /diagnostics: commands refused (garbage or beyond the tables) and the state."""
+        base = super().health()
+        state = self.core.model.state()
+        base.values = {
+            'refused_commands': self.core.rejected_commands + self.refusals,
+            'gauge_pressure_pa': state.pressure,
+            'segment_volumes_m3': ' '.join(f'{v:.9g}' for v in state.volumes),
+            **base.values}
+        return base
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare parameters, assemble the equilibrium map and start (or resume)."""

@@ -20,6 +20,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Parameter
 
 from softseq_ros.nodes.core_node import CoreNode
+from softseq_ros.nodes.diagnostics import Health
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
@@ -90,6 +91,15 @@ class CameraNode(CoreNode):
             self.create_timer(IMAGE_CHECK_S, self._update_image_wanted,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.configured = True
+
+    DIAGNOSTIC_TASK = 'camera'
+
+    def health(self) -> Health:
+        """For /diagnostics: the frame rate asked for and the images rendered, with the rest."""
+        base = super().health()
+        base.values = {'rate_hz': self.core.rate_hz,
+                       'images_rendered': self.core.images_rendered, **base.values}
+        return base
 
     def _update_image_wanted(self) -> None:
         # Rendering is the costliest output: only while someone looks.

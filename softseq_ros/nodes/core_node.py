@@ -15,10 +15,17 @@ subscribed to over DDS (it would arrive twice).
 """
 
 import importlib
+import time
 from typing import Any, Callable
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from softseq_ros.nodes.diagnostics import (
+    LEVEL_OF_NOTICE,
+    OK_LEVEL,
+    DiagnosticsPublisher,
+    Health,
+)
 from softseq_ros.nodes.parameters import ParameterNode
 from softseq_ros.rig import contract
 from softseq_ros.rig.routing import Router
@@ -87,6 +94,14 @@ class CoreNode(ParameterNode):
         self._publishers_by_name: dict[str, Any] = {}
         self._subscriptions_by_name: dict[str, Any] = {}
         self._throttle = Throttle()
+        # For /diagnostics: what the node published, refused and warned about.
+        self.published: dict[str, int] = {}
+        self.refusals = 0
+        self.warnings = 0
+        self.last_warning = ''
+        self._last_warning_at = -float('inf')
+        self._last_warning_level = OK_LEVEL
+        self.diagnostics: DiagnosticsPublisher | None = None
 
     def now_ns(self) -> int:
         """The node clock in nanoseconds (ROS time, or sim time with use_sim_time)."""
@@ -115,6 +130,22 @@ class CoreNode(ParameterNode):
                 qos_profile(topic.qos))
         if self.local is not None:
             self.local.add(self)
+        self.diagnostics = DiagnosticsPublisher(self, self.DIAGNOSTIC_TASK, self.health)
+
+    # What the node's DiagnosticStatus is named after (``<fqn>: <task>``).
+    DIAGNOSTIC_TASK = 'rig core'
+    # A warning keeps the status at WARN this long [s, wall clock], then it is history.
+    WARNING_HOLD_S = 10.0
+
+    def health(self) -> Health:
+        """The node's health for /diagnostics: recent warnings, refusals, messages sent."""
+        recent = time.monotonic() - self._last_warning_at < self.WARNING_HOLD_S
+        values: dict[str, object] = {'warnings': self.warnings, 'refused_messages':
+                                     self.refusals, 'last_warning': self.last_warning}
+        values.update((f'published {topic}', count) for topic, count in self.published.items())
+        if recent:
+            return Health(self._last_warning_level, self.last_warning, values)
+        return Health(OK_LEVEL, 'ok', values)
 
     def publisher(self, topic: contract.Topic) -> Any:
         """The publisher of a contract topic (None when this node does not publish it)."""
@@ -136,6 +167,7 @@ class CoreNode(ParameterNode):
 
     def refused(self, err: InputError) -> list[Output]:
         """What a message that cannot become a core value gives: a throttled warning."""
+        self.refusals += 1
         text = self._throttle.admit(err.key, str(err))
         return [] if text is None else [Notice(self.core.role, WARNING, text)]
 
@@ -154,13 +186,21 @@ class CoreNode(ParameterNode):
         if type(value) is Notice:
             self.log(value.level, value.text)
             return
-        publisher = self._publishers_by_type.get(type(value))
+        kind = type(value)
+        publisher = self._publishers_by_type.get(kind)
         if publisher is not None:
-            publisher.publish(ENCODERS[type(value)](value))
+            publisher.publish(ENCODERS[kind](value))
+            name = kind.topic.name
+            self.published[name] = self.published.get(name, 0) + 1
 
     def log(self, level: str, text: str) -> None:
         """Log through the node's rclpy logger (console and /rosout)."""
         logger = self.get_logger()
+        if level in LEVEL_OF_NOTICE:
+            self.warnings += 1
+            self.last_warning = text
+            self._last_warning_at = time.monotonic()
+            self._last_warning_level = LEVEL_OF_NOTICE[level]
         if level == INFO:
             logger.info(text)
         elif level == WARNING:

@@ -30,6 +30,13 @@ from rclpy.validate_topic_name import validate_topic_name
 from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.msgdefs import MessageDefinitionError, canonical_type_name
 from softseq_ros.bag.writer import BagWriter, BagWriterError
+from softseq_ros.nodes.diagnostics import (
+    ERROR_LEVEL,
+    OK_LEVEL,
+    WARN_LEVEL,
+    DiagnosticsPublisher,
+    Health,
+)
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import build_nodes, exit_with_help, init_ros
 from softseq_ros.rig import contract
@@ -95,6 +102,7 @@ class Recorder(Node):
     """Subscribe to a list of topics and write everything received into one bag."""
 
     NODE_NAME = 'recorder'
+    DIAGNOSTIC_TASK = 'recorder'
     # What --help says of its topics: they are a parameter's, not the contract's.
     HELP_TOPICS = (
         'subscribes to the topics of its topics parameter, by default every topic of the '
@@ -151,6 +159,10 @@ class Recorder(Node):
                               compression=None if compression == 'none' else compression)
         self._subscriptions_by_topic: dict[str, Any] = {}
         self._reported: set[str] = set()
+        self.bytes_written = 0                 # CDR payload bytes handed to the bag
+        self.failed_topics: dict[str, str] = {}   # topic -> why it is not recorded
+        self.write_failures = 0
+        self.diagnostics = DiagnosticsPublisher(self, self.DIAGNOSTIC_TASK, self.health)
         self.get_logger().info(
             f'recording {len(self._wanted)} topics into {self._output}')
         # Wall-clock discovery: with use_sim_time the node clock stands still until /clock
@@ -188,6 +200,7 @@ class Recorder(Node):
                 self._subscribe(topic, type_name, [p.qos_profile for p in publishers
                                                    if p.topic_type == type_name])
             except (MessageDefinitionError, BagWriterError) as err:
+                self.failed_topics[topic] = str(err)
                 if topic not in self._reported:
                     self._reported.add(topic)
                     self.get_logger().error(f'not recording {topic}: {err}')
@@ -215,8 +228,38 @@ class Recorder(Node):
         if self._bag.closed:
             return
         received_ns = self.get_clock().now().nanoseconds
-        self._bag.write(topic, cdr_bytes, received_ns,
-                        int(info.get('source_timestamp') or received_ns))
+        try:
+            self._bag.write(topic, cdr_bytes, received_ns,
+                            int(info.get('source_timestamp') or received_ns))
+        except BagWriterError:
+            self.write_failures += 1
+            raise
+        self.bytes_written += len(cdr_bytes)
+
+    def health(self) -> Health:
+        """
+        The recording's health for /diagnostics: messages and bytes written, failures.
+
+        ERROR once the bag cannot be written on (a full disk: the message says what to run),
+        WARN while a topic cannot be recorded (its type not installed, say), else OK.
+        """
+        bag = self._bag
+        values: dict[str, object] = {
+            'output': str(self._output), 'messages_written': bag.message_count,
+            'bytes_written': self.bytes_written, 'write_failures': self.write_failures,
+            'topics_recorded': len(self._subscriptions_by_topic),
+            'topics_failed': len(self.failed_topics)}
+        if bag.failure is not None:
+            return Health(ERROR_LEVEL, bag.failure, values)
+        if self.failed_topics:
+            topic, why = next(iter(self.failed_topics.items()))
+            more = f' (and {len(self.failed_topics) - 1} more)' if len(self.failed_topics) > 1 \
+                else ''
+            return Health(WARN_LEVEL, f'not recording {topic}: {why}{more}', values)
+        if bag.closed:
+            return Health(OK_LEVEL, f'closed {self._output}', values)
+        return Health(OK_LEVEL, f'recording {len(self._subscriptions_by_topic)} topics into '
+                                f'{self._output}', values)
 
     def close_bag(self, log: bool = True) -> str | None:
         """

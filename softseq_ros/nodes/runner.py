@@ -192,6 +192,8 @@ def _topics_help(node_class: Callable[..., Node]) -> list[str]:
                  if node_name == getattr(node_class, 'NODE_NAME', None)), None)
     topics = [('publishes', topic) for topic in contract.RIG_TOPICS + (contract.CLOCK,)
               if topic.producer in (role, getattr(node_class, 'NODE_NAME', None))]
+    if hasattr(node_class, 'DIAGNOSTIC_TASK'):
+        topics.append(('publishes', contract.DIAGNOSTICS))
     topics += [('subscribes', topic) for topic in contract.consumed_by(role or '')]
     lines = []
     for verb, topic in topics:

@@ -21,12 +21,20 @@ from rclpy.node import Parameter
 from std_srvs.srv import Trigger
 
 from softseq_ros.nodes.core_node import CoreNode
+from softseq_ros.nodes.diagnostics import ERROR_LEVEL, OK_LEVEL, WARN_LEVEL, Health, worst
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
 from softseq_ros.rig.build import pump_core
 from softseq_ros.rig.model import actuator_model
-from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, Reply
+from softseq_ros.rig.pump import (
+    DEFAULT_FEEDBACK_TIMEOUT_S,
+    DEFAULT_MAX_PRESSURE_PA,
+    REACTIONS,
+    STOPPED,
+    Reply,
+)
+from softseq_ros.rig.values import WARNING
 from softseq_ros.rig.wire import NS_PER_S
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import legs_from_text
@@ -70,6 +78,7 @@ class SyringePumpNode(CoreNode):
     def __init__(self, **kwargs: Any) -> None:
         """Declare parameters (defaults from the scene), build the core, start the timer."""
         super().__init__(self.NODE_NAME, **kwargs)
+        self.last_gauge_pa: float | None = None   # the highest of the last feedback's
         scene = self.declare_scene()
         default = scene.pump.profile
         self.rate_hz = self.declare_number(
@@ -130,6 +139,34 @@ class SyringePumpNode(CoreNode):
                 f'{MAX_RUN_S:g} s ({longest_part(self.core.profile, "pump.")})')
         self.configured = True
 
+    DIAGNOSTIC_TASK = 'syringe pump'
+
+    def health(self) -> Health:
+        """
+        The pump's state, its relief valve and its feedback, for /diagnostics.
+
+        A stop the pump made by itself (relief valve, end stop) is an ERROR, a hold it made by
+        itself (no or untrusted feedback) a WARN; a state asked for (idle, running, held or
+        stopped by a service, finished) is OK. The node's own warnings count as in every node.
+        """
+        base = super().health()
+        core = self.core
+        reaction = REACTIONS[core.cause]
+        level = OK_LEVEL
+        if reaction.level == WARNING:
+            level = ERROR_LEVEL if reaction.state == STOPPED else WARN_LEVEL
+        values: dict[str, object] = {
+            'state': core.state, 'reason': core.reason, 'injected_m3': core.volume_m3,
+            'max_pressure_pa (gauge)': core.max_pressure_pa,
+            'max_injected_m3': core.max_injected_m3,
+            'open_loop': core.open_loop}
+        if self.last_gauge_pa is not None:
+            values['gauge_pressure_pa'] = self.last_gauge_pa
+            values['relief_margin_pa'] = core.max_pressure_pa - self.last_gauge_pa
+        values.update(base.values)
+        message = core.status if level != OK_LEVEL or base.level == OK_LEVEL else base.message
+        return Health(worst(level, base.level), message, values)
+
     @property
     def state(self) -> str:
         """The pump's state: idle, running, held, finished or stopped."""
@@ -163,6 +200,8 @@ class SyringePumpNode(CoreNode):
         # Field by field, not through the decoded value: that keeps one gauge pressure, and
         # a message whose pressures (effort) do not match its joints must be seen as such.
         stamp = msg.header.stamp
+        if msg.effort:
+            self.last_gauge_pa = max(msg.effort)
         self.send(self.core.feedback(self.now_ns(), stamp.sec * NS_PER_S + stamp.nanosec,
                                      tuple(msg.name), list(msg.position), list(msg.effort)))
 

@@ -117,6 +117,12 @@ TOPICS_BY_NAME: dict[str, Topic] = {topic.name: topic for topic in RIG_TOPICS}
 # The simulated clock is ROS's own (absolute by convention); QoS as rclpy's TimeSource takes it.
 CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', Qos(1, reliable=False), 'sim_clock', (),
               None, 'simulated time')
+# Absolute by ROS convention (the diagnostic aggregator listens there); every node publishes
+# its own status, named and with the hardware_id of its fully qualified name.
+DIAGNOSTICS = Topic(
+    '/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', Qos(10), 'every node', (), None,
+    "once a second, one DiagnosticStatus per node: level, message and values (SI); name "
+    "'<node>: <task>' and hardware_id the node's fully qualified name")
 
 
 def consumed_by(role: str) -> tuple[Topic, ...]:

@@ -155,6 +155,7 @@ class PumpCore:
         self.duration_s = profile.duration()
         self.state = IDLE
         self.reason = ''
+        self.cause = 'reset'           # the row of REACTIONS that gave the state
         self._elapsed_ns = 0           # run time accumulated before the current run
         self._running_since: int | None = None
         self._frozen_volume: float | None = None  # where a stop left the pump
@@ -178,6 +179,7 @@ class PumpCore:
         reaction = REACTIONS[cause]
         reason = reaction.reason.format(**fields)
         self.state, self.reason = reaction.state, reason
+        self.cause = cause
         status = PumpStatus(now, reaction.state, reason)
         self._out.append(Notice(self.role, reaction.level, f'pump {status.text}'))
         self._out.append(status)
