@@ -317,10 +317,12 @@ def _play(args: argparse.Namespace) -> int:
 
     # Held from before rclpy loads: a signal inside its import would end in an ImportError.
     with HeldSignals() as held:
-        from softseq_ros.nodes.player import play
+        from softseq_ros.nodes.player import parse_remaps, play
 
         result = play(str(args.bag), rate=args.rate, loop=args.loop, clock=args.clock,
-                      topics=args.topics, wait_s=args.wait_for_subscribers, held=held)
+                      topics=args.topics, wait_s=args.wait_for_subscribers, held=held,
+                      start_offset_s=args.start_offset, remap=parse_remaps(args.remap),
+                      qos_overrides_path=args.qos_profile_overrides_path)
     print(f'{args.bag}: {result.messages} messages replayed in {result.loops} pass(es)')
     return 0
 
@@ -490,7 +492,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
                           description='Publish every recorded message on its topic with its '
-                          'recorded timing and QoS, as recorded CDR.')
+                          'recorded timing and QoS, as recorded CDR. While it plays, the '
+                          'node softseq_player serves ~/pause, ~/resume, ~/toggle_paused and '
+                          '~/is_paused (std_srvs/Trigger) and takes its speed factor from '
+                          'its rate parameter (ros2 param set /softseq_player rate 2.0).')
     play.add_argument('bag', type=Path, help='bag directory')
     play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
@@ -498,6 +503,13 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument('--topics', nargs='+', help='only these topics (absolute names)')
     play.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='S',
                       help='wait up to S seconds for a subscriber on every topic first')
+    play.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                      help='start S seconds into the bag (each --loop pass too)')
+    play.add_argument('--remap', '-m', action='append', metavar='FROM:=TO',
+                      help='publish the recorded topic FROM as TO (repeatable)')
+    play.add_argument('--qos-profile-overrides-path', type=Path, metavar='FILE',
+                      help="QoS per recorded topic, in ros2 bag play's YAML form, instead of "
+                      'what the bag says was offered')
     play.set_defaults(handler=_play)
 
     recover = sub.add_parser('recover', help='make a killed recording readable again',

@@ -9,6 +9,18 @@ order, spaced as recorded divided by ``rate``; with ``clock`` the bag's time is 
 ``/clock`` (rosgraph_msgs/Clock) before each message, so nodes with ``use_sim_time`` follow
 the recording.
 
+As ``ros2 bag play`` does, a replay can start ``start_offset_s`` into the bag, publish a topic
+under another name (``remap``: recorded name -> new name), take the QoS of some topics from
+an overrides file (``ros2 bag play --qos-profile-overrides-path``'s YAML: recorded topic name
+-> history, depth, reliability, durability, deadline, lifespan, liveliness,
+liveliness_lease_duration, avoid_ros_namespace_conventions), and be paused, resumed and
+sped up while it runs. rosbag2's own service types (rosbag2_interfaces) are not installed
+here, so its services take the std_srvs forms: ``~/pause``, ``~/resume``,
+``~/toggle_paused`` and ``~/is_paused`` (std_srvs/Trigger; ``is_paused`` answers in
+``success``) and the rate is the node's ``rate`` parameter, set at run time as
+``ros2 param set /softseq_player rate 2.0`` (rosbag2's ``~/set_rate`` and ``~/get_rate``).
+A change of rate or a pause keeps the bag time reached: the replay goes on from there.
+
 SIGINT and SIGTERM end a replay as they end ``softseq run``: held while rclpy loads and the
 publishers are made (a signal inside an import would leave a half-loaded module and a
 misleading error), then acting between two messages; the replay closes its node and context
@@ -18,17 +30,37 @@ background job) still stops it, as it stops ``softseq run``.
 
 from dataclasses import dataclass
 import importlib
+import math
+from pathlib import Path
 import threading
 import time
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping
 
 from mcap.reader import make_reader
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.duration import Duration
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rclpy.validate_topic_name import validate_topic_name
 from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
 import yaml
 
 from softseq_ros.bag.arrays import BagArrays, open_bag
+from softseq_ros.bag.reader import bag_summary
 from softseq_ros.errors import UserError
 from softseq_ros.rig import contract
 from softseq_ros.stopping import HeldSignals
@@ -45,8 +77,172 @@ _DURABILITY = {'transient_local': DurabilityPolicy.TRANSIENT_LOCAL,
                2: DurabilityPolicy.VOLATILE}
 
 
+# The largest rate a replay takes (a rate is a speed factor; 1e6 plays a day in 0.1 s).
+MAX_RATE = 1.0e6
+_HISTORY = {'keep_last': HistoryPolicy.KEEP_LAST, 'keep_all': HistoryPolicy.KEEP_ALL,
+            'system_default': HistoryPolicy.SYSTEM_DEFAULT}
+_RELIABILITY_NAMES = {'reliable': ReliabilityPolicy.RELIABLE,
+                      'best_effort': ReliabilityPolicy.BEST_EFFORT,
+                      'system_default': ReliabilityPolicy.SYSTEM_DEFAULT}
+_DURABILITY_NAMES = {'transient_local': DurabilityPolicy.TRANSIENT_LOCAL,
+                     'volatile': DurabilityPolicy.VOLATILE,
+                     'system_default': DurabilityPolicy.SYSTEM_DEFAULT}
+_LIVELINESS = {'automatic': LivelinessPolicy.AUTOMATIC,
+               'manual_by_topic': LivelinessPolicy.MANUAL_BY_TOPIC,
+               'system_default': LivelinessPolicy.SYSTEM_DEFAULT}
+_DURATION_KEYS = ('deadline', 'lifespan', 'liveliness_lease_duration')
+
+
 class PlayError(UserError):
     """A bag or an option that the player cannot use."""
+
+
+def rate_reason(rate: object) -> str | None:
+    """Why ``rate`` cannot be a replay's speed factor, or None."""
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)):
+        return f'rate must be a number, got {rate!r}'
+    if not (0.0 < rate <= MAX_RATE):
+        return f'rate must be > 0 and <= {MAX_RATE:g}, got {rate}'
+    return None
+
+
+def parse_remaps(rules: list[str] | None) -> dict[str, str]:
+    """``FROM:=TO`` rules as a dict; PlayError naming the rule that is malformed."""
+    remaps: dict[str, str] = {}
+    for rule in rules or []:
+        source, separator, target = rule.partition(':=')
+        if not separator or not source or not target:
+            raise PlayError(f'--remap {rule}: expected FROM:=TO, e.g. /pump/command:=/replayed')
+        if source in remaps:
+            raise PlayError(f'--remap {rule}: {source} is remapped twice')
+        remaps[source] = target
+    return remaps
+
+
+def _qos_duration(path: str, topic: str, key: str, value: object) -> Duration:
+    if not isinstance(value, Mapping) or set(value) - {'sec', 'nsec'} or not all(
+            isinstance(value.get(k, 0), int) and value.get(k, 0) >= 0 for k in ('sec', 'nsec')):
+        raise PlayError(f'{path}: {topic}.{key}: expected {{sec: S, nsec: N}} with '
+                        f'non-negative integers, got {value!r}')
+    return Duration(seconds=value.get('sec', 0), nanoseconds=value.get('nsec', 0))
+
+
+def qos_overrides(path: str | Path, topics: list[str] | set[str]) -> dict[str, QoSProfile]:
+    """
+    The QoS profiles of a ``--qos-profile-overrides-path`` file, by recorded topic name.
+
+    The file is rosbag2's: a mapping of topic names to profiles whose policies are named as
+    rmw names them (``reliability: best_effort``, ``durability: transient_local``, ...);
+    what a profile leaves out keeps rclpy's default. PlayError names the file, the topic and
+    the key of anything that cannot be used, and a topic the bag does not hold.
+    """
+    path = str(path)
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+    except OSError as err:
+        raise PlayError(f'{path}: cannot read the QoS overrides ({err.strerror or err})') \
+            from None
+    except yaml.YAMLError as err:
+        raise PlayError(f'{path}: not YAML ({" ".join(str(err).split())})') from None
+    if not isinstance(data, Mapping):
+        raise PlayError(f'{path}: expected a mapping of topic names to QoS profiles')
+    profiles = {}
+    for topic, fields in data.items():
+        if topic not in topics:
+            raise PlayError(f'{path}: topic {topic}: not in the bag (its topics: '
+                            f'{", ".join(sorted(topics))})')
+        if not isinstance(fields, Mapping):
+            raise PlayError(f'{path}: {topic}: expected a mapping of QoS policies')
+        options: dict[str, Any] = {'depth': 10}
+        for key, value in fields.items():
+            names = {'history': _HISTORY, 'reliability': _RELIABILITY_NAMES,
+                     'durability': _DURABILITY_NAMES, 'liveliness': _LIVELINESS}.get(key)
+            if names is not None:
+                if value not in names:
+                    raise PlayError(f'{path}: {topic}.{key}: {value!r} is none of '
+                                    f'{", ".join(names)}')
+                options[key] = names[value]
+            elif key == 'depth':
+                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                    raise PlayError(f'{path}: {topic}.depth: expected an integer >= 0, '
+                                    f'got {value!r}')
+                options['depth'] = value
+            elif key in _DURATION_KEYS:
+                options[key] = _qos_duration(path, topic, key, value)
+            elif key == 'avoid_ros_namespace_conventions':
+                if not isinstance(value, bool):
+                    raise PlayError(f'{path}: {topic}.{key}: expected true or false, '
+                                    f'got {value!r}')
+                options[key] = value
+            else:
+                raise PlayError(f'{path}: {topic}.{key}: unknown QoS policy (expected '
+                                f'history, depth, reliability, durability, deadline, '
+                                'lifespan, liveliness, liveliness_lease_duration or '
+                                'avoid_ros_namespace_conventions)')
+        profiles[topic] = QoSProfile(**options)
+    return profiles
+
+
+class PlaybackClock:
+    """
+    Bag time against wall time, at a rate that can change and with pauses.
+
+    A change of rate and a pause keep the bag time reached; thread safe (services and the
+    rate parameter change it from the executor thread while the replay waits on it).
+    """
+
+    def __init__(self, rate: float) -> None:
+        """A clock at ``rate``, not started."""
+        self._changed = threading.Condition()
+        self.rate = float(rate)
+        self.paused = False
+        self._wall = time.monotonic()
+        self._bag_ns = 0
+
+    def start(self, bag_ns: int) -> None:
+        """Bag time ``bag_ns`` is now."""
+        with self._changed:
+            self._wall, self._bag_ns = time.monotonic(), int(bag_ns)
+            self._changed.notify_all()
+
+    def _now_locked(self) -> float:
+        if self.paused:
+            return float(self._bag_ns)
+        return self._bag_ns + (time.monotonic() - self._wall) * 1e9 * self.rate
+
+    def now_ns(self) -> float:
+        """The bag time reached [ns]."""
+        with self._changed:
+            return self._now_locked()
+
+    def set_rate(self, rate: float) -> None:
+        """Go on at ``rate`` from the bag time reached."""
+        with self._changed:
+            self._bag_ns, self._wall = self._now_locked(), time.monotonic()
+            self.rate = float(rate)
+            self._changed.notify_all()
+
+    def set_paused(self, paused: bool) -> bool:
+        """Pause or resume; True when that changed anything."""
+        with self._changed:
+            if paused == self.paused:
+                return False
+            self._bag_ns, self._wall = self._now_locked(), time.monotonic()
+            self.paused = paused
+            self._changed.notify_all()
+            return True
+
+    def wait_until(self, bag_ns: int, poll_s: float) -> bool:
+        """Wait at most ``poll_s`` for bag time ``bag_ns``; True once it is reached."""
+        with self._changed:
+            if self.paused:
+                self._changed.wait(poll_s)
+                return False
+            left = (bag_ns - self._now_locked()) * 1e-9 / self.rate
+            if left <= 0.0:
+                return True
+            self._changed.wait(min(left, poll_s))
+            return not self.paused and self._now_locked() >= bag_ns
 
 
 def message_class(type_name: str) -> Any:
@@ -91,31 +287,122 @@ class PlayResult:
 class BagPlayer(Node):
     """Publishes a bag's messages on their topics; :meth:`play` runs the replay."""
 
+    NODE_NAME = 'softseq_player'
+    # Its std_srvs/Trigger services (~/name), as ros2 bag play's of the same names.
+    SERVICES: dict[str, str] = {
+        'pause': 'pause the replay (the bag time stands still)',
+        'resume': 'go on from where it was paused',
+        'toggle_paused': 'pause when playing, resume when paused',
+        'is_paused': 'success is true while paused'}
+
     def __init__(self, bag: str, *, rate: float = 1.0, loop: bool = False,
                  clock: bool = False, topics: list[str] | None = None,
+                 start_offset_s: float = 0.0, remap: Mapping[str, str] | None = None,
+                 qos_overrides_path: str | Path | None = None,
                  **node_options: Any) -> None:
         """Open the bag and create one publisher per topic (refuses bad options first)."""
-        if not rate > 0.0:
-            raise PlayError(f'rate must be > 0, got {rate}')
+        reason = rate_reason(rate)
+        if reason is not None:
+            raise PlayError(reason)
+        if not (isinstance(start_offset_s, (int, float)) and math.isfinite(start_offset_s)
+                and start_offset_s >= 0.0):
+            raise PlayError(f'start offset must be a finite number of seconds >= 0, '
+                            f'got {start_offset_s}')
         self.bag: BagArrays = open_bag(bag)
         unknown = sorted(set(topics or []) - set(self.bag.channels))
         if unknown:
             raise PlayError(f'{bag}: no topic {", ".join(unknown)} in this bag')
-        super().__init__('softseq_player', **node_options)
-        self.rate = float(rate)
-        self.loop = bool(loop)
         self.topics = list(topics) if topics else sorted(self.bag.channels)
+        remap = dict(remap or {})
+        for source, target in remap.items():
+            if source not in self.topics:
+                raise PlayError(f'--remap {source}:={target}: no topic {source} among those '
+                                f'played ({", ".join(self.topics)})')
+            try:
+                validate_topic_name(target)
+            except InvalidTopicNameException as err:
+                raise PlayError(f'--remap {source}:={target}: {target!r} is not a valid topic '
+                                f'name ({str(err).splitlines()[0]})') from None
+        overrides = qos_overrides(qos_overrides_path, self.topics) \
+            if qos_overrides_path is not None else {}
+        summary = bag_summary(bag)
+        self.start_ns = summary.start_ns + int(round(start_offset_s * 1e9))
+        if start_offset_s > 0.0 and self.start_ns > summary.end_ns:
+            raise PlayError(f"{bag}: start offset {start_offset_s:g} s is past the bag's end "
+                            f'({summary.duration_ns * 1e-9:.9g} s after its start)')
+        super().__init__(self.NODE_NAME, **node_options)
+        self.loop = bool(loop)
+        self.remap = remap
+        self.clock_source = PlaybackClock(rate)
         self.publishers_by_topic = {}
         for topic in self.topics:
             info = self.bag.channels[topic]
             self.publishers_by_topic[topic] = self.create_publisher(
-                message_class(info.type_name), topic,
-                qos_from_bag(info.offered_qos_profiles, topic))
+                message_class(info.type_name), remap.get(topic, topic),
+                overrides.get(topic) or qos_from_bag(info.offered_qos_profiles, topic))
         self.clock_publisher = self.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS) \
             if clock else None
         self._stop = threading.Event()
         # Stop signals held by the caller (HeldSignals.pending): non-empty ends the replay.
         self.signals: list[int] = []
+        self.add_on_set_parameters_callback(self._check_rate)
+        self.declare_parameter('rate', float(rate), ParameterDescriptor(
+            type=ParameterType.PARAMETER_DOUBLE, dynamic_typing=True,
+            description='Speed factor of the replay (integer or double); '
+            'set at run time to change it from the bag time reached.',
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=MAX_RATE)]))
+        self.add_post_set_parameters_callback(self._rate_changed)
+        for name in self.SERVICES:
+            self.create_service(Trigger, f'~/{name}', getattr(self, f'_serve_{name}'))
+
+    @property
+    def rate(self) -> float:
+        """The replay's speed factor now."""
+        return self.clock_source.rate
+
+    @property
+    def paused(self) -> bool:
+        """True while the replay is paused."""
+        return self.clock_source.paused
+
+    def _check_rate(self, parameters: list[Parameter]) -> SetParametersResult:
+        for parameter in parameters:
+            if parameter.name == 'rate':
+                reason = rate_reason(parameter.value)
+                if reason is not None:
+                    return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _rate_changed(self, parameters: list[Parameter]) -> None:
+        for parameter in parameters:
+            if parameter.name == 'rate':
+                self.clock_source.set_rate(float(parameter.value))
+
+    def _answer(self, response: Trigger.Response, success: bool,
+                message: str) -> Trigger.Response:
+        response.success, response.message = success, message
+        return response
+
+    def _serve_pause(self, _request: Trigger.Request,
+                     response: Trigger.Response) -> Trigger.Response:
+        changed = self.clock_source.set_paused(True)
+        return self._answer(response, True, 'paused' if changed else 'already paused')
+
+    def _serve_resume(self, _request: Trigger.Request,
+                      response: Trigger.Response) -> Trigger.Response:
+        changed = self.clock_source.set_paused(False)
+        return self._answer(response, True, 'playing' if changed else 'already playing')
+
+    def _serve_toggle_paused(self, _request: Trigger.Request,
+                             response: Trigger.Response) -> Trigger.Response:
+        paused = not self.clock_source.paused
+        self.clock_source.set_paused(paused)
+        return self._answer(response, True, 'paused' if paused else 'playing')
+
+    def _serve_is_paused(self, _request: Trigger.Request,
+                         response: Trigger.Response) -> Trigger.Response:
+        paused = self.clock_source.paused
+        return self._answer(response, paused, 'paused' if paused else 'playing')
 
     def stop(self) -> None:
         """Ask a running :meth:`play` to end after the current message."""
@@ -123,15 +410,6 @@ class BagPlayer(Node):
 
     def _stopped(self) -> bool:
         return bool(self.signals) or self._stop.is_set()
-
-    def _sleep(self, seconds: float) -> None:
-        """Sleep, looking at the held stop signals at least every SIGNAL_POLL_S."""
-        deadline = time.monotonic() + seconds
-        while not self._stopped():
-            left = deadline - time.monotonic()
-            if left <= 0.0:
-                return
-            self._stop.wait(min(left, SIGNAL_POLL_S))
 
     def wait_for_subscribers(self, timeout_s: float) -> bool:
         """Wait until every played topic has a subscriber (or the timeout); True if so."""
@@ -147,26 +425,25 @@ class BagPlayer(Node):
         for file in self.bag.files:
             with open(file, 'rb') as stream:
                 for _, channel, message in make_reader(stream).iter_messages(
-                        topics=list(wanted), log_time_order=True):
+                        topics=list(wanted), starting_at=self.start_ns, log_time_order=True):
                     yield channel.topic, message.log_time, message.data
+
+    def _wait_for(self, log_time: int) -> bool:
+        """Wait until bag time ``log_time`` (paused time not counting); False when stopped."""
+        while not self._stopped():
+            if self.clock_source.wait_until(log_time, SIGNAL_POLL_S):
+                return True
+        return False
 
     def play(self) -> PlayResult:
         """Replay until the bag ends (or forever with ``loop``, until :meth:`stop`)."""
         result = PlayResult()
         while not self._stopped():
-            start_wall = time.monotonic()
-            first_log = None
+            # Each pass starts at the start offset, as ros2 bag play's loop does.
+            self.clock_source.start(self.start_ns)
             for topic, log_time, data in self._messages():
-                if self._stopped():
+                if self._stopped() or not self._wait_for(log_time):
                     break
-                if first_log is None:
-                    first_log = log_time
-                due = start_wall + (log_time - first_log) * 1e-9 / self.rate
-                delay = due - time.monotonic()
-                if delay > 0.0:
-                    self._sleep(delay)
-                    if self._stopped():
-                        break
                 if self.clock_publisher is not None:
                     stamp = Clock()
                     stamp.clock.sec, stamp.clock.nanosec = divmod(int(log_time), 1_000_000_000)
@@ -181,7 +458,9 @@ class BagPlayer(Node):
 
 def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
          topics: list[str] | None = None, wait_s: float = 0.0,
-         args: list[str] | None = None, held: HeldSignals | None = None) -> PlayResult:
+         args: list[str] | None = None, held: HeldSignals | None = None, *,
+         start_offset_s: float = 0.0, remap: Mapping[str, str] | None = None,
+         qos_overrides_path: str | Path | None = None) -> PlayResult:
     """
     Run a replay in its own rclpy context until it ends or SIGINT/SIGTERM.
 
@@ -192,7 +471,9 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
     """
     if held is None:
         with HeldSignals() as own:
-            return play(bag, rate, loop, clock, topics, wait_s, args, own)
+            return play(bag, rate, loop, clock, topics, wait_s, args, own,
+                        start_offset_s=start_offset_s, remap=remap,
+                        qos_overrides_path=qos_overrides_path)
     held.check()
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -203,7 +484,8 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
     player = None
     try:
         player = BagPlayer(bag, rate=rate, loop=loop, clock=clock, topics=topics,
-                           context=context)
+                           start_offset_s=start_offset_s, remap=remap,
+                           qos_overrides_path=qos_overrides_path, context=context)
         player.signals = held.pending
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(player)
