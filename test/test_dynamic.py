@@ -212,11 +212,31 @@ def test_as_the_pump_slows_the_dynamic_path_converges_to_the_quasistatic_one():
 
 
 STEP_INDEPENDENCE = 1e-6   # of the volume scale, at every output, snap-throughs included
+# A snap-through's duration, fluid moved and peak exchange, relative; its start and end, as a
+# share of its duration: default tolerance against one 100x tighter.
+SNAP_STEP_INDEPENDENCE = 1e-4
+
+
+def snap_numbers(snaps) -> np.ndarray:
+    """Per snap: start, end [s], duration [s], fluid moved [m^3], peak exchange [m^3/s]."""
+    return np.array([[s.start_s, s.end_s, s.duration_s, s.fluid_moved_m3,
+                      s.peak_exchange_m3_per_s] for s in snaps])
+
+
+def snap_distance(snaps, reference) -> np.ndarray:
+    """Per number, the largest difference over the snaps: relative, the times per duration."""
+    ours, theirs = snap_numbers(snaps), snap_numbers(reference)
+    assert ours.shape == theirs.shape == (2, 5)
+    gap = np.abs(ours - theirs)
+    gap[:, :2] /= theirs[:, [2]]
+    gap[:, 2:] /= np.abs(theirs[:, 2:])
+    return gap.max(axis=0)
 
 
 def test_the_result_does_not_depend_on_the_step_the_tolerance_sets():
     # The Fig. 1 asymmetric pair through both snap-throughs, a channel with inertance, at the
-    # default tolerance and at one 100x tighter: the integrator's steps differ, the answer not.
+    # default tolerance and at one 100x tighter: the integrator's steps differ, the answer not,
+    # the snap-throughs' timing included (located on the steps' polynomials, not at the steps).
     from softseq_ros.quasistatic.equilibrium import EquilibriumMap
     from softseq_ros.scene.network import DEFAULT_NETWORK_RTOL
 
@@ -232,10 +252,39 @@ def test_the_result_does_not_depend_on_the_step_the_tolerance_sets():
         for injected in grid:
             flow.advance(injected / 1e-7)
             volumes.append(flow.volumes())
-        runs.append((np.array(volumes), flow.steps))
-    (default, default_steps), (tight, tight_steps) = runs
+        runs.append((np.array(volumes), flow.steps, flow.take_snaps()))
+    (default, default_steps, default_snaps), (tight, tight_steps, tight_snaps) = runs
     assert tight_steps > 2 * default_steps
     assert np.max(np.abs(default - tight)) < STEP_INDEPENDENCE * emap.v_scale
+    assert np.all(snap_distance(default_snaps, tight_snaps) < SNAP_STEP_INDEPENDENCE)
+
+
+def test_snap_through_numbers_converge_to_a_tight_reference_as_the_tolerance_tightens():
+    # The benchmark's network (bench/bench_dynamic.py): the Fig. 1 asymmetric pair, a 10 mm
+    # channel of 0.4 mm radius, the scene's 0.05 mL/s. Measured at the steps, the second snap's
+    # duration went from 14.7 s at rtol 1e-2 to 11.9 s at 1e-6 and 10.9 s at 1e-10; on the
+    # polynomials it is 10.77 s at every tolerance to a few parts in 1e4 or better.
+    from softseq_ros.scene.network import DEFAULT_NETWORK_RTOL
+
+    segments = load_scene('fig1_asymmetric').segments
+    flow_rate, end = 5e-8, 42.0 * ML / 5e-8
+
+    def snaps(rtol: float) -> list:
+        flow = NetworkFlow(segments, NetworkSettings(Fluid(), None, (Tube(0.01, 0.4e-3),),
+                                                     rtol=rtol))
+        flow.set_flow(flow_rate)
+        flow.advance(end)
+        return flow.take_snaps()
+
+    reference = snaps(1e-11)
+    assert snap_numbers(reference)[1, 2] == pytest.approx(10.77, abs=0.01)
+    loose, default, tight = (snap_distance(snaps(rtol), reference)
+                             for rtol in (1e-3, DEFAULT_NETWORK_RTOL, 1e-9))
+    # Each number: tenfold closer from 1e-3 to the default 1e-6, a thousandfold at 1e-9,
+    # where it is within 1e-6 of the reference.
+    assert np.all(default < loose / 10), (loose, default)
+    assert np.all(tight < loose / 1000) and np.all(tight < 1e-6), (loose, tight)
+    assert np.all(default < SNAP_STEP_INDEPENDENCE)
 
 
 def test_a_snap_through_is_an_event_with_a_start_the_fluid_it_moves_and_a_duration():

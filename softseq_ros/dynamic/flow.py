@@ -22,14 +22,15 @@ plain floats for a state of one entry, :class:`_ScalarRadau`; with direct calls 
 comparison. :meth:`NetworkFlow.advance_through` reads many output times at once, each step's
 outputs from one evaluation of its interpolant.
 
-Volumes are checked after every step: a segment pushed past the end of its curve ends the
-integration with :class:`NetworkDomainError` (the quasi-static solver refuses such a volume too).
-A segment drawn below its rest volume collapses (a stiff line below its rest pressure), so a
-fast withdrawal pulls the far segments' fluid through the channels instead of failing; only
-suction beyond vacuum is refused.
+What happens within a step (a segment leaving its range or passing a fold of its curve, each
+channel's peak flow, the snap-throughs) is found on the step's collocation polynomial, located
+in time (softseq_ros.dynamic.events), and only up to the time asked. A segment pushed past the
+end of its curve ends the integration with :class:`NetworkDomainError` at the located instant
+(the quasi-static solver refuses such a volume too). A segment drawn below its rest volume
+collapses (a stiff line below its rest pressure), so a fast withdrawal pulls the far segments'
+fluid through the channels instead of failing; only suction beyond vacuum is refused.
 """
 
-from dataclasses import dataclass
 import math
 from typing import Callable, Sequence
 
@@ -38,6 +39,18 @@ from numpy.typing import NDArray
 from scipy.integrate import DenseOutput, Radau
 from scipy.linalg.lapack import dgetrf, dgetrs, zgetrf, zgetrs
 
+from softseq_ros.dynamic.events import (
+    EMPTYING,
+    FILLING,
+    DynamicSnap,
+    FoldCrossing,
+    SnapWatcher,
+    StepCurve,
+    crossings,
+    exchange_flow,
+    first_beyond,
+    segment_folds,
+)
 from softseq_ros.dynamic.network import TubeLaw, tube_law
 from softseq_ros.errors import UserError
 from softseq_ros.scene.network import NetworkSettings
@@ -69,7 +82,16 @@ INTEGRATORS = ('radau', 'scipy-radau')
 
 
 class NetworkDomainError(UserError):
-    """A segment's volume left the range its model covers while fluid moved."""
+    """
+    A segment's volume left the range its model covers while fluid moved.
+
+    ``located``: at an instant found on the step's polynomial (the network is left there).
+    """
+
+    def __init__(self, message: str, located: bool = False) -> None:
+        super().__init__(message)
+        self.located = located
+        self.rows: FloatArray | None = None
 
 
 class NetworkFlow:
@@ -95,6 +117,8 @@ class NetworkFlow:
         self.supply = None if network.supply is None else tube_law(network.supply,
                                                                    network.fluid)
         self.inertial = [j for j, law in enumerate(self.laws) if law.inertance > 0.0]
+        # The segment the syringe feeds (through the supply line, if any): the base.
+        self.feed = 0
         self.rest = np.array([s.rest_volume for s in self.segments])
         self.full = np.array([s.max_volume for s in self.segments])
         self.rest_total = float(self.rest.sum())
@@ -111,6 +135,7 @@ class NetworkFlow:
         self.steps = 0
         self.snaps = SnapWatcher(self.v_scale)
         self.new_snaps: list[DynamicSnap] = []
+        self.new_fold_crossings: list[FoldCrossing] = []
         self._origin = (0.0, 0.0)   # (time, injected) where the current supply flow began
         self._solver: Radau | None = None
         self._dense = None
@@ -119,11 +144,27 @@ class NetworkFlow:
         self._pressure_of = [s.pressure for s in self.segments]
         self._bounds = list(zip(self.rest.tolist(), self.full.tolist()))
         self._collapse = [COLLAPSE_STIFFENING * _mean_stiffness(s) for s in self.segments]
-        # Whether the last watched step had fluid moving between the segments (a transient),
-        # and a step end the integrator reached beyond the time asked, watched once time gets
-        # there (unless the flow changes first: then that step never happens).
+        # The levels a segment's volume must not pass: the end of its curve (with round-off's
+        # slack: a programme may end exactly there) and, below its rest volume, where its
+        # collapse reaches vacuum; and the folds of its curve, which are reported.
+        slack = 1e-9 * self.v_scale
+        self._upper = [hi + slack for _, hi in self._bounds]
+        self._lower = [lo + min(VACUUM_GAUGE_PA - float(pressure(lo)), 0.0) / collapse
+                       for pressure, (lo, _), collapse in zip(self._pressure_of, self._bounds,
+                                                              self._collapse)]
+        self._folds = [segment_folds(s) for s in self.segments]
+        # Whether the last watched step had fluid moving between the segments (a transient).
         self.exchanging = False
-        self._unwatched = False
+        # The integrator's last step as the segments' volume cubics, how far it has been
+        # watched (up to the time asked: beyond it the flow may change first, and then that
+        # part of the step never happens), and the first instant in it where a segment leaves
+        # its range (inf: none), with why.
+        self._curve: StepCurve | None = None
+        self._watched_to = 0.0
+        self._leaves_at = math.inf
+        self._leaves_why = ''
+        # The next stretch watched starts where the flow or the state changed at once.
+        self._fresh = False
         self._steady = [None if law.inertance > 0.0 else law.flow for law in self.laws]
         # The last two balances computed, keyed by (t, state): Radau evaluates the rates at
         # each accepted step's end, which the step's checks need again (the other entry
@@ -258,31 +299,33 @@ class NetworkFlow:
         changed = abs(flow - self.flow) > SAME_FLOW * max(abs(flow), abs(self.flow))
         if changed or self._solver is None:
             self._materialise()
+            self._end_integration()
             self.flow = float(flow)
             self._origin = (self.t, self.injected)
-            self._solver = None
             if changed:
                 self._restart_watch()
 
     def inject_now(self, volume: float) -> None:
-        """Put ``volume`` [m^3] into the base segment at once (a command that came late)."""
+        """Put ``volume`` [m^3] into the segment the pump feeds at once (a late command)."""
         self._materialise()
+        self._end_integration()
         self.y = self.y.copy()
-        self.y[0] += volume
+        if self.feed < self.n - 1:
+            # The tip's volume follows from the injected volume by mass.
+            self.y[self.feed] += volume
         self.injected += volume
         self._origin = (self.t, self.injected)
-        self._solver = None
         self._now = None
         if abs(volume) > JUMP_SHARE * self.v_scale:
             self._restart_watch()
 
     def set_volumes(self, volumes: Sequence[float], injected: float) -> None:
         """Put the segments at ``volumes`` at rest (no channel flow): a resume."""
+        self._end_integration()
         self.y = np.concatenate([np.asarray(volumes[:-1], dtype=float),
                                  np.zeros(len(self.inertial))])
         self.injected = float(injected)
         self._origin = (self.t, self.injected)
-        self._solver = None
         self._now = None
         self._restart_watch()
 
@@ -290,9 +333,11 @@ class NetworkFlow:
         """
         Integrate to time ``t`` [s] with the current supply flow.
 
-        The steps are watched (domain, snap-throughs, Reynolds numbers) up to ``t`` only: the
-        integrator's last step may end beyond it, with a flow that a command at ``t`` changes.
-        A :class:`NetworkDomainError` leaves the state at the last instant reached.
+        The steps are watched (fold crossings, snap-throughs, Reynolds numbers) up to ``t``
+        only: the integrator's last step may end beyond it, with a flow that a command at
+        ``t`` changes. A segment that leaves its range before ``t`` raises
+        :class:`NetworkDomainError` at the instant located on the step's polynomial, and
+        leaves the network there.
         """
         if t <= self.t:
             return
@@ -301,15 +346,16 @@ class NetworkFlow:
             # The state now lies in the step about to be left behind.
             self._materialise()
         try:
-            if self._unwatched and solver.t <= t:
-                self._unwatched = False
-                self._after_step(solver.t, solver.y)
+            if self._leaves_at <= t:
+                self._refuse_at_exit()
+            if self._watched_to < solver.t <= t:
+                self._watch_step(solver)
             while solver.t < t:
                 self._step(solver)
+                if self._leaves_at <= t:
+                    self._refuse_at_exit()
                 if solver.t <= t:
-                    self._after_step(solver.t, solver.y)
-                else:
-                    self._unwatched = True
+                    self._watch_step(solver)
         except NetworkDomainError:
             # The next call starts again from the last instant reached.
             self._solver = None
@@ -329,11 +375,21 @@ class NetworkFlow:
             self._solver = self._new_solver()
             self._dense = None
             self._recent = []
-            self._unwatched = False
+            self._curve = None
+            self._watched_to = self.t
+            self._leaves_at = math.inf
         return self._solver
 
+    def _end_integration(self) -> None:
+        """The present integration ends now: the part of its last step up to now happened."""
+        if self._curve is not None and self._watched_to < self.t:
+            self._watch(self.t, self._curve.x_of(self.t))
+        self._solver = None
+        self._curve = None
+        self._leaves_at = math.inf
+
     def _step(self, solver: 'Radau | _ScalarRadau') -> None:
-        """One integrator step; its interpolant is fetched only when an output falls inside."""
+        """One integrator step, its volumes as cubics, and where a segment leaves its range."""
         message = solver.step()
         if solver.status == 'failed':
             raise NetworkDomainError(f'the network integration failed at {solver.t:.6g} s: '
@@ -341,6 +397,72 @@ class NetworkFlow:
         self.steps += 1
         # A step that passes no output, or whose end is the output, needs no interpolant.
         self._dense = _PENDING
+        curve = self._curve = self._step_curve(solver)
+        self._watched_to = curve.t_old
+        self._leaves_at, self._leaves_why = self._first_exit(curve)
+
+    def _step_curve(self, solver: 'Radau | _ScalarRadau') -> StepCurve:
+        """The last step's continuous solution (its collocation cubic), as segment volumes."""
+        if isinstance(solver, _ScalarRadau):
+            t_old, h, start, cubic = solver.sol
+            starts, cubics = [start], [cubic]
+        else:
+            if self._dense is _PENDING:
+                self._dense = _Interpolant(solver.dense_output())
+            dense = self._dense
+            t_old, h = dense.dense.t_old, dense.dense.h
+            starts = dense.start[:self.n - 1]
+            cubics = [tuple(row) for row in dense.rows[:self.n - 1]]
+        # The tip's volume by mass: the rest volumes and what was injected, less the others.
+        injected = self._injected_at(t_old)
+        tip_start = self.rest_total + injected - sum(starts)
+        tip = (self.flow * h - sum(q[0] for q in cubics), -sum(q[1] for q in cubics),
+               -sum(q[2] for q in cubics))
+        return StepCurve(t_old, h, (*starts, tip_start), (*cubics, tip), self.flow, self.feed,
+                         injected)
+
+    def _first_exit(self, curve: StepCurve) -> tuple[float, str]:
+        """The first instant in a step where a segment leaves its range (inf: none), and why."""
+        first, why = math.inf, ''
+        for i, (start, cubic) in enumerate(zip(curve.starts, curve.cubics)):
+            for level, sign, kind in ((self._upper[i], 1.0, 'end'),
+                                      (self._lower[i], -1.0, 'vacuum')):
+                x = first_beyond(start, cubic, 0.0, 1.0, level, sign)
+                if x is not None and curve.time(x) < first:
+                    first, why = curve.time(x), f'{kind} {i}'
+        return first, why
+
+    def _refuse_at_exit(self) -> None:
+        """
+        A segment leaves its range at the located instant: the network stops there, refusing.
+
+        What happened up to that instant is watched; the state is the one at that instant.
+        """
+        t, curve = self._leaves_at, self._curve
+        x = curve.x_of(t)
+        self._watch(t, x)
+        if self._dense is _PENDING:
+            self._dense = _Interpolant(self._solver.dense_output())
+        self.y = np.asarray(self._dense(t), dtype=float)
+        self.t = t
+        self.injected = curve.injected_at(x)
+        self._origin = (self.t, self.injected)
+        self._now = None
+        kind, i = self._leaves_why.split()
+        segment = self.segments[int(i)]
+        volume = curve.volumes(x)[int(i)]
+        self._solver = None
+        self._curve = None
+        self._leaves_at = math.inf
+        if kind == 'end':
+            raise NetworkDomainError(
+                f'segment {segment.name} passes the end of its curve at {t:.6g} s '
+                f'({volume:.6g} m^3, injected {self.injected:.6g} m^3)', located=True)
+        raise NetworkDomainError(
+            f'segment {segment.name} collapses under suction beyond vacuum at {t:.6g} s '
+            f'({volume:.6g} m^3, rest {self.rest[int(i)]:.6g} m^3, injected '
+            f'{self.injected:.6g} m^3): the syringe draws faster than the channels let the '
+            'fluid follow', located=True)
 
     def advance_through(self, times: Sequence[float] | FloatArray) -> FloatArray:
         """
@@ -349,8 +471,9 @@ class NetworkFlow:
         The same steps, watching and states as :meth:`advance` to each time in turn, to the
         bit, without a call per time: the times a step passes are read from its interpolant
         at once. Times at or before now read the state now; afterwards the network is at the
-        last time. A :class:`NetworkDomainError` leaves the network at the last time reached
-        before the failing step's end; ``error.rows`` holds the states of the times before it.
+        last time. A :class:`NetworkDomainError` holds in ``error.rows`` the states of the
+        times before it; a segment leaving its range leaves the network at the located
+        instant, a failed step at the last time reached before it.
         """
         times = np.asarray(times, dtype=float).reshape(-1)
         if times.size > 1 and np.any(np.diff(times) < 0.0):
@@ -366,27 +489,29 @@ class NetworkFlow:
         self._materialise()
         try:
             while True:
-                # The times inside the last step, then its end (watched first, as advance
-                # watches a step before it says anything at or beyond its end).
-                inside = int(np.searchsorted(times, solver.t, side='left'))
+                # The times inside the last step (before a segment leaves its range in it),
+                # then its end (watched first, as advance watches a step before it says
+                # anything at or beyond its end).
+                inside = int(np.searchsorted(times, min(solver.t, self._leaves_at),
+                                             side='left'))
                 if inside > k:
                     if self._dense is _PENDING:
                         self._dense = _Interpolant(solver.dense_output())
                     rows[k:inside] = self._dense.many(times[k:inside])
                     k = inside
-                if self._unwatched and solver.t <= end:
-                    self._unwatched = False
-                    self._after_step(solver.t, solver.y)
+                if self._leaves_at <= end:
+                    self._refuse_at_exit()
+                if self._watched_to < solver.t <= end:
+                    self._watch_step(solver)
                 at_end = int(np.searchsorted(times, solver.t, side='right'))
                 rows[k:at_end] = solver.y
                 k = at_end
                 if k == times.size:
                     break
                 self._step(solver)
-                self._unwatched = True
         except NetworkDomainError as err:
             self._solver = None
-            if k > 0 and times[k - 1] > self.t:
+            if not err.located and k > 0 and times[k - 1] > self.t:
                 self.t = float(times[k - 1])
                 self.injected = self._injected_at(self.t)
                 self.y = rows[k - 1].copy()
@@ -437,62 +562,90 @@ class NetworkFlow:
                 flows[:, j] = drops / law.resistance
             else:
                 flows[:, j] = [law.flow(d) for d in drops.tolist()]
-        syringe = pressures[:, 0] + (self.supply.drop(self.flow) if self.supply is not None
-                                     else 0.0)
+        syringe = pressures[:, self.feed] + (self.supply.drop(self.flow)
+                                             if self.supply is not None else 0.0)
         return injected, volumes, flows, syringe
 
-    def take_snaps(self) -> list['DynamicSnap']:
+    def take_snaps(self) -> list[DynamicSnap]:
         """The snap-throughs completed since the last call."""
         found, self.new_snaps = self.new_snaps, []
         return found
 
+    def take_fold_crossings(self) -> list[FoldCrossing]:
+        """The segments' passages through folds of their own curves since the last call."""
+        found, self.new_fold_crossings = self.new_fold_crossings, []
+        return found
+
     def _restart_watch(self) -> None:
         """
-        The flow or the state changed at once: watch the state now with its new rates.
+        The flow or the state changed at once: the rates now are new.
 
         What the exchange was before (a calm step long ago, say) says nothing about it after:
-        an episode that starts now starts here.
+        an episode that is fast where the next stretch starts starts there.
         """
         self._recent = []
-        self._unwatched = False
-        self._after_step(self.t, self.y, fresh=True)
+        self._fresh = True
+        _, _, flows, rates = self._balance(self.t, self.y)
+        self._note_exchange(flows, rates)
 
-    def _after_step(self, t: float, y: FloatArray, fresh: bool = False) -> None:
-        """
-        Check one step's end, watch it, keep each channel's peak Reynolds number.
+    def _watch_step(self, solver: 'Radau | _ScalarRadau') -> None:
+        """The rest of the last step, now that time has reached its end."""
+        self._watch(solver.t, 1.0)
+        _, _, flows, rates = self._balance(solver.t, solver.y)
+        self._note_exchange(flows, rates)
 
-        A volume beyond its segment's curve, or suction beyond vacuum, is refused; the
-        exchange between the segments says whether a transient runs and finds snap-throughs.
-        ``fresh``: the rates changed at once at ``t`` (see :meth:`_restart_watch`).
-        """
-        volumes, pressures, flows, rates = self._balance(t, y)
-        injected = self._injected_at(t)
-        slack = 1e-9 * self.v_scale
-        beyond = np.flatnonzero(volumes > self.full + slack)
-        if beyond.size:
-            i = int(beyond[0])
-            raise NetworkDomainError(
-                f'segment {self.segments[i].name} passes the end of its curve at {t:.6g} s '
-                f'({volumes[i]:.6g} m^3, injected {injected:.6g} m^3)')
-        sucked = np.flatnonzero(pressures < VACUUM_GAUGE_PA)
-        if sucked.size:
-            i = int(sucked[0])
-            raise NetworkDomainError(
-                f'segment {self.segments[i].name} collapses under suction beyond vacuum at '
-                f'{t:.6g} s ({volumes[i]:.6g} m^3, rest {self.rest[i]:.6g} m^3, injected '
-                f'{injected:.6g} m^3): the syringe draws faster than the channels let the '
-                'fluid follow')
+    def _note_exchange(self, flows: FloatArray, rates: FloatArray) -> None:
+        """Whether fluid moves between the segments at an instant (a transient runs)."""
         for j, flow in enumerate(flows.tolist()):
             self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
         # The tip's rate from mass: the pump's flow less the others'.
-        volume_rates = np.append(rates[:self.n - 1], self.flow - float(np.sum(rates[:self.n - 1])))
+        volume_rates = rates[:self.n - 1].tolist()
+        volume_rates.append(self.flow - sum(volume_rates))
         exchange = exchange_flow(volume_rates, self.flow)
         self.exchanging = exchange > max(QUIET_SHARE_OF_FLOW * abs(self.flow),
                                          float(self.atol[0]))
-        snap = self.snaps.observe(t, injected, volumes, float(pressures[0]), exchange,
-                                  self.flow, fresh)
-        if snap is not None:
-            self.new_snaps.append(snap)
+
+    def _watch(self, until: float, x_until: float) -> None:
+        """
+        Watch the last step from where its watching stopped to ``until`` (``x_until`` in it).
+
+        On its polynomial: the channels' peak flows (Reynolds numbers), the segments' passages
+        through folds of their curves, and the snap-throughs.
+        """
+        curve = self._curve
+        lo = curve.x_of(self._watched_to)
+        self._watched_to = until
+        if not x_until > lo:
+            return
+        fresh, self._fresh = self._fresh, False
+        for j, peak in enumerate(curve.peak_flows(lo, x_until)):
+            self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(peak))
+        passed = []
+        for i, folds in enumerate(self._folds):
+            for fold in folds:
+                for x, rising in crossings(curve.starts[i], curve.cubics[i], lo, x_until,
+                                           fold.volume):
+                    passed.append(FoldCrossing(
+                        self.segments[i].name, fold.volume, fold.pressure, fold.kind,
+                        FILLING if rising > 0 else EMPTYING, curve.time(x),
+                        curve.injected_at(x)))
+        self.new_fold_crossings.extend(sorted(passed, key=lambda c: c.time_s))
+        self.new_snaps.extend(self.snaps.watch(curve, lo, x_until, fresh, self._state_at,
+                                               self._exchange_at))
+
+    def _exchange_at(self, curve: StepCurve, x: float) -> float:
+        """The exchange the equations give at the state at ``x`` in the last step."""
+        if self._dense is _PENDING:
+            self._dense = _Interpolant(self._solver.dense_output())
+        t = curve.time(x)
+        rates = self._rates(t, np.asarray(self._dense(t), dtype=float)).tolist()[:self.n - 1]
+        rates.append(curve.flow - sum(rates))
+        return exchange_flow(rates, curve.flow)
+
+    def _state_at(self, curve: StepCurve, x: float) -> tuple[float, list[float], float]:
+        """Injected volume, volumes and the fed segment's gauge pressure at ``x`` in a step."""
+        volumes = curve.volumes(x)
+        return curve.injected_at(x), volumes, self._pressure_list(volumes)[self.feed]
 
     # ------------------------------------------------------------------ the state now
 
@@ -937,101 +1090,6 @@ def damping_ratio(resistance: float, inertance: float, compliances: Sequence[flo
     return 0.5 * resistance * math.sqrt(c1 * c2 / (c1 + c2) / inertance)
 
 
-# A snap-through, as the network lives it: fluid exchanged between the segments faster than
-# this many times the pump's flow, and more of it than this share of the volume scale.
-SNAP_EXCHANGE_PER_FLOW = 5.0
-SNAP_SHARE_OF_SCALE = 1e-3
-# An episode that begins with a change of the pump's flow is a snap-through only if its
-# exchange then rises to more than this many times where it began (an instability gathers
-# speed; fluid evening out after the change does not).
-SNAP_ACCELERATION = 2.0
 # An injection smaller than this share of the volume scale is round-off (a command that names
 # the volume the integration reached), not a jump of the state.
 JUMP_SHARE = 1e-9
-
-
-@dataclass
-class DynamicSnap:
-    """
-    A snap-through in time: where it started and ended, the fluid it moved, how fast, how long.
-
-    ``injected`` [m^3] and ``start_s`` [s]: where the exchange first outran the pump;
-    ``duration_s``: from 10 % to 90 % of the fluid moved; ``peak_exchange_m3_per_s``: the
-    fastest exchange; ``fluid_moved_m3``: the fluid exchanged between the segments beyond
-    what the pump pushed; volumes and pressures (gauge, at the base) before and after.
-    """
-
-    injected: float
-    start_s: float
-    end_s: float
-    duration_s: float
-    fluid_moved_m3: float
-    peak_exchange_m3_per_s: float
-    from_volumes: list[float]
-    to_volumes: list[float]
-    from_pressure: float
-    to_pressure: float
-
-
-def exchange_flow(volume_rates: FloatArray, supply_flow: float) -> float:
-    """Fluid moving between the segments beyond the pump's flow [m^3/s]."""
-    return 0.5 * max(float(np.sum(np.abs(volume_rates))) - abs(supply_flow), 0.0)
-
-
-class SnapWatcher:
-    """Finds snap-throughs in the network's steps: episodes of fast exchange, timed."""
-
-    def __init__(self, v_scale: float) -> None:
-        """Episodes must move more than SNAP_SHARE_OF_SCALE of ``v_scale``."""
-        self.v_scale = v_scale
-        self.found: list[DynamicSnap] = []
-        # (time, injected, exchange, volumes, pressure) of the steps of the episode under way
-        self._episode: list[tuple[float, float, float, FloatArray, float]] | None = None
-        self._last: tuple[float, float, float, FloatArray, float] | None = None
-        self._fresh_start = False   # the episode under way began with a change of flow
-
-    def observe(self, t: float, injected: float, volumes: FloatArray, pressure: float,
-                exchange: float, supply_flow: float, fresh: bool = False) -> DynamicSnap | None:
-        """
-        One step's state; a snap when an episode of fast exchange has just ended.
-
-        ``fresh``: the flow or the state changed at once at ``t``, so an episode begins here,
-        not at the last calm step before.
-        """
-        fast = exchange > SNAP_EXCHANGE_PER_FLOW * abs(supply_flow) and exchange > 0.0
-        sample = (t, injected, exchange, volumes.copy(), pressure)
-        if fast:
-            if self._episode is None:
-                # The episode starts at the last calm step: the state before the snap.
-                self._episode = [self._last] if self._last is not None and not fresh else []
-                self._fresh_start = fresh
-            self._episode.append(sample)
-            self._last = sample
-            return None
-        self._last = sample
-        if self._episode is None:
-            return None
-        episode, self._episode = self._episode + [sample], None
-        return self._close(episode)
-
-    def _close(self, episode: list) -> DynamicSnap | None:
-        times = np.array([s[0] for s in episode])
-        rates = np.array([s[2] for s in episode])
-        # The fluid moved: the exchange integrated over the episode (trapezoids on the steps).
-        moved = np.concatenate([[0.0], np.cumsum(0.5 * (rates[1:] + rates[:-1])
-                                                 * np.diff(times))])
-        total = float(moved[-1])
-        if total <= SNAP_SHARE_OF_SCALE * self.v_scale:
-            return None
-        # An episode that began with a change of the flow (or a jump of the state) is the
-        # fluid evening out, fastest where it begins, unless its exchange then gathers speed
-        # as an instability's does. One that began while the flow stayed is a snap-through.
-        if self._fresh_start and rates.max() <= SNAP_ACCELERATION * rates[0]:
-            return None
-        t10, t90 = np.interp([0.1 * total, 0.9 * total], moved, times)
-        first, last = episode[0], episode[-1]
-        snap = DynamicSnap(float(first[1]), float(first[0]), float(last[0]), float(t90 - t10),
-                           total, float(rates.max()), [float(v) for v in first[3]],
-                           [float(v) for v in last[3]], float(first[4]), float(last[4]))
-        self.found.append(snap)
-        return snap

@@ -9,7 +9,7 @@ pushed at one flow rate. :func:`run_schedule` integrates the network
 (:class:`softseq_ros.dynamic.flow.NetworkFlow`, through its public methods only) across the
 legs and reads the state at the asked times: time, injected volume, the syringe's gauge
 pressure, the segment volumes and curvatures, the channel flows; with the snap-throughs the
-network lived (:class:`softseq_ros.dynamic.flow.DynamicSnap`: start, fluid moved, peak exchange
+network lived (:class:`softseq_ros.dynamic.events.DynamicSnap`: start, fluid moved, peak exchange
 flow, 10-90 % duration) and each channel's peak Reynolds number over the samples.
 :func:`write_path` and :func:`write_snaps` write both as the CSV files of ``softseq solve``.
 
@@ -24,7 +24,8 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from softseq_ros.dynamic.flow import DynamicSnap, NetworkDomainError, NetworkFlow
+from softseq_ros.dynamic.events import DynamicSnap
+from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.errors import UserError
 from softseq_ros.scene.csv_columns import write_rows
 from softseq_ros.scene.network import NetworkSettings

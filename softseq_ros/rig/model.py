@@ -69,7 +69,7 @@ class TimedSnap:
 
     ``start_ns``: when the exchange began, on the driver's clock; ``duration_s``: 10 % to 90 %
     of the fluid moved; ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``: between the
-    segments, beyond the pump's own flow (softseq_ros.dynamic.flow.DynamicSnap).
+    segments, beyond the pump's own flow (softseq_ros.dynamic.events.DynamicSnap).
     """
 
     injected: float
@@ -252,7 +252,7 @@ class DynamicModel:
     late message) puts its difference into the base segment at once. The model advances at
     ``rate_hz`` on its driver's clock and says its state at that rate while a transient runs
     (fluid moving between the segments), else with the commands' answers; a snap-through
-    (softseq_ros.dynamic.flow.DynamicSnap) is reported when it has run its course. Its reach
+    (softseq_ros.dynamic.events.DynamicSnap) is reported when it has run its course. Its reach
     and end stop are the quasi-static ones (``reach``): a transient may still carry a segment
     past its curve, which is refused then.
     """
