@@ -49,12 +49,15 @@ def _solve(args: argparse.Namespace) -> int:
 
 def _solve_network(args: argparse.Namespace, scene: Any) -> int:
     """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
+    from softseq_ros.dynamic.events import fold_crossing_line
     from softseq_ros.dynamic.network import laminar_range_warning
     from softseq_ros.dynamic.path import (
         PathError,
+        folds_file,
         history_path,
         programme_path,
         snaps_file,
+        write_folds,
         write_path,
         write_snaps,
     )
@@ -70,12 +73,15 @@ def _solve_network(args: argparse.Namespace, scene: Any) -> int:
             raise PathError(f'{args.path}: injected_m3: {err}') from None
     else:
         path = programme_path(scene.segments, scene.network, profile, rate_hz=scene.pump.rate_hz)
-    snaps_out = snaps_file(args.out)
+    snaps_out, folds_out = snaps_file(args.out), folds_file(args.out)
     write_path(args.out, path, scene.segment_names)
     write_snaps(snaps_out, path.snaps, scene.segment_names)
+    write_folds(folds_out, path.folds)
     print(f'{scene.name}: {path.time_s.size} samples of the network in time, pump at '
           f'{profile.flow_rate * 1e6:g} mL/s -> {args.out} (snap-throughs: {len(path.snaps)} '
-          f'-> {snaps_out})')
+          f'-> {snaps_out}; fold crossings: {len(path.folds)} -> {folds_out})')
+    for crossing in path.folds:
+        print(f'  {fold_crossing_line(crossing)}')
     for snap in path.snaps:
         print(f'  snap-through at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
               f'{snap.fluid_moved_m3 * 1e6:.3f} mL moved, peak '

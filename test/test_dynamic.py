@@ -30,6 +30,14 @@ PRESSURE = 1.0e5                   # both segments start inflated to 100 kPa, in
 CHANNEL = Tube(length_m=0.1, radius_m=1.0e-3)
 
 
+@pytest.fixture(scope='module')
+def fig1_map():
+    """The equilibrium map of the Fig. 1 asymmetric pair (a second to build: built once)."""
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap
+
+    return EquilibriumMap(load_scene('fig1_asymmetric').segments)
+
+
 def pair() -> list[LinearSegment]:
     return [LinearSegment('bottom', 0.1, REST, 1.0 / C1, 50.0 * ML),
             LinearSegment('top', 0.1, REST, 1.0 / C2, 50.0 * ML)]
@@ -165,13 +173,13 @@ def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):
     assert final[1] - 1e-6 == pytest.approx(share_top * 1e-5, rel=1e-3)
 
 
-def test_as_the_pump_slows_the_dynamic_path_converges_to_the_quasistatic_one():
+def test_as_the_pump_slows_the_dynamic_path_converges_to_the_quasistatic_one(fig1_map):
     # The Fig. 1 asymmetric pair (two Gent balloons, two snap-throughs on inflation) joined by
     # a 10 mm channel of 0.5 mm radius, inflated at 1e-8 to 1e-11 m^3/s: three decades.
-    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+    from softseq_ros.quasistatic.equilibrium import Tracker
 
-    segments = load_scene('fig1_asymmetric').segments
-    emap = EquilibriumMap(segments)
+    emap = fig1_map
+    segments = emap.segments
     top = 0.95 * emap.injected_range[1]
     grid = np.linspace(0.0, top, 200)
     quasistatic = Tracker(emap).sweep(grid)
@@ -233,15 +241,14 @@ def snap_distance(snaps, reference) -> np.ndarray:
     return gap.max(axis=0)
 
 
-def test_the_result_does_not_depend_on_the_step_the_tolerance_sets():
+def test_the_result_does_not_depend_on_the_step_the_tolerance_sets(fig1_map):
     # The Fig. 1 asymmetric pair through both snap-throughs, a channel with inertance, at the
     # default tolerance and at one 100x tighter: the integrator's steps differ, the answer not,
     # the snap-throughs' timing included (located on the steps' polynomials, not at the steps).
-    from softseq_ros.quasistatic.equilibrium import EquilibriumMap
     from softseq_ros.scene.network import DEFAULT_NETWORK_RTOL
 
-    segments = load_scene('fig1_asymmetric').segments
-    emap = EquilibriumMap(segments)
+    emap = fig1_map
+    segments = emap.segments
     grid = np.linspace(0.0, 0.95 * emap.injected_range[1], 500)
     tube = Tube(0.01, 0.5e-3, inertance=True)
     runs = []
@@ -287,11 +294,11 @@ def test_snap_through_numbers_converge_to_a_tight_reference_as_the_tolerance_tig
     assert np.all(default < SNAP_STEP_INDEPENDENCE)
 
 
-def test_a_snap_through_is_an_event_with_a_start_the_fluid_it_moves_and_a_duration():
-    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
+def test_a_snap_through_is_an_event_with_a_start_the_fluid_it_moves_and_a_duration(fig1_map):
+    from softseq_ros.quasistatic.equilibrium import Tracker
 
-    segments = load_scene('fig1_asymmetric').segments
-    emap = EquilibriumMap(segments)
+    emap = fig1_map
+    segments = emap.segments
     top = 0.95 * emap.injected_range[1]
     expected = Tracker(emap).sweep(np.linspace(0.0, top, 2000)).events
     flow = NetworkFlow(segments, NetworkSettings(Fluid(), None, (Tube(0.01, 0.5e-3),)))
@@ -329,3 +336,67 @@ def test_on_the_rig_a_snap_through_goes_out_on_the_events_topic(tmp_path):
     # The bottom takes the top's fluid (as long as the exchange outruns the pump fivefold).
     assert events[0]['to_volumes_m3'][0] - events[0]['from_volumes_m3'][0] > 5 * ML
     assert events[0]['to_volumes_m3'][1] < events[0]['from_volumes_m3'][1] - 5 * ML
+
+
+def reference_pair(segments, tube: Tube, flow_rate: float, end_s: float, rtol: float):
+    """
+    An independent solution of two segments joined by ``tube`` (laminar, no inertance).
+
+    Both volumes as states (no mass closure), DOP853 at ``rtol``: shares nothing with
+    NetworkFlow but the segments' pressure functions. Its dense output, volumes as rows.
+    """
+    from scipy.integrate import solve_ivp
+
+    resistance = tube_law(tube, Fluid()).resistance
+    base, tip = (s.pressure for s in segments)
+
+    def rates(t, v):
+        q = (float(base(v[0])) - float(tip(v[1]))) / resistance
+        return [flow_rate - q, q]
+
+    solution = solve_ivp(rates, (0.0, end_s), [s.rest_volume for s in segments],
+                         method='DOP853', rtol=rtol, atol=1e-19, dense_output=True)
+    assert solution.status == 0
+    return solution.sol
+
+
+def test_a_segment_passing_a_fold_of_its_curve_is_located_in_time(fig1_map):
+    # The benchmark's network through the first snap-through. Each segment's passages through
+    # the peaks and valleys of its own curve, located on the steps' cubics, against where an
+    # independent reference's volume crosses the same fold volume.
+    from scipy.optimize import brentq
+
+    from softseq_ros.dynamic.events import EMPTYING, FILLING, PEAK, VALLEY, segment_folds
+    from softseq_ros.quasistatic.equilibrium import Tracker
+
+    segments = load_scene('fig1_asymmetric').segments
+    tube, flow_rate, end = Tube(0.01, 0.4e-3), 5e-8, 620.0
+    flow = NetworkFlow(segments, NetworkSettings(Fluid(), None, (tube,)))
+    flow.set_flow(flow_rate)
+    flow.advance(end)
+    crossings = flow.take_fold_crossings()
+    (snap,) = flow.take_snaps()
+    bottom, top = ([(f.volume, f.kind) for f in segment_folds(s)] for s in segments)
+    assert [f[1] for f in bottom] == [f[1] for f in top] == [PEAK, VALLEY]
+    # The top passes its peak and valley while the pair fills; the bottom its peak just
+    # before the pair snaps; the snap carries the bottom over its valley and the top back
+    # over its valley and peak.
+    assert [(c.segment, c.kind, c.direction) for c in crossings] == [
+        ('top', PEAK, FILLING), ('top', VALLEY, FILLING), ('bottom', PEAK, FILLING),
+        ('bottom', VALLEY, FILLING), ('top', VALLEY, EMPTYING), ('top', PEAK, EMPTYING)]
+    assert all(a.time_s < b.time_s for a, b in zip(crossings, crossings[1:]))
+    reference = reference_pair(segments, tube, flow_rate, end, 1e-11)
+    names = [s.name for s in segments]
+    for crossing in crossings:
+        i = names.index(crossing.segment)
+        assert crossing.injected == pytest.approx(flow_rate * crossing.time_s, rel=1e-12)
+
+        def beyond(t, c=crossing, i=i):
+            return reference(t)[i] - c.fold_volume_m3
+
+        expected = brentq(beyond, crossing.time_s - 1.0, crossing.time_s + 1.0, xtol=1e-12)
+        assert abs(crossing.time_s - expected) < 1e-7 * end, (crossing, expected)
+    # The segment's own fold comes first, the pair's fold (where the quasi-static path snaps,
+    # the sum of the two stiffnesses zero) later, and the exchange outruns the pump later still.
+    qs_snap = Tracker(fig1_map).sweep(np.linspace(0.0, end * flow_rate, 2000)).events[0].injected
+    assert crossings[2].injected < qs_snap < snap.injected < crossings[3].injected

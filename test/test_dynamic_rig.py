@@ -251,6 +251,54 @@ def test_a_withdrawal_faster_than_the_channel_collapses_the_base_and_still_ends_
     np.testing.assert_allclose(states[-1].position, rest, atol=1e-9 * ML)
 
 
+def test_a_segment_passing_the_end_of_its_curve_is_refused_at_the_located_instant():
+    # The rate-inversion pair through a 0.15 mm channel at 0.3 mL/s: the base cannot pass its
+    # fluid on fast enough and reaches the end of its curve at about 197 s, between two of the
+    # 1 s outputs and inside an integrator step. Refused at the instant located on the step's
+    # cubic, against where an independent reference's base crosses its largest volume.
+    from scipy.optimize import brentq
+    from test_dynamic import reference_pair
+
+    segments = load_scene('rate_inversion').segments
+    tube, flow_rate = Tube(0.02, 0.15e-3), 3e-7
+    flow = NetworkFlow(segments, NetworkSettings(WATER, None, (tube,)))
+    flow.set_flow(flow_rate)
+    outputs = np.arange(1.0, 300.0)
+    with pytest.raises(NetworkDomainError, match=r'^segment base passes the end of its curve at '
+                                                 r'196\.714 s \(5\.79058e-05 m\^3, injected '
+                                                 r'5\.90141e-05 m\^3\)$') as refused:
+        flow.advance_through(outputs)
+    reference = reference_pair(segments, tube, flow_rate, 200.0, 1e-12)
+    expected = brentq(lambda t: reference(t)[0] - segments[0].max_volume, 150.0, 200.0,
+                      xtol=1e-12)
+    assert abs(flow.t - expected) < 1e-7 * expected
+    # The outputs before it, and the network left at it with the base at the end of its curve.
+    assert refused.value.located and refused.value.rows.shape == (196, 1)
+    assert flow.volumes()[0] == pytest.approx(segments[0].max_volume, abs=1e-9 * flow.v_scale)
+    located = flow.t
+    with pytest.raises(NetworkDomainError, match='passes the end of its curve'):
+        flow.advance(located + 1.0)
+    assert flow.t == pytest.approx(located, rel=1e-12)
+
+
+def test_the_rig_notes_a_segment_passing_a_fold_of_its_curve(tmp_path):
+    from softseq_ros.rig.build import actuator_core
+    from softseq_ros.rig.values import INFO, Notice, PumpCommand
+
+    # Up to 4 mL at 0.2 mL/s: the top passes the peak of its curve at about 2.8 mL.
+    scene = fig1_with_network(tmp_path, {'channels': [{'length_m': 0.01,
+                                                         'radius_m': 0.5e-3}]})
+    core = actuator_core(scene)
+    said = []
+    for k in range(1, 1001):
+        now = k * 20_000_000
+        said += core.handle(PumpCommand(now, 2e-7 * k * 0.02, 2e-7), now)
+    notes = [n.text for n in said if isinstance(n, Notice) and n.level == INFO]
+    assert len(notes) == 1 and notes[0].startswith('segment top passes the peak of its curve (')
+    injected = float(notes[0].split(', ')[-1].split(' mL injected')[0])
+    assert 2.7 < injected < 2.9
+
+
 def test_suction_beyond_vacuum_is_refused_and_the_rig_holds_its_last_state(tmp_path):
     from softseq_ros.rig.build import actuator_core
     from softseq_ros.rig.values import WARNING, Notice, PumpCommand

@@ -93,6 +93,19 @@ def test_pumped_slowly_the_written_snaps_are_where_the_quasistatic_ones_are(tmp_
     # A volume history is pushed at the pump's flow rate, row to row.
     times = np.array([float(r[0]) for r in rows])
     np.testing.assert_allclose(times, history / 1e-9, rtol=1e-12)
+    # Beside them, each segment's passages through the folds of its curve, located in time:
+    # the bottom passes its peak just before the pair snaps, and is carried over its valley.
+    header, rows = read_csv(tmp_path / 'path_folds.csv')
+    assert header == ['time_s', 'injected_m3', 'segment', 'kind', 'direction',
+                      'fold_volume_m3', 'fold_pressure_pa']
+    passed = [(r[2], r[3], r[4]) for r in rows]
+    assert passed.index(('bottom', 'peak', 'filling')) < \
+        passed.index(('bottom', 'valley', 'filling'))
+    peak = rows[passed.index(('bottom', 'peak', 'filling'))]
+    assert float(peak[1]) < expected[0].injected < snap['injected_m3']
+    assert float(peak[0]) == pytest.approx(float(peak[1]) / 1e-9, rel=1e-12)
+    assert f'fold crossings: {len(rows)} ->' in printed
+    assert printed.count('passes the ') == len(rows)
 
 
 def test_the_columns_are_si_and_the_volumes_keep_the_mass(tmp_path, capsys):

@@ -67,6 +67,9 @@ class LaggingModel:
     def take_warnings(self):
         return self.inner.take_warnings()
 
+    def take_notes(self):
+        return self.inner.take_notes()
+
 
 def test_a_model_with_time_is_advanced_at_its_rate_and_recorded(tmp_path):
     scene = load_scene('fig1_asymmetric')

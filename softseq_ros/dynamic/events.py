@@ -237,6 +237,14 @@ class FoldCrossing:
     injected: float
 
 
+def fold_crossing_line(crossing: FoldCrossing, clock_s: float = 0.0) -> str:
+    """One line saying a fold crossing; ``clock_s`` is added to its time (a driver's clock)."""
+    return (f'segment {crossing.segment} passes the {crossing.kind} of its curve '
+            f'({crossing.fold_pressure_pa * 1e-3:.4g} kPa gauge at '
+            f'{crossing.fold_volume_m3 * 1e6:.4g} mL), {crossing.direction}, at '
+            f'{crossing.time_s + clock_s:.6g} s, {crossing.injected * 1e6:.4f} mL injected')
+
+
 # ---------------------------------------------------------------------- snap-throughs
 
 @dataclass

@@ -17,14 +17,14 @@ Every value is SI (s, m^3, m^3/s, Pa gauge, 1/m).
 """
 
 import csv
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from softseq_ros.dynamic.events import DynamicSnap
+from softseq_ros.dynamic.events import DynamicSnap, FoldCrossing
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.errors import UserError
 from softseq_ros.scene.csv_columns import write_rows
@@ -73,6 +73,9 @@ class DynamicPath:
     snap-throughs that ran their course by the last sample; ``peak_reynolds[j]`` is channel
     j's largest Reynolds number over the samples; ``steps`` the integrator's steps.
 
+    ``folds``: each segment's passages through the folds of its own curve by the last sample
+    (:class:`softseq_ros.dynamic.events.FoldCrossing`, located in time).
+
     ``drained`` (None when every sample was reached) says why the path ends before the last
     sample time: the syringe drew so fast that a segment, collapsing below its rest volume,
     pulled a suction beyond vacuum while the others still held fluid the channels had not yet
@@ -91,6 +94,7 @@ class DynamicPath:
     peak_reynolds: list[float]
     steps: int
     drained: str | None = None
+    folds: list[FoldCrossing] = field(default_factory=list)
 
 
 def programme_schedule(profile: PumpProfile) -> tuple[FlowSchedule, float]:
@@ -153,6 +157,7 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
     pressure = np.empty(samples.size)
     injected = np.empty(samples.size)
     snaps: list[DynamicSnap] = []
+    folds: list[FoldCrossing] = []
     legs = list(zip(schedule.times[:-1], schedule.times[1:], schedule.flows))
     leg = 0
     drained = None
@@ -165,6 +170,7 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
             while leg < len(legs) and legs[leg][1] <= samples[i]:
                 fluid.advance(float(legs[leg][1]))
                 snaps.extend(fluid.take_snaps())
+                folds.extend(fluid.take_fold_crossings())
                 leg += 1
                 fluid.set_flow(float(legs[leg][2]) if leg < len(legs) else 0.0)
         except NetworkDomainError as err:
@@ -186,8 +192,10 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
             # What a sample-by-sample run had taken by its last sample.
             last = times[states.shape[0] - 1] if states.shape[0] else -np.inf
             snaps.extend(s for s in fluid.take_snaps() if s.end_s <= last)
+            folds.extend(c for c in fluid.take_fold_crossings() if c.time_s <= last)
         else:
             snaps.extend(fluid.take_snaps())
+            folds.extend(fluid.take_fold_crossings())
         rows = slice(i, i + states.shape[0])
         injected[rows], volumes[rows], flows[rows], pressure[rows] = fluid.read_states(
             times[:states.shape[0]], states)
@@ -204,7 +212,7 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
         if row < samples.size:
             snap[row] = True
     return DynamicPath(samples, injected, pressure, volumes, curvatures, flows, snap, snaps,
-                       [float(x) for x in fluid.peak_reynolds], fluid.steps, drained)
+                       [float(x) for x in fluid.peak_reynolds], fluid.steps, drained, folds)
 
 
 def programme_path(segments: Sequence[Segment], network: NetworkSettings,
@@ -225,8 +233,9 @@ def programme_path(segments: Sequence[Segment], network: NetworkSettings,
                         rtol)
     if lead > 0.0:
         path.time_s = path.time_s - lead
-        path.snaps = [replace(s, start_s=s.start_s - lead, end_s=s.end_s - lead)
-                      for s in path.snaps]
+        path.snaps = [replace(s, start_s=s.start_s - lead, end_s=s.end_s - lead,
+                              peak_s=s.peak_s - lead) for s in path.snaps]
+        path.folds = [replace(c, time_s=c.time_s - lead) for c in path.folds]
     return path
 
 
@@ -270,15 +279,35 @@ def snap_columns(names: Sequence[str]) -> list[str]:
             + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names])
 
 
-def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[str]) -> None:
-    """One row per snap-through (the header alone when there was none)."""
+def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str]]) -> None:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with out.open('w', newline='') as handle:
         writer = csv.writer(handle)
-        writer.writerow(snap_columns(names))
-        for snap in snaps:
-            writer.writerow([repr(float(x)) for x in (
-                snap.start_s, snap.end_s, snap.injected, snap.duration_s, snap.fluid_moved_m3,
-                snap.peak_exchange_m3_per_s, snap.from_pressure, snap.to_pressure,
-                *snap.from_volumes, *snap.to_volumes)])
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[str]) -> None:
+    """One row per snap-through (the header alone when there was none)."""
+    _write_table(out, snap_columns(names), ([repr(float(x)) for x in (
+        snap.start_s, snap.end_s, snap.injected, snap.duration_s, snap.fluid_moved_m3,
+        snap.peak_exchange_m3_per_s, snap.from_pressure, snap.to_pressure,
+        *snap.from_volumes, *snap.to_volumes)] for snap in snaps))
+
+
+def folds_file(out: str | Path) -> Path:
+    """Where the fold crossings of a path written to ``out`` go: ``NAME_folds.csv`` beside it."""
+    out = Path(out)
+    return out.with_name(f'{out.stem}_folds.csv')
+
+
+FOLD_COLUMNS = ['time_s', 'injected_m3', 'segment', 'kind', 'direction', 'fold_volume_m3',
+                'fold_pressure_pa']
+
+
+def write_folds(out: str | Path, folds: Sequence[FoldCrossing]) -> None:
+    """One row per passage of a segment through a fold of its curve (the header alone: none)."""
+    _write_table(out, FOLD_COLUMNS, ([
+        repr(float(c.time_s)), repr(float(c.injected)), c.segment, c.kind, c.direction,
+        repr(float(c.fold_volume_m3)), repr(float(c.fold_pressure_pa))] for c in folds))

@@ -173,6 +173,8 @@ class ActuatorCore:
             out.append(Notice(self.role, INFO, said))
             if self._send_events:
                 out.append(event)
+        for line in self.model.take_notes():
+            out.append(Notice(self.role, INFO, line))
         for line in self.model.take_warnings():
             out.append(Notice(self.role, WARNING, line))
         return out

@@ -10,7 +10,9 @@ The actuator core (softseq_ros.rig.actuator) knows its physics only through this
 - :meth:`ActuatorModel.saved` and :meth:`ActuatorModel.resume`: a restarted actuator keeps the
   branch its history put it on;
 - :meth:`ActuatorModel.check_programme` and :attr:`ActuatorModel.end_stop_m3`: the pump learns
-  its reach from the model, not from the physics behind it.
+  its reach from the model, not from the physics behind it;
+- :meth:`ActuatorModel.take_warnings` and :meth:`ActuatorModel.take_notes`: lines for the
+  actuator's log (a channel no longer laminar; a segment passing a fold of its curve).
 
 A model with :attr:`ActuatorModel.rate_hz` wants :meth:`advance` called at that rate (by the
 batch runner's clock or a node's timer); ``None`` means its state changes only on commands.
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 import math
 from typing import Protocol, Sequence
 
+from softseq_ros.dynamic.events import fold_crossing_line
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import laminar_range_warning
 from softseq_ros.errors import UserError
@@ -124,6 +127,9 @@ class ActuatorModel(Protocol):
 
     def take_warnings(self) -> list[str]:
         """What the model found doubtful since the last call (one line each)."""
+
+    def take_notes(self) -> list[str]:
+        """What the model saw happen since the last call, worth a log line (one line each)."""
 
 
 # The maps a process keeps: enough for the rigs of a few scenes side by side, bounded so that a
@@ -227,6 +233,10 @@ class QuasiStaticModel:
 
     def take_warnings(self) -> list[str]:
         """The equilibrium has nothing to doubt."""
+        return []
+
+    def take_notes(self) -> list[str]:
+        """The equilibrium's snap-throughs are its events; nothing else to note."""
         return []
 
 
@@ -351,6 +361,12 @@ class DynamicModel:
                 self._warned[j] = True
                 lines.append(line)
         return lines
+
+    def take_notes(self) -> list[str]:
+        """Each segment's passage through a fold of its own curve, located in time."""
+        origin = (self._origin_ns or 0) / NS_PER_S
+        return [fold_crossing_line(crossing, origin)
+                for crossing in self.flow_network.take_fold_crossings()]
 
     def state(self) -> ModelState:
         """Pressure at the syringe (gauge), segment volumes and curvatures now."""
