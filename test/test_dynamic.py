@@ -101,6 +101,37 @@ def test_with_inertance_the_pair_rings_as_a_series_rlc_circuit():
     assert min(swings) < -0.3 * start
 
 
+def test_the_syringe_feeds_the_segment_the_network_names():
+    # The linear pair fed at the top, pumped at Q from rest: the bottom fills through the
+    # channel from the top, so the channel's flow (counted towards the tip) is negative,
+    # -Q C1 / (C1 + C2) (1 - exp(-t / tau)) with the same tau; the syringe sees the top's
+    # pressure, and the volumes hold what was injected.
+    law = tube_law(CHANNEL, Fluid())
+    tau = time_constant(law.resistance, (C1, C2))
+    pump = 1e-7
+    flow = NetworkFlow(pair(), NetworkSettings(Fluid(), None, (CHANNEL,), feed=1), rtol=1e-11)
+    flow.set_flow(pump)
+    for t in np.linspace(0.1, 5.0, 25) * tau:
+        flow.advance(t)
+        expected = -pump * C1 / (C1 + C2) * (1.0 - math.exp(-t / tau))
+        assert flow.flows()[0] == pytest.approx(expected, rel=1e-6)
+        volumes = flow.volumes()
+        assert flow.syringe_pressure() == flow.pressures(volumes)[1]
+        assert abs(float(np.sum(volumes)) - 2.0 * REST - pump * t) <= 1e-12 * 80 * ML
+    # A chain of three fed in the middle: the pump's flow goes both ways, and at the ramp's
+    # steady state each segment takes its share of the flow by its compliance.
+    chain = pair() + [LinearSegment('third', 0.1, REST, 1.0 / C1, 50.0 * ML)]
+    flow = NetworkFlow(chain, NetworkSettings(Fluid(), None, (CHANNEL, CHANNEL), feed=1),
+                       rtol=1e-11)
+    flow.set_flow(pump)
+    flow.advance(50.0 * tau)
+    towards_tip = flow.flows()
+    share = pump / (C1 + C2 + C1)
+    assert towards_tip == pytest.approx([-share * C1, share * C1], rel=1e-9)
+    assert float(np.sum(flow.volumes())) == pytest.approx(3.0 * REST + pump * 50.0 * tau,
+                                                          abs=1e-12 * 150 * ML)
+
+
 def test_the_scene_declares_the_network_and_refuses_a_bad_one_in_one_line(tmp_path):
     scene = load_scene('fig1_asymmetric')
     assert scene.network is None
@@ -118,6 +149,17 @@ def test_the_scene_declares_the_network_and_refuses_a_bad_one_in_one_line(tmp_pa
     assert with_network.network.channels == (Tube(0.05, 0.5e-3),)
     assert with_network.network.fluid == Fluid(1.0e-3, 998.0)
     assert isinstance(actuator_model(with_network), DynamicModel)
+    # The syringe feeds the base unless the network names another segment, by its name.
+    assert with_network.network.feed == 0
+    tip_fed = scene_from_dict(dict(data, network={'channels': [{'length_m': 0.05,
+                                                                'radius_m': 0.5e-3}],
+                                                   'feeds': 'b'}), tmp_path / 'x.yaml')
+    assert tip_fed.network.feed == 1
+    bad = dict(data, network={'channels': [{'length_m': 0.05, 'radius_m': 0.5e-3}],
+                              'feeds': 'c'})
+    with pytest.raises(SceneError, match=r"x\.yaml: network\.feeds: must name one of the "
+                                         r"segments \(a, b\), got 'c'$"):
+        scene_from_dict(bad, tmp_path / 'x.yaml')
     bad = dict(data, network={'channels': []})
     with pytest.raises(SceneError, match=r'x\.yaml: network\.channels: needs one channel per '
                                          r'pair of neighbouring segments \(1\), got 0$'):

@@ -299,6 +299,40 @@ def test_the_rig_notes_a_segment_passing_a_fold_of_its_curve(tmp_path):
     assert 2.7 < injected < 2.9
 
 
+def test_on_the_rig_feeding_the_tip_reverses_the_channel_flow_and_keeps_the_mass(tmp_path):
+    from softseq_ros.rig.build import actuator_core
+    from softseq_ros.rig.values import ChannelFlows, PumpCommand, SegmentVolumes
+
+    channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
+    bottom, top = load_scene('fig1_asymmetric').segments
+    rest = bottom.rest_volume + top.rest_volume
+    flows = {}
+    for feeds in ('bottom', 'top'):
+        scene = fig1_with_network(tmp_path, {'channels': [channel], 'feeds': feeds})
+        core = actuator_core(scene)
+        said = []
+        for k in range(1, 201):   # 2 mL at 0.2 mL/s, commands at 20 Hz
+            now = k * 50_000_000
+            said += core.handle(PumpCommand(now, 1e-8 * k, 2e-7), now)
+            said += core.tick(now + 25_000_000)
+        states = [v for v in said if isinstance(v, SegmentVolumes)]
+        flows[feeds] = np.array([v.flows_m3_per_s[0] for v in said
+                                 if isinstance(v, ChannelFlows)])
+        # Mass at every output, commands and ticks alike: what the pump had pushed by then
+        # (until the second command the actuator knows no rate and holds the first volume;
+        # from there, the commands' ramp).
+        for state in states:
+            injected = 2e-7 * state.stamp_ns / 1e9 if state.stamp_ns >= 100_000_000 else 1e-8
+            assert abs(sum(state.volumes_m3) - rest - injected) <= 1e-12 * scene.capacity
+        # The syringe's pressure is the fed segment's (no supply line).
+        fed = bottom if feeds == 'bottom' else top
+        last = states[-1]
+        assert last.gauge_pa == pytest.approx(
+            float(fed.pressure(last.volumes_m3[0 if feeds == 'bottom' else 1])), rel=1e-12)
+    # Fed at the base the channel carries fluid on to the tip; fed at the tip, back to the base.
+    assert np.all(flows['bottom'][1:] > 0.0) and np.all(flows['top'][1:] < 0.0)
+
+
 def test_suction_beyond_vacuum_is_refused_and_the_rig_holds_its_last_state(tmp_path):
     from softseq_ros.rig.build import actuator_core
     from softseq_ros.rig.values import WARNING, Notice, PumpCommand

@@ -1,13 +1,13 @@
 """
-Segments joined by tubes and fed at the base by the syringe: the network integrated in time.
+Segments joined by tubes and fed by the syringe: the network integrated in time.
 
 Segment i holds volume v_i at pressure p_i(v_i) (its model: table or law). The syringe imposes
-the volume flow Q(t) into the base segment through the supply line; channel j carries q_j from
-segment j to segment j + 1 with a pressure drop ``L_j dq_j/dt + R_j q_j + a_j q_j |q_j|``
-(softseq_ros.dynamic.network). So
+the volume flow Q(t) into the segment f it feeds (the base unless the scene says otherwise)
+through the supply line; channel j carries q_j from segment j to segment j + 1 with a pressure
+drop ``L_j dq_j/dt + R_j q_j + a_j q_j |q_j|`` (softseq_ros.dynamic.network). So
 
-    dv_0/dt = Q - q_0,   dv_i/dt = q_(i-1) - q_i,   and the tip's volume follows from mass:
-    v_tip = (rest volumes) + (injected volume) - (the other volumes),
+    dv_i/dt = [i = f] Q + q_(i-1) - q_i   (q_(-1) = 0),   and the tip's volume follows from
+    mass: v_tip = (rest volumes) + (injected volume) - (the other volumes),
 
 which keeps the sum of the volumes equal to the injected volume to round-off at every instant.
 A channel without inertance carries the flow its pressure drop drives at once; one with it
@@ -117,8 +117,10 @@ class NetworkFlow:
         self.supply = None if network.supply is None else tube_law(network.supply,
                                                                    network.fluid)
         self.inertial = [j for j, law in enumerate(self.laws) if law.inertance > 0.0]
-        # The segment the syringe feeds (through the supply line, if any): the base.
-        self.feed = 0
+        # The segment the syringe feeds (through the supply line, if any).
+        self.feed = network.feed
+        if not 0 <= self.feed < self.n:
+            raise ValueError(f'the syringe feeds segment {self.feed}, one of {self.n} segments?')
         self.rest = np.array([s.rest_volume for s in self.segments])
         self.full = np.array([s.max_volume for s in self.segments])
         self.rest_total = float(self.rest.sum())
@@ -235,7 +237,9 @@ class NetworkFlow:
         pressures = self._pressure_list(volumes)
         flows = self._flow_list(state, pressures)
         last = self.n - 1
-        rates = [(self.flow if i == 0 else flows[i - 1]) - flows[i] for i in range(last)]
+        rates = [-flows[0]] + [flows[i - 1] - flows[i] for i in range(1, last)]
+        if self.feed < last:
+            rates[self.feed] += self.flow
         for j in self.inertial:
             law = self.laws[j]
             rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
@@ -263,8 +267,10 @@ class NetworkFlow:
                             - sum(others)]
         pressures = self._pressure_list(volumes)
         flows = self._flow_list(state, pressures)
-        rates = [self.flow - flows[0]]
+        rates = [-flows[0]]
         rates += [flows[i - 1] - flows[i] for i in range(1, last)]
+        if self.feed < last:
+            rates[self.feed] += self.flow
         for j in self.inertial:
             law = self.laws[j]
             rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
@@ -285,7 +291,9 @@ class NetworkFlow:
         start_t, start_injected = self._origin
         pressures = self._pressure_list([v, self.rest_total + (start_injected + self.flow
                                                                 * (t - start_t)) - v])
-        return self.flow - self._steady[0](pressures[0] - pressures[1])
+        # The pump's flow into the base, unless the syringe feeds the tip.
+        return (self.flow if self.feed == 0 else 0.0) - self._steady[0](pressures[0]
+                                                                         - pressures[1])
 
     # ------------------------------------------------------------------ time
 
@@ -688,9 +696,9 @@ class NetworkFlow:
         return self._current()[2].copy()
 
     def syringe_pressure(self) -> float:
-        """The gauge pressure [Pa] at the syringe: the base segment's plus the supply line's."""
-        base = float(self._current()[1][0])
-        return base + (self.supply.drop(self.flow) if self.supply is not None else 0.0)
+        """The gauge pressure [Pa] at the syringe: the fed segment's plus the supply line's."""
+        fed = float(self._current()[1][self.feed])
+        return fed + (self.supply.drop(self.flow) if self.supply is not None else 0.0)
 
 
 # An interpolant the last step has and the outputs have not yet asked for.

@@ -440,7 +440,7 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     camera = _camera(ctx, raw.get('camera'), pump.profile)
     outputs = _outputs(ctx, raw.get('outputs'))
     solver = _solver(ctx, raw.get('solver'))
-    network = read_network(ctx, raw.get('network'), len(segments))
+    network = read_network(ctx, raw.get('network'), tuple(s.name for s in segments))
     return Scene(name=name, description=description, network=network,
                  path=Path(path) if path is not None else None, segments=segments, pump=pump,
                  camera=camera, outputs=outputs, solver=solver)

@@ -2,14 +2,16 @@
 The fluid network a scene may declare: the fluid, the supply line and the channels.
 
 A scene with a ``network`` block puts time into the physics (softseq_ros.dynamic): fluid flows
-from the syringe through the supply line into the base segment and through one channel between
-each pair of neighbouring segments. Every tube is circular, given by its length and radius;
-what follows from them (Hagen-Poiseuille resistance, inertance, minor losses) is computed in
-softseq_ros.dynamic.network. Schema (optional keys show their defaults)::
+from the syringe through the supply line into the segment it feeds (the base unless ``feeds``
+names another) and through one channel between each pair of neighbouring segments. Every tube
+is circular, given by its length and radius; what follows from them (Hagen-Poiseuille
+resistance, inertance, minor losses) is computed in softseq_ros.dynamic.network. Schema
+(optional keys show their defaults)::
 
     network:
       fluid: {viscosity_pa_s: 1.0e-3, density_kg_per_m3: 998.0}   # water at 20 C
-      supply: {length_m: 0.5, radius_m: 0.8e-3}      # optional: syringe to base segment
+      supply: {length_m: 0.5, radius_m: 0.8e-3}      # optional: syringe to the fed segment
+      feeds: bottom                                 # the segment the syringe feeds: the base
       channels:                                     # base to tip, one per neighbouring pair
         - {length_m: 0.01, radius_m: 0.25e-3, inertance: false, minor_loss: 0.0,
            friction: laminar}                       # or blasius: turbulent above Re ~ 1190
@@ -62,13 +64,19 @@ class Tube:
 
 @dataclass(frozen=True)
 class NetworkSettings:
-    """The declared network: the fluid, the supply line (None: ideal) and the channels."""
+    """
+    The declared network: the fluid, the supply line (None: ideal) and the channels.
+
+    ``feed``: the index (base to tip) of the segment the syringe feeds; 0, the base, unless
+    the scene's ``feeds`` names another.
+    """
 
     fluid: Fluid
     supply: Tube | None
     channels: tuple[Tube, ...]
     rate_hz: float = DEFAULT_NETWORK_RATE_HZ
     rtol: float = DEFAULT_NETWORK_RTOL
+    feed: int = 0
 
 
 def channel_names(segment_names: tuple[str, ...] | list[str]) -> tuple[str, ...]:
@@ -96,11 +104,14 @@ def _tube(ctx: Context, value: object, key_path: str) -> Tube:
     return Tube(length, radius, inertance, minor_loss, friction)
 
 
-def read_network(ctx: Context, value: object, segment_count: int) -> NetworkSettings | None:
-    """The ``network`` block of a scene (None when the scene has none)."""
+def read_network(ctx: Context, value: object,
+                 segment_names: tuple[str, ...]) -> NetworkSettings | None:
+    """The ``network`` block of a scene of segments ``segment_names`` (None: it has none)."""
     if value is None:
         return None
-    raw = ctx.mapping(value, 'network', ('channels',), ('fluid', 'supply', 'rate_hz', 'rtol'))
+    segment_count = len(segment_names)
+    raw = ctx.mapping(value, 'network', ('channels',),
+                      ('fluid', 'supply', 'feeds', 'rate_hz', 'rtol'))
     fluid_raw = ctx.mapping(raw.get('fluid', {}), 'network.fluid', (),
                             ('viscosity_pa_s', 'density_kg_per_m3'))
     fluid = Fluid(
@@ -109,6 +120,10 @@ def read_network(ctx: Context, value: object, segment_count: int) -> NetworkSett
         ctx.number(fluid_raw.get('density_kg_per_m3', WATER_DENSITY_KG_PER_M3),
                    'network.fluid.density_kg_per_m3', gt=0.0))
     supply = None if raw.get('supply') is None else _tube(ctx, raw['supply'], 'network.supply')
+    feeds = raw.get('feeds', segment_names[0])
+    if feeds not in segment_names:
+        raise ctx.error('network.feeds', f'must name one of the segments '
+                                         f'({", ".join(segment_names)}), got {feeds!r}')
     items = ctx.sequence(raw['channels'], 'network.channels')
     if len(items) != segment_count - 1:
         raise ctx.error('network.channels', f'needs one channel per pair of neighbouring '
@@ -121,4 +136,4 @@ def read_network(ctx: Context, value: object, segment_count: int) -> NetworkSett
     rtol = ctx.number(raw.get('rtol', DEFAULT_NETWORK_RTOL), 'network.rtol', gt=0.0)
     if not 1e-13 <= rtol <= 1e-2:
         raise ctx.error('network.rtol', f'must be within 1e-13 and 1e-2, got {rtol:g}')
-    return NetworkSettings(fluid, supply, channels, rate, rtol)
+    return NetworkSettings(fluid, supply, channels, rate, rtol, segment_names.index(feeds))
