@@ -113,7 +113,7 @@ def fresh_run(design: object, table: str | None = None) -> dict:
 def part_meshes() -> None:
     rows = []
     for name in ('top', 'bottom'):
-        base = load_design(DESIGNS / f'paper_{name}.yaml')
+        base = load_design(DESIGNS / f'paper_{name}_yeoh.yaml')
         for size in MESH_SIZES:
             design = with_changes(base, {'mesh.element_size_m': size})
             row = {'segment': name, 'element_size_m': size, **fresh_run(design)}
@@ -126,9 +126,8 @@ def part_whole() -> None:
     # The unit cell and the whole segment on the same coarse mesh, with the shipped Yeoh fit
     # (the membranes' uniform inflation turns unstable past their common peak) and with the
     # Arruda-Boyce fit (it does not); then the whole segment on a finer mesh.
-    yeoh = load_design(DESIGNS / 'paper_top.yaml')
-    arruda = _with_material(yeoh, MATERIALS['Arruda-Boyce mu 16.3 kPa, lambda_m 3.96 '
-                                           '(stretch <= 4)'])
+    yeoh = load_design(DESIGNS / 'paper_top_yeoh.yaml')
+    arruda = load_design(DESIGNS / 'paper_top.yaml')
     cases = [('unit_cell', 0.002, 1, 'Yeoh', yeoh), ('whole_segment', 0.002, 1, 'Yeoh', yeoh),
              ('whole_segment', 0.002, 1, 'Arruda-Boyce', arruda),
              ('whole_segment', 0.0015, 2, 'Arruda-Boyce', arruda)]
@@ -148,7 +147,7 @@ def part_whole() -> None:
 def part_sweep() -> None:
     from softseq_ros.fem.sweep import run_sweep, sweep_cases
 
-    base = with_changes(load_design(DESIGNS / 'paper_top.yaml'),
+    base = with_changes(load_design(DESIGNS / 'paper_top_yeoh.yaml'),
                         {'mesh.element_size_m': 0.0015, 'volume.max_injected_m3': 3e-5})
     cases = sweep_cases(base, {'geometry.membrane_thickness_m': [0.0005, 0.00075, 0.001,
                                                                  0.00125]})
@@ -163,6 +162,150 @@ def part_sweep() -> None:
         print(rows[-1], flush=True)
     _store('sweep', {'machine': _machine(), 'rows': rows,
                      'case': 'paper_top, 1.5 mm elements, 0 to 30 mL, membrane 0.5-1.25 mm'})
+
+
+# The shipped designs (the paper's law) at three refinements, and the Yeoh variants at the
+# default mesh; the default mesh's tables are the shipped scenes' tables.
+CONVERGENCE_DIR = REPO / 'bench' / 'fem_convergence'
+SHIPPED_TABLES = {'paper_top': 'paper_fem_top', 'paper_bottom': 'paper_fem_bottom',
+                  'paper_top_yeoh': 'paper_fem_yeoh_top',
+                  'paper_bottom_yeoh': 'paper_fem_yeoh_bottom'}
+
+
+def convergence_cases(sizes: tuple[float, ...] = MESH_SIZES) -> list:
+    """Sweep cases: the Arruda-Boyce pair at each size, the Yeoh pair at the default only."""
+    from softseq_ros.fem.sweep import SweepCase
+
+    cases = []
+    for name in ('paper_top', 'paper_bottom', 'paper_top_yeoh', 'paper_bottom_yeoh'):
+        base = load_design(DESIGNS / f'{name}.yaml')
+        for size in sizes:
+            if name.endswith('_yeoh') and size != base.mesh.element_size_m:
+                continue
+            design = (base if size == base.mesh.element_size_m
+                      else with_changes(base, {'mesh.element_size_m': size}))
+            cases.append(SweepCase(label=f'{name}__{size * 1e3:g}mm',
+                                   changes={'mesh.element_size_m': size}, design=design))
+    # Longest first, so two workers finish together.
+    return sorted(cases, key=lambda c: (c.design.mesh.element_size_m,
+                                        c.design.geometry.membrane_thickness_m))
+
+
+def part_convergence(sizes: tuple[float, ...] = MESH_SIZES, out: Path = CONVERGENCE_DIR,
+                     ship: bool = True) -> None:
+    """The paper pair's plateau and sequence at three meshes; the shipped tables refreshed."""
+    import shutil
+
+    from softseq_ros.fem.sweep import run_sweep
+
+    cases = convergence_cases(sizes)
+    missing = [case for case in cases if not (out / f'{case.label}.csv').is_file()]
+    if missing:
+        run_sweep(missing, out, workers=2, progress=print)
+    if ship:
+        for case in cases:
+            if case.design.mesh.element_size_m == 0.00075:
+                shutil.copyfile(out / f'{case.label}.csv', REPO / 'config' / 'segments'
+                                / f'{SHIPPED_TABLES[case.design.name]}.csv')
+    rows = []
+    for size in sizes:
+        for law in ('', '_yeoh'):
+            tables = {n: out / f'paper_{n}{law}__{size * 1e3:g}mm.csv' for n in ('bottom', 'top')}
+            if not all(t.is_file() for t in tables.values()):
+                continue
+            walls = {n: _table_wall_s(t) for n, t in tables.items()}
+            rows.append({'material': 'Yeoh' if law else 'Arruda-Boyce',
+                         'element_size_m': size, 'bottom_wall_s': walls['bottom'],
+                         'top_wall_s': walls['top'],
+                         **_pair_summary(tables['bottom'], tables['top'])})
+            print(rows[-1], flush=True)
+    _store('convergence', {'machine': _machine(), 'rows': rows})
+
+
+def part_comparison() -> None:
+    """The README's table: the paper's reported facts, the stand-ins and the FEM scenes."""
+    from softseq_ros.fem.assembly import pair_metrics, summary_numbers
+    from softseq_ros.scene.loader import load_scene
+
+    rows = {}
+    for scene_name in ('paper', 'paper_fem', 'paper_fem_yeoh'):
+        scene = load_scene(scene_name)
+        metrics = pair_metrics(list(scene.segments), 65e-6, samples=6501)
+        numbers = summary_numbers(metrics)
+        path = metrics['path']
+        history = metrics['history_m3']
+        at = {ml: int(np.argmin(np.abs(history - ml * 1e-6))) for ml in (25, 40, 45, 60, 65)}
+        volumes = np.asarray(path.volumes)
+        flow = volumes[at[65]] - volumes[at[40]]
+        lengths = np.array([s.length for s in scene.segments])
+        numbers['top_flow_share_40_65'] = float(flow[1] / (history[at[65]] - history[at[40]]))
+        numbers['bending_deg'] = {ml: [round(float(np.degrees(k * L)), 0) for k, L in
+                                       zip(np.asarray(path.curvatures)[at[ml]], lengths)]
+                                  for ml in (25, 45, 60)}
+        numbers['segment_peaks_pa'] = [round(float(np.max(s.pressures)), 1)
+                                       for s in scene.segments]
+        numbers['segment_peak_at_m3'] = [float(s.volumes[int(np.argmax(s.pressures))]
+                                               - s.volumes[0]) for s in scene.segments]
+        rows[scene_name] = numbers
+        print(scene_name, numbers, flush=True)
+    _store('comparison', {'machine': _machine(), 'rows': rows})
+
+
+def _comparison_lines(rows: dict) -> list[str]:
+    """The README's comparison table from the stored numbers."""
+    def cell(name: str) -> dict:
+        return rows[name]
+
+    def kpa(v: float) -> str:
+        return f'{v / 1e3:.2f}'
+
+    lines = ['| on one syringe, 0 -> 65 mL | paper (reported) | `paper` (stand-ins) | '
+             '`paper_fem` (FEM unit cells, Arruda-Boyce) | `paper_fem_yeoh` (FEM, Yeoh) |',
+             '|---|---|---|---|---|']
+    names = ('paper', 'paper_fem', 'paper_fem_yeoh')
+    lower = []
+    for n in names:
+        b, t = cell(n)['segment_peaks_pa']
+        where = cell(n)['segment_peak_at_m3'][1] * 1e6
+        lower.append(f'{"top" if t < b else "bottom"}: {kpa(t)} kPa (highest at {where:.0f} mL) '
+                     f'vs {kpa(b)} kPa')
+    lines.append('| segment that levels off lower | top | ' + ' | '.join(lower) + ' |')
+    lines.append('| sequence | partial | ' + ' | '.join(
+        f'{cell(n)["sequence"]} (smallest share of the inflow {cell(n)["min_share"]:+.3f})'
+        for n in names) + ' |')
+    lines.append('| combined plateau | reached at 40 mL (a slight slope in the experiment) | '
+                 + ' | '.join(f'within 1 % of its top ({kpa(cell(n)["plateau_pressure_pa"])} '
+                              f'kPa at {cell(n)["plateau_peak_injected_m3"] * 1e6:.0f} mL) '
+                              f'from {cell(n)["plateau_from_m3"] * 1e6:.0f} mL on'
+                              for n in names) + ' |')
+    lines.append('| top takes over (its share of the inflow half-way) | - | ' + ' | '.join(
+        f'{cell(n)["switch_injected_m3"] * 1e6:.0f} mL' if cell(n)['switch_injected_m3']
+        else '-' for n in names) + ' |')
+    lines.append('| pressure at 25 / 40 / 65 mL [kPa] | - | ' + ' | '.join(
+        ' / '.join(kpa(cell(n)[f'p_at_{v}_ml_pa']) for v in (25, 40, 65)) for n in names)
+        + ' |')
+    lines.append("| top's share of the flow, 40 -> 65 mL | nearly all | " + ' | '.join(
+        f'{cell(n)["top_flow_share_40_65"]:.0%}' for n in names) + ' |')
+    lines.append('| bending of bottom / top at steps 3, 4, 5 (25 / 45 / 60 mL) [degrees] | both '
+                 'bend, then only the top curls | ' + ' | '.join(
+                     ', '.join('/'.join(f'{v:.0f}' for v in (cell(n)['bending_deg'].get(ml)
+                                                              or cell(n)['bending_deg'][str(ml)]))
+                               for ml in (25, 45, 60)) for n in names) + ' |')
+    return lines
+
+
+def _table_wall_s(path: Path) -> float | None:
+    """The run time a sweep's summary.csv beside the table gives for it."""
+    import csv
+
+    summary = path.parent / 'summary.csv'
+    if not summary.is_file():
+        return None
+    lines = [line for line in summary.read_text().splitlines() if not line.startswith('#')]
+    for row in csv.DictReader(lines):
+        if row['table'] == path.name:
+            return float(row['wall_s'])
+    return None
 
 
 def part_materials() -> None:
@@ -203,34 +346,15 @@ def _with_material(design: object, material: dict) -> object:
 
 def _pair_summary(bottom: Path, top: Path) -> dict:
     """Sequence type and path numbers of the two tables on one syringe (0 -> 65 mL)."""
-    from softseq_ros.quasistatic.equilibrium import Tracker, classify
-    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.fem.assembly import pair_metrics, summary_numbers
 
     segments = (read_table(bottom, name='bottom', length=0.111),
                 read_table(top, name='top', length=0.111))
-    out = {'bottom_peak_pa': round(float(segments[0].pressures.max()), 1),
-           'top_peak_pa': round(float(segments[1].pressures.max()), 1)}
-    capacity = sum(s.max_volume - s.rest_volume for s in segments)
-    top_ml = min(65e-6, capacity * 0.999)
-    emap = build_map(segments, None)
-    out['sequence'] = classify(emap)
-    history = np.linspace(0.0, top_ml, 1301)
-    path = Tracker(emap).sweep(history)
-    pressure = np.asarray(path.pressure)
-    volumes = np.asarray(path.volumes)
-    for ml in (25, 40, 45, 60, 65):
-        i = int(np.argmin(np.abs(history - ml * 1e-6)))
-        if abs(history[i] - ml * 1e-6) < 1e-7:
-            out[f'p_at_{ml}_ml_pa'] = round(float(pressure[i]), 1)
-            out[f'top_share_at_{ml}_ml'] = round(
-                float((volumes[i, 1] - segments[1].rest_volume) / max(history[i], 1e-12)), 3)
-    top_index = int(np.argmax(pressure))
-    out['combined_peak_pa'] = round(float(pressure[top_index]), 1)
-    out['combined_peak_injected_m3'] = float(history[top_index])
-    near = np.nonzero(pressure >= 0.99 * pressure[top_index])[0]
-    out['within_1pct_of_peak_from_m3'] = float(history[near[0]])
-    out['snap_throughs'] = len(path.events)
-    out['reached_m3'] = float(history[-1])
+    out = summary_numbers(pair_metrics(segments))
+    # The report's names for the plateau.
+    out['combined_peak_pa'] = out['plateau_pressure_pa']
+    out['combined_peak_injected_m3'] = out['plateau_peak_injected_m3']
+    out['within_1pct_of_peak_from_m3'] = out['plateau_from_m3']
     return out
 
 
@@ -325,7 +449,7 @@ def write_figures(folder: Path = REPO / 'docs', element_size_m: float = 0.001) -
         ax.set_xlabel('fluid injected into the segment [mL]')
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
-    axes[0].set_title('PV: FEM (Yeoh, stretch <= 4 fit) vs stand-ins', fontsize=9)
+    axes[0].set_title("PV: FEM (Arruda-Boyce, the paper's law) vs stand-ins", fontsize=9)
     axes[1].set_title('curvature of the beam', fontsize=9)
     axes[2].set_title('FEM unit cells (1 mm) across Ecoflex 00-30 fits', fontsize=9)
     fig.tight_layout()
@@ -335,14 +459,15 @@ def write_figures(folder: Path = REPO / 'docs', element_size_m: float = 0.001) -
 
 
 PARTS = {'meshes': part_meshes, 'whole': part_whole, 'sweep': part_sweep,
-         'materials': part_materials}
+         'materials': part_materials, 'convergence': part_convergence,
+         'comparison': part_comparison}
 
 
 def quick(folder: Path) -> None:
     """``--quick``: one coarse case through every part's code, no fine mesh; into ``folder``."""
     from softseq_ros.fem.sweep import run_sweep, sweep_cases
 
-    yeoh = with_changes(load_design(DESIGNS / 'paper_top.yaml'), QUICK_CHANGES)
+    yeoh = with_changes(load_design(DESIGNS / 'paper_top_yeoh.yaml'), QUICK_CHANGES)
     print(f'quick: top unit cell at {QUICK_ELEMENT_M * 1e3:g} mm in a fresh process ...',
           flush=True)
     result = fresh_run(yeoh, str(folder / 'quick_top.csv'))
@@ -455,6 +580,37 @@ def write_report(note: str = '') -> None:
                          f'{row["combined_peak_injected_m3"] * 1e6:.1f} | '
                          f'{row["within_1pct_of_peak_from_m3"] * 1e6:.1f} |')
         lines.append('')
+    if 'convergence' in data:
+        part = data['convergence']
+        lines += ["## The paper pair on the paper's law: mesh convergence", '',
+                  'Unit cells, full PV curves, both segments on one syringe, 0 -> 65 mL; run on '
+                  'two worker processes. Machine: ' + str(part['machine']), '',
+                  '| material | element [mm] | bottom peak [Pa] | top peak [Pa] | '
+                  'sequence | smallest share of the inflow | plateau [Pa] | within 1 % from '
+                  '[mL] | top takes over at [mL] | p at 25 / 45 / 60 mL [Pa] | wall bottom / top '
+                  '[s] |', '|---|---:|---:|---:|---|---:|---:|---:|---:|---|---|']
+        for row in part['rows']:
+            ps = ' / '.join(str(row.get(f'p_at_{v}_ml_pa', '-')) for v in (25, 45, 60))
+            switch = row.get('switch_injected_m3')
+            lines.append(
+                f'| {row["material"]} | {row["element_size_m"] * 1e3:g} | '
+                f'{row["bottom_peak_pa"]} | {row["top_peak_pa"]} | {row["sequence"]} | '
+                f'{row["min_share"]} | {row["plateau_pressure_pa"]} | '
+                f'{row["plateau_from_m3"] * 1e6:.1f} | '
+                f'{"-" if switch is None else f"{switch * 1e6:.1f}"} | {ps} | '
+                f'{row.get("bottom_wall_s")} / {row.get("top_wall_s")} |')
+        arruda = [r for r in part['rows'] if r['material'] == 'Arruda-Boyce']
+        arruda.sort(key=lambda r: -r['element_size_m'])
+        lines += ['', 'Plateau pressure change per refinement (Arruda-Boyce):', '']
+        for key, label in (('bottom_peak_pa', 'bottom peak'), ('top_peak_pa', 'top peak'),
+                           ('plateau_pressure_pa', 'pair plateau')):
+            lines.append(f'- {label}: ' + ', '.join(
+                f'{a["element_size_m"] * 1e3:g} -> {b["element_size_m"] * 1e3:g} mm: '
+                f'{(b[key] / a[key] - 1) * 100:+.2f} %' for a, b in zip(arruda[:-1], arruda[1:])))
+        lines.append('')
+    if 'comparison' in data:
+        lines += ["## The paper's facts, the stand-ins and the FEM scenes", '',
+                  *_comparison_lines(data['comparison']['rows']), '']
     REPORT.write_text('\n'.join(lines) + '\n')
 
 

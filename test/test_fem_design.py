@@ -68,7 +68,8 @@ def test_shipped_designs_are_table_i():
      'x.yaml: geometry.wall_thickness_m: must leave a cavity'),
     (lambda d: d['material'].update(law='rubber'),
      "x.yaml: material.law: unknown material law 'rubber'"),
-    (lambda d: d['material'].pop('c1_pa'), 'x.yaml: material.c1_pa: required key is missing'),
+    (lambda d: d['material'].pop('lambda_m'),
+     'x.yaml: material.lambda_m: required key is missing'),
     (lambda d: d['mesh'].update(model='quarter'), "x.yaml: mesh.model: unknown model 'quarter'"),
     (lambda d: d['mesh'].update(element_size_m=0.01),
      'x.yaml: mesh.element_size_m: must be at most a quarter of height_m'),
@@ -114,7 +115,7 @@ def test_design_hash_follows_what_decides_the_result():
     assert same.digest() == top.digest()
     renamed = design_from_dict({**_raw(), 'description': 'other words'}, 'y.yaml')
     assert renamed.digest() == top.digest()
-    for change in ({'geometry.membrane_thickness_m': 0.0006}, {'material.c1_pa': 8000.0},
+    for change in ({'geometry.membrane_thickness_m': 0.0006}, {'material.lambda_m': 4.5},
                    {'mesh.element_size_m': 0.001}, {'volume.max_injected_m3': 6e-5}):
         assert with_changes(top, change).digest() != top.digest()
 
@@ -201,7 +202,7 @@ def test_fem_command_computes_once_then_serves_the_cache(tmp_path):
     assert 'computed in' in first.stdout
     assert 'mL injected' in first.stderr  # progress while it runs
     text = out.read_text()
-    assert '# Material: yeoh' in text and 'design hash' in text
+    assert '# Material: arruda_boyce' in text and 'design hash' in text
     cached = list((tmp_path / 'cache').glob('paper_top-*.csv'))
     assert len(cached) == 1 and cached[0].read_text() == text
     again = _softseq('paper_top', *quick, '--out', str(tmp_path / 'again.csv'), '--quiet',

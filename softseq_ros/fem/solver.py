@@ -98,6 +98,9 @@ class State:
     # Under volume control: a local minimum of the energy among states of this volume (None:
     # not known, e.g. a state of a pressure-controlled or arc-length run).
     stable: bool | None = None
+    # The last Newton correction of the pressure [Pa]: the error left in it is smaller still
+    # (quadratic convergence), so it bounds the solver's scatter of a table's rows.
+    pressure_correction: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -225,7 +228,8 @@ class InflationModel:
                     and abs(constraint) <= tolerance * self.rest_volume):
                 self._check_orientation(q)
                 return State(volume=target, pressure=p, q=q, iterations=iteration,
-                             stable=self._stable() if damping is None else None)
+                             stable=self._stable() if damping is None else None,
+                             pressure_correction=abs(float(step[-1])))
             if np.max(np.abs(step[:-1])) > 0.5 * self.length_scale:
                 raise ConvergenceError('Newton step larger than half the model size')
         raise ConvergenceError(f'no convergence in {max_iterations} iterations')
