@@ -356,6 +356,14 @@ def test_a_snap_through_is_an_event_with_a_start_the_fluid_it_moves_and_a_durati
         assert snap.fluid_moved_m3 == pytest.approx(moved, rel=0.05)
         assert 0.0 < snap.duration_s < snap.end_s - snap.start_s
         assert snap.peak_exchange_m3_per_s > 100 * 1e-9
+        # The segment the quasi-static snap fills took the fluid, the other gave it: what each
+        # gained beyond the pump's push, the same as the quasi-static jump (5 %), by mass.
+        gained = np.subtract(event.to_volumes, event.from_volumes)
+        assert snap.taking() == [int(np.argmax(gained))]
+        assert snap.giving() == [int(np.argmin(gained))]
+        np.testing.assert_allclose(snap.exchanged_m3, gained, rtol=0.05)
+        assert abs(sum(snap.exchanged_m3)) < 1e-12 * emap.v_scale
+        assert snap.start_s < snap.peak_s < snap.end_s
     assert flow.take_snaps() == []
 
 
@@ -378,6 +386,8 @@ def test_on_the_rig_a_snap_through_goes_out_on_the_events_topic(tmp_path):
     # The bottom takes the top's fluid (as long as the exchange outruns the pump fivefold).
     assert events[0]['to_volumes_m3'][0] - events[0]['from_volumes_m3'][0] > 5 * ML
     assert events[0]['to_volumes_m3'][1] < events[0]['from_volumes_m3'][1] - 5 * ML
+    assert events[0]['giving_segments'] == ['top']
+    assert events[0]['taking_segments'] == ['bottom']
 
 
 def reference_pair(segments, tube: Tube, flow_rate: float, end_s: float, rtol: float):

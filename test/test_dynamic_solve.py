@@ -40,6 +40,10 @@ def asymmetric_with_network(tmp_path: Path, **pump: object) -> Path:
     return path
 
 
+def scene_names(scene_file: Path) -> tuple[str, ...]:
+    return load_scene(scene_file).segment_names
+
+
 def test_without_a_network_solve_writes_the_quasistatic_bytes(tmp_path, capsys):
     # The Fig. 1 asymmetric scene as shipped (no network), its pump sampled at 2 Hz.
     data = yaml.load((CONFIG / 'fig1_asymmetric.yaml').read_text(), Loader=YamlLoader)
@@ -74,7 +78,12 @@ def test_pumped_slowly_the_written_snaps_are_where_the_quasistatic_ones_are(tmp_
     assert len(expected) == 1
     header, rows = read_csv(tmp_path / 'path_snaps.csv')
     assert len(rows) == 1
-    snap = dict(zip(header, map(float, rows[0])))
+    # Numbers, then the names of the segments that gave the fluid and took it.
+    assert header[-2:] == ['giving', 'taking'] and rows[0][-2:] == ['top', 'bottom']
+    snap = dict(zip(header[:-2], map(float, rows[0][:-2])))
+    gained = [snap[f'exchanged_{name}_m3'] for name in scene_names(scene_file)]
+    assert gained[0] == pytest.approx(-gained[1], rel=1e-9) and gained[0] > 0.0
+    assert gained[0] == pytest.approx(snap['fluid_moved_m3'], rel=1e-6)
     # Pumped at 1e-9 m^3/s the snap starts at the fold and lands where the quasi-static one does.
     assert snap['injected_m3'] == pytest.approx(expected[0].injected, abs=0.05 * ML)
     for k, name in enumerate(scene.segment_names):

@@ -95,6 +95,10 @@ def test_the_report_of_a_dynamic_bag_shows_the_measured_snap_durations(fast, tmp
     # Without the scene there is no quasi-static path to lag behind.
     assert transients['lag'] is None and snap['delay_injected_m3'] is None
     assert f'10-90 % in {events[0]["duration_s"] * 1e3:.0f} ms' in summary
+    # Which segments gave the fluid and which took it, as the event named them.
+    assert events[0]['giving_segments'] == ['top'] and events[0]['taking_segments'] == ['bottom']
+    assert (snap['giving_segments'], snap['taking_segments']) == (['top'], ['bottom'])
+    assert 'moved (top -> bottom)' in summary
     assert 'lag behind the quasi-static path: needs the scene' in summary
     report = (tmp_path / 'report' / 'report.md').read_text()
     assert '## Transients (fluid network)' in report
@@ -150,6 +154,8 @@ def test_compare_shows_the_snap_durations_and_a_quasi_static_bag_has_no_transien
     duration = events_in(bag)[0]['duration_s']
     row = next(line for line in table.splitlines() if 'duration (10-90 %)' in line)
     assert row.split('|')[3:5] == [' - ', f' {duration * 1e3:.4g} ']
+    row = next(line for line in table.splitlines() if 'fluid from -> to' in line)
+    assert row.split('|')[3:6] == [' - ', ' top -> bottom ', ' only in B ']
     # Without the scene there is no quasi-static path to measure the lag against.
     lag_rows = [line for line in table.splitlines() if 'lag behind the quasi-static' in line]
     assert len(lag_rows) == 4

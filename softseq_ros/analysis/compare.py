@@ -4,8 +4,9 @@ Two recordings side by side: the same metrics, their difference (``softseq compa
 For two resolutions of one scene, two scenes, or a quasi-static run against a dynamic one.
 Values are shown in mL, kPa, mJ, mm and ms; the difference is B minus A. When either bag is
 dynamic (a scene with a fluid network) the table adds its transients: each snap-through's
-duration, fluid moved and peak exchange, and the lag behind the quasi-static path, which needs
-the scene (``-`` without it, and for a bag that has no such row). A metric that does not apply
+duration, fluid moved, which segments gave and took it, and peak exchange, and the lag
+behind the quasi-static path, which needs the scene (``-`` without it, and for a bag that has
+no such row). A metric that does not apply
 to a bag (a switch where no segment takes over, a plateau on a curve that never levels off)
 shows as ``does not apply``, with the reason under the table.
 """
@@ -14,7 +15,12 @@ from dataclasses import dataclass
 import os
 
 from softseq_ros.analysis.recording import load_recording
-from softseq_ros.analysis.report import not_applicable_reason, recording_metrics, scene_notes
+from softseq_ros.analysis.report import (
+    not_applicable_reason,
+    parties,
+    recording_metrics,
+    scene_notes,
+)
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,7 @@ def _transient_rows(metrics: dict) -> dict[str, tuple[object, str]]:
         rows[f'{key} injected at its start'] = (snap['injected_m3'] * 1e6, 'mL')
         rows[f'{key} duration (10-90 %)'] = (snap['duration_s'] * 1e3, 'ms')
         rows[f'{key} fluid moved'] = (snap['fluid_moved_m3'] * 1e6, 'mL')
+        rows[f'{key} fluid from -> to'] = (parties(snap), '')
         rows[f'{key} peak exchange'] = (snap['peak_exchange_m3_per_s'] * 1e6, 'mL/s')
         delay = snap['delay_injected_m3']
         rows[f'{key} late behind the quasi-static snap'] = (

@@ -401,6 +401,14 @@ def _delay(snap: dict) -> str:
             f'snap at {_ml(snap["quasi_static_injected_m3"], 3)}')
 
 
+def parties(snap: dict) -> str:
+    """'top -> bottom': the segments that gave the fluid and those that took it."""
+    giving, taking = snap.get('giving_segments'), snap.get('taking_segments')
+    if giving is None and taking is None:
+        return '-'
+    return f'{" + ".join(giving or []) or "-"} -> {" + ".join(taking or []) or "-"}'
+
+
 def _transient_lines(transients: dict) -> list[str]:
     """The summary's lines on a dynamic recording's transients."""
     snaps = transients['snaps']
@@ -411,7 +419,7 @@ def _transient_lines(transients: dict) -> list[str]:
         lines.append(
             f'  snap {number} ({snap["direction"]}) at {_ml(snap["injected_m3"], 3)}, '
             f't = {snap["start_time_s"]:.3f} s: 10-90 % in {_ms(snap["duration_s"])}, '
-            f'{_ml(snap["fluid_moved_m3"], 3)} moved, peak exchange '
+            f'{_ml(snap["fluid_moved_m3"], 3)} moved ({parties(snap)}), peak exchange '
             f'{_ml_per_s(snap["peak_exchange_m3_per_s"])}, gauge pressure '
             f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])}')
         lines.append(
@@ -561,18 +569,19 @@ def _check_text(check: dict) -> str:
 def _transient_markdown(transients: dict) -> list[str]:
     lines = ['', '## Transients (fluid network)', '',
              'Snap-throughs in time as the actuator reported them: duration from 10 % to 90 % '
-             'of the fluid moved; peak channel flow (positive towards the tip) and pressure '
-             'drop within the window shown in `transients.png`; late by: injected volume '
-             'pumped between the quasi-static snap and the start of this one.', '']
+             'of the fluid moved; from -> to: the segments that gave the fluid and those that '
+             'took it; peak channel flow (positive towards the tip) and pressure drop within '
+             'the window shown in `transients.png`; late by: injected volume pumped between '
+             'the quasi-static snap and the start of this one.', '']
     if transients['snaps']:
-        lines += ['| snap | direction | start | injected | duration | fluid moved | '
+        lines += ['| snap | direction | start | injected | duration | fluid moved | from -> to | '
                   'peak exchange | gauge pressure | peak channel flow | peak pressure drop | '
-                  'late by |', '|---:|---|---:|---:|---:|---:|---:|---|---|---|---:|']
+                  'late by |', '|---:|---|---:|---:|---:|---:|---|---:|---|---|---|---:|']
         for number, snap in enumerate(transients['snaps'], start=1):
             lines.append(
                 f'| {number} | {snap["direction"]} | {snap["start_time_s"]:.3f} s | '
                 f'{_ml(snap["injected_m3"], 3)} | {_ms(snap["duration_s"])} | '
-                f'{_ml(snap["fluid_moved_m3"], 3)} | '
+                f'{_ml(snap["fluid_moved_m3"], 3)} | {parties(snap)} | '
                 f'{_ml_per_s(snap["peak_exchange_m3_per_s"])} | '
                 f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '
                 f'{_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)} | '

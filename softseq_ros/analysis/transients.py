@@ -53,6 +53,8 @@ class TimedSnap:
     to_pressure: float
     window_s: tuple[float, float]
     volume_change: tuple[float, ...]   # per segment, after less before [m^3]
+    giving: tuple[str, ...] | None = None   # the segments that gave the fluid (None: unsaid)
+    taking: tuple[str, ...] | None = None   # the segments that took it
 
 
 @dataclass(frozen=True)
@@ -158,8 +160,13 @@ def timed_snaps(recording: Recording) -> list[TimedSnap]:
             _float(event.get('peak_exchange_m3_per_s')), float(event['from_pressure_pa']),
             float(event['to_pressure_pa']), _window(times, row, start, duration),
             tuple(float(after) - float(before) for before, after in
-                  zip(event['from_volumes_m3'], event['to_volumes_m3']))))
+                  zip(event['from_volumes_m3'], event['to_volumes_m3'])),
+            _names(event.get('giving_segments')), _names(event.get('taking_segments'))))
     return snaps
+
+
+def _names(value: object) -> tuple[str, ...] | None:
+    return None if value is None else tuple(str(name) for name in value)
 
 
 def _float(value: object) -> float:
@@ -180,6 +187,8 @@ def _snap_entry(snap: TimedSnap, recording: Recording) -> dict:
              'fluid_moved_m3': snap.fluid_moved,
              'peak_exchange_m3_per_s': snap.peak_exchange,
              'from_pressure_pa': snap.from_pressure, 'to_pressure_pa': snap.to_pressure,
+             'giving_segments': None if snap.giving is None else list(snap.giving),
+             'taking_segments': None if snap.taking is None else list(snap.taking),
              'window_s': list(snap.window_s),
              'peak_channel_flow_m3_per_s': {}, 'peak_pressure_drop_pa': {},
              'quasi_static_injected_m3': None, 'delay_injected_m3': None}

@@ -273,10 +273,17 @@ def snaps_file(out: str | Path) -> Path:
 
 
 def snap_columns(names: Sequence[str]) -> list[str]:
-    """Column names of the snap-throughs' CSV for segments ``names`` (base to tip)."""
+    """
+    Column names of the snap-throughs' CSV for segments ``names`` (base to tip).
+
+    Numbers, then ``giving`` and ``taking``: the names of the segments that gave and took the
+    fluid, separated by spaces. ``exchanged_<name>_m3`` is what a segment gained from the
+    others (its volume's change less the pump's push into it; negative: it gave).
+    """
     return (['start_s', 'end_s', 'injected_m3', 'duration_s', 'fluid_moved_m3',
-             'peak_exchange_m3_per_s', 'from_pressure_pa', 'to_pressure_pa']
-            + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names])
+             'peak_exchange_m3_per_s', 'peak_s', 'from_pressure_pa', 'to_pressure_pa']
+            + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names]
+            + [f'exchanged_{n}_m3' for n in names] + ['giving', 'taking'])
 
 
 def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str]]) -> None:
@@ -292,8 +299,10 @@ def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[s
     """One row per snap-through (the header alone when there was none)."""
     _write_table(out, snap_columns(names), ([repr(float(x)) for x in (
         snap.start_s, snap.end_s, snap.injected, snap.duration_s, snap.fluid_moved_m3,
-        snap.peak_exchange_m3_per_s, snap.from_pressure, snap.to_pressure,
-        *snap.from_volumes, *snap.to_volumes)] for snap in snaps))
+        snap.peak_exchange_m3_per_s, snap.peak_s, snap.from_pressure, snap.to_pressure,
+        *snap.from_volumes, *snap.to_volumes, *snap.exchanged_m3)]
+        + [' '.join(names[i] for i in snap.giving()), ' '.join(names[i] for i in snap.taking())]
+        for snap in snaps))
 
 
 def folds_file(out: str | Path) -> Path:

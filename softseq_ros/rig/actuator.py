@@ -168,8 +168,12 @@ class ActuatorCore:
                 event.duration_s = float(snap.duration_s)
                 event.fluid_moved_m3 = float(snap.fluid_moved_m3)
                 event.peak_exchange_m3_per_s = float(snap.peak_exchange_m3_per_s)
-                said += (f', {snap.fluid_moved_m3 * 1e6:.3f} mL moved in '
-                         f'{snap.duration_s:.3g} s (10-90 %)')
+                event.giving_segments = list(snap.giving)
+                event.taking_segments = list(snap.taking)
+                said += (f', {snap.fluid_moved_m3 * 1e6:.3f} mL moved from '
+                         f'{" and ".join(snap.giving) or "-"} to '
+                         f'{" and ".join(snap.taking) or "-"} in {snap.duration_s:.3g} s '
+                         '(10-90 %)')
             out.append(Notice(self.role, INFO, said))
             if self._send_events:
                 out.append(event)

@@ -72,7 +72,8 @@ class TimedSnap:
 
     ``start_ns``: when the exchange began, on the driver's clock; ``duration_s``: 10 % to 90 %
     of the fluid moved; ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``: between the
-    segments, beyond the pump's own flow (softseq_ros.dynamic.events.DynamicSnap).
+    segments, beyond the pump's own flow; ``giving`` and ``taking``: the names of the segments
+    that gave the fluid and took it (softseq_ros.dynamic.events.DynamicSnap).
     """
 
     injected: float
@@ -84,6 +85,8 @@ class TimedSnap:
     duration_s: float
     fluid_moved_m3: float
     peak_exchange_m3_per_s: float
+    giving: tuple[str, ...] = ()
+    taking: tuple[str, ...] = ()
 
 
 class ActuatorModel(Protocol):
@@ -341,7 +344,9 @@ class DynamicModel:
         origin = self._origin_ns or 0
         return [TimedSnap(snap.injected, snap.from_volumes, snap.to_volumes, snap.from_pressure,
                           snap.to_pressure, origin + round(snap.start_s * NS_PER_S),
-                          snap.duration_s, snap.fluid_moved_m3, snap.peak_exchange_m3_per_s)
+                          snap.duration_s, snap.fluid_moved_m3, snap.peak_exchange_m3_per_s,
+                          tuple(self.names[i] for i in snap.giving()),
+                          tuple(self.names[i] for i in snap.taking()))
                 for snap in self.flow_network.take_snaps()]
 
     def channel_state(self) -> tuple[list[float], list[float]]:

@@ -90,7 +90,9 @@ class SnapThrough:
 
     A snap-through in time (the dynamic model) says more: when it started (``start_ns``), how
     long it took (``duration_s``, 10 % to 90 % of the fluid moved), the fluid it moved between
-    the segments and its peak exchange flow; None for a quasi-static one (instantaneous).
+    the segments, its peak exchange flow, and which segments gave the fluid and which took it
+    (``giving_segments``, ``taking_segments``: names, base to tip); None for a quasi-static one
+    (instantaneous).
     """
 
     topic: ClassVar[Topic] = contract.EVENTS
@@ -104,6 +106,8 @@ class SnapThrough:
     duration_s: float | None = None
     fluid_moved_m3: float | None = None
     peak_exchange_m3_per_s: float | None = None
+    giving_segments: list[str] | None = None
+    taking_segments: list[str] | None = None
 
 
 @dataclass(slots=True)
