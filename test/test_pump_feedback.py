@@ -283,7 +283,9 @@ def test_only_answers_to_its_own_recent_commands_are_feedback(scene):
 def test_answers_keep_it_running_even_late_and_out_of_order_but_not_too_late(scene):
     rig = Rig(scene)
     rig.run(0.5)
-    # Every command answered 1.5 s late, in swapped pairs: the pump runs on.
+    # Every command answered 1.5 s late, in swapped pairs: the pump runs on. The answer to the
+    # newer of a pair answers the older one too (an actuator behind its commands answers the
+    # newest and skips the others), so the older one's own answer comes too late to count.
     commands = []
     for i in range(1, 400):
         commands.append(rig.tick(0.5 + 0.01 * i))
@@ -298,8 +300,31 @@ def test_answers_keep_it_running_even_late_and_out_of_order_but_not_too_late(sce
     rig.answer(unanswered)
     rig.tick(6.6)
     assert rig.pump.state == 'held'
-    assert rig.pump.reason.endswith("the 1 messages on actuator/volumes in that time answered "
+    # That one and the older of the last swapped pair.
+    assert rig.pump.reason.endswith("the 2 messages on actuator/volumes in that time answered "
                                     "none of the pump's commands; call ~/start to go on")
+
+
+def test_an_answer_to_a_newer_command_answers_the_older_ones(scene):
+    rig = Rig(scene)
+    rig.run(0.5)
+    # An actuator behind its commands answers only every tenth, the newest it has: each
+    # answer is feedback, and answers the nine before it.
+    commands = []
+    for i in range(1, 301):
+        commands.append(rig.tick(0.5 + 0.01 * i))
+        if i % 10 == 0:
+            rig.answer(commands[-1])
+    rig.run(4.5)
+    assert rig.pump.state == 'running'
+    # A skipped command's stamp, heard afterwards (a replay, a forger), is no answer any more.
+    for i, skipped in enumerate(commands[:-1]):
+        rig.tick(4.7 + 0.001 * i)
+        rig.answer(skipped)
+    rig.tick(6.8)
+    assert rig.pump.state == 'held'
+    assert f'the {len(commands) - 1} messages on actuator/volumes in that time answered none' \
+        in rig.pump.reason
 
 
 def test_open_loop_takes_no_feedback_and_holds_on_nothing(scene):

@@ -283,6 +283,8 @@ def test_actuator_buffers_commands_while_it_waits_for_a_previous_state(tmp_path)
                           state_file=str(state_file))
     for volume in list(grid) + list(grid[::-1][:len(grid) - row]):
         first.handle(command(float(volume)), 0)
+    # The newest state, written at once or at the driver's next flush (0.1 s in the node).
+    first.flush_state()
     assert json.loads(state_file.read_text())['volumes_m3'] == pytest.approx(list(held),
                                                                               rel=1e-9)
     second = actuator_core(scene, QuasiStaticModel(emap, scene.segment_names),

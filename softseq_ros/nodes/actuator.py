@@ -10,9 +10,15 @@ lists (default: the scene's): ``actuator/pressure`` (absolute: gauge +
 stamped with the command it answers; once at start, latched, ``actuator/scene``: which scene's
 segments it runs (name and digest).
 
+Commands faster than it answers (softseq_ros.rig.intake): while it keeps up it answers every
+``pump/command`` in order; once far behind it takes the waiting ones without answering, answers
+the newest every 20 ms, counts what it skipped (passed over, or dropped by its queue) and says
+so in its log at most once a second.
+
 Resume: on start the node waits up to ``resume_timeout_s`` for a latched ``actuator/volumes``
-from a live publisher and resumes on the branch nearest those volumes; without one it reads
-``state_file`` (the core writes it after every change; by default
+from a live publisher and resumes on the branch nearest the newest of those it hears; without
+one it reads ``state_file`` (the core writes it at most ten times a second, and the last state
+at a clean stop; by default
 ``$ROS_HOME/softseq/<namespace>/actuator.json``, ``$ROS_HOME`` being ``~/.ros`` unless set).
 Only an abnormal end is resumed: destroying the node (a handled SIGINT or SIGTERM) marks the
 file closed, and the next start is at rest without a word; an actuator killed with ``kill -9``
@@ -27,21 +33,27 @@ in one namespace) warns once, naming them.
 import os
 from pathlib import Path
 import time
-from typing import Any
+from typing import Any, Callable
 
+import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Parameter
 
-from softseq_ros.nodes.core_node import CoreNode, message_class, qos_profile
+from softseq_ros.nodes.core_node import CoreNode, log_to, message_class, qos_profile
 from softseq_ros.nodes.diagnostics import Health
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
+from softseq_ros.rig.actuator import STATE_SAVE_PERIOD_S
 from softseq_ros.rig.build import actuator_core
-from softseq_ros.rig.values import WARNING
-from softseq_ros.rig.wire import segment_volumes
+from softseq_ros.rig.intake import FLUSH_PERIOD_S, CommandIntake
+from softseq_ros.rig.values import WARNING, Notice
+from softseq_ros.rig.wire import InputError, segment_volumes
 
 RESUME_POLL_S = 0.02
+# A live publisher's latched volumes come as its history, oldest first: the resume takes the
+# newest heard until none came for this long.
+RESUME_SETTLE_S = 0.1
 PUBLISHER_CHECK_S = 1.0
 
 
@@ -56,8 +68,15 @@ class ActuatorNode(CoreNode):
         """For /diagnostics: commands refused (garbage or beyond the tables) and the state."""
         base = super().health()
         state = self.core.model.state()
+        intake = self.intake
         base.values = {
             'refused_commands': self.core.rejected_commands + self.refusals,
+            # Under overload (softseq_ros.rig.intake): what it skipped, and why.
+            'answered_commands': intake.answered,
+            'skipped_commands': intake.skipped.total + self.core.skipped_while_waiting,
+            'skipped_passed_over': intake.skipped.passed_over,
+            'skipped_dropped_by_queue': intake.skipped.dropped,
+            'behind_its_commands': intake.pending is not None,
             'gauge_pressure_pa': state.pressure,
             'segment_volumes_m3': ' '.join(f'{v:.9g}' for v in state.volumes),
             **base.values}
@@ -80,20 +99,28 @@ class ActuatorNode(CoreNode):
             read_only=True)
         state_file = self.declare_text(
             'state_file', str(default_state_file(self.get_namespace(), self.get_name())),
-            'File the state is written to after every change and resumed from when no '
+            'File the state is written to when it changes (at most ten times a second, and at a '
+            'clean stop) and resumed from when no '
             'actuator/volumes arrives at start and the last run did not stop cleanly (a clean '
             'stop marks it closed; default: in $ROS_HOME/softseq, one per node name and '
             'namespace); empty: off, every start at rest.', read_only=True)
         self.core = actuator_core(scene, outputs=frozenset(outputs),
                                   ambient_pressure_pa=ambient, state_file=state_file or None)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.intake = CommandIntake()
+        # Armed while a command waits to be answered (the actuator is behind).
+        self._flush_timer = self.create_timer(FLUSH_PERIOD_S, self._flush_command, clock=steady,
+                                              autostart=False)
+        self._flush_armed = False
+        if self.core.state_file is not None:
+            self.create_timer(STATE_SAVE_PERIOD_S, self._flush_state, clock=steady)
         # The core's own outputs: those its model can give (no flows without channels).
         self.connect(self.core.outputs)
         self.send(self.core.begin(self.now_ns()))  # the scene it runs, latched
         self._warned_publishers: frozenset[str] = frozenset()
         command = self.subscription(contract.PUMP_COMMAND)
         if command is not None:
-            self.create_timer(PUBLISHER_CHECK_S, self._check_publishers,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.create_timer(PUBLISHER_CHECK_S, self._check_publishers, clock=steady)
         if self.core.rate_hz is not None:
             # A model whose state moves between commands is advanced on the ROS clock.
             self.create_timer(1.0 / self.core.rate_hz, self._advance)
@@ -102,6 +129,42 @@ class ActuatorNode(CoreNode):
 
     def _advance(self) -> None:
         self.send(self.core.tick(self.now_ns()))
+
+    # ---------------------------------------------------------------- commands
+
+    def receiver(self, topic: contract.Topic, decode: Callable[[Any], Any]) -> Callable:
+        """Commands go through the intake (with what DDS says of them); others as usual."""
+        if topic is not contract.PUMP_COMMAND:
+            return super().receiver(topic, decode)
+        intake = self.intake
+
+        def on_command(msg: Any, info: Any) -> None:
+            sequence = info.get('publication_sequence_number')
+            try:
+                value = decode(msg)
+            except InputError as err:
+                intake.refused(sequence)
+                self.send(self.refused(err))
+                return
+            command = intake.take(value, sequence, info.get('received_timestamp'),
+                                  time.time_ns())
+            if command is not None:
+                self.send(self.core.handle(command, self.now_ns()))
+            elif not self._flush_armed:
+                self._flush_armed = True
+                self._flush_timer.reset()
+        return on_command
+
+    def _flush_command(self) -> None:
+        command = self.intake.flush()
+        if command is None:
+            self._flush_timer.cancel()
+            self._flush_armed = False
+            return
+        self.send(self.core.handle(command, self.now_ns()))
+
+    def _flush_state(self) -> None:
+        self.send(self.core.flush_state())
 
     @property
     def resuming(self) -> bool:
@@ -114,10 +177,12 @@ class ActuatorNode(CoreNode):
         """Listen for the last actuator/volumes for resume_timeout_s (wall time)."""
         self.core.begin_wait()
         self._resume_deadline = time.monotonic() + self.resume_timeout_s
+        self._resume_heard: Any = None
+        self._resume_settle = 0.0
         topic = contract.VOLUMES
         self._resume_subscription = self.create_subscription(
             message_class(topic.type_name), topic.name, self._on_resume_volumes,
-            qos_profile(topic.qos))
+            qos_profile(topic.reader_qos))
         # Wall clock: with use_sim_time the ROS clock may not move until /clock arrives.
         self._resume_timer = self.create_timer(
             RESUME_POLL_S, self._resume_poll, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -125,15 +190,28 @@ class ActuatorNode(CoreNode):
     def _on_resume_volumes(self, msg: Any) -> None:
         if not self.core.waiting:
             return
-        value = segment_volumes(msg)
+        # The publisher sends what it keeps, oldest first; the newest is the state to take.
+        value, heard = segment_volumes(msg), self._resume_heard
+        if heard is None or value.stamp_ns >= heard.stamp_ns:
+            self._resume_heard = value
+        self._resume_settle = time.monotonic() + RESUME_SETTLE_S
+
+    def _resume_from_heard(self) -> bool:
+        value, self._resume_heard = self._resume_heard, None
         source = f'the last {self._resume_subscription.topic_name}'
         resumed, notices = self.core.resume_from(list(value.names), value.volumes_m3, source)
         self.send(notices)
-        if resumed:
-            self._end_resume()
+        return resumed
 
     def _resume_poll(self) -> None:
-        if self.core.waiting and time.monotonic() >= self._resume_deadline:
+        if not self.core.waiting:
+            return
+        now = time.monotonic()
+        if self._resume_heard is not None and now >= self._resume_settle:
+            if self._resume_from_heard():
+                self._end_resume()
+                return
+        if now >= self._resume_deadline:
             # Starting at rest is the normal case and says nothing; a resume warns itself.
             _, notices = self.core.resume_from_file()
             self.send(notices)
@@ -146,12 +224,30 @@ class ActuatorNode(CoreNode):
         self.send(self.core.end_wait(self.now_ns()))
 
     def destroy_node(self) -> None:
-        """Mark the state file closed (a clean stop: the next start is at rest), then destroy."""
+        """
+        Answer the newest command taken, mark the state file closed, then destroy.
+
+        A clean stop: the state file holds the last state, closed, so the next start is at
+        rest. What it says is logged once the node is gone: after a Ctrl-C the context is
+        shut down, and the node's logger would fail to publish the lines on /rosout.
+        """
+        notices: list[Notice] = []
         core = getattr(self, 'core', None)
+        intake = getattr(self, 'intake', None)
+        if core is not None and intake is not None:
+            pending = intake.flush()
+            if pending is not None and not core.waiting:
+                outputs = core.handle(pending, self.now_ns())
+                if self.context.ok():
+                    self.send([value for value in outputs if type(value) is not Notice])
+                notices += [value for value in outputs if type(value) is Notice]
+            notices += intake.report() + intake.summary()
         if core is not None:
-            for notice in core.close():
-                self.log(notice.level, notice.text)
+            notices += core.close()
+        logger_name = self.get_logger().name
         super().destroy_node()
+        for notice in notices:
+            log_to(rclpy.logging.get_logger(logger_name), notice.level, notice.text)
 
     # ---------------------------------------------------------------- graph
 
@@ -160,6 +256,9 @@ class ActuatorNode(CoreNode):
         infos = self.get_publishers_info_by_topic(subscription.topic_name)
         names = frozenset(
             f'{info.node_namespace.rstrip("/")}/{info.node_name}' for info in infos)
+        # Two publishers' sequence numbers interleave: no gap means a dropped command then.
+        self.intake.one_publisher = len(infos) <= 1
+        self.send(self.intake.report())
         if len(names) > 1 and names != self._warned_publishers:
             self._warned_publishers = names
             self.log(WARNING, f'{subscription.topic_name} has {len(names)} publishers '

@@ -123,11 +123,9 @@ class CoreNode(ParameterNode):
         for topic in contract.consumed_by(role):
             if self.local is not None and self.local.produces(topic.producer):
                 continue
-            decode = DECODERS[topic.name]
             self._subscriptions_by_name[topic.name] = self.create_subscription(
                 message_class(topic.type_name), topic.name,
-                lambda msg, decode=decode, topic=topic: self._receive(topic, decode, msg),
-                qos_profile(topic.qos))
+                self.receiver(topic, DECODERS[topic.name]), qos_profile(topic.reader_qos))
         if self.local is not None:
             self.local.add(self)
         self.diagnostics = DiagnosticsPublisher(self, self.DIAGNOSTIC_TASK, self.health)
@@ -156,6 +154,10 @@ class CoreNode(ParameterNode):
         return self._subscriptions_by_name.get(topic.name)
 
     # ---------------------------------------------------------------- values in and out
+
+    def receiver(self, topic: contract.Topic, decode: Callable[[Any], Any]) -> Callable:
+        """The subscription callback of a consumed topic (a node may take some its own way)."""
+        return lambda msg: self._receive(topic, decode, msg)
 
     def _receive(self, topic: contract.Topic, decode: Callable[[Any], Any], msg: Any) -> None:
         try:
@@ -195,17 +197,21 @@ class CoreNode(ParameterNode):
 
     def log(self, level: str, text: str) -> None:
         """Log through the node's rclpy logger (console and /rosout)."""
-        logger = self.get_logger()
         if level in LEVEL_OF_NOTICE:
             self.warnings += 1
             self.last_warning = text
             self._last_warning_at = time.monotonic()
             self._last_warning_level = LEVEL_OF_NOTICE[level]
-        if level == INFO:
-            logger.info(text)
-        elif level == WARNING:
-            logger.warning(text)
-        elif level == ERROR:
-            logger.error(text)
-        else:
-            logger.debug(text)
+        log_to(self.get_logger(), level, text)
+
+
+def log_to(logger: Any, level: str, text: str) -> None:
+    """Log ``text`` at a notice's ``level`` through an rclpy logger."""
+    if level == INFO:
+        logger.info(text)
+    elif level == WARNING:
+        logger.warning(text)
+    elif level == ERROR:
+        logger.error(text)
+    else:
+        logger.debug(text)

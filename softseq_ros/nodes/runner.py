@@ -197,7 +197,7 @@ def _topics_help(node_class: Callable[..., Node]) -> list[str]:
     topics += [('subscribes', topic) for topic in contract.consumed_by(role or '')]
     lines = []
     for verb, topic in topics:
-        qos = topic.qos
+        qos = topic.qos if verb == 'publishes' else topic.reader_qos
         switch = f', scene output {topic.output}' if topic.output else ''
         lines.append(_wrap(f'{verb} {topic.name} [{topic.type_name}] (depth {qos.depth}, '
                            f'{"reliable" if qos.reliable else "best effort"}'

@@ -17,8 +17,13 @@ the SHA-256 of their definitions), on a latched topic, so every recording can na
 Resume: a restarted actuator must stay on the branch its history put it on (hysteresis).
 While :attr:`waiting` (the driver looks for a previous state), commands are buffered and
 answered in order once the wait ends (:meth:`end_wait`). ``state_file`` (None: off; the
-actuator node gives one in the ROS home by default) makes the core write its state there after
-every change, atomically, and :meth:`resume_from_file` read it back. A clean stop
+actuator node gives one in the ROS home by default) makes the core write its state there,
+atomically, and :meth:`resume_from_file` read it back. It writes a change at once when the last
+write is ``save_period_s`` old or more, else the driver's next :meth:`flush_state` writes the
+newest state: a write costs a millisecond or more (the rename), more than an answer, so an
+actuator commanded at kilohertz writes ten times a second, not at every command; a ``kill -9``
+loses at most the last ``save_period_s`` of state, and a resume from it walks to the next
+command through the volumes in between (the jump rule). A clean stop
 (:meth:`close`) writes the last state once more with ``"closed": true``: only an actuator that
 ended abnormally (a crash, ``kill -9``) is resumed, loudly; after a clean stop the next run
 starts at rest, as one experiment after another must. The flag is written into the file, not
@@ -29,10 +34,13 @@ Bad commands (NaN, negative, volumes outside the segment models) are refused wit
 warning; the state stays where it was.
 """
 
+from collections import deque
 import json
 import math
 import os
 from pathlib import Path
+import time
+from typing import Callable
 
 from softseq_ros.rig import contract
 from softseq_ros.rig.model import ActuatorModel, CommandRefusedError, Snap, TimedSnap
@@ -53,7 +61,11 @@ from softseq_ros.rig.values import (
 from softseq_ros.segments.identity import segments_sha256
 
 ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events', 'flows')
-MAX_BUFFERED_COMMANDS = 100_000
+# Commands kept while waiting for a previous state (the newest; older ones are skipped, and
+# the jump rule walks through them): as many as the command queue holds.
+MAX_BUFFERED_COMMANDS = contract.PUMP_COMMAND.qos.depth
+# The state file is written at most this often (and always at a clean stop).
+STATE_SAVE_PERIOD_S = 0.1
 
 
 class ActuatorCore:
@@ -64,8 +76,14 @@ class ActuatorCore:
     def __init__(self, model: ActuatorModel, names: tuple[str, ...], *,
                  outputs: frozenset[str] = frozenset(ACTUATOR_OUTPUTS),
                  ambient_pressure_pa: float = contract.DEFAULT_AMBIENT_PRESSURE_PA,
-                 state_file: Path | None = None, scene_name: str = '') -> None:
-        """An actuator at rest; ``outputs`` are scene output names (others are ignored)."""
+                 state_file: Path | None = None, scene_name: str = '',
+                 save_period_s: float = STATE_SAVE_PERIOD_S,
+                 save_clock: Callable[[], int] = time.monotonic_ns) -> None:
+        """
+        An actuator at rest; ``outputs`` are scene output names (others are ignored).
+
+        ``save_clock`` (ns) times the state file's writes, ``save_period_s`` apart at most.
+        """
         self.model = model
         self.rate_hz = model.rate_hz
         self.names = tuple(names)
@@ -79,9 +97,15 @@ class ActuatorCore:
         self.ambient_pressure_pa = ambient_pressure_pa
         self.state_file = state_file
         self._state_folder_made = False
+        self.save_period_ns = int(save_period_s * 1e9)
+        self._save_clock = save_clock
+        self._last_save_ns: int | None = None
+        self._unsaved = False
+        self.state_writes = 0
         self.rejected_commands = 0
+        self.skipped_while_waiting = 0
         self.waiting = False
-        self._buffered: list[tuple[PumpCommand, int]] = []
+        self._buffered: deque[tuple[PumpCommand, int]] = deque()
         self._throttle = Throttle()
         self._send_pressure = 'pressure' in self.outputs
         self._send_volumes = 'volumes' in self.outputs
@@ -98,8 +122,11 @@ class ActuatorCore:
     def handle(self, value: PumpCommand, now: int) -> list[Output]:
         """Move to the commanded injected volume; the outputs of that state."""
         if self.waiting:
-            if len(self._buffered) < MAX_BUFFERED_COMMANDS:
-                self._buffered.append((value, now))
+            if len(self._buffered) == MAX_BUFFERED_COMMANDS:
+                # The oldest goes unanswered; the answer to a newer one walks through it.
+                self._buffered.popleft()
+                self.skipped_while_waiting += 1
+            self._buffered.append((value, now))
             return []
         injected = value.injected_m3
         if not math.isfinite(injected):
@@ -118,7 +145,7 @@ class ActuatorCore:
         # A repeated command changes nothing: the same numbers go out with the new stamp.
         outputs = self._outputs(stamp, snaps or [])
         if snaps is not None and self.state_file is not None:
-            self._save(outputs)
+            self._changed(outputs)
         return outputs
 
     def tick(self, now: int) -> list[Output]:
@@ -135,7 +162,7 @@ class ActuatorCore:
             return []
         outputs = self._outputs(now, snaps)
         if self.state_file is not None:
-            self._save(outputs)
+            self._changed(outputs)
         return outputs
 
     def refuse(self, key: str, text: str) -> list[Output]:
@@ -207,8 +234,27 @@ class ActuatorCore:
             self._save(outputs, closed=True)
         return outputs
 
+    def _changed(self, outputs: list[Output]) -> None:
+        """The state changed: write it now, or at the next flush when the last write is recent."""
+        now = self._save_clock()
+        last = self._last_save_ns
+        if last is None or now - last >= self.save_period_ns:
+            self._save(outputs)
+        else:
+            self._unsaved = True
+
+    def flush_state(self) -> list[Output]:
+        """Write a state not yet written (the driver calls this every ``save_period_s``)."""
+        outputs: list[Output] = []
+        if self._unsaved and self.state_file is not None:
+            self._save(outputs)
+        return outputs
+
     def _save(self, outputs: list[Output], closed: bool = False) -> None:
         """Write the state atomically, so a kill mid-write leaves the previous one."""
+        self._unsaved = False
+        self._last_save_ns = self._save_clock()
+        self.state_writes += 1
         data = json.dumps({'names': list(self.names), 'segments_sha256': self.segments_sha256,
                            **self.model.saved(), 'closed': closed})
         temporary = self.state_file.with_name(self.state_file.name + '.tmp')
@@ -233,7 +279,7 @@ class ActuatorCore:
     def end_wait(self, now: int) -> list[Output]:
         """Stop waiting; answer the buffered commands in order."""
         self.waiting = False
-        buffered, self._buffered = self._buffered, []
+        buffered, self._buffered = self._buffered, deque()
         out: list[Output] = []
         for command, received in buffered:
             out.extend(self.handle(command, received))

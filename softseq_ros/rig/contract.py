@@ -46,41 +46,62 @@ class Topic:
 
     name: str                      # relative to the node's namespace
     type_name: str                 # pkg/msg/Type
-    qos: Qos
+    qos: Qos                       # the publisher's (a recorder asks for it, a bag says it)
     producer: str                  # core role
     consumers: tuple[str, ...]     # core roles whose ``handle`` takes it
     output: str | None             # scene output name that switches it on, None: always on
     content: str                   # what the message holds (units, frame)
+    # What the consumer cores read with, when not ``qos``: a latched state topic keeps many
+    # messages for a reader that must not miss one, and its consumers want the current state.
+    consumer_qos: Qos | None = None
+
+    @property
+    def reader_qos(self) -> Qos:
+        """The QoS the consumer cores (and a restarting actuator) subscribe with."""
+        return self.qos if self.consumer_qos is None else self.consumer_qos
+
+
+# How many messages the publisher of a message-per-command topic keeps for each reader: a
+# reader that stalls (a recorder on a loaded machine) misses none for this many commands,
+# 5 s at 200 Hz. A keep-last publisher replaces a message its reliable reader has not yet
+# acknowledged once its history is full, so a depth of 1 lost answers to any reader slower
+# than the actuator for a moment (a recorder at 200 Hz missed 143 that a probe received).
+ANSWER_DEPTH = 1000
+# Camera frames: 1 s at 100 Hz, 10 s at the scene's default 10 Hz.
+FRAME_DEPTH = 100
 
 
 PUMP_COMMAND = Topic(
     'pump/command', 'sensor_msgs/msg/JointState',
     # Deep: a command the actuator's queue drops is skipped physics-wise (the jump rule), but
     # its answer is missing from the recording; a stalled process must not lose any.
-    Qos(1000), PUMP, (ACTUATOR,), None,
+    Qos(ANSWER_DEPTH), PUMP, (ACTUATOR,), None,
     'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]')
 PUMP_STATUS = Topic(
     'pump/status', 'std_msgs/msg/String', Qos(1, latched=True), PUMP, (), None,
     'JSON {"state", "reason", "stamp_ns"}: idle, running, held, finished or stopped')
 PRESSURE = Topic(
-    'actuator/pressure', 'sensor_msgs/msg/FluidPressure', Qos(100), ACTUATOR, (),
+    'actuator/pressure', 'sensor_msgs/msg/FluidPressure', Qos(ANSWER_DEPTH), ACTUATOR, (),
     'pressure', 'absolute pressure [Pa] = gauge + ambient')
 # The pump reads its relief pressure here, gauge as the actuator computed it: no ambient
-# pressure of its own that could disagree with the actuator's.
+# pressure of its own that could disagree with the actuator's. Latched, so that a camera
+# started later or a restarted actuator gets the current state; the consumers read the
+# newest only (a late joiner is sent the publisher's whole history).
 VOLUMES = Topic(
-    'actuator/volumes', 'sensor_msgs/msg/JointState', Qos(1, latched=True), ACTUATOR,
-    (CAMERA, PUMP), 'volumes',
-    'one joint per segment, base to tip: position = volume [m^3], effort = gauge pressure [Pa]')
+    'actuator/volumes', 'sensor_msgs/msg/JointState', Qos(ANSWER_DEPTH, latched=True),
+    ACTUATOR, (CAMERA, PUMP), 'volumes',
+    'one joint per segment, base to tip: position = volume [m^3], effort = gauge pressure [Pa]',
+    consumer_qos=Qos(1, latched=True))
 CURVATURES = Topic(
-    'actuator/curvatures', 'sensor_msgs/msg/JointState', Qos(100), ACTUATOR, (CAMERA,),
-    'curvature', 'one joint per segment: position = curvature [1/m]')
+    'actuator/curvatures', 'sensor_msgs/msg/JointState', Qos(ANSWER_DEPTH), ACTUATOR,
+    (CAMERA,), 'curvature', 'one joint per segment: position = curvature [1/m]')
 # The channel flows are the other half of the volumes' state: on with them, for an actuator
 # whose model has channels (a scene with a network). So 'flows' is a core's output that no
 # scene lists: the actuator derives it (DERIVED_OUTPUTS: what it goes with).
 DERIVED_OUTPUTS: dict[str, str] = {'flows': 'volumes'}
 CHANNEL_FLOWS = Topic(
-    'actuator/channel_flows', 'sensor_msgs/msg/JointState', Qos(100), ACTUATOR, (), 'flows',
-    'one joint per channel, base to tip, named <segment>_to_<segment>: velocity = flow '
+    'actuator/channel_flows', 'sensor_msgs/msg/JointState', Qos(ANSWER_DEPTH), ACTUATOR, (),
+    'flows', 'one joint per channel, base to tip, named <segment>_to_<segment>: velocity = flow '
     '[m^3/s], positive towards the tip; effort = pressure drop along it [Pa]')
 EVENTS = Topic(
     'actuator/events', 'std_msgs/msg/String', Qos(100, latched=True), ACTUATOR, (), 'events',
@@ -95,7 +116,7 @@ SCENE = Topic(
     'JSON {"scene", "segments", "segments_sha256", "stamp_ns"}: the scene name, its segments '
     'base to tip and the SHA-256 of their definitions (softseq_ros.segments.identity)')
 BACKBONE = Topic(
-    'camera/backbone', 'geometry_msgs/msg/PoseArray', Qos(10), CAMERA, (), 'poses',
+    'camera/backbone', 'geometry_msgs/msg/PoseArray', Qos(FRAME_DEPTH), CAMERA, (), 'poses',
     'backbone points in softseq_base at the camera rate')
 SNAPSHOTS = Topic(
     'camera/snapshots', 'geometry_msgs/msg/PoseArray', Qos(20, latched=True), CAMERA, (),
@@ -104,7 +125,8 @@ SNAPSHOT_STEPS = Topic(
     'camera/snapshot_steps', 'std_msgs/msg/String', Qos(20, latched=True), CAMERA, (), 'poses',
     'JSON per snapshot, in the same order: step, trigger_injected_m3, direction, stamp_ns')
 MARKERS = Topic(
-    'camera/markers', 'visualization_msgs/msg/MarkerArray', Qos(10), CAMERA, (), 'markers',
+    'camera/markers', 'visualization_msgs/msg/MarkerArray', Qos(FRAME_DEPTH), CAMERA, (),
+    'markers',
     'one LINE_STRIP per segment')
 IMAGE = Topic(
     'camera/image', 'sensor_msgs/msg/Image', Qos(2, reliable=False), CAMERA, (), 'image',

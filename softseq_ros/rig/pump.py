@@ -18,9 +18,11 @@ pump with a pressure sensor:
   when the commanded volume would exceed ``max_injected_m3``;
 - feedback is the actuator's *answer to this pump*: the actuator stamps its state with the
   stamp of the command it answers, so only a message stamped like one of the pump's last
-  :data:`RECENT_COMMANDS` commands, not answered before, counts. Anything else (another
-  publisher, a replayed recording, the actuator's states between commands) keeps no pump
-  running;
+  :data:`RECENT_COMMANDS` commands, not answered before, counts; and it answers every older
+  command too (an actuator behind its commands answers the newest it has and walks through
+  the ones it skipped, softseq_ros.rig.intake), so none of them counts afterwards. Anything
+  else (another publisher, a replayed recording, the actuator's states between commands)
+  keeps no pump running;
 - feedback that cannot be trusted (segment names that are not the scene's, arrays of the
   wrong length, a volume that is NaN, infinite or negative, a pressure that is NaN, infinite
   or below vacuum) is no feedback: an answer like that holds the pump at once, any other such
@@ -146,7 +148,8 @@ class PumpCore:
         self._last_feedback: int | None = None
         self.segment_names = None if segment_names is None else tuple(segment_names)
         self.feedback_topic = feedback_topic
-        # The stamps of the last commands, and those of them not answered yet.
+        # The stamps of the last commands not answered yet (nor any newer one), oldest first,
+        # and the same as a set.
         self._sent: deque[int] = deque()
         self._unanswered: set[int] = set()
         self._warned: set[str] = set()       # kinds of untrusted feedback already warned about
@@ -295,7 +298,13 @@ class PumpCore:
         unanswered = self._unanswered
         answer = stamp_ns in unanswered
         if answer:
-            unanswered.remove(stamp_ns)
+            # It answers the older commands too (those the actuator skipped).
+            sent = self._sent
+            while True:
+                oldest = sent.popleft()
+                unanswered.discard(oldest)
+                if oldest == stamp_ns:
+                    break
         fault = self._fault(names, volumes_m3, gauge_pa)
         if fault is not None:
             kind, text = fault
