@@ -7,6 +7,7 @@ form a series RLC circuit and ring with the damping ratio (R / 2) sqrt(C / L), C
 (C1 + C2). The sum of the volumes is the injected volume at every instant.
 """
 
+import bisect
 import json
 import math
 from pathlib import Path
@@ -198,10 +199,23 @@ def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):
     assert set(times[times < ramp_end - 20_000_000]) <= set(commands)
     hold = times[(times > ramp_end + 50_000_000) & (times < ramp_end + 500_000_000)]
     assert np.max(np.diff(hold)) <= 5_000_000 and len(set(hold) - set(commands)) > 50
-    # Mass: at every command instant the volumes hold the rest volumes plus what was injected.
+    # Mass at every output: the volumes hold the rest volumes plus what was injected by then.
+    # At a command, its volume; between commands, what the actuator's model lets the pump
+    # push (docs/dynamic.md): the rate of the last two commands, for as long as the last
+    # interval lasted, then nothing.
+    stamps = sorted(commands)
+    between = 0
     for t, v in volumes:
-        if t in commands:
-            assert abs(float(v.sum()) - 2e-6 - commands[t]) <= 1e-12 * 80 * ML
+        k = bisect.bisect_right(stamps, t) - 1
+        t_k, u_k = stamps[k], commands[stamps[k]]
+        injected = u_k
+        if t > t_k and k > 0:
+            interval = t_k - stamps[k - 1]
+            rate = (u_k - commands[stamps[k - 1]]) / interval
+            injected += rate * min(t - t_k, interval)
+            between += 1
+        assert abs(float(v.sum()) - 2e-6 - injected) <= 1e-12 * 80 * ML, (t, injected)
+    assert between > 50
     # The top segment lags behind its quasi-static share while the pump pushes, then catches
     # up in the hold: tau = R C1 C2 / (C1 + C2).
     law = tube_law(Tube(0.1, 0.5e-3), Fluid())
@@ -230,35 +244,37 @@ def test_as_the_pump_slows_the_dynamic_path_converges_to_the_quasistatic_one(fig
     away = np.all([np.abs(grid - snap) > 0.03 * top for snap in snaps], axis=0)
     network = NetworkSettings(Fluid(), None, (Tube(0.01, 0.5e-3),), rtol=1e-8)
     distances, delays = [], []
-    for flow_rate in (1e-8, 1e-9, 1e-10, 1e-11):
+    for flow_rate in (1e-8, 1e-9, 1e-10, 1e-11, 1e-12):
         flow = NetworkFlow(segments, network)
         flow.set_flow(flow_rate)
-        volumes = []
-        for injected in grid:
-            flow.advance(injected / flow_rate)
-            volumes.append(flow.volumes())
-        distances.append(np.max(np.abs(np.array(volumes)[away] - quasistatic.volumes[away])))
-        # Each snap: where the exchange between the segments peaks, against the fold.
-        flow = NetworkFlow(segments, network)
-        flow.set_flow(flow_rate)
-        late = []
-        for snap in snaps:
-            fine = np.linspace(snap - 0.5 * ML, snap + 1.0 * ML, 1501)
-            exchange = []
-            for injected in fine:
+        if flow_rate > 1e-12:
+            volumes = []
+            for injected in grid:
                 flow.advance(injected / flow_rate)
-                exchange.append(abs(flow.flows()[0]))
-            late.append(fine[int(np.argmax(exchange))] - snap)
-        delays.append(max(late))
+                volumes.append(flow.volumes())
+            distances.append(np.max(np.abs(np.array(volumes)[away]
+                                           - quasistatic.volumes[away])))
+        flow.advance(top / flow_rate)
+        # Each snap: where its exchange peaks (located on the steps' polynomials), against
+        # the quasi-static fold.
+        delays.append([flow_rate * snap.peak_s - fold
+                       for snap, fold in zip(flow.take_snaps(), snaps)])
     # Off the snaps the path lags the quasi-static one in proportion to the flow (first order).
     ratios = np.array(distances[:-1]) / np.array(distances[1:])
     assert np.all(ratios > 8.0) and np.all(ratios < 12.5), distances
-    # The snaps come late by a delay that shrinks like flow^(2/3) (a saddle-node passage):
-    # at least 3x per decade, and within 5 uL of the quasi-static snap at the slowest.
+    # The snaps come late by a delay that shrinks like flow^(2/3): the passage through a
+    # saddle-node fold, whose slow time scales as flow^(-1/3), so 10^(2/3) = 4.64 per decade as
+    # the flow goes to zero, approached from above (the next order still counts at the faster
+    # flows: measured 6.2, 5.6, 5.2, 4.9 and 4.9, 4.9, 4.8, 4.7 for the two snaps).
     delays = np.array(delays)
-    assert np.all(delays > -1e-3 * ML)
-    assert np.all(delays[:-1] > 3.0 * np.maximum(delays[1:], 1e-3 * ML)), delays
-    assert delays[-1] < 5e-3 * ML
+    assert delays.shape == (5, 2) and np.all(delays > 0.0)
+    per_decade = delays[:-1] / delays[1:]
+    passage = 10.0 ** (2.0 / 3.0)
+    assert np.all(per_decade > 0.97 * passage) and np.all(per_decade < 1.4 * passage), \
+        per_decade
+    assert np.all(np.abs(per_decade[-1] / passage - 1.0) < 0.1), per_decade
+    # At the slowest, within a microlitre of the quasi-static snap.
+    assert np.all(delays[-1] < 1e-3 * ML)
 
 
 STEP_INDEPENDENCE = 1e-6   # of the volume scale, at every output, snap-throughs included
