@@ -101,3 +101,74 @@ def test_compare_says_which_metric_does_not_apply_and_why(linear, peaked):
     assert any(line.startswith('- B, plateau pressure (gauge): the pressure falls')
                for line in reasons)
     assert any(line.startswith('- B, hysteresis area: no deflation') for line in reasons)
+
+
+def _reset_once_at(volume_m3: float):
+    """A BatchRun ``wrap`` that stops and resets the pump once (as ~/stop and ~/reset do)."""
+    done = []
+
+    def wrap(label, function):
+        if label != 'pump.tick':
+            return function
+        pump = function.__self__
+
+        def tick(now):
+            if not done and pump.volume_m3 >= volume_m3:
+                done.append(now)
+                return pump.stop(now).outputs + pump.reset(now).outputs + function(now)
+            return function(now)
+        return tick
+    return wrap
+
+
+@pytest.fixture(scope='module')
+def two_runs(tmp_path_factory) -> Path:
+    """
+    A real two-run bag: the batch runner on the Fig. 1 asymmetric pair, 0 -> 50 mL -> 0, whose
+    pump is stopped and reset at 3.8 mL (the command goes back to 0 mL in one step) and then
+    runs its programme again from the start.
+    """
+    from softseq_ros.batch import BatchRun
+
+    folder = tmp_path_factory.mktemp('two_runs')
+    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
+    scene['name'] = 'two_runs'
+    scene['pump'].update({'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50,
+                          'legs': [{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}]})
+    scene['camera'] = {'rate_hz': 5, 'trigger_injected_m3': [2.5e-6, 2.5e-5]}
+    path = folder / 'two_runs.yaml'
+    path.write_text(yaml.safe_dump(scene))
+    bag = folder / 'bag'
+    BatchRun(path, bag, start_time_ns=10**18, wrap=_reset_once_at(3.8 * ML)).run()
+    return bag
+
+
+def test_a_bag_with_a_pump_reset_is_split_into_runs_each_reported(two_runs, tmp_path):
+    from softseq_ros.analysis import figures
+    from softseq_ros.analysis.recording import load_recording
+
+    recording = load_recording(two_runs)
+    # Both signs of the reset are seen: the command's jump back and the idle status.
+    [start] = recording.run_starts
+    assert 'jumped from 4.0000 mL to 0.0000 mL' in start.cause and 'idle again' in start.cause
+    first, second = recording.runs()
+    assert first.state_injected.max() == pytest.approx(4.0 * ML)
+    assert second.state_injected.min() == 0.0 and second.state_injected.max() == \
+        pytest.approx(50 * ML)
+    metrics, text = write_report(two_runs, tmp_path)
+    runs = metrics['runs']
+    assert [r['run'] for r in runs] == [1, 2] and runs[1]['from_s'] == start.time_s
+    # Run 1 ended at 4 mL without deflating; run 2 is the whole asymmetric cycle (four snaps,
+    # as the single-run bag of the same pair has).
+    assert runs[0]['hysteresis_area_j'] is None and runs[0]['injected_range_m3'][1] == \
+        pytest.approx(4.0 * ML)
+    assert runs[1]['sequence_type'] == 'asymmetric' and runs[1]['snap_count'] == 4
+    assert runs[1]['hysteresis_area_j'] > 0.0
+    # The numbers at the top are run 1's, and a warning says the bag holds two runs.
+    assert metrics['snap_count'] == runs[0]['snap_count'] == 0
+    assert any(w.startswith('the bag holds 2 pump runs') for w in metrics['warnings'])
+    assert 'run 2 (from 0.220 s' in text and '## Runs' in (tmp_path / 'report.md').read_text()
+    # No line of a figure joins the two runs: each drawn stretch lies within one run.
+    boundary = int(recording.state_run_starts[0])
+    for _, rows in figures._legs(recording):
+        assert rows[-1] < boundary or rows[0] >= boundary

@@ -91,11 +91,17 @@ def _thin(size: int, keep: NDArray[np.intp] | None = None) -> NDArray[np.intp]:
 
 
 def _legs(recording: Recording) -> list[tuple[str, NDArray[np.intp]]]:
-    """Contiguous runs of inflation and deflation rows, thinned, each with its direction."""
+    """
+    Contiguous stretches of inflation and deflation rows, thinned, each with its direction.
+
+    A new run of the pump (a reset or restart, :meth:`Recording.runs`) starts a new stretch:
+    no line joins two runs.
+    """
     sign = recording.state_flow_sign
     if not sign.size:
         return []
-    breaks = np.flatnonzero(np.diff(sign) != 0) + 1
+    breaks = np.union1d(np.flatnonzero(np.diff(sign) != 0) + 1,
+                        recording.state_run_starts[recording.state_run_starts > 0])
     starts = np.concatenate([[0], breaks])
     stops = np.concatenate([breaks, [sign.size]])
     snaps = _snap_rows(recording)
@@ -131,12 +137,19 @@ def _broken(values: NDArray[np.float64], rows: NDArray[np.intp],
 def _draw_legs(ax: object, recording: Recording, x: NDArray[np.float64],
                y: NDArray[np.float64], label: str = '', **extra: object) -> None:
     snaps = _snap_rows(recording)
+    starts = recording.state_run_starts
     shown = set()
     for direction, rows in _legs(recording):
         style = dict(STYLE[direction])
         style.update(extra)
-        name = f'{label}{direction}' if direction not in shown else None
-        shown.add(direction)
+        # Runs after the first (a reset or restarted pump) are named and drawn fainter.
+        run = int(np.searchsorted(starts, rows[0], side='right')) + 1 if starts.size else 0
+        key = (run, direction)
+        name = (f'{label}{f"run {run}, " if run else ""}{direction}' if key not in shown
+                else None)
+        shown.add(key)
+        if run > 1:
+            style['alpha'] = 0.5
         ax.plot(_broken(x, rows, snaps), _broken(y, rows, snaps), lw=1.5, label=name, **style)
     for row in snaps.tolist():
         direction = INFLATION if recording.state_flow_sign[row] > 0 else DEFLATION
@@ -335,6 +348,13 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = False) -> list[
     axes[2, 0].legend(fontsize=8)
     for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
+    # Where a new run of the pump begins (a reset or restart): a line and its number.
+    for number, start in enumerate(recording.run_starts, start=2):
+        for ax in axes[:, 0]:
+            ax.axvline(start.time_s, color='0.4', lw=0.8, ls=':')
+        axes[0, 0].annotate(f'run {number}', (start.time_s, 1.0), xycoords=('data',
+                            'axes fraction'), xytext=(2, -2), textcoords='offset points',
+                            ha='left', va='top', fontsize=7, color='0.3')
     return save_figure(fig, out, svg)
 
 

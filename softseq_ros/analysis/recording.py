@@ -19,6 +19,14 @@ comparison list it): pump commands or volumes without positions (or volumes with
 pressures), rows whose positions or pressures are NaN or infinite, and String payloads larger
 than :data:`MAX_PAYLOAD_BYTES`. A bag with no usable pump command or volumes left is refused.
 
+Several runs in one bag: a recorder left running while the pump is reset (``~/reset``: the
+commanded volume goes back to the programme's start in one step) or restarted, or while the
+actuator is restarted, holds several runs. Each new run is found (:func:`find_run_starts`) by
+the pump's status going idle again after it had left idle, by the commanded volume jumping
+(further in one command than the pump's flow moves it, by far), or by the actuator naming its
+scene again after its first state; :meth:`Recording.runs` gives each run as a recording of its
+own, and the report measures each.
+
 A bag of a scene with a fluid network (docs/dynamic.md) also holds the channel flows
 (:class:`ChannelFlows`) and snap-through events in time, whose JSON carries ``start_ns``,
 ``duration_s``, ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``; a quasi-static bag has
@@ -58,6 +66,14 @@ NS_PER_S = 1_000_000_000
 # Pressure messages read to find the ambient pressure (absolute minus gauge): it is constant.
 AMBIENT_SAMPLES = 2000
 INFLATION, DEFLATION = 'inflation', 'deflation'
+# A commanded volume that moves further in one command than this many times the pump's flow
+# on the commands either side of it, over that time (or at all, by more than JUMP_SHARE of the
+# range, while the pump says it does not move), jumps: the pump was reset or restarted.
+JUMP_FACTOR = 4.0
+JUMP_SHARE = 1e-3
+# Signs of one new run closer together than this are one (a reset's idle status and the jump of
+# the command after it).
+RUN_MERGE_S = 0.5
 # The largest String payload (events, status, steps, scene) read: the rig's JSON is a few
 # hundred bytes; a payload of megabytes is no rig message and is skipped, not parsed.
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -149,6 +165,13 @@ class Recording:
     channel_flows: ChannelFlows | None = None
     # Messages left out as unusable: topic -> reason -> count.
     skipped: dict[str, dict[str, int]] = field(default_factory=dict)
+    # Where each run after the first begins (s from the first pump command) and why.
+    run_starts: list['RunStart'] = field(default_factory=list)
+    # Each snap-through event's receive time (s from the first pump command).
+    event_times_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    # This recording's run: its number (1-based) and where it begins and ends [s].
+    run: int = 1
+    run_span_s: tuple[float, float] | None = None
 
     def skipped_lines(self) -> list[str]:
         """One line per topic and reason of what was skipped, for a report's warnings."""
@@ -162,6 +185,52 @@ class Recording:
         return self.scenes[0] if self.scenes else None
 
     @property
+    def state_run_starts(self) -> NDArray[np.intp]:
+        """The state rows at which the runs after the first begin."""
+        return np.searchsorted(self.state_time_s, [r.time_s for r in self.run_starts])
+
+    def runs(self) -> list['Recording']:
+        """
+        The recording split into its runs (itself when it holds one), each a Recording.
+
+        A run's times stay those of the whole bag (from its first pump command); its snapshots
+        and events are those of its time span.
+        """
+        if not self.run_starts:
+            return [self]
+        edges = [-np.inf] + [r.time_s for r in self.run_starts] + [np.inf]
+        return [self._between(number, lo, hi)
+                for number, (lo, hi) in enumerate(zip(edges[:-1], edges[1:]), start=1)]
+
+    def _between(self, number: int, lo: float, hi: float) -> 'Recording':
+        from dataclasses import replace
+
+        def rows(times: FloatArray) -> slice:
+            return slice(int(np.searchsorted(times, lo)), int(np.searchsorted(times, hi)))
+
+        pump, state = rows(self.pump_time_s), rows(self.state_time_s)
+        curves = state if self.curvature_time_s is self.state_time_s else \
+            rows(self.curvature_time_s)
+        events = (self.event_times_s >= lo) & (self.event_times_s < hi)
+        shown = (max(lo, float(self.pump_time_s[0])),
+                 min(hi, float(self.pump_time_s[-1])))
+        return replace(
+            self, pump_time_s=self.pump_time_s[pump], pump_injected=self.pump_injected[pump],
+            state_time_s=self.state_time_s[state], state_injected=self.state_injected[state],
+            pressure=self.pressure[state], volumes=self.volumes[state],
+            state_flow_sign=self.state_flow_sign[state],
+            curvature_time_s=self.curvature_time_s[curves],
+            curvatures=self.curvatures[curves] if self.curvatures.shape[0] else self.curvatures,
+            curvature_injected=(self.curvature_injected[curves]
+                                if self.curvature_injected.size else self.curvature_injected),
+            events=[e for e, keep in zip(self.events, events) if keep],
+            event_times_s=self.event_times_s[events],
+            # A snapshot at a run's first command saw the jump that ended the run before.
+            snapshots=[s for s in self.snapshots if lo < s.time_s <= hi],
+            status=[s for s in self.status if lo <= s[0] < hi],
+            snap_rows=None, run_starts=[], run=number, run_span_s=shown, channel_flows=None)
+
+    @property
     def inflating(self) -> NDArray[np.bool_]:
         """Per state: on an inflation leg (a hold counts with the leg before it)."""
         return self.state_flow_sign > 0
@@ -170,6 +239,65 @@ class Recording:
     def deflating(self) -> NDArray[np.bool_]:
         """Per state: on a deflation leg."""
         return self.state_flow_sign < 0
+
+
+@dataclass(frozen=True)
+class RunStart:
+    """Where a new run begins in a bag (s from its first pump command) and what shows it."""
+
+    time_s: float
+    cause: str
+
+
+def find_run_starts(pump_time_s: FloatArray, pump_u: FloatArray,
+                    flow_sign: NDArray[np.int8], status: list[tuple[float, str, str]],
+                    scene_stamps_s: list[float], first_state_s: float) -> list[RunStart]:
+    """
+    Where the runs after the first begin: at the first command of each, with the causes.
+
+    A run begins where the pump's status goes idle after it had left idle (a reset, or a
+    restarted pump node), where the commanded volume jumps (moves further in one command than
+    JUMP_FACTOR times the flow of the commands either side over that time, or by more than
+    JUMP_SHARE of the range while the pump says it stands still), and where the actuator names
+    its scene again after its first state (a restarted actuator). Signs within RUN_MERGE_S are
+    one start.
+    """
+    found: list[tuple[float, str]] = []
+    was_active, previous = False, 'idle'
+    for time_s, state, _ in status:
+        if state == 'idle' and was_active:
+            found.append((time_s, f'the pump went idle again after {previous} (reset or '
+                                  'restarted)'))
+        was_active = was_active or state != 'idle'
+        previous = state
+    if pump_u.size > 1:
+        du = np.abs(np.diff(pump_u))
+        dt = np.diff(pump_time_s)
+        rate = np.divide(du, dt, out=np.zeros_like(du), where=dt > 0)
+        rate[flow_sign[1:] == 0] = 0.0
+        # The flow on the commands either side: a jump is far beyond both.
+        local = np.maximum(np.concatenate([[0.0], rate[:-1]]), np.concatenate([rate[1:], [0.0]]))
+        span = float(np.ptp(pump_u)) or 1.0
+        allowed = np.where(flow_sign[1:] != 0, JUMP_FACTOR * local * dt, 0.0)
+        for row in np.flatnonzero(du > np.maximum(allowed, JUMP_SHARE * span)).tolist():
+            found.append((float(pump_time_s[row + 1]),
+                          f'the commanded volume jumped from {pump_u[row] * 1e6:.4f} mL to '
+                          f'{pump_u[row + 1] * 1e6:.4f} mL in one command'))
+    for stamp_s in scene_stamps_s[1:]:
+        if stamp_s > first_state_s:
+            found.append((stamp_s, 'the actuator started again (it named its scene anew)'))
+    starts: list[RunStart] = []
+    for time_s, cause in sorted(found):
+        if time_s <= float(pump_time_s[0]):
+            continue
+        if starts and time_s - starts[-1].time_s <= RUN_MERGE_S:
+            if cause not in starts[-1].cause:
+                starts[-1] = RunStart(starts[-1].time_s, f'{starts[-1].cause}; {cause}')
+            continue
+        # The run begins at the first command at or after the sign.
+        row = min(int(np.searchsorted(pump_time_s, time_s)), pump_time_s.size - 1)
+        starts.append(RunStart(float(pump_time_s[row]), cause))
+    return starts
 
 
 def _topic(namespace: str, spec: contract.Topic) -> str:
@@ -317,19 +445,27 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         recording.status = [_status(text, log_time, t0)
                             for log_time, text in optional[contract.PUMP_STATUS].messages]
     if contract.EVENTS in optional:
-        recording.events = _events(optional[contract.EVENTS].messages, names[contract.EVENTS])
+        messages = optional[contract.EVENTS].messages
+        recording.events = _events(messages, names[contract.EVENTS])
+        recording.event_times_s = _seconds(np.array([t for t, _ in messages], np.int64), t0)
     if contract.SNAPSHOTS in optional:
         steps = optional.get(contract.SNAPSHOT_STEPS)
         recording.snapshots = _snapshots(
             optional[contract.SNAPSHOTS].messages, steps.messages if steps else None,
             names[contract.SNAPSHOT_STEPS], pump_stamp, pump_u, flow_sign, t0, ignored,
             names[contract.SNAPSHOTS])
+    scene_stamps_s: list[float] = []
     if contract.SCENE in optional:
-        recording.scenes = _scenes(optional[contract.SCENE].messages, names[contract.SCENE])
+        recording.scenes, stamps = _scenes(optional[contract.SCENE].messages,
+                                           names[contract.SCENE])
+        scene_stamps_s = [(stamp - t0) / NS_PER_S for stamp in stamps]
     if contract.CHANNEL_FLOWS in optional:
         recording.channel_flows = _channel_flows(optional[contract.CHANNEL_FLOWS],
                                                  names[contract.CHANNEL_FLOWS], t0, ignored)
     recording.pump_time_s = _seconds(pump_stamp, t0, in_place=True)
+    recording.run_starts = find_run_starts(
+        recording.pump_time_s, pump_u, flow_sign, recording.status, scene_stamps_s,
+        float(recording.state_time_s[0]) if recording.state_time_s.size else 0.0)
     return recording
 
 
@@ -474,15 +610,22 @@ def _events(messages: list[tuple[int, str]], topic: str) -> list[dict]:
             for number, (log_time, text) in enumerate(messages, start=1)]
 
 
-def _scenes(messages: list[tuple[int, str]], topic: str) -> list[RecordedScene]:
-    """The distinct scene identities of ``actuator/scene``, in the order said."""
+def _scenes(messages: list[tuple[int, str]], topic: str) -> tuple[list[RecordedScene],
+                                                                     list[int]]:
+    """
+    The distinct scene identities of ``actuator/scene``, in the order said, and every stamp.
+
+    An actuator names its scene each time it starts: a stamp after its first state is a restart.
+    """
     scenes: list[RecordedScene] = []
+    stamps = []
     for number, (log_time, text) in enumerate(messages, start=1):
         said = _decode(SCENE_IDENTITY_JSON, topic, number, text, log_time)
         scene = RecordedScene(said.scene, said.segments, said.segments_sha256, said.stamp_ns)
+        stamps.append(said.stamp_ns)
         if not any(_same_scene(scene, seen) for seen in scenes):
             scenes.append(scene)
-    return scenes
+    return scenes, stamps
 
 
 def _same_scene(a: RecordedScene, b: RecordedScene) -> bool:

@@ -109,15 +109,7 @@ def recording_metrics(recording: Recording, scene: object | None = None,
     ``transients``: the recording's, when already analysed (the report draws them too);
     otherwise a dynamic recording's are analysed here.
     """
-    trace = recording_trace(recording)
-    try:
-        result = analyse(trace)
-    except TraceError as err:
-        raise TraceError(f'{recording.path}: {err}') from None
-    top = int(np.argmax(recording.state_injected))
-    rest = recording.volumes[0]
-    added = recording.volumes[top] - rest
-    share = added / max(float(np.sum(added)), 1e-300)
+    runs = recording.runs()
     metrics: dict = {
         'bag': str(recording.path),
         'namespace': recording.namespace,
@@ -129,20 +121,22 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         'skipped_as_unusable': recording.skipped,
         'ambient_pressure_pa': recording.ambient_pressure_pa,
         'recorded_scene': recording.scene.as_dict() if recording.scene else None,
-        **result,
-        'peak_injection': {'injected_m3': float(recording.state_injected[top]),
-                           'pressure_pa': float(recording.pressure[top]),
-                           'share_of_added_volume': [float(x) for x in share]},
-        'snap_events_topic': [{k: e[k] for k in ('injected_m3', 'from_pressure_pa',
-                                                 'to_pressure_pa') if k in e}
-                              for e in recording.events],
-        'steps': [{'step': s.step, 'direction': s.direction, 'cycle': s.cycle,
-                   'injected_m3': s.injected,
-                   'trigger_injected_m3': s.trigger_injected, 'time_s': s.time_s,
-                   'tip_m': [float(x) for x in s.tip]} for s in recording.snapshots],
+        # The numbers of the first run; a bag of several runs lists each under 'runs'.
+        **run_metrics(runs[0]),
         'warnings': [],
         'notes': [],
     }
+    if len(runs) > 1:
+        metrics['runs'] = [{'run': run.run, 'from_s': run.run_span_s[0],
+                            'until_s': run.run_span_s[1],
+                            'began': 'the recording began' if run.run == 1 else
+                            recording.run_starts[run.run - 2].cause,
+                            **run_metrics(run)} for run in runs]
+        metrics['warnings'].append(
+            f'the bag holds {len(runs)} pump runs (' + '; '.join(
+                f'run {start_number} from {start.time_s:.3f} s: {start.cause}'
+                for start_number, start in enumerate(recording.run_starts, start=2))
+            + '): the numbers above the runs are those of run 1; runs lists each')
     if len(recording.scenes) > 1:
         metrics['warnings'].append(
             'the actuator was restarted on other segments during the recording: '
@@ -176,6 +170,32 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         metrics['transients'] = transients.metrics
         metrics['warnings'].extend(transients.warnings)
     return metrics
+
+
+def run_metrics(recording: Recording) -> dict:
+    """The numbers of one run of a recording (first cycle), SI units, gauge pressures."""
+    try:
+        result = analyse(recording_trace(recording))
+    except TraceError as err:
+        where = f' (run {recording.run})' if recording.run_span_s else ''
+        raise TraceError(f'{recording.path}{where}: {err}') from None
+    top = int(np.argmax(recording.state_injected))
+    rest = recording.volumes[0]
+    added = recording.volumes[top] - rest
+    share = added / max(float(np.sum(added)), 1e-300)
+    return {
+        **result,
+        'peak_injection': {'injected_m3': float(recording.state_injected[top]),
+                           'pressure_pa': float(recording.pressure[top]),
+                           'share_of_added_volume': [float(x) for x in share]},
+        'snap_events_topic': [{k: e[k] for k in ('injected_m3', 'from_pressure_pa',
+                                                 'to_pressure_pa') if k in e}
+                              for e in recording.events],
+        'steps': [{'step': s.step, 'direction': s.direction, 'cycle': s.cycle,
+                   'injected_m3': s.injected,
+                   'trigger_injected_m3': s.trigger_injected, 'time_s': s.time_s,
+                   'tip_m': [float(x) for x in s.tip]} for s in recording.snapshots],
+    }
 
 
 def load_reference(path: str | os.PathLike) -> dict:
@@ -445,19 +465,9 @@ def _transient_lines(transients: dict) -> list[str]:
 BRANCHES_SHOWN = 12   # stays on a branch listed in the summary; metrics.json has them all
 
 
-def summary_text(metrics: dict) -> str:
-    """A few lines a researcher reads first."""
-    lines = [f'recording: {metrics["bag"]} (namespace {metrics["namespace"]})']
-    recorded = metrics.get('recorded_scene')
-    if recorded:
-        checked = (f'checked against scene {metrics["scene"]}' if metrics.get('scene') else
-                   'as recorded; no scene given to check it against')
-        lines.append(f'scene: {recorded["scene"]} (segments '
-                     f'{", ".join(recorded["segments"])}, sha256 '
-                     f'{short(recorded["segments_sha256"])}; {checked})')
-    lines.append(f'duration: {metrics["duration_s"]:.1f} s of rig time, injected '
-                 f'{_ml(metrics["injected_range_m3"][0])} to '
-                 f'{_ml(metrics["injected_range_m3"][1])}')
+def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
+    """The summary's lines on one run: type, switch, peak, plateau, snaps, hysteresis, steps."""
+    lines = []
     scene_type = metrics.get('sequence_type_of_scene')
     lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording)'
                  + (f'; scene: {scene_type}' if scene_type else ''))
@@ -469,7 +479,7 @@ def summary_text(metrics: dict) -> str:
         lines.append(f'switch: {_not_applied(metrics, "switch")}')
     peak = metrics['peak_injection']
     split = ', '.join(f'{name} {share * 100:.0f} %' for name, share in
-                      zip(metrics['segments'], peak['share_of_added_volume']))
+                      zip(segments, peak['share_of_added_volume']))
     lines.append(f'at peak injection: gauge pressure {_kpa(peak["pressure_pa"])}, '
                  f'added volume split {split}')
     plateau = metrics.get('plateau')
@@ -489,6 +499,34 @@ def summary_text(metrics: dict) -> str:
     else:
         lines.append('snap-throughs: none')
     lines.append(f'hysteresis area: {_mj(metrics, "hysteresis_area_j")}')
+    first, later = _first_cycle_steps(metrics)
+    for step in first:
+        tip = step['tip_m']
+        lines.append(f'step {step["step"]} ({step["direction"]}) at {_ml(step["injected_m3"], 1)}'
+                     f': tip at x {tip[0] * MM:.1f} mm, z {tip[1] * MM:.1f} mm')
+    if later:
+        lines.append(f'({later} snapshots of later cycles in metrics.json)')
+    return lines
+
+
+def summary_text(metrics: dict) -> str:
+    """A few lines a researcher reads first."""
+    lines = [f'recording: {metrics["bag"]} (namespace {metrics["namespace"]})']
+    recorded = metrics.get('recorded_scene')
+    if recorded:
+        checked = (f'checked against scene {metrics["scene"]}' if metrics.get('scene') else
+                   'as recorded; no scene given to check it against')
+        lines.append(f'scene: {recorded["scene"]} (segments '
+                     f'{", ".join(recorded["segments"])}, sha256 '
+                     f'{short(recorded["segments_sha256"])}; {checked})')
+    runs = metrics.get('runs') or []
+    injected = [r['injected_range_m3'] for r in runs] or [metrics['injected_range_m3']]
+    lines.append(f'duration: {metrics["duration_s"]:.1f} s of rig time, injected '
+                 f'{_ml(min(r[0] for r in injected))} to {_ml(max(r[1] for r in injected))}')
+    if runs:
+        lines.append(f'runs: {len(runs)} in the bag (the pump reset or restarted, or the '
+                     'actuator restarted); run 1 first, then each other run')
+    lines.extend(_run_lines(metrics, metrics['segments']))
     stays = metrics.get('branches_visited')
     if stays:
         shown = ' -> '.join(f'#{s["branch"]} ({s["state"]})' for s in stays[:BRANCHES_SHOWN])
@@ -497,13 +535,10 @@ def summary_text(metrics: dict) -> str:
                      + (f' and {more} more stays (metrics.json)' if more > 0 else ''))
     if 'transients' in metrics:
         lines.extend(_transient_lines(metrics['transients']))
-    first, later = _first_cycle_steps(metrics)
-    for step in first:
-        tip = step['tip_m']
-        lines.append(f'step {step["step"]} ({step["direction"]}) at {_ml(step["injected_m3"], 1)}'
-                     f': tip at x {tip[0] * MM:.1f} mm, z {tip[1] * MM:.1f} mm')
-    if later:
-        lines.append(f'({later} snapshots of later cycles in metrics.json)')
+    for run in runs[1:]:
+        lines.append(f'run {run["run"]} (from {run["from_s"]:.3f} s to {run["until_s"]:.3f} s; '
+                     f'began: {run["began"]}):')
+        lines.extend('  ' + line for line in _run_lines(run, metrics['segments']))
     experiment = metrics.get('experiment')
     if experiment:
         lines.append(f'experiment {experiment["file"]}: PV RMSE {_kpa(experiment["pv_rmse_pa"])}'
@@ -612,6 +647,26 @@ def _transient_markdown(transients: dict) -> list[str]:
     return lines
 
 
+def _runs_markdown(runs: list[dict]) -> list[str]:
+    """report.md's table of the runs of a bag that holds several (the numbers above: run 1)."""
+    lines = ['', '## Runs', '', f'The bag holds {len(runs)} pump runs; the numbers above are '
+             'those of run 1, each run is measured on its own here (all in `metrics.json`, '
+             '`runs`).', '', '| run | from | until | began | sequence type | injected up to | '
+             'switch | plateau | snap-throughs | hysteresis area |',
+             '|---:|---:|---:|---|---|---:|---|---|---:|---|']
+    for run in runs:
+        switch, plateau = run['switch'], run['plateau']
+        lines.append(
+            f'| {run["run"]} | {run["from_s"]:.3f} s | {run["until_s"]:.3f} s | {run["began"]} '
+            f'| {run["sequence_type"]} | {_ml(run["injected_range_m3"][1])} | '
+            + (f'{_ml(switch["injected_m3"])}, {switch["segment_taking_over"]}' if switch
+               else _not_applied(run, 'switch'))
+            + ' | ' + (f'{_kpa(plateau["pressure_pa"])} from {_ml(plateau["onset_injected_m3"])}'
+                       if plateau else _not_applied(run, 'plateau'))
+            + f' | {run["snap_count"]} | {_mj(run, "hysteresis_area_j")} |')
+    return lines
+
+
 def markdown(metrics: dict) -> str:
     """report.md: the summary as a short document with tables."""
     lines = [f'# Report of `{metrics["bag"]}`', '',
@@ -640,6 +695,8 @@ def markdown(metrics: dict) -> str:
     for name, limit in (metrics.get('segment_pressure_limits_pa') or {}).items():
         lines.append(f'| {name}: highest pressure of its curve (peak or plateau) | '
                      f'{_kpa(limit)} |')
+    if metrics.get('runs'):
+        lines += _runs_markdown(metrics['runs'])
     if metrics['snaps']:
         lines += ['', '## Snap-throughs', '', '| injected | direction | gauge pressure | '
                   'fluid moved |', '|---:|---|---|---:|']
