@@ -217,19 +217,27 @@ def _report(args: argparse.Namespace) -> int:
     try:
         _write_report(args.bag, args.scene, args.experiment, args.out or args.bag / 'report',
                       reference=args.reference, namespace=args.namespace, svg=args.svg,
-                      workers=workers)
+                      workers=workers, style=_figure_style(args))
     finally:
         stop_workers(workers)
     return 0
 
 
+def _figure_style(args: argparse.Namespace) -> Any:
+    """The figures' look from --style, --width and --dpi (refused in one line if unusable)."""
+    from softseq_ros.analysis.figures import FigureStyle
+
+    return FigureStyle(args.style, args.width, args.dpi)
+
+
 def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None,
                   out: Path, reference: Path | None = None, namespace: str | None = None,
-                  svg: bool = False, workers: object | None = None) -> None:
+                  svg: bool = False, workers: object | None = None,
+                  style: Any = None) -> None:
     from softseq_ros.analysis.report import write_report
 
     _, text = write_report(bag, out, scene_name, experiment_csv, reference, namespace, svg,
-                           workers=workers)
+                           workers=workers, style=style)
     print(text)
     print(f'report: {out / "report.md"}, {out / "metrics.json"}, figures in {out}')
 
@@ -239,6 +247,7 @@ def _compare(args: argparse.Namespace) -> int:
 
     from softseq_ros.analysis.compare import compare_bags
 
+    _figure_style(args)   # an unusable --style, --width or --dpi is refused before reading
     scene = None
     if args.scene is not None:
         from softseq_ros.scene.loader import load_scene
@@ -252,8 +261,31 @@ def _compare(args: argparse.Namespace) -> int:
         (args.out / 'compare.md').write_text(table)
         (args.out / 'compare.json').write_text(json.dumps({'a': metrics_a, 'b': metrics_b},
                                                           indent=2) + '\n')
-        print(f'written: {args.out / "compare.md"}, {args.out / "compare.json"}')
+        figure = _compare_figure(args)
+        print(f'written: {args.out / "compare.md"}, {args.out / "compare.json"}, '
+              + ', '.join(str(path) for path in figure))
     return 0
+
+
+def _figure_options(parser: argparse.ArgumentParser) -> None:
+    """--style, --width and --dpi: how a command's figures look."""
+    parser.add_argument('--style', choices=('paper', 'screen'), default='paper',
+                        help='paper (default): no titles, 8 pt type, sized for a journal '
+                        'column or page, 300 dpi, cropped to what is drawn; screen: short '
+                        'titles, larger, 110 dpi')
+    parser.add_argument('--width', type=float, metavar='INCHES',
+                        help="every figure's width in inches, its height in proportion (3.5: "
+                        'a journal column, 7.2: a page; default: each figure its own)')
+    parser.add_argument('--dpi', type=float, help='PNG resolution in dots per inch (default '
+                        '300 for paper, 110 for screen)')
+
+
+def _compare_figure(args: argparse.Namespace) -> list[Path]:
+    """compare.png: both bags' curves over each other, in the figure style asked for."""
+    from softseq_ros.analysis.compare import write_overlay
+
+    return write_overlay(args.a, args.b, args.out, args.namespace_a, args.namespace_b,
+                         _figure_style(args))
 
 
 def _library(args: argparse.Namespace) -> int:
@@ -446,6 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
     svg.add_argument('--no-svg', action='store_false', dest='svg',
                      help='PNG figures only (the default)')
     report.add_argument('--out', type=Path, help='folder for the report (default BAG/report)')
+    _figure_options(report)
     report.set_defaults(handler=_report)
 
     compare = sub.add_parser('compare', help='two bags side by side, the same metrics',
@@ -459,7 +492,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument('--scene', help='the scene (file or shipped name) whose segments made '
                          'both bags: with it a dynamic bag also shows its lag behind the '
                          'quasi-static path')
-    compare.add_argument('--out', type=Path, help='folder for compare.md and compare.json')
+    compare.add_argument('--out', type=Path, help='folder for compare.md, compare.json and '
+                         'compare.png (both PV curves and volume planes over each other)')
+    _figure_options(compare)
     compare.set_defaults(handler=_compare)
 
     library = sub.add_parser('library', help='assemble every pair (and triple) of segments',

@@ -258,7 +258,8 @@ def test_experiment_beyond_the_recording_widens_the_axis(paper, tmp_path, monkey
     path.write_text(synthetic_experiment(trace, 10 * ML, 1.0, rows=100))
     experiment = read_experiment(path)
     drawn = []
-    monkeypatch.setattr(figures, 'save_figure', lambda fig, out, svg: drawn.append(fig) or [out])
+    monkeypatch.setattr(figures, 'save_figure',
+                        lambda fig, out, svg, style=None: drawn.append(fig) or [out])
     figures.plot_pv(recording, None, tmp_path / 'pv.png', experiment, svg=False)
     low, high = drawn[0].axes[0].get_xlim()
     assert high >= experiment.injected.max() * 1e6 > recording.state_injected.max() * 1e6

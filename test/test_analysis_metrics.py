@@ -1,8 +1,11 @@
-"""Numbers that can be quoted: a metric that does not apply says so, with its reason."""
+"""Numbers that can be quoted (a metric that does not apply says why), runs, paper figures."""
 
 import json
 from pathlib import Path
+import subprocess
+import sys
 
+import numpy as np
 import pytest
 import yaml
 
@@ -172,3 +175,125 @@ def test_a_bag_with_a_pump_reset_is_split_into_runs_each_reported(two_runs, tmp_
     boundary = int(recording.state_run_starts[0])
     for _, rows in figures._legs(recording):
         assert rows[-1] < boundary or rows[0] >= boundary
+
+
+# ------------------------------------------------------------------------ figures for a paper
+
+
+def _png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as image:
+        return np.asarray(image.convert('RGB'), dtype=float)
+
+
+def _blank_band(pixels: np.ndarray) -> float:
+    """The tallest band of all-white rows or columns, as a share of the image's side."""
+    worst = 0.0
+    for axis in (0, 1):
+        blank = np.all(pixels > 250, axis=(1 - axis, 2))
+        run = longest = 0
+        for row in blank:
+            run = run + 1 if row else 0
+            longest = max(longest, run)
+        worst = max(worst, longest / blank.size)
+    return worst
+
+
+def _share_of(pixels: np.ndarray, colour: str) -> float:
+    """The share of pixels within a small distance of ``colour`` (hex)."""
+    rgb = np.array([int(colour[k:k + 2], 16) for k in (1, 3, 5)], dtype=float)
+    return float(np.mean(np.linalg.norm(pixels - rgb, axis=2) < 30.0))
+
+
+def test_paper_figures_are_cropped_titleless_and_show_both_directions(linear, peaked, tmp_path,
+                                                                      monkeypatch):
+    from softseq_ros.analysis import figures
+    from softseq_ros.analysis.experiment import synthetic_experiment
+    from softseq_ros.analysis.recording import load_recording
+    from softseq_ros.analysis.report import recording_trace
+
+    recording = load_recording(linear)
+    experiment_file = tmp_path / 'retraced.csv'
+    # An experiment whose deflation retraces its inflation, as the model's does here.
+    experiment_file.write_text(synthetic_experiment(recording_trace(recording), 0.0, 1.0,
+                                                    rows=200))
+    drawn = []
+    save = figures.save_figure
+    monkeypatch.setattr(figures, 'save_figure',
+                        lambda fig, out, svg, style=None: drawn.append(fig) or save(
+                            fig, out, svg, style))
+    metrics, _ = write_report(peaked, tmp_path / 'peaked')
+    metrics, _ = write_report(linear, tmp_path / 'linear', experiment_csv=experiment_file)
+    # No titles: a paper's caption says what a figure shows.
+    for fig in drawn:
+        assert fig._suptitle is None
+        assert all(not ax.get_title() for ax in fig.axes)
+    for folder in ('peaked', 'linear'):
+        for png in (tmp_path / folder).glob('*.png'):
+            pixels = _png(png)
+            # Cropped to what is drawn: no blank band across a figure (the former shapes
+            # figure had a fifth of its height blank under its legends).
+            assert _blank_band(pixels) < 0.04, png
+    pv = _png(tmp_path / 'linear' / 'pv.png')
+    # The deflation retraces the inflation: both must still show.
+    for colour in (figures.STYLE['inflation']['color'], figures.STYLE['deflation']['color'],
+                   figures.EXPERIMENT_STYLE['inflation']['color'],
+                   figures.EXPERIMENT_STYLE['deflation']['color']):
+        assert _share_of(pv, colour) > 1e-4, colour
+
+
+def test_figure_size_and_resolution_are_settable_and_bad_ones_refused(linear, tmp_path):
+    from PIL import Image
+
+    from softseq_ros.analysis.figures import FigureStyle, FigureStyleError
+
+    write_report(linear, tmp_path, style=FigureStyle('paper', width_in=3.0, dpi=100))
+    with Image.open(tmp_path / 'pv.png') as image:
+        assert image.info['dpi'] == pytest.approx((100, 100), abs=0.5)
+        # 3 in at 100 dpi, cropped to what is drawn (the legend below may widen it a little).
+        assert 240 <= image.size[0] <= 330
+    for flags, message in ((('--dpi', '5'), '--dpi 5: a resolution'),
+                           (('--width', '0.1'), '--width 0.1: a figure width'),
+                           (('--style', 'poster'), "invalid choice: 'poster'")):
+        result = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'report', str(linear),
+                                 '--out', str(tmp_path / 'refused'), *flags],
+                                capture_output=True, text=True, timeout=120,
+                                stdin=subprocess.DEVNULL)
+        assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert not (tmp_path / 'refused').exists()
+    with pytest.raises(FigureStyleError):
+        FigureStyle('paper', dpi=2000)
+
+
+def test_steps_say_how_far_the_tip_bends(peaked, tmp_path):
+    from softseq_ros.analysis.metrics import segment_lengths
+    from softseq_ros.analysis.recording import load_recording
+
+    recording = load_recording(peaked)
+    # From the backbone's geometry alone, the segments' lengths of the scene (0.111 m each).
+    np.testing.assert_allclose(segment_lengths(recording.snapshots, 2), [0.111, 0.111],
+                               rtol=1e-9)
+    metrics, text = write_report(peaked, tmp_path, figures=False)
+    assert len(metrics['steps']) == 2
+    for step, shot in zip(metrics['steps'], recording.snapshots):
+        # Against curvature times length at the state the snapshot shows.
+        row = int(np.searchsorted(recording.state_time_s, shot.time_s))
+        expected = recording.curvatures[row] * 0.111
+        np.testing.assert_allclose(step['bend_angles_rad'], expected, rtol=1e-6, atol=1e-9)
+        assert step['tip_angle_rad'] == pytest.approx(expected.sum(), rel=1e-6)
+    assert 'tip angle' in text
+
+
+def test_compare_writes_an_overlay_figure_of_both_bags(linear, peaked, tmp_path):
+    from softseq_ros.analysis.figures import BAG_COLOURS
+
+    result = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'compare', str(linear),
+                             str(peaked), '--out', str(tmp_path), '--dpi', '120'],
+                            capture_output=True, text=True, timeout=120,
+                            stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr
+    pixels = _png(tmp_path / 'compare.png')
+    assert all(_share_of(pixels, colour) > 1e-3 for colour in BAG_COLOURS)
+    assert _blank_band(pixels) < 0.04
+    assert str(tmp_path / 'compare.png') in result.stdout

@@ -13,6 +13,7 @@ shows as ``does not apply``, with the reason under the table.
 
 from dataclasses import dataclass
 import os
+from pathlib import Path
 
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import (
@@ -21,6 +22,7 @@ from softseq_ros.analysis.report import (
     recording_metrics,
     scene_notes,
 )
+from softseq_ros.errors import writing
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,23 @@ def _cell(value: object) -> str:
     if isinstance(value, float):
         return f'{value:.4g}'
     return str(value)
+
+
+def write_overlay(bag_a: str | os.PathLike, bag_b: str | os.PathLike, out: Path,
+                  namespace_a: str | None = None, namespace_b: str | None = None,
+                  style: object | None = None, svg: bool = False) -> list[Path]:
+    """
+    ``compare.png`` in ``out``: both bags' PV curves (and v1-v2 planes) over each other.
+
+    ``style``: a :class:`softseq_ros.analysis.figures.FigureStyle` (default: paper).
+    """
+    from softseq_ros.analysis.figures import PAPER, draw, thinned
+
+    recordings = [(f'A: {Path(bag_a).name}', thinned(load_recording(bag_a, namespace_a))),
+                  (f'B: {Path(bag_b).name}', thinned(load_recording(bag_b, namespace_b)))]
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
+    return draw('overlay', recordings, out / 'compare.png', svg, style or PAPER)
 
 
 def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,

@@ -199,11 +199,11 @@ def compare(trace: Trace, experiment: Experiment, snapshots: list | None = None)
                                'rmse_after_pa': rmse, 'rows_used': used}
     else:
         result['alignment'] = None
-    result['tip_errors'] = _tip_errors(experiment, snapshots or [])
+    result['tip_errors'] = tip_errors(experiment, snapshots or [])
     return result
 
 
-def _tip_errors(experiment: Experiment, snapshots: list) -> list[dict]:
+def tip_errors(experiment: Experiment, snapshots: list) -> list[dict]:
     """At each snapshot, the experiment's tip at the same volume and direction, and the gap."""
     if experiment.tip is None:
         return []

@@ -1,13 +1,20 @@
 """
-Figures of a rig run in the paper's style.
+Figures of a rig run, fit for a paper.
 
-Humans read mL, kPa and mm here; the data stay SI underneath, and every pressure axis says
-gauge. Inflation is drawn solid in blue, deflation dashed in orange throughout; a snap-through is
-an arrow from the state before to the state after. Figures: the PV curve (Fig. 4A / 6), each
-segment's volume and curvature against the injected volume (Fig. 3), the v1-v2 plane with stable
-and unstable equilibria and lines of constant total volume (Fig. 1B / 4B), the tentacle's shape
-at the camera's steps (Fig. 7), the time series and, for a dynamic bag, the transients around
-its snap-throughs in time.
+Humans read mL, kPa, mm and degrees here; the data stay SI underneath, and every pressure axis
+says gauge. Inflation is drawn solid and thick, deflation dashed and thin on top of it, so both
+show where they coincide (blue and vermillion where colour is free, the segment's colour in
+per-segment figures); a snap-through is an arrow from the state before to the state after.
+Figures: the PV curve (Fig. 4A / 6), each segment's volume, curvature and bend angle against
+the injected volume (Fig. 3), the v1-v2 plane with stable and unstable equilibria and lines of
+constant total volume (Fig. 1B / 4B), the tentacle's shape at the camera's steps with an
+experiment's tips (Fig. 7), the time series and, for a dynamic bag, the transients around its
+snap-throughs in time.
+
+A :class:`FigureStyle` sets how they look: ``paper`` (the default: no titles, a caption says
+what a figure shows; sized for a 3.5 in journal column or a 7.2 in page, 8 pt type, 300 dpi,
+cropped to what is drawn) or ``screen`` (short titles, larger, 110 dpi, for a quick look);
+the width and the resolution can be set for either.
 
 Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot: it costs half a
 second to import), and long recordings are thinned to a few thousand points per line, keeping
@@ -24,19 +31,102 @@ from numpy.typing import NDArray
 from softseq_ros.analysis.metrics import snap_rows
 from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
 from softseq_ros.analysis.transients import Transients, TransientWindow, transient_windows
-from softseq_ros.errors import OutputWriteError, writing
+from softseq_ros.errors import OutputWriteError, UserError, writing
 
 ML = 1e6
 KPA = 1e-3
 MM = 1e3
 MAX_POINTS = 2000
-STYLE = {INFLATION: {'color': 'tab:blue', 'ls': '-'},
-         DEFLATION: {'color': 'tab:orange', 'ls': '--'}}
+# Okabe-Ito colours, told apart with every common colour-vision deficiency. Deflation is drawn
+# thinner and on top of inflation, so a path that retraces itself shows both.
+STYLE = {INFLATION: {'color': '#0072B2', 'ls': '-', 'lw': 2.0, 'zorder': 2},
+         DEFLATION: {'color': '#D55E00', 'ls': (0, (3.5, 2.0)), 'lw': 1.1, 'zorder': 3}}
 GAUGE = 'gauge pressure [kPa]'
 INJECTED = 'injected volume [mL]'
 # Snaps a transients figure shows side by side (more would be too narrow to read).
 MAX_TRANSIENT_SNAPS = 4
-SEGMENT_COLOURS = ['tab:green', 'tab:purple', 'tab:brown', 'tab:cyan', 'tab:olive']
+SEGMENT_COLOURS = ['#009E73', '#CC79A7', '#E69F00', '#56B4E9', '#000000']
+# An experiment's markers: about this many per direction, inflation's pointing up.
+EXPERIMENT_MARKERS = 24
+EXPERIMENT_STYLE = {INFLATION: {'marker': '^', 'color': '#555555'},
+                    DEFLATION: {'marker': 'v', 'color': '#999999'}}
+
+
+class FigureStyleError(UserError):
+    """A figure style, width or resolution that cannot be drawn (one line, naming the option)."""
+
+
+@dataclass(frozen=True)
+class FigureStyle:
+    """
+    How the figures look: ``paper`` or ``screen``, a width and a resolution.
+
+    ``width_in`` (None: each figure's own) sets every figure's width in inches, its height
+    following the figure's proportions; ``dpi`` the PNG's resolution.
+    """
+
+    name: str = 'paper'
+    width_in: float | None = None
+    dpi: float | None = None
+
+    def __post_init__(self) -> None:
+        """Refuse a style, width or resolution that cannot be drawn."""
+        if self.name not in FIGURE_STYLES:
+            raise FigureStyleError(f'--style {self.name}: expected one of '
+                                   f'{", ".join(FIGURE_STYLES)}')
+        if self.width_in is not None and not 1.0 <= self.width_in <= 40.0:
+            raise FigureStyleError(f'--width {self.width_in:g}: a figure width in inches, from '
+                                   '1 to 40 (3.5 is a journal column, 7.2 a page)')
+        if self.dpi is not None and not 30.0 <= self.dpi <= 1200.0:
+            raise FigureStyleError(f'--dpi {self.dpi:g}: a resolution from 30 to 1200 dots per '
+                                   'inch')
+
+    @property
+    def paper(self) -> bool:
+        """No titles, print sizes, cropped to what is drawn."""
+        return self.name == 'paper'
+
+    @property
+    def resolution(self) -> float:
+        """The PNG's dots per inch."""
+        return self.dpi if self.dpi is not None else (300.0 if self.paper else 110.0)
+
+    def size(self, width: float, height: float) -> tuple[float, float]:
+        """
+        A figure's size in inches, from its paper size (``width`` x ``height``).
+
+        The screen style draws everything 1.6 times larger; a set width scales both sides.
+        """
+        if not self.paper:
+            width, height = 1.6 * width, 1.6 * height
+        if self.width_in is not None:
+            width, height = self.width_in, height * self.width_in / width
+        return width, height
+
+    def title(self, ax: object, text: str) -> None:
+        """A short title on screen; none in a paper (its caption says it)."""
+        if not self.paper:
+            ax.set_title(text, fontsize=9)
+
+    def context(self) -> object:
+        """The settings of matplotlib for this style, for drawing and saving."""
+        import matplotlib
+
+        base = {'font.size': 8.0, 'axes.labelsize': 8.0, 'axes.titlesize': 8.0,
+                'xtick.labelsize': 7.0, 'ytick.labelsize': 7.0, 'legend.fontsize': 6.5,
+                'legend.frameon': False, 'legend.handlelength': 2.6,
+                'axes.linewidth': 0.6, 'xtick.major.width': 0.6, 'ytick.major.width': 0.6,
+                'xtick.major.size': 3.0, 'ytick.major.size': 3.0, 'grid.linewidth': 0.4,
+                'lines.markersize': 3.5, 'savefig.pad_inches': 0.02,
+                'svg.fonttype': 'none'}
+        if not self.paper:
+            base.update({'font.size': 10.0, 'axes.labelsize': 10.0, 'xtick.labelsize': 9.0,
+                         'ytick.labelsize': 9.0, 'legend.fontsize': 8.0})
+        return matplotlib.rc_context(base)
+
+
+FIGURE_STYLES = ('paper', 'screen')
+PAPER = FigureStyle()
 
 
 @dataclass(frozen=True)
@@ -134,28 +224,57 @@ def _broken(values: NDArray[np.float64], rows: NDArray[np.intp],
     return out
 
 
+def _darker(colour: object) -> tuple[float, float, float]:
+    """A darker shade of ``colour``: a segment's deflation, dashed over its inflation."""
+    from matplotlib.colors import to_rgb
+
+    return tuple(0.5 * c for c in to_rgb(colour))
+
+
+def _direction_key(ax: object) -> None:
+    """Legend entries that say which line style is which direction (per-segment colours)."""
+    for direction, shade in ((INFLATION, '0.55'), (DEFLATION, '0.15')):
+        style = {k: v for k, v in STYLE[direction].items() if k in ('ls', 'lw')}
+        ax.plot([], [], color=shade, label=direction, **style)
+
+
 def _draw_legs(ax: object, recording: Recording, x: NDArray[np.float64],
-               y: NDArray[np.float64], label: str = '', **extra: object) -> None:
+               y: NDArray[np.float64], label: str = '', directions: bool = True,
+               **extra: object) -> None:
+    """
+    The recorded path, leg by leg, with its snap-throughs as arrows.
+
+    ``label`` starts each leg's legend entry; with ``directions`` it ends with the leg's
+    direction, else only the first inflation leg is named (a figure with a colour per segment
+    says once, with :func:`_direction_key`, which style is which direction). A colour given in
+    ``extra`` is the inflation's; deflation is drawn in a darker shade of it.
+    """
     snaps = _snap_rows(recording)
     starts = recording.state_run_starts
     shown = set()
     for direction, rows in _legs(recording):
         style = dict(STYLE[direction])
         style.update(extra)
+        if 'color' in extra and direction == DEFLATION:
+            style['color'] = _darker(extra['color'])
         # Runs after the first (a reset or restarted pump) are named and drawn fainter.
         run = int(np.searchsorted(starts, rows[0], side='right')) + 1 if starts.size else 0
         key = (run, direction)
-        name = (f'{label}{f"run {run}, " if run else ""}{direction}' if key not in shown
-                else None)
+        prefix = f'{label}{f"run {run}, " if run else ""}'
+        if directions:
+            name = f'{prefix}{direction}' if key not in shown else None
+        else:
+            name = prefix.rstrip(', ') if key not in shown and direction == INFLATION else None
         shown.add(key)
         if run > 1:
             style['alpha'] = 0.5
-        ax.plot(_broken(x, rows, snaps), _broken(y, rows, snaps), lw=1.5, label=name, **style)
+        ax.plot(_broken(x, rows, snaps), _broken(y, rows, snaps), label=name, **style)
     for row in snaps.tolist():
         direction = INFLATION if recording.state_flow_sign[row] > 0 else DEFLATION
         ax.annotate('', xy=(x[row], y[row]), xytext=(x[row - 1], y[row - 1]),
-                    arrowprops={'arrowstyle': '->', 'color': STYLE[direction]['color'],
-                                'lw': 1.4})
+                    arrowprops={'arrowstyle': '->', 'color': extra.get(
+                        'color', STYLE[direction]['color']), 'lw': 1.0,
+                        'shrinkA': 0, 'shrinkB': 0}, zorder=4)
 
 
 def _x_limits(ax: object, *ranges: tuple[float, float]) -> None:
@@ -165,70 +284,107 @@ def _x_limits(ax: object, *ranges: tuple[float, float]) -> None:
     ax.set_xlim(lo - pad, hi + pad)
 
 
+def _draw_experiment(ax: object, experiment: object) -> tuple[float, float]:
+    """An experiment's PV points, inflation and deflation apart; its injected range [mL]."""
+    for direction, sign in ((INFLATION, 1), (DEFLATION, -1)):
+        rows = np.flatnonzero(experiment.sign == sign)
+        if not rows.size:
+            continue
+        every = max(1, rows.size // EXPERIMENT_MARKERS)
+        # Deflation's markers sit between inflation's: a curve that retraces itself shows both.
+        offset = every // 2 if sign < 0 else 0
+        style = EXPERIMENT_STYLE[direction]
+        ax.plot(experiment.injected[rows] * ML, experiment.pressure[rows] * KPA, '-',
+                lw=0.6, color=style['color'], marker=style['marker'], ms=3.2, mfc='none',
+                mew=0.7, markevery=(offset, every), label=f'experiment, {direction}',
+                zorder=1)
+    return float(experiment.injected.min() * ML), float(experiment.injected.max() * ML)
+
+
 def plot_pv(recording: Recording, model: ModelCurves | None, out: Path,
-            experiment: object | None = None, svg: bool = False) -> list[Path]:
+            experiment: object | None = None, svg: bool = False,
+            style: FigureStyle = PAPER) -> list[Path]:
     """Gauge pressure against injected volume, inflation and deflation apart, snaps marked."""
-    fig, axes = new_figure(6.4, 4.6)
+    fig, axes = new_figure(*style.size(3.5, 2.6), margins={'left': 0.14, 'bottom': 0.16,
+                                                            'top': 0.97})
     ax = axes[0, 0]
     u = recording.state_injected * ML
     ranges = [(float(u.min()), float(u.max()))]
     if model is not None:
-        for name, (added, pressure) in zip(model.names, model.segment_curves):
+        for j, (name, (added, pressure)) in enumerate(zip(model.names, model.segment_curves)):
             dv = added * ML
             shown = dv <= max(u.max() * 1.2, 1e-9)
-            ax.plot(dv[shown], pressure[shown] * KPA, ':', lw=1,
-                    label=f'segment {name} alone (vs its own added volume)')
-    _draw_legs(ax, recording, u, recording.pressure * KPA, label='actuator, ')
+            ax.plot(dv[shown], pressure[shown] * KPA, ':', lw=1.0,
+                    color=SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)],
+                    label=f'{name} alone (vs its added volume)')
+    _draw_legs(ax, recording, u, recording.pressure * KPA)
     if experiment is not None:
-        for direction, marker in ((1, 'o'), (-1, 's')):
-            rows = experiment.sign == direction
-            if rows.any():
-                ax.plot(experiment.injected[rows] * ML, experiment.pressure[rows] * KPA, marker,
-                        ms=2.5, mfc='none', color='tab:red' if direction > 0 else 'tab:purple',
-                        label=f'experiment, {INFLATION if direction > 0 else DEFLATION}')
-        ranges.append((float(experiment.injected.min() * ML),
-                       float(experiment.injected.max() * ML)))
+        ranges.append(_draw_experiment(ax, experiment))
     _x_limits(ax, *ranges)
     ax.set_xlabel(INJECTED)
     ax.set_ylabel(GAUGE)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc='lower right')
-    ax.set_title('Pressure-volume curve (Fig. 4A / 6 style); arrows: snap-throughs', fontsize=10)
-    return save_figure(fig, out, svg)
+    # Below the axes: a PV curve fills its box, any corner may hold data.
+    ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.155), ncol=2)
+    style.title(ax, 'Pressure-volume curve; arrows: snap-throughs')
+    return save_figure(fig, out, svg, style)
 
 
-def plot_segments(recording: Recording, out: Path, svg: bool = False) -> list[Path]:
-    """Volume added to each segment and its curvature against injected volume (Fig. 3)."""
-    n = len(recording.segment_names)
-    fig, axes = new_figure(6.4, 5.8, 2, 1, {'top': 0.93, 'bottom': 0.09}, sharex=True)
+def plot_segments(recording: Recording, out: Path, svg: bool = False,
+                  lengths: FloatArray | None = None, style: FigureStyle = PAPER) -> list[Path]:
+    """
+    Volume added to each segment, its curvature and its bend angle against injected volume.
+
+    The bend angle of a segment is its curvature times its length (``lengths``, from the scene
+    or the camera's backbone; without them the panel is left out); the tip's is their sum.
+    """
+    curved = recording.curvatures.shape[0] == recording.volumes.shape[0]
+    angles = curved and lengths is not None
+    panels = 1 + curved + angles
+    fig, axes = new_figure(*style.size(3.5, 1.45 * panels + 0.45), panels, 1,
+                           {'left': 0.15, 'bottom': 0.4 / (1.45 * panels + 0.45),
+                            'top': 0.985, 'hspace': 0.1}, sharex=True)
     u = recording.state_injected * ML
     rest = recording.volumes[0]
     for j, name in enumerate(recording.segment_names):
         colour = SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)]
         _draw_legs(axes[0, 0], recording, u, (recording.volumes[:, j] - rest[j]) * ML,
-                   label=f'{name}, ', color=colour)
-        if recording.curvatures.shape[0] == recording.volumes.shape[0]:
+                   label=name, directions=False, color=colour)
+        if curved:
             _draw_legs(axes[1, 0], recording, u, recording.curvatures[:, j],
-                       label=f'{name}, ', color=colour)
-    axes[0, 0].set_ylabel('volume added to segment [mL]')
-    axes[1, 0].set_ylabel('segment curvature [1/m]')
-    axes[1, 0].set_xlabel(INJECTED)
+                       label=name, directions=False, color=colour)
+        if angles:
+            _draw_legs(axes[2, 0], recording, u,
+                       np.degrees(recording.curvatures[:, j] * lengths[j]),
+                       label=name, directions=False, color=colour)
+    _direction_key(axes[0, 0])
+    if angles:
+        _draw_legs(axes[2, 0], recording, u,
+                   np.degrees(recording.curvatures @ np.asarray(lengths)),
+                   label='tip (sum)', directions=False, color='0.35')
+        axes[2, 0].set_ylabel('bend angle [deg]')
+    axes[0, 0].set_ylabel('volume added\nto segment [mL]')
+    if curved:
+        axes[1, 0].set_ylabel('curvature [1/m]')
+    axes[-1, 0].set_xlabel(INJECTED)
     for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=max(1, n))
-    axes[0, 0].set_title('Segment volume and curvature (Fig. 3 style); solid: inflation, '
-                         'dashed: deflation', fontsize=9)
-    return save_figure(fig, out, svg)
+    axes[0, 0].legend(ncol=2, loc='upper left')
+    if angles:
+        axes[2, 0].legend(loc='upper left')
+    style.title(axes[0, 0], 'Segment volume, curvature and bend angle')
+    return save_figure(fig, out, svg, style)
 
 
 def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path,
-                      svg: bool = False) -> list[Path]:
+                      svg: bool = False, style: FigureStyle = PAPER) -> list[Path]:
     """v1 against v2 (added volumes): equilibria, constant total volume, the recorded path."""
-    fig, axes = new_figure(5.8, 5.6, margins={'left': 0.13, 'bottom': 0.1, 'top': 0.93})
-    ax = axes[0, 0]
     names = recording.segment_names
     if len(names) != 2:
-        return _segments_instead(fig, recording, out, svg)
+        return _segments_instead(recording, out, svg, style)
+    fig, axes = new_figure(*style.size(3.3, 3.2), margins={'left': 0.15, 'bottom': 0.13,
+                                                            'top': 0.98, 'right': 0.98})
+    ax = axes[0, 0]
     rest = model.rest_volumes if model is not None else recording.volumes[0]
     dv = (recording.volumes - rest) * ML
     limit = float(np.nanmax(dv)) * 1.1 or 1.0
@@ -236,47 +392,50 @@ def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path
         shown = set()
         for volumes, stable in model.equilibria:
             cv = (volumes - rest) * ML
-            for mask, colour, label in ((stable, 'k', 'stable equilibria'),
-                                        (~stable, 'tab:red', 'unstable equilibria')):
+            for mask, colour, label in ((stable, '0.2', 'stable equilibria'),
+                                        (~stable, '#CC79A7', 'unstable equilibria')):
                 if mask.any():
                     ax.plot(np.where(mask, cv[:, 0], np.nan), np.where(mask, cv[:, 1], np.nan),
-                            color=colour, lw=0.9, alpha=0.6,
+                            color=colour, lw=0.7, alpha=0.7, zorder=1,
                             label=None if label in shown else label)
                     shown.add(label)
-        limit = max(limit, 0.0)
     step = nice_step(2 * limit / 8)
     for total in np.arange(step, 2 * limit + step, step):
-        ax.plot([0, total], [total, 0], color='0.75', lw=0.6, zorder=0)
+        ax.plot([0, total], [total, 0], color='0.8', lw=0.5, zorder=0)
         if total < limit:
             # Labelled next to the x axis, away from the path, which leaves the origin upward.
-            ax.text(total - 0.03 * limit, 0.03 * limit, f'{total:g} mL', fontsize=6,
+            ax.text(total - 0.03 * limit, 0.03 * limit, f'{total:g} mL', fontsize=5.5,
                     color='0.45', rotation=-45, ha='center', va='center')
-    _draw_legs(ax, recording, dv[:, 0], dv[:, 1], label='recorded, ')
+    _draw_legs(ax, recording, dv[:, 0], dv[:, 1])
     ax.set_xlabel(f'volume added to {names[0]} [mL]')
     ax.set_ylabel(f'volume added to {names[1]} [mL]')
     ax.set_aspect('equal', adjustable='box')
     ax.set_xlim(0, limit)
     ax.set_ylim(0, limit)
     ax.grid(alpha=0.2)
-    ax.legend(fontsize=7, loc='upper right')
-    ax.set_title('Volume distribution (Fig. 1B / 4B style); grey: constant total volume',
-                 fontsize=9)
-    return save_figure(fig, out, svg)
+    ax.legend(loc='upper right')
+    style.title(ax, 'Volume distribution; grey: constant total volume')
+    return save_figure(fig, out, svg, style)
 
 
-def _segments_instead(fig: object, recording: Recording, out: Path, svg: bool) -> list[Path]:
-    ax = fig.axes[0]
+def _segments_instead(recording: Recording, out: Path, svg: bool,
+                      style: FigureStyle) -> list[Path]:
+    """The volume added to each segment against injected volume (not two segments)."""
+    fig, axes = new_figure(*style.size(3.5, 2.6), margins={'left': 0.14, 'bottom': 0.16,
+                                                            'top': 0.97})
+    ax = axes[0, 0]
     u = recording.state_injected * ML
     rest = recording.volumes[0]
     for j, name in enumerate(recording.segment_names):
         _draw_legs(ax, recording, u, (recording.volumes[:, j] - rest[j]) * ML,
-                   label=f'{name}, ')
+                   label=name, directions=False, color=SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)])
+    _direction_key(ax)
     ax.set_xlabel(INJECTED)
     ax.set_ylabel('volume added to segment [mL]')
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title('Volume distribution', fontsize=10)
-    return save_figure(fig, out, svg)
+    ax.legend()
+    style.title(ax, 'Volume distribution')
+    return save_figure(fig, out, svg, style)
 
 
 def nice_step(raw: float) -> float:
@@ -288,42 +447,67 @@ def nice_step(raw: float) -> float:
     return float(10 * exponent)
 
 
-def plot_shapes(recording: Recording, out: Path, svg: bool = False) -> list[Path]:
-    """The backbone at each step: inflation and deflation in two panels, one colour per step."""
+def plot_shapes(recording: Recording, out: Path, svg: bool = False,
+                experiment: object | None = None, style: FigureStyle = PAPER) -> list[Path]:
+    """
+    The backbone at each step: inflation and deflation in two panels, one colour per step.
+
+    Each step is labelled with its injected volume and tip angle; an experiment's tip at the
+    same volume and direction (where its file has tips) is an open circle of the step's colour.
+    """
     from matplotlib import colormaps
 
-    fig, axes = new_figure(9.6, 5.2, 1, 2, {'left': 0.07, 'bottom': 0.3, 'top': 0.88},
-                        sharex=True, sharey=True)
+    from softseq_ros.analysis.experiment import tip_errors
+    from softseq_ros.analysis.metrics import bend_angles
+
+    # Two square panels side by side, the legends below them: no room left over between.
+    fig, axes = new_figure(*style.size(5.6, 3.3), 1, 2,
+                           {'left': 0.09, 'right': 0.99, 'bottom': 0.14, 'top': 0.99,
+                            'wspace': 0.05}, sharex=True, sharey=True)
     steps = sorted({s.step for s in recording.snapshots if s.step is not None})
-    palette = colormaps['tab10']
-    colour = {step: palette(i % 10) for i, step in enumerate(steps)}
+    palette = colormaps['viridis']
+    colour = {step: palette(0.9 * i / max(len(steps) - 1, 1)) for i, step in enumerate(steps)}
+    measured = {(t['step'], t['direction'], t['injected_m3']): t['experiment_tip_m']
+                for t in (tip_errors(experiment, recording.snapshots) if experiment else [])}
+    count = len(recording.segment_names)
     for ax, direction in zip(axes[0], (INFLATION, DEFLATION)):
         shots = [s for s in recording.snapshots if s.direction == direction]
         for shot in shots:
-            label = (f'step {shot.step}: {shot.injected * ML:.1f} mL' if shot.step is not None
-                     else f'{shot.injected * ML:.1f} mL')
-            ax.plot(shot.points[:, 0] * MM, shot.points[:, 1] * MM, '-', lw=2,
-                    color=colour.get(shot.step, 'k'), label=label)
-            ax.plot(*(shot.tip * MM), 'o', ms=3, color=colour.get(shot.step, 'k'))
-        ax.plot([0], [0], 'ks', ms=6)
+            tip_angle = float(np.degrees(np.sum(bend_angles(shot.points, count) or [np.nan])))
+            label = (f'{"step " + str(shot.step) + ": " if shot.step is not None else ""}'
+                     f'{shot.injected * ML:.1f} mL, {tip_angle:.0f}°')
+            shade = colour.get(shot.step, 'k')
+            ax.plot(shot.points[:, 0] * MM, shot.points[:, 1] * MM, '-', lw=1.6,
+                    color=shade, label=label)
+            ax.plot(*(shot.tip * MM), 'o', ms=3, color=shade)
+            tip = measured.get((shot.step, shot.direction, shot.injected))
+            if tip is not None:
+                ax.plot(tip[0] * MM, tip[1] * MM, 'o', ms=6, mfc='none', mew=1.0,
+                        color=shade)
+        ax.plot([0], [0], 'ks', ms=5)
         ax.set_xlabel('x [mm]')
         ax.set_aspect('equal', adjustable='box')
         ax.grid(alpha=0.3)
-        ax.set_title(f'{direction} ({len(shots)} snapshots)', fontsize=10)
+        ax.text(0.02, 0.98, f'{direction}', transform=ax.transAxes, ha='left', va='top',
+                fontsize=8, fontweight='bold')
         if shots:
-            ax.legend(fontsize=7, loc='upper center', bbox_to_anchor=(0.5, -0.15), ncol=3,
-                      frameon=False)
+            ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.13), ncol=2,
+                      handlelength=1.2, columnspacing=1.0)
     axes[0, 0].set_ylabel('z [mm]')
-    _square_limits(axes[0, 0], recording)
-    fig.suptitle('Tentacle shape at the camera steps (Fig. 7 style)', fontsize=10)
-    return save_figure(fig, out, svg)
+    if measured:
+        axes[0, 1].text(0.98, 0.98, "open circles: the experiment's tip", ha='right',
+                        va='top', fontsize=6.5, transform=axes[0, 1].transAxes)
+    _square_limits(axes[0, 0], recording, list(measured.values()))
+    style.title(axes[0, 0], 'Tentacle shape at the camera steps')
+    return save_figure(fig, out, svg, style)
 
 
-def _square_limits(ax: object, recording: Recording) -> None:
-    """Both panels show every snapshot at one scale (equal aspect, shared limits)."""
+def _square_limits(ax: object, recording: Recording, extra: list) -> None:
+    """Both panels show every snapshot (and experiment tip) at one scale."""
     if not recording.snapshots:
         return
-    points = np.vstack([s.points for s in recording.snapshots] + [np.zeros((1, 2))]) * MM
+    points = np.vstack([s.points for s in recording.snapshots] + [np.zeros((1, 2))]
+                       + [np.asarray(extra).reshape(-1, 2)]) * MM
     lo, hi = points.min(axis=0), points.max(axis=0)
     size = float(np.max(hi - lo)) * 1.08 or 1.0
     centre = 0.5 * (lo + hi)
@@ -331,21 +515,25 @@ def _square_limits(ax: object, recording: Recording) -> None:
     ax.set_ylim(centre[1] - size / 2, centre[1] + size / 2)
 
 
-def plot_timeseries(recording: Recording, out: Path, svg: bool = False) -> list[Path]:
+def plot_timeseries(recording: Recording, out: Path, svg: bool = False,
+                    style: FigureStyle = PAPER) -> list[Path]:
     """Injected volume, gauge pressure and each segment's total volume against time."""
-    fig, axes = new_figure(6.4, 6.4, 3, 1, {'top': 0.95, 'bottom': 0.08}, sharex=True)
+    fig, axes = new_figure(*style.size(3.5, 4.2), 3, 1, {'left': 0.15, 'top': 0.985,
+                                                          'bottom': 0.09, 'hspace': 0.1},
+                           sharex=True)
     rows = _thin(recording.pump_time_s.size)
-    axes[0, 0].plot(recording.pump_time_s[rows], recording.pump_injected[rows] * ML, 'k-')
-    axes[0, 0].set_ylabel('injected (pump) [mL]')
+    axes[0, 0].plot(recording.pump_time_s[rows], recording.pump_injected[rows] * ML, 'k-',
+                    lw=1.0)
+    axes[0, 0].set_ylabel('injected\n(pump) [mL]')
     rows = _thin(recording.state_time_s.size, _snap_rows(recording))
-    axes[1, 0].plot(recording.state_time_s[rows], recording.pressure[rows] * KPA, 'k-')
-    axes[1, 0].set_ylabel(GAUGE)
+    axes[1, 0].plot(recording.state_time_s[rows], recording.pressure[rows] * KPA, 'k-', lw=1.0)
+    axes[1, 0].set_ylabel(GAUGE.replace(' [', '\n['))
     for j, name in enumerate(recording.segment_names):
         axes[2, 0].plot(recording.state_time_s[rows], recording.volumes[rows, j] * ML,
-                        label=name)
-    axes[2, 0].set_ylabel('segment volume, total [mL]')
+                        lw=1.2, color=SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)], label=name)
+    axes[2, 0].set_ylabel('segment volume,\ntotal [mL]')
     axes[2, 0].set_xlabel('time from the first pump command [s]')
-    axes[2, 0].legend(fontsize=8)
+    axes[2, 0].legend()
     for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
     # Where a new run of the pump begins (a reset or restart): a line and its number.
@@ -355,11 +543,61 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = False) -> list[
         axes[0, 0].annotate(f'run {number}', (start.time_s, 1.0), xycoords=('data',
                             'axes fraction'), xytext=(2, -2), textcoords='offset points',
                             ha='left', va='top', fontsize=7, color='0.3')
-    return save_figure(fig, out, svg)
+    style.title(axes[0, 0], 'Time series')
+    return save_figure(fig, out, svg, style)
+
+
+BAG_COLOURS = ('#0072B2', '#D55E00')
+
+
+def plot_overlay(recordings: list[tuple[str, Recording]], out: Path, svg: bool = False,
+                 style: FigureStyle = PAPER) -> list[Path]:
+    """
+    Two recordings over each other (``softseq compare``): PV curves and v1-v2 planes.
+
+    The planes when both have two segments; a colour per recording, inflation solid,
+    deflation dashed.
+    """
+    plane = all(len(r.segment_names) == 2 for _, r in recordings)
+    # The square plane beside the wider PV curve, without room left over between them.
+    fig, axes = new_figure(*style.size(6.0 if plane else 3.5, 2.9), 1, 1 + plane,
+                           {'left': 0.08 if plane else 0.14, 'bottom': 0.15, 'top': 0.97,
+                            'right': 0.98, 'wspace': 0.25},
+                           gridspec_kw={'width_ratios': [1.35, 1] if plane else [1]})
+    ranges = []
+    limit = 0.0
+    for (label, recording), colour in zip(recordings, BAG_COLOURS):
+        u = recording.state_injected * ML
+        ranges.append((float(u.min()), float(u.max())))
+        _draw_legs(axes[0, 0], recording, u, recording.pressure * KPA, label=label,
+                   directions=False, color=colour)
+        if plane:
+            dv = (recording.volumes - recording.volumes[0]) * ML
+            limit = max(limit, float(np.nanmax(dv)) * 1.05)
+            _draw_legs(axes[0, 1], recording, dv[:, 0], dv[:, 1], label=label,
+                       directions=False, color=colour)
+    _x_limits(axes[0, 0], *ranges)
+    axes[0, 0].set_xlabel(INJECTED)
+    axes[0, 0].set_ylabel(GAUGE)
+    _direction_key(axes[0, 0])
+    axes[0, 0].legend(loc='upper center', bbox_to_anchor=(0.5, -0.155), ncol=2)
+    if plane:
+        names = [r.segment_names for _, r in recordings]
+        same = names[0] == names[1]
+        axes[0, 1].set_xlabel(f'volume added to {names[0][0] if same else "segment 1"} [mL]')
+        axes[0, 1].set_ylabel(f'volume added to {names[0][1] if same else "segment 2"} [mL]')
+        axes[0, 1].set_aspect('equal', adjustable='box')
+        axes[0, 1].set_xlim(0, limit or 1.0)
+        axes[0, 1].set_ylim(0, limit or 1.0)
+    for ax in axes[0]:
+        ax.grid(alpha=0.3)
+    style.title(axes[0, 0], 'Both recordings: pressure-volume curve')
+    return save_figure(fig, out, svg, style)
 
 
 def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ...],
-                    channel_names: tuple[str, ...], out: Path, svg: bool = False) -> list[Path]:
+                    channel_names: tuple[str, ...], out: Path, svg: bool = False,
+                    style: FigureStyle = PAPER) -> list[Path]:
     """
     Each snap in time: gauge pressure and channel flow above, segment volumes below.
 
@@ -367,11 +605,11 @@ def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ..
     volume (when the scene was given).
     """
     count = len(windows)
-    width = 3.6 * count + 0.6
+    width, height = style.size(2.3 * count + 0.4, 3.8)
     # Fixed margins in inches, whatever the number of panels: room for both y labels.
-    fig, axes = new_figure(width, 6.0, 2, count,
-                        {'left': 0.75 / width, 'right': 1 - 0.65 / width, 'top': 0.88,
-                         'bottom': 0.09, 'wspace': 0.55}, sharex='col')
+    fig, axes = new_figure(width, height, 2, count,
+                           {'left': 0.6 / width, 'right': 1 - 0.55 / width, 'top': 0.9,
+                            'bottom': 0.1, 'wspace': 0.75}, sharex='col')
     for column, window in enumerate(windows):
         snap = window.snap
         # Short snaps read in ms, long ones in s.
@@ -405,12 +643,15 @@ def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ..
         bottom.set_xlabel(f"time from the snap's start [{unit}]", fontsize=8)
     axes[0, 0].set_ylabel(GAUGE, fontsize=8)
     axes[1, 0].set_ylabel('segment volume, total [mL]', fontsize=8)
-    fig.suptitle('Snap-throughs in time (dotted: start; dashed: quasi-static)', fontsize=10)
-    return save_figure(fig, out, svg)
+    if not style.paper:
+        fig.suptitle('Snap-throughs in time (dotted: start; dashed: quasi-static)', fontsize=10)
+    return save_figure(fig, out, svg, style)
 
 
 def _draw(name: str, args: tuple) -> list[Path]:
-    return _FIGURE_FUNCTIONS[name](*args)
+    style = next((a for a in args if isinstance(a, FigureStyle)), PAPER)
+    with style.context():
+        return _FIGURE_FUNCTIONS[name](*args)
 
 
 def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
@@ -454,7 +695,13 @@ def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
 def _outputs(name: str, args: tuple) -> list[Path]:
     """The files a figure job writes (what the forked half drew)."""
     out = next(a for a in args if isinstance(a, Path))
-    return [out, out.with_suffix('.svg')] if args[-1] else [out]
+    svg = next(a for a in args if isinstance(a, bool))
+    return [out, out.with_suffix('.svg')] if svg else [out]
+
+
+def draw(name: str, *args: object) -> list[Path]:
+    """Draw figure ``name`` here, in its style's settings (the style among ``args``)."""
+    return _draw(name, args)
 
 
 def thinned(recording: Recording) -> Recording:
@@ -494,11 +741,14 @@ def thinned(recording: Recording) -> Recording:
 def write_figures(recording: Recording, emap: object | None, directory: Path,
                   experiment: object | None = None, svg: bool = False,
                   workers: object | None = None,
-                  transients: Transients | None = None) -> list[Path]:
+                  transients: Transients | None = None,
+                  style: FigureStyle = PAPER) -> list[Path]:
     """
-    All figures of a run into ``directory`` (PNG, and SVG as well with ``svg``).
+    All figures of a run into ``directory`` (PNG, and SVG as well with ``svg``), in ``style``.
 
-    ``transients`` (a dynamic recording's, with a snap in time) add ``transients.png``.
+    ``transients`` (a dynamic recording's, with a snap in time) add ``transients.png``. The
+    bend-angle panel of ``segments.png`` takes the segments' lengths from the scene's model,
+    else from a camera snapshot's backbone.
 
     Drawing is most of a report's time: with ``workers`` (from
     :func:`softseq_ros.analysis.figure_workers.start_workers`) the figures are drawn in those
@@ -508,19 +758,23 @@ def write_figures(recording: Recording, emap: object | None, directory: Path,
     # Windows are cut from the whole recording: thinning could lose a short snap.
     windows = transient_windows(recording, transients, MAX_TRANSIENT_SNAPS, MAX_POINTS) \
         if transients is not None else []
+    from softseq_ros.analysis.metrics import segment_lengths
+
     recording = thinned(recording)
     model = ModelCurves.from_map(emap) if emap is not None else None
-    jobs = [('pv', (recording, model, directory / 'pv.png', experiment, svg)),
-            ('segments', (recording, directory / 'segments.png', svg)),
-            ('volume_split', (recording, model, directory / 'volume_split.png', svg))]
+    lengths = (np.array([segment.length for segment in emap.segments]) if emap is not None
+               else segment_lengths(recording.snapshots, len(recording.segment_names)))
+    jobs = [('pv', (recording, model, directory / 'pv.png', experiment, svg, style)),
+            ('segments', (recording, directory / 'segments.png', svg, lengths, style)),
+            ('volume_split', (recording, model, directory / 'volume_split.png', svg, style))]
     # A figure with nothing to show is not drawn: no snapshot (a scene without trigger
     # volumes) leaves no shapes to draw.
     if recording.snapshots:
-        jobs.append(('shapes', (recording, directory / 'shapes.png', svg)))
-    jobs.append(('timeseries', (recording, directory / 'timeseries.png', svg)))
+        jobs.append(('shapes', (recording, directory / 'shapes.png', svg, experiment, style)))
+    jobs.append(('timeseries', (recording, directory / 'timeseries.png', svg, style)))
     if windows:
         jobs.append(('transients', (windows, recording.segment_names, transients.channel_names,
-                                    directory / 'transients.png', svg)))
+                                    directory / 'transients.png', svg, style)))
     if workers is None:
         return [path for name, args in jobs for path in _draw(name, args)]
     # Two halves of about equal drawing time, PNG or SVG: shapes and time series (and the
@@ -537,18 +791,31 @@ SECOND_HALF = ('shapes', 'timeseries', 'transients')
 
 
 _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': plot_volume_split,
+                     'overlay': plot_overlay,
                      'shapes': plot_shapes, 'timeseries': plot_timeseries,
                      'transients': plot_transients}
 
 
-def save_figure(fig: object, out: Path, svg: bool) -> list[Path]:
-    """Write ``fig`` as PNG (and SVG), a failed write naming the file; the paths written."""
+def save_figure(fig: object, out: Path, svg: bool,
+                style: FigureStyle | None = None) -> list[Path]:
+    """
+    Write ``fig`` as PNG (and SVG), a failed write naming the file; the paths written.
+
+    With a ``style``: at its resolution, and cropped to what is drawn (no blank margins);
+    without, at 110 dpi as laid out.
+    """
+    style = style or SCREEN_AS_LAID_OUT
+    crop = {'bbox_inches': 'tight', 'pad_inches': 0.02} if style.paper else {}
     # zlib's fastest level: a fifth of a figure's time at the default level, for 7 % more bytes.
     with writing(out):
-        fig.savefig(out, dpi=110, pil_kwargs={'compress_level': 1})
+        fig.savefig(out, dpi=style.resolution, pil_kwargs={'compress_level': 1}, **crop)
     written = [out]
     if svg:
         with writing(out.with_suffix('.svg')):
-            fig.savefig(out.with_suffix('.svg'))
+            fig.savefig(out.with_suffix('.svg'), **crop)
         written.append(out.with_suffix('.svg'))
     return written
+
+
+# What the figures saved without a style (the graph's and the library's own) look like.
+SCREEN_AS_LAID_OUT = FigureStyle('screen')

@@ -323,6 +323,56 @@ def _slope(u: FloatArray, p: FloatArray) -> float:
     return float(np.polyfit(u, p, 1)[0])
 
 
+def _segment_chords(points: FloatArray, count: int) -> list[tuple[FloatArray, FloatArray]]:
+    """Per segment of a backbone, its chords' lengths and directions (unwrapped) [m, rad]."""
+    per, left = divmod(points.shape[0] - 1, count)
+    if left or per < 2:
+        return []
+    found = []
+    for j in range(count):
+        steps = np.diff(points[j * per:(j + 1) * per + 1], axis=0)
+        found.append((np.hypot(steps[:, 0], steps[:, 1]),
+                      np.unwrap(np.arctan2(steps[:, 1], steps[:, 0]))))
+    return found
+
+
+def bend_angles(points: FloatArray, count: int) -> list[float]:
+    """
+    Each segment's bend angle [rad] from a camera backbone of ``count`` segments (base first).
+
+    The backbone holds 1 + count x k points, k per segment, equally spaced along each arc
+    (softseq_ros.segments.kinematics). On a constant-curvature arc every chord turns by the
+    same angle d from the one before, and the tangents at the arc's ends lie d / 2 outside its
+    first and last chord: the bend angle is the turn from the first chord to the last times
+    k / (k - 1), exact for the model's arcs. Empty when the backbone has no such layout.
+    """
+    angles = []
+    for _, direction in _segment_chords(points, count):
+        turns = direction.size - 1
+        angles.append(float((direction[-1] - direction[0]) * (turns + 1) / turns))
+    return angles
+
+
+def segment_lengths(snapshots: list, count: int) -> FloatArray | None:
+    """
+    Each segment's length [m] from the first camera snapshot that has the backbone's layout.
+
+    An arc of chords c_k each turning by d is sum(c_k) x (d / 2) / sin(d / 2) long (exact for
+    the model's constant-curvature arcs). None without such a snapshot.
+    """
+    for shot in snapshots:
+        chords = _segment_chords(shot.points, count)
+        if not chords:
+            continue
+        lengths = []
+        for length, direction in chords:
+            turn = (direction[-1] - direction[0]) / max(direction.size - 1, 1)
+            half = 0.5 * abs(turn)
+            lengths.append(float(np.sum(length) * (half / np.sin(half) if half > 1e-9 else 1)))
+        return np.array(lengths)
+    return None
+
+
 def segment_limits(segments: list, names: tuple[str, ...]) -> dict[str, float]:
     """Per segment: the highest pressure its curve holds (its peak or plateau) [Pa, gauge]."""
     limits = {}

@@ -26,7 +26,13 @@ import numpy as np
 import yaml
 
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
-from softseq_ros.analysis.metrics import Trace, TraceError, analyse, segment_limits
+from softseq_ros.analysis.metrics import (
+    Trace,
+    TraceError,
+    analyse,
+    bend_angles,
+    segment_limits,
+)
 from softseq_ros.analysis.recording import Recording, load_recording
 from softseq_ros.analysis.transients import Transients, analyse_transients
 from softseq_ros.errors import UserError, write_text, writing
@@ -191,11 +197,19 @@ def run_metrics(recording: Recording) -> dict:
         'snap_events_topic': [{k: e[k] for k in ('injected_m3', 'from_pressure_pa',
                                                  'to_pressure_pa') if k in e}
                               for e in recording.events],
-        'steps': [{'step': s.step, 'direction': s.direction, 'cycle': s.cycle,
-                   'injected_m3': s.injected,
-                   'trigger_injected_m3': s.trigger_injected, 'time_s': s.time_s,
-                   'tip_m': [float(x) for x in s.tip]} for s in recording.snapshots],
+        'steps': [_step(s, len(recording.segment_names)) for s in recording.snapshots],
     }
+
+
+def _step(shot: object, count: int) -> dict:
+    """A snapshot as metrics.json holds it: where, when, the tip, and how far it bends."""
+    angles = bend_angles(shot.points, count)
+    return {'step': shot.step, 'direction': shot.direction, 'cycle': shot.cycle,
+            'injected_m3': shot.injected, 'trigger_injected_m3': shot.trigger_injected,
+            'time_s': shot.time_s, 'tip_m': [float(x) for x in shot.tip],
+            # The tip's tangent from the base's, and each segment's share of it [rad].
+            'tip_angle_rad': float(sum(angles)) if angles else None,
+            'bend_angles_rad': angles or None}
 
 
 def load_reference(path: str | os.PathLike) -> dict:
@@ -306,11 +320,13 @@ def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str
                  experiment_csv: str | os.PathLike | None = None,
                  reference_file: str | os.PathLike | None = None, namespace: str | None = None,
                  svg: bool = False, figures: bool = True,
-                 workers: object | None = None) -> tuple[dict, str]:
+                 workers: object | None = None,
+                 style: object | None = None) -> tuple[dict, str]:
     """
     Read the bag, write metrics.json, report.md, summary.txt and figures; return both.
 
-    Figures are PNG, and SVG as well with ``svg`` (drawing them takes as long again). A
+    Figures are PNG, and SVG as well with ``svg`` (drawing them takes as long again), in
+    ``style`` (a :class:`softseq_ros.analysis.figures.FigureStyle`; default: paper). A
     command that started a figure worker early (:mod:`softseq_ros.analysis.figure_workers`)
     passes it as ``workers`` and ends it itself; otherwise one is started here.
     """
@@ -322,7 +338,7 @@ def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str
         workers = own = start_workers(svg)
     try:
         return _write_report(bag, out, scene_name, experiment_csv, reference_file, namespace,
-                             svg, figures, workers)
+                             svg, figures, workers, style)
     finally:
         if own is not None:
             from softseq_ros.analysis.figure_workers import stop_workers
@@ -333,7 +349,8 @@ def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str
 def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
                   experiment_csv: str | os.PathLike | None,
                   reference_file: str | os.PathLike | None, namespace: str | None, svg: bool,
-                  figures: bool, workers: object | None) -> tuple[dict, str]:
+                  figures: bool, workers: object | None,
+                  style: object | None = None) -> tuple[dict, str]:
     experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
     reference = load_reference(reference_file) if reference_file is not None else None
     scene = emap = None
@@ -362,9 +379,10 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
         out.mkdir(parents=True, exist_ok=True)
     written = []
     if figures:
-        from softseq_ros.analysis.figures import write_figures
+        from softseq_ros.analysis.figures import PAPER, write_figures
 
-        written = write_figures(recording, emap, out, experiment, svg, workers, transients)
+        written = write_figures(recording, emap, out, experiment, svg, workers, transients,
+                                style or PAPER)
     metrics['figures'] = [p.name for p in written]
     write_text(out / 'metrics.json', json.dumps(metrics, indent=2, default=_json) + '\n')
     text = summary_text(metrics)
@@ -502,8 +520,10 @@ def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
     first, later = _first_cycle_steps(metrics)
     for step in first:
         tip = step['tip_m']
+        angle = step.get('tip_angle_rad')
         lines.append(f'step {step["step"]} ({step["direction"]}) at {_ml(step["injected_m3"], 1)}'
-                     f': tip at x {tip[0] * MM:.1f} mm, z {tip[1] * MM:.1f} mm')
+                     f': tip at x {tip[0] * MM:.1f} mm, z {tip[1] * MM:.1f} mm'
+                     + (f', tip angle {np.degrees(angle):.1f} deg' if angle is not None else ''))
     if later:
         lines.append(f'({later} snapshots of later cycles in metrics.json)')
     return lines
@@ -709,13 +729,16 @@ def markdown(metrics: dict) -> str:
     first, later = _first_cycle_steps(metrics)
     if first:
         lines += ['', '## Steps (camera snapshots, first cycle)', '',
-                  '| step | direction | injected | tip x | tip z |', '|---:|---|---:|---:|---:|']
+                  '| step | direction | injected | tip x | tip z | tip angle |',
+                  '|---:|---|---:|---:|---:|---:|']
         if later:
             lines.insert(-2, f'{later} snapshots of later cycles are in `metrics.json`.\n')
         for step in first:
+            angle = step.get('tip_angle_rad')
             lines.append(f'| {step["step"]} | {step["direction"]} | '
                          f'{_ml(step["injected_m3"], 1)} | {step["tip_m"][0] * MM:.1f} mm | '
-                         f'{step["tip_m"][1] * MM:.1f} mm |')
+                         f'{step["tip_m"][1] * MM:.1f} mm | '
+                         + (f'{np.degrees(angle):.1f} deg |' if angle is not None else '- |'))
     experiment = metrics.get('experiment')
     if experiment:
         align = experiment.get('alignment') or {}
