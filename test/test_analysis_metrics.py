@@ -297,3 +297,21 @@ def test_compare_writes_an_overlay_figure_of_both_bags(linear, peaked, tmp_path)
     assert all(_share_of(pixels, colour) > 1e-3 for colour in BAG_COLOURS)
     assert _blank_band(pixels) < 0.04
     assert str(tmp_path / 'compare.png') in result.stdout
+
+
+def test_what_starts_a_run_and_what_does_not():
+    from softseq_ros.analysis.recording import find_run_starts
+
+    # A pump at 1 mL/s, 50 Hz: a tick skipped (twice the step over twice the time), a hold
+    # (flow 0, the volume kept), then a leg three times as fast: one run.
+    time = np.arange(0, 400) * 0.02
+    time = np.delete(time, 50)
+    rate = np.where(time < 4.0, 1e-6, 3e-6)
+    moving = (time < 2.0) | (time >= 3.0)
+    u = np.concatenate([[0.0], np.cumsum(np.where(moving[1:], rate[1:], 0.0) * np.diff(time))])
+    sign = moving.astype(np.int8)
+    status = [(0.0, 'idle', ''), (0.0, 'running', ''), (2.0, 'held', ''), (3.0, 'running', '')]
+    assert find_run_starts(time, u, sign, status, [-0.5], 0.0) == []
+    # An actuator that names its scene again after its first state started again.
+    [start] = find_run_starts(time, u, sign, status, [-0.5, 5.001], 0.0)
+    assert start.time_s == pytest.approx(5.02) and 'actuator started again' in start.cause

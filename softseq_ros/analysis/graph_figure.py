@@ -3,7 +3,7 @@ The figure of a transition graph (softseq_ros.quasistatic.graph): ``softseq grap
 
 Left: every stable branch as a horizontal bar over the injected volume, labelled by its state
 (each segment's piece, base to tip), with its snaps as vertical arrows at their volumes:
-inflation's (blue, solid) point up, deflation's (orange, dashed) down; joins are thin grey
+inflation's (blue, solid) point up, deflation's (vermillion, dashed) down; joins are thin grey
 links. The default inflate-then-deflate path is drawn dark and thick; a branch no history
 reaches from rest is hatched. For two segments, right: the volume plane (Fig. 1B style), the
 equilibrium set with the stable branches and the snaps at constant total volume.
@@ -17,6 +17,7 @@ from softseq_ros.analysis.figures import (
     INJECTED,
     ML,
     STYLE,
+    FigureStyle,
     new_figure,
     nice_step,
     save_figure,
@@ -108,7 +109,9 @@ def plot_graph(graph: TransitionGraph, out: Path, emap: object | None = None,
     fig.suptitle(f'Transition graph: {len(graph.branches)} stable branches, '
                  f'{len(graph.snaps())} snaps; dark: the default inflate-then-deflate path',
                  fontsize=9)
-    return save_figure(fig, out, svg)
+    # Laid out for a screen, its titles a key to a figure of many parts; cropped to what is
+    # drawn, at twice a screen's resolution.
+    return save_figure(fig, out, svg, FigureStyle('paper', dpi=220))
 
 
 def _draw_bars(ax: object, graph: TransitionGraph, rows: dict[int, float],
@@ -194,5 +197,4 @@ def _draw_plane(ax: object, graph: TransitionGraph, emap: object) -> None:
     ax.set_ylim(0, limit * 1.02 or 1.0)
     ax.grid(alpha=0.2)
     ax.legend(fontsize=6.5, loc='upper right')
-    ax.set_title('Volume plane (Fig. 1B style); grey lines: constant total volume',
-                 fontsize=8.5)
+    ax.set_title('Volume plane; grey lines: constant total volume', fontsize=8.5)
