@@ -187,27 +187,29 @@ def test_quantisation_reads_as_the_quantisation_noise():
         assert 0.6 * deviation < estimated_noise(volume, noisy) < 1.5 * deviation
 
 
-def test_a_real_peak_and_valley_measured_at_1_mbar_is_not_flagged(tmp_path):
+def _classified_pair(path: Path, base: tuple[str, Path], tip: tuple[str, Path],
+                     length: float = 0.111) -> tuple:
+    """A scene of two table segments: its verdict, the features used and not, lines, warnings."""
     from softseq_ros.analysis.robustness import scene_features
-
-    strong = _balloon_table(tmp_path / 'latex.csv')
-    weak = _balloon_table(tmp_path / 'latex_weaker.csv', scale=0.95)
-    scene_path = tmp_path / 'latex_pair.yaml'
-    scene_path.write_text(f"""name: latex_pair
-segments:
-  - {{name: strong, length_m: 0.1, table: {strong}}}
-  - {{name: weak, length_m: 0.1, table: {weak}}}
-pump:
-  flow_rate_m3_per_s: 1.0e-6
-  legs: [{{inflate_to_m3: 2.0e-5}}, {{deflate_to_m3: 0.0}}]
-""")
     from softseq_ros.scene.loader import load_scene
 
-    scene = load_scene(scene_path)
+    rows = '\n'.join(f'  - {{name: {name}, length_m: {length}, table: {table}}}'
+                     for name, table in (base, tip))
+    path.write_text(f'name: {path.stem}\nsegments:\n{rows}\npump:\n'
+                    '  flow_rate_m3_per_s: 1.0e-6\n'
+                    '  legs: [{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]\n')
+    scene = load_scene(path)
     emap = EquilibriumMap(scene.segments)
     verdict = classify(emap)
     used, unused = scene_features(scene, emap)
-    lines, warnings = robustness_lines(verdict, used, unused)
+    return (verdict, used, unused, *robustness_lines(verdict, used, unused))
+
+
+def test_a_real_peak_and_valley_measured_at_1_mbar_is_not_flagged(tmp_path):
+    strong = _balloon_table(tmp_path / 'latex.csv')
+    weak = _balloon_table(tmp_path / 'latex_weaker.csv', scale=0.95)
+    verdict, used, unused, lines, warnings = _classified_pair(
+        tmp_path / 'latex_pair.yaml', ('strong', strong), ('weak', weak), length=0.1)
     assert verdict == 'asymmetric'
     # The verdict rests on each balloon's one peak-valley, about 29 kPa deep (and 27.6 kPa for
     # the weaker one), not on the equal readings the quantisation makes.
@@ -224,26 +226,11 @@ pump:
 
 
 def test_a_verdict_resting_on_noise_sized_features_is_flagged(tmp_path):
-    from softseq_ros.analysis.robustness import scene_features
-    from softseq_ros.scene.loader import load_scene
-
     noise = 50.0
     noisy = _table(tmp_path / 'noisy.csv', SEGMENTS / 'paper_top.csv', noise_pa=noise, every=6,
                    seed=3)
-    scene_path = tmp_path / 'noisy_pair.yaml'
-    scene_path.write_text(f"""name: noisy_pair
-segments:
-  - {{name: bottom, length_m: 0.111, table: {SEGMENTS / 'paper_bottom.csv'}}}
-  - {{name: top, length_m: 0.111, table: {noisy}}}
-pump:
-  flow_rate_m3_per_s: 1.0e-6
-  legs: [{{inflate_to_m3: 6.0e-5}}, {{deflate_to_m3: 0.0}}]
-""")
-    scene = load_scene(scene_path)
-    emap = EquilibriumMap(scene.segments)
-    verdict = classify(emap)
-    used, unused = scene_features(scene, emap)
-    lines, warnings = robustness_lines(verdict, used, unused)
+    verdict, used, _, _, warnings = _classified_pair(
+        tmp_path / 'noisy_pair.yaml', ('bottom', SEGMENTS / 'paper_bottom.csv'), ('top', noisy))
     # The paper's partial pair turns asymmetric or symmetric on noise wiggles alone: what it
     # rests on is noise-sized, and said so.
     assert verdict in ('symmetric', 'asymmetric') and used
