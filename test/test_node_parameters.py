@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 import pytest
-from rcl_interfaces.srv import GetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from test_nodes import status_states, write_scene
@@ -283,14 +283,18 @@ def test_a_prefix_that_reaches_no_node_is_refused_naming_the_nodes_there_are(
 
 def test_a_bad_value_for_one_node_of_a_namespaced_rig_is_refused_naming_it(ros_env, tmp_path):
     scene = f'scene:={write_scene(tmp_path)}'
+    # Ours, naming the node of the three and the parameter (rclpy's said "Invalid parameter
+    # value (0) for parameter. Reason: rate_hz: must be > 0, got 0: rate_hz").
     line = _one_error_line(_run(ros_env, tmp_path, 'rig', '-r', '__ns:=/rig_b', '-p', scene,
                                 '-p', 'camera:rate_hz:=0'), 'rig')
-    assert 'rate_hz' in line and 'must be > 0' in line, line
-    # The fully qualified form, refused for its value and not for its form (no quoting hint).
+    assert line == 'rig: error: /rig_b/camera: parameter rate_hz: must be > 0, got 0', line
+    # The fully qualified form, refused for its value and not for its form (no quoting hint);
+    # a range rclpy checks itself (from the descriptor) is said in our words too.
     line = _one_error_line(_run(ros_env, tmp_path, 'syringe_pump', '-r', '__ns:=/rig_b',
                                 '-p', scene, '-p', 'rig_b/syringe_pump:cycles:=0'),
                            'syringe_pump')
-    assert 'cycles' in line and 'quote' not in line, line
+    assert line == 'syringe_pump: error: /rig_b/syringe_pump: parameter cycles: must be >= 1, ' \
+        'got 0', line
     # A value rcl cannot read is named as typed, with the hint where it helps.
     line = _one_error_line(_run(ros_env, tmp_path, 'rig', '-r', '__ns:=/rig_b', '-p', scene,
                                 '-p', 'syringe_pump:legs:=[{inflate_to_m3: 5.0e-6}]'), 'rig')
@@ -306,6 +310,36 @@ def test_a_parameter_no_node_has_is_refused(ros_env, tmp_path):
         line = _one_error_line(_run(ros_env, tmp_path, 'rig', '-r', '__ns:=/rig_b',
                                     '-p', scene, '-p', rule), 'rig')
         assert f'-p {rule}: no parameter max_presure_pa on {where}' in line, line
+
+
+def test_a_value_refused_at_run_time_is_our_one_line(context):
+    # As `ros2 param set` asks: over the node's set_parameters service.
+    pump = SyringePumpNode(context=context, parameter_overrides=[
+        Parameter('scene', value='fig1_none'), Parameter('autostart', value=False)])
+    asker = Node('asker', context=context)
+    client = asker.create_client(SetParameters, '/syringe_pump/set_parameters')
+    with spinning(context, pump, asker):
+        assert client.wait_for_service(timeout_sec=STARTUP_TIMEOUT_S)
+
+        def refused(name, value) -> str:
+            future = client.call_async(SetParameters.Request(
+                parameters=[Parameter(name, value=value).to_parameter_msg()]))
+            wait_for(future.done, f'the answer to setting {name}')
+            (result,) = future.result().results
+            assert not result.successful
+            return result.reason
+        # rclpy types use_sim_time itself and said "Wrong parameter type, expected
+        # 'Type.BOOL' got 'Type.STRING'".
+        assert refused('use_sim_time', 'true') == \
+            "use_sim_time: must be true or false, got string 'true'"
+        assert refused('rate_hz', 0) == 'rate_hz: must be > 0, got 0'
+        assert refused('rate_hz', 1.0e9) == 'rate_hz: must be <= 10000, got 1e+09'
+        assert refused('scene', 'paper') == \
+            'scene: read-only, it is set when the node starts (--ros-args -p scene:=...)'
+        # The Python API says the same.
+        (result,) = pump.set_parameters([Parameter('use_sim_time', value='yes')])
+        assert result.reason == "use_sim_time: must be true or false, got string 'yes'"
+        assert pump.get_parameter('use_sim_time').value is False
 
 
 def test_use_sim_time_that_is_no_boolean_is_our_one_line(ros_env, tmp_path):

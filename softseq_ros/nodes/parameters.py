@@ -29,7 +29,7 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
-from rclpy.exceptions import InvalidParameterTypeException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
@@ -42,6 +42,18 @@ from softseq_ros.scene.loader import Scene, load_scene
 
 class NodeConfigError(UserError):
     """A node configuration that cannot run; the message names the parameter."""
+
+
+class ParameterValueError(NodeConfigError, InvalidParameterValueException):
+    """
+    A value given to a node at start that it refuses: ``<node>: parameter <name>: <reason>``.
+
+    Also rclpy's InvalidParameterValueException, which a node built in Python raised before.
+    """
+
+    def __init__(self, message: str) -> None:
+        """The one line, as the user sees it."""
+        Exception.__init__(self, message)
 
 
 # rcl's ROS arguments that take a value (rcl/arguments.h), so that a value is never read as a
@@ -293,7 +305,66 @@ class ParameterNode(Node):
                  rule: _Rule) -> Any:
         self._rules[name] = rule
         descriptor.name = name
-        return self.declare_parameter(name, default, descriptor).value
+        try:
+            return self.declare_parameter(name, default, descriptor).value
+        except InvalidParameterValueException as err:
+            # rclpy wraps the reason in its own words ("Invalid parameter value (0) for
+            # parameter. Reason: ...: rate_hz"); ours names the node, which in a rig of three
+            # matters, and the parameter once.
+            said = re.search(r'Reason: (.*): ' + re.escape(name) + r'$', str(err), re.S)
+            reason = self._our_words(name, said[1] if said else str(err))
+            raise ParameterValueError(f'{self.get_fully_qualified_name()}: parameter {reason}') \
+                from None
+
+    def _our_words(self, name: str, reason: str) -> str:
+        """A refusal's reason as ours words it (``name: must be ..., got ...``)."""
+        if reason.startswith(f'{name}: '):
+            return reason
+        # rclpy checks a descriptor's range before our callback sees the value.
+        out = re.fullmatch(r'Parameter \S+ out of range\.? Min: \S+, Max: \S+, value: (\S+)',
+                           reason)
+        rule = self._rules.get(name)
+        if out is not None and rule is not None:
+            ours = None
+            for number in (int, float):
+                try:
+                    ours = rule.reason(Parameter(name, value=number(out[1])))
+                    break
+                except ValueError:
+                    continue
+            if ours is not None:
+                return f'{name}: {ours}'
+        return f'{name}: {reason}'
+
+    # ---------------------------------------------------------------- set at run time
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """As rclpy's, with our one-line reason where rclpy refuses in its own words."""
+        results = super().set_parameters(parameter_list)
+        return [self._reworded(parameter, result)
+                for parameter, result in zip(parameter_list, results)]
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """As rclpy's (the parameter services call it), with our one-line reason."""
+        result = super().set_parameters_atomically(parameter_list)
+        if result.successful or len(parameter_list) != 1:
+            return result
+        return self._reworded(parameter_list[0], result)
+
+    def _reworded(self, parameter: Parameter, result: SetParametersResult) -> SetParametersResult:
+        """A refusal rclpy words itself (a parameter it types, a read-only one) in our words."""
+        if result.successful or not self.has_parameter(parameter.name):
+            return result
+        name = parameter.name
+        if result.reason.startswith('Wrong parameter type'):
+            expected = Parameter.Type(self.describe_parameter(name).type)
+            reason = type_reason(name, expected, parameter)
+        elif result.reason.startswith('Trying to set a read-only parameter'):
+            reason = (f'{name}: read-only, it is set when the node starts '
+                      f'(--ros-args -p {name}:=...)')
+        else:
+            reason = self._our_words(name, result.reason)
+        return SetParametersResult(successful=False, reason=reason)
 
     def declare_number(self, name: str, default: float, description: str, *,
                        minimum: float | None = None, maximum: float | None = None,
@@ -406,6 +477,16 @@ def rcl_reason(err: Exception, rule_text: str | None = None) -> str:
     hint = ('; quote a value that is YAML text, e.g. -p "legs:=\'[{inflate_to_m3: 5.0e-6}]\'"'
             if value[:1] in ('[', '{') else '')
     return f'-p {rule_text}: rcl cannot read the value ({reason}){hint}'
+
+
+_TYPE_WORDS = {Parameter.Type.BOOL: 'true or false', Parameter.Type.INTEGER: 'an integer',
+               Parameter.Type.DOUBLE: 'a number', Parameter.Type.STRING: 'a string'}
+
+
+def type_reason(name: str, expected: Parameter.Type, given: Parameter) -> str:
+    """Our one line for a value of the wrong type given to a parameter rclpy types itself."""
+    words = _TYPE_WORDS.get(expected, expected.name.lower().replace('_', ' '))
+    return f'{name}: must be {words}, got {given.type_.name.lower()} {given.value!r}'
 
 
 def use_sim_time_reason(message: str) -> str:
