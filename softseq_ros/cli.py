@@ -574,11 +574,13 @@ def build_parser() -> argparse.ArgumentParser:
                          'from its geometry and material by hyperelastic FEM with the cavity '
                          "volume prescribed (felupe); tables are cached by the design's hash. "
                          'With --sweep, every combination of the given values, in parallel.')
-    fem.add_argument('design', help='design YAML file, or the name of a shipped design '
-                     '(paper_top, paper_bottom)')
+    fem.add_argument('design', nargs='+', help='design YAML file, or the name of a shipped '
+                     "design (paper_top, paper_bottom); with --model actuator, the segments' "
+                     'designs base to tip')
     fem.add_argument('--out', type=Path, help='CSV table to write (default: the cache file)')
-    fem.add_argument('--model', choices=('unit_cell', 'whole_segment'),
-                     help="override the design's mesh.model")
+    fem.add_argument('--model', choices=('unit_cell', 'whole_segment', 'actuator'),
+                     help="override the design's mesh.model; actuator: the whole actuator of "
+                     'the designs given, on one cavity, base clamped (docs/fem.md)')
     fem.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
                      help='override a design value, e.g. mesh.element_size_m=0.001')
     fem.add_argument('--sweep', action='append', default=[], metavar='KEY=V1,V2,...',

@@ -97,6 +97,13 @@ QUICK = {
          r'\| neo-Hooke[^|]* \| \d+\.\d \| \d+\.\d \| \w+ \|'],
         ['bench/fem_results.json', 'bench/fem_results.md', 'docs/fem_mesh.png',
          'docs/fem_pv.png']),
+    'bench_fem_actuator.py': (
+        ['# The whole actuator against the assembly of its segment tables', '## Run times'],
+        [r'\| whole actuator \(one cavity\) \| [1-9]\d* \| \d+\.\d \|',
+         r'\| unit cell tables \| \w+ \| [+-]\d+\.\d \(',
+         r'- unit cells: tables and assembly \d+\.\d s, \*\*\d+\.\dx\*\*'],
+        ['bench/fem_actuator_results.json', 'bench/fem_actuator_results.md',
+         'docs/fem_actuator.png']),
 }
 
 

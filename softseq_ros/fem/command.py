@@ -40,10 +40,40 @@ def _assignments(items: list[str], option: str, many: bool) -> dict[str, Any]:
     return out
 
 
+def _actuator(args: argparse.Namespace, changes: dict[str, Any]) -> int:
+    """``softseq fem BOTTOM TOP --model actuator``: the whole actuator on one cavity."""
+    from softseq_ros.fem.actuator import actuator_table_for, check_actuator
+    from softseq_ros.progress import end_progress, write_progress
+
+    for option, value in (('--sweep', args.sweep), ('--out-dir', args.out_dir),
+                          ('--workers', args.workers), ('--scheduler', args.scheduler)):
+        if value:
+            raise DesignError(f'{option}: not with --model actuator')
+    designs = [load_design(design_path(name)) for name in args.design]
+    changes = {**changes, 'mesh.model': 'whole_segment'}
+    designs = [with_changes(design, changes) for design in designs]
+    check_actuator(designs)
+    start = time.perf_counter()
+    stream = None if args.quiet else sys.stderr
+    path, computed, _ = actuator_table_for(
+        designs, out=args.out, cache_dir=args.cache_dir, use_cache=not args.no_cache,
+        progress=None if stream is None else (lambda line: write_progress(stream, line)))
+    end_progress(stream)
+    how = (f'computed in {time.perf_counter() - start:.1f} s' if computed
+           else 'from the cache')
+    print(f'actuator {" + ".join(d.name for d in designs)}: table {path} ({how})')
+    return 0
+
+
 def run_fem_command(args: argparse.Namespace) -> int:
     """Run ``softseq fem`` with parsed arguments; a bad input raises before any work."""
-    design: Design = load_design(design_path(args.design))
     changes = _assignments(args.set, '--set', many=False)
+    if args.model == 'actuator':
+        return _actuator(args, changes)
+    if len(args.design) != 1:
+        raise DesignError(f'{" ".join(args.design)}: one design, or several (base to tip) with '
+                          '--model actuator')
+    design: Design = load_design(design_path(args.design[0]))
     if args.model is not None:
         changes['mesh.model'] = args.model
     if changes:

@@ -58,6 +58,13 @@ class SegmentModel:
     membrane_of_top: NDArray[np.int64]  # index of the membrane each of those belongs to
     wall_cuts: list[NDArray[np.int64]]  # points at each wall's mid-plane (whole segment)
     dofs: int
+    bounds: tuple[float, ...] = ()   # where each segment starts and ends along x [m]
+    membrane_owner: NDArray[np.int64] | None = None  # the segment of each membrane
+
+    @property
+    def is_unit_cell(self) -> bool:
+        """Whether this is a unit cell (a mirror plane and a turning cut) or a whole model."""
+        return bool(self.model.space.has_plane)
 
     def segment_volume(self, model_volume: float) -> float:
         """Fluid volume of the whole segment [m^3] for a modelled cavity volume."""
@@ -95,7 +102,7 @@ class SegmentModel:
 
     def contact(self, x: NDArray[np.float64], q: NDArray[np.float64]) -> bool:
         """Whether a membrane has reached the mid-plane between it and its neighbour."""
-        if self.design.mesh.model == 'unit_cell':
+        if self.is_unit_cell:
             theta = self.model.space.plane_angle(q)
             normal = np.array([np.cos(theta), 0.0, np.sin(theta)])
             cut = x[self.wall_cuts[0]]
@@ -125,54 +132,16 @@ class SegmentModel:
         return False
 
 
-def build_segment(design: Design) -> SegmentModel:
-    """Mesh a segment design and set up its volume-controlled model."""
-    g = design.geometry
-    size = design.mesh.element_size_m
-    thin = design.mesh.thin_layer_cells
-    pitch = g.wall_length_m + g.membrane_length_m
-    skin_band = g.skin_band_thickness_m
-    top_membrane = g.height_m - g.membrane_thickness_m
-    top_wall = g.height_m - skin_band
-    half_cavity = g.cavity_width_m / 2
+def mesh_grid(xs: NDArray, ys: NDArray, zs: NDArray, fluid: NDArray
+              ) -> tuple[fem.Mesh, NDArray, NDArray, NDArray]:
+    """
+    The solid cells of a grid as a hexahedral mesh, and the faces that bound its fluid cells.
 
-    if design.mesh.model == 'unit_cell':
-        x_lines = [0.0, g.membrane_length_m / 2, pitch / 2]
-        membranes = [(-g.membrane_length_m / 2, g.membrane_length_m / 2)]
-        wall_centres = [pitch / 2]
-        x_end = pitch / 2
-    else:
-        count = g.membranes
-        cap = g.end_cap_length_m
-        membranes, wall_centres = [], []
-        start = cap
-        for index in range(count):
-            membranes.append((start, start + g.membrane_length_m))
-            start += g.membrane_length_m
-            if index < count - 1:
-                wall_centres.append(start + g.wall_length_m / 2)
-                start += g.wall_length_m
-        x_end = start + cap
-        x_lines = [0.0, x_end] + [v for m in membranes for v in m] + wall_centres
-    thin_below = 2.0 * max(g.membrane_thickness_m, skin_band, 1e-12) + 1e-9
-    xs = _subdivide(x_lines, size, 1, 0.0)
-    ys = _subdivide([0.0, half_cavity, g.width_m / 2], size, thin, thin_below)
-    zs = _subdivide([0.0, g.beam_thickness_m / 2, g.beam_thickness_m, top_wall, top_membrane,
-                     g.height_m], size, thin, thin_below)
+    ``fluid`` (cells along x, y, z) marks the cavity. Returns the mesh, its points, the cavity
+    faces (four point indices each, ordered so that their normal points into the solid) and
+    the map from grid points to mesh points (-1: not in the mesh).
+    """
     nx, ny, nz = len(xs), len(ys), len(zs)
-
-    xc, yc, zc = (0.5 * (v[1:] + v[:-1]) for v in (xs, ys, zs))
-    in_membrane = np.zeros(nx - 1, dtype=bool)
-    for lo, hi in membranes:
-        in_membrane |= (xc > lo) & (xc < hi)
-    if design.mesh.model == 'unit_cell':
-        in_cavity_x = np.ones(nx - 1, dtype=bool)
-    else:
-        in_cavity_x = (xc > membranes[0][0]) & (xc < membranes[-1][1])
-    roof = np.where(in_membrane, top_membrane, top_wall)
-    fluid = (in_cavity_x[:, None, None] & (yc[None, :, None] < half_cavity)
-             & (zc[None, None, :] > g.beam_thickness_m)
-             & (zc[None, None, :] < roof[:, None, None]))
 
     def node(i: NDArray, j: NDArray, k: NDArray) -> NDArray:
         return (i * ny + j) * nz + k
@@ -190,12 +159,6 @@ def build_segment(design: Design) -> SegmentModel:
     renumber = np.full(grid_points.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
     points = grid_points[used]
-    if g.membrane_thickness_factors is not None:
-        # Each membrane's skin scaled through its thickness (the outer surface stays flat).
-        skin = points[:, 2] >= top_membrane - 1e-9
-        for (lo, hi), factor in zip(membranes, g.membrane_thickness_factors):
-            over = skin & (points[:, 0] >= lo - 1e-9) & (points[:, 0] <= hi + 1e-9)
-            points[over, 2] = g.height_m - (g.height_m - points[over, 2]) * factor
     mesh = fem.Mesh(points, renumber[cells], 'hexahedron')
 
     # Cavity faces: between a fluid cell and a solid neighbour, normal toward the solid.
@@ -225,7 +188,105 @@ def build_segment(design: Design) -> SegmentModel:
 
         quad = np.stack([corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)], axis=1)
         faces.append(quad if sign > 0 else quad[:, ::-1])
-    cavity = Cavity(faces=renumber[np.concatenate(faces)], weights=(0.0, 1.0, 0.0))
+    return mesh, points, renumber[np.concatenate(faces)], renumber
+
+
+def build_segment(design: Design) -> SegmentModel:
+    """Mesh a segment design and set up its volume-controlled model."""
+    return build_chain([design], design.mesh.model)
+
+
+# Dimensions that segments on one cavity must share (their cross-section).
+SHARED_SECTION = ('height_m', 'width_m', 'beam_thickness_m', 'cavity_width_m')
+
+
+def _layout(designs: list[Design]) -> tuple[list, list, list, list, float]:
+    """
+    Along x, base to tip: membranes (lo, hi), their segment, mid-wall planes, segment bounds.
+
+    Each segment is its membranes between end caps; where two segments meet, their end caps
+    are one wall band over the shared cavity (each half its own segment's skin thickness).
+    """
+    membranes, owner, wall_centres, bounds = [], [], [], [0.0]
+    start = 0.0
+    for index, design in enumerate(designs):
+        g = design.geometry
+        x = start + g.end_cap_length_m
+        if index > 0:
+            wall_centres.append(start)  # the junction's band, as a wall between membranes
+        for k in range(g.membranes):
+            membranes.append((x, x + g.membrane_length_m))
+            owner.append(index)
+            x += g.membrane_length_m
+            if k < g.membranes - 1:
+                wall_centres.append(x + g.wall_length_m / 2)
+                x += g.wall_length_m
+        start += g.length_m
+        bounds.append(start)
+    return membranes, owner, wall_centres, bounds, start
+
+
+def build_chain(designs: list[Design], model: str) -> SegmentModel:
+    """
+    Mesh segments in a row, base to tip, on one cavity, and set up its volume-controlled model.
+
+    One design and ``unit_cell`` or ``whole_segment``: the segment models. Several designs
+    (``whole_segment``): the whole actuator, base clamped; the designs share their
+    cross-section (:data:`SHARED_SECTION`), their material and the first one's mesh settings.
+    """
+    design = designs[0]
+    g = design.geometry
+    size = design.mesh.element_size_m
+    thin = design.mesh.thin_layer_cells
+    pitch = g.wall_length_m + g.membrane_length_m
+    half_cavity = g.cavity_width_m / 2
+    roofs = [(g_i.height_m - g_i.membrane_thickness_m, g_i.height_m - g_i.skin_band_thickness_m)
+             for g_i in (d.geometry for d in designs)]
+    top_membrane, top_wall = roofs[0]
+
+    if model == 'unit_cell':
+        x_lines = [0.0, g.membrane_length_m / 2, pitch / 2]
+        membranes = [(-g.membrane_length_m / 2, g.membrane_length_m / 2)]
+        owner = [0]
+        wall_centres = [pitch / 2]
+        x_end = pitch / 2
+        bounds = [0.0, x_end]
+    else:
+        membranes, owner, wall_centres, bounds, x_end = _layout(designs)
+        x_lines = [0.0, x_end] + [v for m in membranes for v in m] + wall_centres
+    thin_below = 2.0 * max(max(d.geometry.membrane_thickness_m, d.geometry.skin_band_thickness_m)
+                           for d in designs) + 1e-9
+    xs = _subdivide(x_lines, size, 1, 0.0)
+    ys = _subdivide([0.0, half_cavity, g.width_m / 2], size, thin, thin_below)
+    zs = _subdivide([0.0, g.beam_thickness_m / 2, g.beam_thickness_m,
+                     *(z for roof in roofs for z in roof), g.height_m], size, thin, thin_below)
+    nx = len(xs)
+
+    xc, yc, zc = (0.5 * (v[1:] + v[:-1]) for v in (xs, ys, zs))
+    in_membrane = np.zeros(nx - 1, dtype=bool)
+    for lo, hi in membranes:
+        in_membrane |= (xc > lo) & (xc < hi)
+    if model == 'unit_cell':
+        in_cavity_x = np.ones(nx - 1, dtype=bool)
+    else:
+        in_cavity_x = (xc > membranes[0][0]) & (xc < membranes[-1][1])
+    segment_of = np.clip(np.searchsorted(bounds, xc) - 1, 0, len(designs) - 1)
+    membrane_roof = np.array([r[0] for r in roofs])[segment_of]
+    wall_roof = np.array([r[1] for r in roofs])[segment_of]
+    roof = np.where(in_membrane, membrane_roof, wall_roof)
+    fluid = (in_cavity_x[:, None, None] & (yc[None, :, None] < half_cavity)
+             & (zc[None, None, :] > g.beam_thickness_m)
+             & (zc[None, None, :] < roof[:, None, None]))
+
+    mesh, points, faces, _ = mesh_grid(xs, ys, zs, fluid)
+    if g.membrane_thickness_factors is not None:
+        # Each membrane's skin scaled through its thickness (the outer surface stays flat).
+        skin = points[:, 2] >= top_membrane - 1e-9
+        for (lo, hi), factor in zip(membranes, g.membrane_thickness_factors):
+            over = skin & (points[:, 0] >= lo - 1e-9) & (points[:, 0] <= hi + 1e-9)
+            points[over, 2] = g.height_m - (g.height_m - points[over, 2]) * factor
+        mesh = fem.Mesh(points, mesh.cells, 'hexahedron')
+    cavity = Cavity(faces=faces, weights=(0.0, 1.0, 0.0))
 
     mu = initial_shear_modulus(design.material.law, design.material.params)
     region = fem.RegionHexahedron(mesh)
@@ -237,7 +298,7 @@ def build_segment(design: Design) -> SegmentModel:
     tol = 1e-9
     space = ReducedSpace(points)
     space.fix(np.nonzero(points[:, 1] < tol)[0], (0.0, 1.0, 0.0))
-    if design.mesh.model == 'unit_cell':
+    if model == 'unit_cell':
         start_face = np.nonzero(points[:, 0] < tol)[0]
         space.fix(start_face, (1.0, 0.0, 0.0))
         anchor = np.nonzero((points[:, 0] < tol) & (points[:, 1] < tol) & (points[:, 2] < tol))[0]
@@ -263,13 +324,14 @@ def build_segment(design: Design) -> SegmentModel:
         inside = (points[top, 0] >= lo - tol) & (points[top, 0] <= hi + tol)
         membrane_of_top[inside] = index
     keep = membrane_of_top >= 0
-    if design.mesh.model == 'unit_cell':
+    if model == 'unit_cell':
         # Points on the cut itself are its own mirror images; they cannot signal contact.
         keep &= points[top, 0] < x_end - tol
     top, membrane_of_top = top[keep], membrane_of_top[keep]
 
-    model = InflationModel(body, displacement, space, cavity,
+    solver = InflationModel(body, displacement, space, cavity,
                            force_scale=mu * g.height_m**2, length_scale=g.height_m)
-    return SegmentModel(model=model, mesh=mesh, design=design, volume_factor=volume_factor,
+    return SegmentModel(model=solver, mesh=mesh, design=design, volume_factor=volume_factor,
                         neutral_line=line, top_points=top, membrane_of_top=membrane_of_top,
-                        wall_cuts=wall_cuts, dofs=space.size)
+                        wall_cuts=wall_cuts, dofs=space.size, bounds=tuple(bounds),
+                        membrane_owner=np.asarray(owner, dtype=np.int64))
