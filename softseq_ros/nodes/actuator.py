@@ -47,7 +47,7 @@ from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import STATE_SAVE_PERIOD_S
 from softseq_ros.rig.build import actuator_core
 from softseq_ros.rig.intake import FLUSH_PERIOD_S, CommandIntake
-from softseq_ros.rig.values import WARNING, Notice
+from softseq_ros.rig.values import WARNING, Notice, SegmentVolumes
 from softseq_ros.rig.wire import InputError, segment_volumes
 
 RESUME_POLL_S = 0.02
@@ -67,19 +67,22 @@ class ActuatorNode(CoreNode):
     def health(self) -> Health:
         """For /diagnostics: commands refused (garbage or beyond the tables) and the state."""
         base = super().health()
-        state = self.core.model.state()
         intake = self.intake
-        base.values = {
+        values: dict[str, object] = {
             'refused_commands': self.core.rejected_commands + self.refusals,
             # Under overload (softseq_ros.rig.intake): what it skipped, and why.
             'answered_commands': intake.answered,
             'skipped_commands': intake.skipped.total + self.core.skipped_while_waiting,
             'skipped_passed_over': intake.skipped.passed_over,
             'skipped_dropped_by_queue': intake.skipped.dropped,
-            'behind_its_commands': intake.pending is not None,
-            'gauge_pressure_pa': state.pressure,
-            'segment_volumes_m3': ' '.join(f'{v:.9g}' for v in state.volumes),
-            **base.values}
+            'behind_its_commands': intake.pending is not None}
+        # What was last published, not the model asked anew: a dynamic model's state is
+        # computed as it integrates, and a look from outside must not take part in that.
+        state = self.last_published.get(SegmentVolumes)
+        if state is not None:
+            values['gauge_pressure_pa'] = state.gauge_pa
+            values['segment_volumes_m3'] = ' '.join(f'{v:.9g}' for v in state.volumes_m3)
+        base.values = {**values, **base.values}
         return base
 
     def __init__(self, **kwargs: Any) -> None:

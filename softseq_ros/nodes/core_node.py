@@ -96,6 +96,7 @@ class CoreNode(ParameterNode):
         self._throttle = Throttle()
         # For /diagnostics: what the node published, refused and warned about.
         self.published: dict[str, int] = {}
+        self.last_published: dict[type, Output] = {}
         self.refusals = 0
         self.warnings = 0
         self.last_warning = ''
@@ -194,6 +195,7 @@ class CoreNode(ParameterNode):
             publisher.publish(ENCODERS[kind](value))
             name = kind.topic.name
             self.published[name] = self.published.get(name, 0) + 1
+            self.last_published[kind] = value
 
     def log(self, level: str, text: str) -> None:
         """Log through the node's rclpy logger (console and /rosout)."""
