@@ -8,7 +8,12 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rosbags.highlevel import AnyReader
+from std_msgs.msg import String
+import yaml
 
+from softseq_ros.bag.reader import bag_summary
+from softseq_ros.bag.writer import BagWriterError
 from softseq_ros.nodes.recorder import RIG_TOPICS, Recorder
 from softseq_ros.testing import spinning, wait_for
 
@@ -49,3 +54,62 @@ def test_get_parameters_answers_for_a_parameter_given_no_value(context, tmp_path
     with pytest.raises(InvalidParameterValueException, match='types: must be a list of strings'):
         Recorder(context=context, parameter_overrides=[
             Parameter('output', value=str(tmp_path / 'bad')), Parameter('types', value=5)])
+
+
+def test_regex_and_all_topics_take_topics_as_they_appear_and_split(context, tmp_path: Path):
+    # Started before any of its topics exists: what a regex or all_topics takes is found as
+    # it appears. max_bag_duration splits the bag as it records.
+    by_regex = Recorder(context=context, parameter_overrides=[
+        # What rcl makes of -p "topics:=[]": a value not set.
+        Parameter('output', value=str(tmp_path / 'regex')), Parameter('topics'),
+        Parameter('regex', value=r'^/late/'), Parameter('max_bag_duration', value=0.2)])
+    everything = Recorder(context=context, namespace='/all', parameter_overrides=[
+        Parameter('output', value=str(tmp_path / 'all')), Parameter('all_topics', value=True),
+        Parameter('exclude_regex', value='rosout|parameter_events|diagnostics')])
+    talker = Node('talker', context=context)
+    try:
+        with spinning(context, by_regex, everything, talker):
+            late = talker.create_publisher(String, '/late/chatter', 10)
+            other = talker.create_publisher(String, '/elsewhere', 10)
+            hidden = talker.create_publisher(String, '/late/_hidden', 10)
+            wait_for(lambda: '/late/chatter' in by_regex.recorded_topics
+                     and '/elsewhere' in everything.recorded_topics, 'the late topics')
+            wait_for(lambda: late.get_subscription_count() == 2, 'both recorders matched')
+            sent = 0
+
+            def publish_until_split() -> bool:
+                nonlocal sent
+                for publisher in (late, other, hidden):
+                    publisher.publish(String(data=str(sent)))
+                sent += 1
+                return len(by_regex.bag.file_names) >= 3
+            wait_for(publish_until_split, 'the regex recorder to split its bag twice')
+            wait_for(lambda: by_regex.bag.message_count >= sent - 1, 'the last messages')
+    finally:
+        by_regex.close_bag(log=False)
+        everything.close_bag(log=False)
+    # The regex took /late/chatter only (not the hidden topic nor /elsewhere); all_topics
+    # took /late/chatter and /elsewhere but nothing excluded or hidden.
+    regex_topics = bag_summary(tmp_path / 'regex').topics
+    assert set(regex_topics) == {'/late/chatter'}
+    assert set(bag_summary(tmp_path / 'all').topics) == {'/late/chatter', '/elsewhere'}
+    with AnyReader([tmp_path / 'regex']) as reader:
+        numbers = [int(reader.deserialize(raw, c.msgtype).data)
+                   for c, _, raw in reader.messages()]
+    assert numbers == sorted(numbers)
+    assert len(numbers) == regex_topics['/late/chatter'].message_count
+    files = yaml.safe_load((tmp_path / 'regex' / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']['files']
+    assert len(files) >= 3 and all(f['message_count'] > 0 for f in files)
+    assert all(f['duration']['nanoseconds'] < 200_000_000 for f in files)
+
+
+def test_bad_topic_selection_and_split_settings_are_refused(context, tmp_path: Path):
+    with pytest.raises(BagWriterError, match=r"parameter regex: '\(' is not a regular"):
+        Recorder(context=context, parameter_overrides=[
+            Parameter('output', value=str(tmp_path / 'a')), Parameter('regex', value='(')])
+    with pytest.raises(BagWriterError, match='max_bag_duration: must be a number of seconds'):
+        Recorder(context=context, parameter_overrides=[
+            Parameter('output', value=str(tmp_path / 'b')),
+            Parameter('max_bag_duration', value=-1.0)])
+    assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()

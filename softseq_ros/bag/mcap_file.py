@@ -127,6 +127,11 @@ class ChunkedMcapWriter:
         return self._message_count + sum(lane.count for lane in self._lanes)
 
     @property
+    def bytes_written(self) -> int:
+        """Bytes handed to the stream so far (a chunk in progress not yet among them)."""
+        return self._offset
+
+    @property
     def time_range(self) -> tuple[int, int] | None:
         """Earliest and latest log time of the messages so far; None before the first."""
         ranges = [(self._start, self._end)] if self._message_count else []

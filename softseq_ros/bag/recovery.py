@@ -16,7 +16,7 @@ being written is never moved or replaced.
 """
 
 import bisect
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import io
 import os
 from pathlib import Path
@@ -106,23 +106,26 @@ class BagInUseError(BagWriterError):
     """A bag whose writer still holds its lock: it is being written."""
 
 
-def _bag_files(directory: Path) -> tuple[Path, Path | None]:
-    """The bag's .mcap path (perhaps missing) and an earlier recovery's damaged original."""
-    mcaps = sorted(directory.glob('*.mcap'))
-    damaged = sorted(directory.glob('*.mcap' + DAMAGED_SUFFIX))
-    if len(mcaps) > 1 or len(damaged) > 1:
-        found = ', '.join(p.name for p in [*mcaps, *damaged])
-        raise BagWriterError(f'{directory}: expected one .mcap file, found {found}')
-    if mcaps:
-        path = mcaps[0]
-        original = path.with_name(path.name + DAMAGED_SUFFIX)
-        if damaged and damaged[0] != original:
-            raise BagWriterError(f'{directory}: {damaged[0].name} does not belong to '
-                                 f'{path.name}')
-        return path, original if original.exists() else None
-    if damaged:
-        return damaged[0].with_name(damaged[0].name[:-len(DAMAGED_SUFFIX)]), damaged[0]
-    raise BagWriterError(f'{directory}: no .mcap file in it')
+def _file_index(path: Path) -> tuple[int, str]:
+    """Sort key of a bag's files: the number after the last '_' (name_0, name_1, ..., name_10)."""
+    stem = path.name.split('.mcap')[0]
+    number = stem.rpartition('_')[2]
+    return (int(number), path.name) if number.isdigit() else (-1, path.name)
+
+
+def _bag_files(directory: Path) -> list[tuple[Path, Path | None]]:
+    """
+    Each .mcap path of the bag (perhaps missing) with an earlier recovery's damaged original.
+
+    A bag split by size or duration has several files (name_0.mcap, name_1.mcap, ...), each
+    recovered on its own.
+    """
+    mcaps = {p.name: p for p in directory.glob('*.mcap')}
+    damaged = {p.name[:-len(DAMAGED_SUFFIX)]: p for p in directory.glob('*.mcap' + DAMAGED_SUFFIX)}
+    if not mcaps and not damaged:
+        raise BagWriterError(f'{directory}: no .mcap file in it')
+    names = sorted(set(mcaps) | set(damaged), key=lambda n: _file_index(directory / n))
+    return [(directory / name, damaged.get(name)) for name in names]
 
 
 def _refuse_if_in_use(directory: Path, *paths: Path | None) -> None:
@@ -422,12 +425,12 @@ def _check(path: Path) -> _Scan:
 # ---------------------------------------------------------------- checking what was written
 
 
-def _verify(directory: Path, path: Path, expected: int, *, mcap_read: bool = True) -> None:
+def _verify_file(directory: Path, path: Path, expected: int, *, mcap_read: bool = True) -> None:
     """
-    Read the bag back with mcap (CRCs checked) and rosbags; raise unless both agree.
+    Read one file back with mcap (CRCs checked); raise unless it holds ``expected`` messages.
 
     ``mcap_read`` False skips mcap's full read for a file that was not written but has just
-    been read through with every CRC checked (a complete bag whose metadata.yaml is rewritten).
+    been read through with every CRC checked (a complete file whose metadata is rewritten).
     """
     from mcap.reader import make_reader
     from mcap.stream_reader import StreamReader
@@ -443,6 +446,14 @@ def _verify(directory: Path, path: Path, expected: int, *, mcap_read: bool = Tru
             statistics = make_reader(stream).get_summary().statistics
         if statistics is None or statistics.message_count != expected:
             raise ValueError(f'its statistics do not count {expected} messages')
+    except Exception as err:  # noqa: BLE001 - any reader's failure is a bag not recovered
+        raise BagWriterError(f'{directory}: the recovered bag does not read back cleanly '
+                             f'({path.name}: {type(err).__name__}: {err})') from None
+
+
+def _verify(directory: Path, expected: int) -> None:
+    """Read the whole bag back with rosbags (an independent reader, through metadata.yaml)."""
+    try:
         from rosbags.rosbag2 import Reader
 
         with Reader(directory) as reader:
@@ -455,23 +466,34 @@ def _verify(directory: Path, path: Path, expected: int, *, mcap_read: bool = Tru
                              f'({type(err).__name__}: {err})') from None
 
 
-def _information_from_summary(path: Path) -> dict[str, Any]:
+def _information_from_summary(paths: list[Path]) -> dict[str, Any]:
+    """metadata.yaml's content from the summaries of the bag's files, in order."""
     from mcap.reader import make_reader
 
-    with open(path, 'rb') as stream:
-        summary = make_reader(stream).get_summary()
-    stats = summary.statistics
-    rows = []
-    for channel_id, channel in summary.channels.items():
-        schema = summary.schemas.get(channel.schema_id)
-        rows.append((channel.topic, schema.name if schema else '',
-                     channel.metadata.get('offered_qos_profiles', ''),
-                     channel.metadata.get('topic_type_hash', ''),
-                     stats.channel_message_counts.get(channel_id, 0)))
-    start = stats.message_start_time if stats.message_count else 0
-    duration = stats.message_end_time - stats.message_start_time if stats.message_count else 0
-    return bag_information(file_name=path.name, start_ns=start, duration_ns=duration,
-                           topics=rows)
+    rows: dict[str, list] = {}
+    files = []
+    for path in paths:
+        with open(path, 'rb') as stream:
+            summary = make_reader(stream).get_summary()
+        stats = summary.statistics
+        for channel_id, channel in summary.channels.items():
+            schema = summary.schemas.get(channel.schema_id)
+            count = stats.channel_message_counts.get(channel_id, 0)
+            row = rows.get(channel.topic)
+            if row is None:
+                rows[channel.topic] = [channel.topic, schema.name if schema else '',
+                                       channel.metadata.get('offered_qos_profiles', ''),
+                                       channel.metadata.get('topic_type_hash', ''), count]
+            else:
+                row[4] += count
+        start = stats.message_start_time if stats.message_count else 0
+        duration = stats.message_end_time - start if stats.message_count else 0
+        files.append((path.name, start, duration, stats.message_count))
+    spans = [(start, start + duration) for _, start, duration, count in files if count]
+    first = min((a for a, _ in spans), default=0)
+    last = max((b for _, b in spans), default=0)
+    return bag_information(file_name=paths[-1].name, start_ns=first, duration_ns=last - first,
+                           topics=[tuple(row) for row in rows.values()], files=files)
 
 
 # ---------------------------------------------------------------- recovery
@@ -489,6 +511,10 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
     its replacement is on disk. A recovery that was cut short (killed, disk full) is simply
     run again: it reads the damaged original it kept, any number of times. ``keep_damaged``
     False removes the damaged original once the recovered bag is complete and read back.
+    A bag split into several files has each file recovered so (the files a writer closed
+    are complete; the last one it wrote is the one cut short), and one metadata.yaml lists
+    them all; a last file that holds nothing yet (the writer died right after opening it)
+    is set aside as ``<name>.truncated`` and left out.
 
     Refused (nothing written, nothing moved): a bag whose writer still holds its lock
     (:class:`BagInUseError`), and a file with nothing to recover (:class:`NothingToRecoverError`).
@@ -496,8 +522,43 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
     directory = Path(directory)
     if not directory.is_dir():
         raise BagWriterError(f'{directory}: not a bag directory')
-    path, original = _bag_files(directory)
-    _refuse_if_in_use(directory, path, original)
+    files = _bag_files(directory)
+    for path, original in files:
+        _refuse_if_in_use(directory, path, original)
+    results = []
+    for number, (path, original) in enumerate(files):
+        try:
+            results.append(_recover_file(directory, path, original))
+        except NothingToRecoverError:
+            if len(files) == 1 or number != len(files) - 1:
+                raise
+            if path.exists() and original is None:
+                os.replace(path, path.with_name(path.name + DAMAGED_SUFFIX))
+                _sync_directory(directory)
+            else:
+                path.unlink(missing_ok=True)
+    write_metadata_yaml(directory, _information_from_summary([r.mcap_path for r in results]))
+    total = sum(r.message_count for r in results)
+    _verify(directory, total)
+    if not keep_damaged:
+        for result in results:
+            if result.damaged_copy is not None:
+                result.damaged_copy.unlink()
+        results = [replace(r, damaged_copy=None) for r in results]
+    if len(results) == 1:
+        return results[0]
+    rebuilt = [r for r in results if not r.was_complete]
+    expected = [r.expected_count if not r.was_complete else r.message_count for r in results]
+    return RecoveryResult(
+        (rebuilt or results)[-1].mcap_path, total, not rebuilt,
+        next((r.damaged_copy for r in rebuilt if r.damaged_copy is not None), None),
+        '; '.join(f'{r.mcap_path.name}: {r.stop_reason}' for r in (rebuilt or results[-1:])),
+        tuple(d for r in rebuilt for d in r.dropped),
+        None if None in expected else sum(expected))
+
+
+def _recover_file(directory: Path, path: Path, original: Path | None) -> RecoveryResult:
+    """One .mcap file of the bag made whole (metadata.yaml is the caller's)."""
     if path.exists():
         try:
             scan = _check(path)
@@ -506,12 +567,8 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
                 raise
             scan = None   # a cut-short recovery's output: the damaged original is read instead
         if scan is not None and scan.intact:
-            write_metadata_yaml(directory, _information_from_summary(path))
-            _verify(directory, path, scan.messages, mcap_read=False)
-            if original is not None and not keep_damaged:
-                original.unlink()
-            return RecoveryResult(path, scan.messages, True,
-                                  original if keep_damaged else None, 'complete file')
+            _verify_file(directory, path, scan.messages, mcap_read=False)
+            return RecoveryResult(path, scan.messages, True, original, 'complete file')
     source = original if original is not None else path
     temporary = path.with_name(path.name + RECOVERING_SUFFIX)
     temporary.unlink(missing_ok=True)   # left by a recovery that was killed
@@ -533,10 +590,7 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
         _sync_directory(directory)
     os.replace(temporary, path)
     _sync_directory(directory)
-    write_metadata_yaml(directory, writer.bag_information())
-    _verify(directory, path, writer.message_count)
-    if not keep_damaged:
-        damaged.unlink()
+    _verify_file(directory, path, writer.message_count)
     summary = scan.summary
     dropped = list(scan.dropped)
     orphans = scan.messages - writer.message_count
@@ -545,8 +599,7 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
         # no intact summary describes: without their type they cannot be written.
         dropped.append(DroppedRange(0, scan.size, 'messages', 'their channel record was in a '
                                     'dropped part of the file', orphans))
-    return RecoveryResult(path, writer.message_count, False,
-                          damaged if keep_damaged else None, _stop_reason(scan),
+    return RecoveryResult(path, writer.message_count, False, damaged, _stop_reason(scan),
                           tuple(dropped),
                           summary.message_count if summary is not None else None)
 

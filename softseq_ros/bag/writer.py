@@ -2,7 +2,11 @@
 Write MCAP bags in the layout of rosbag2 (ROS 2 Jazzy).
 
 A bag is a directory holding one ``<name>_0.mcap`` file and a ``metadata.yaml`` beside it,
-as ``ros2 bag record -s mcap`` leaves it. What is matched (rosbag2 Jazzy,
+as ``ros2 bag record -s mcap`` leaves it; split by size or duration (``max_file_size_bytes``,
+``max_file_duration_s``, as ``ros2 bag record --max-bag-size/--max-bag-duration``) it holds
+``<name>_0.mcap``, ``<name>_1.mcap``, ..., each a complete MCAP file with every schema and
+channel of the bag so far, all listed in ``metadata.yaml`` (``relative_file_paths`` and
+``files``, each with its start, duration and message count). What is matched (rosbag2 Jazzy,
 rosbag2_storage_mcap/mcap_storage.cpp and rosbag2_storage/yaml.hpp, qos.cpp):
 
 - MCAP header profile ``ros2``; chunked data with message indexes and a summary section
@@ -85,6 +89,15 @@ class _Topic:
     channel_id: int
     qos_profiles_yaml: str
     type_hash: str
+    earlier_count: int = 0      # messages in the bag's files closed before the current one
+
+
+@dataclass(frozen=True)
+class _ClosedFile:
+    name: str
+    start_ns: int
+    duration_ns: int
+    message_count: int
 
 
 class BagWriter:
@@ -98,14 +111,27 @@ class BagWriter:
 
     def __init__(self, directory: str | os.PathLike, *, chunk_size: int = DEFAULT_CHUNK_SIZE,
                  compression: str | None = 'zstd',
-                 flush_period_s: float | None = DEFAULT_FLUSH_PERIOD_S) -> None:
+                 flush_period_s: float | None = DEFAULT_FLUSH_PERIOD_S,
+                 max_file_size_bytes: int = 0, max_file_duration_s: float = 0.0) -> None:
         """
         Create ``directory`` and open ``<directory name>_0.mcap`` in it for writing.
 
         The directory must not exist or be empty. ``compression`` is applied per chunk
         ('zstd', 'lz4' or None). ``flush_period_s`` bounds how long a written message may stay
-        in memory before it is on disk; None disables the periodic flush.
+        in memory before it is on disk; None disables the periodic flush. A message that
+        finds the current file at ``max_file_size_bytes`` or more on disk, or
+        ``max_file_duration_s`` or more of log time after the file's first message, goes
+        into the next file (0: no limit). Files grow by whole chunks, so a file ends at the
+        first chunk boundary past its size limit, as rosbag2's MCAP files do.
         """
+        if not (isinstance(max_file_size_bytes, int) and max_file_size_bytes >= 0):
+            raise BagWriterError(f'max_file_size_bytes {max_file_size_bytes!r}: must be a byte '
+                                 'count >= 0 (0: no limit)')
+        if not (0.0 <= max_file_duration_s < float('inf')):
+            raise BagWriterError(f'max_file_duration_s {max_file_duration_s!r}: must be a '
+                                 'finite number of seconds >= 0 (0: no limit)')
+        self._max_file_size = max_file_size_bytes
+        self._max_file_duration_ns = int(round(max_file_duration_s * 1e9))
         self._init(Path(directory), None, chunk_size=chunk_size, compression=compression,
                    flush_period_s=flush_period_s)
 
@@ -119,6 +145,13 @@ class BagWriter:
             raise BagWriterError(f'chunk_size {chunk_size}: must be a positive byte count')
         if flush_period_s is not None and not flush_period_s > 0:
             raise BagWriterError(f'flush_period_s {flush_period_s}: must be positive or None')
+        if not hasattr(self, '_max_file_size'):
+            self._max_file_size, self._max_file_duration_ns = 0, 0
+        self._chunk_size = chunk_size
+        self._compression = compression
+        self._closed_files: list[_ClosedFile] = []
+        self._file_start_ns: int | None = None
+        self._schema_texts: dict[str, str] = {}
         if file_name is None:
             if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
                 raise BagWriterError(
@@ -145,15 +178,19 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._flush_period_s = flush_period_s
         self._failure: str | None = None
-        self._writer = ChunkedMcapWriter(self._file, chunk_size=chunk_size,
-                                         compression=_COMPRESSIONS[compression])
-        self._writer.start(profile=PROFILE, library=_library_name())
+        self._writer = self._new_mcap()
         self._stop = threading.Event()
         self._flusher: threading.Thread | None = None
         if flush_period_s is not None:
             self._flusher = threading.Thread(target=self._flush_periodically,
                                              name='bag-flusher', daemon=True)
             self._flusher.start()
+
+    def _new_mcap(self) -> ChunkedMcapWriter:
+        writer = ChunkedMcapWriter(self._file, chunk_size=self._chunk_size,
+                                   compression=_COMPRESSIONS[self._compression])
+        writer.start(profile=PROFILE, library=_library_name())
+        return writer
 
     @classmethod
     def for_recovery(cls, directory: Path, file_name: str, final_name: str) -> 'BagWriter':
@@ -175,13 +212,18 @@ class BagWriter:
 
     @property
     def mcap_path(self) -> Path:
-        """The .mcap file inside the bag directory."""
+        """The .mcap file being written (the last of a split bag)."""
         return self._mcap_path
+
+    @property
+    def file_names(self) -> list[str]:
+        """The bag's .mcap files so far, in order (one unless the bag was split)."""
+        return [f.name for f in self._closed_files] + [self._final_name]
 
     @property
     def message_count(self) -> int:
         """Messages written so far."""
-        return self._writer.message_count
+        return sum(f.message_count for f in self._closed_files) + self._writer.message_count
 
     @property
     def topics(self) -> dict[str, str]:
@@ -244,13 +286,73 @@ class BagWriter:
             schema_id = self._writer.register_schema(
                 name=type_name, encoding=SCHEMA_ENCODING, data=schema_text.encode('utf-8'))
             self._schema_ids[type_name] = schema_id
-        metadata = {'offered_qos_profiles': qos_profiles_yaml}
-        if type_hash:
-            metadata['topic_type_hash'] = type_hash
-        channel_id = self._writer.register_channel(
-            topic=name, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
+        self._schema_texts[type_name] = schema_text
+        topic = _Topic(name, type_name, 0, qos_profiles_yaml, type_hash)
+        topic.channel_id = self._register_channel(topic, schema_id)
+        self._topics[name] = topic
+
+    def _register_channel(self, topic: _Topic, schema_id: int) -> int:
+        metadata = {'offered_qos_profiles': topic.qos_profiles_yaml}
+        if topic.type_hash:
+            metadata['topic_type_hash'] = topic.type_hash
+        return self._writer.register_channel(
+            topic=topic.name, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
             metadata=metadata)
-        self._topics[name] = _Topic(name, type_name, channel_id, qos_profiles_yaml, type_hash)
+
+    def _split_due(self, log_time_ns: int) -> bool:
+        start = self._file_start_ns
+        if start is None:
+            return False
+        if self._max_file_duration_ns and log_time_ns - start >= self._max_file_duration_ns:
+            return True
+        return bool(self._max_file_size) and \
+            self._writer.bytes_written >= self._max_file_size
+
+    def _split_locked(self) -> None:
+        """Finish the current file and go on in the next one, with every schema and channel."""
+        time_range = self._writer.time_range
+        start, end = time_range if time_range else (0, 0)
+        closed = _ClosedFile(self._final_name, start, end - start, self._writer.message_count)
+        counts = {name: self._writer.channel_message_count(topic.channel_id)
+                  for name, topic in self._topics.items()}
+        self._finish_file_locked()
+        self._file.close()
+        self._closed_files.append(closed)
+        for name, topic in self._topics.items():
+            topic.earlier_count += counts[name]
+        index = len(self._closed_files)
+        file_name = f'{self._directory.name}_{index}.mcap'
+        self._file = open(self._directory / file_name, 'xb')
+        _lock(self._file, self._directory / file_name)
+        self._mcap_path = self._directory / file_name
+        self._final_name = file_name
+        self._file_start_ns = None
+        self._writer = self._new_mcap()
+        self._schema_ids = {}
+        for topic in self._topics.values():
+            schema_id = self._schema_ids.get(topic.type_name)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(
+                    name=topic.type_name, encoding=SCHEMA_ENCODING,
+                    data=self._schema_texts[topic.type_name].encode('utf-8'))
+                self._schema_ids[topic.type_name] = schema_id
+            topic.channel_id = self._register_channel(topic, schema_id)
+        self._sync_directory_locked()
+
+    def _sync_directory_locked(self) -> None:
+        descriptor = os.open(self._directory, os.O_RDONLY)
+        try:
+            os.fsync(descriptor)
+        finally:
+            os.close(descriptor)
+
+    def _finish_file_locked(self) -> None:
+        """The current file's summary and ``rosbag2`` record, on disk."""
+        information = self.bag_information()
+        self._writer.add_metadata('rosbag2', {'serialized_metadata': dump_yaml(information)})
+        self._writer.finish()
+        self._file.flush()
+        os.fsync(self._file.fileno())
 
     def write(self, topic: str, cdr_bytes: bytes, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
@@ -271,6 +373,11 @@ class BagWriter:
             if self._failure is not None:
                 raise BagWriterError(self._failure)
             try:
+                if (self._max_file_size or self._max_file_duration_ns) \
+                        and self._split_due(log_time_ns):
+                    self._split_locked()
+                if self._file_start_ns is None or log_time_ns < self._file_start_ns:
+                    self._file_start_ns = log_time_ns
                 self._writer.add_message(
                     entry.channel_id, cdr_bytes, log_time_ns,
                     log_time_ns if publish_time_ns is None else publish_time_ns)
@@ -304,9 +411,10 @@ class BagWriter:
         """
         with self._lock:
             self._check_open()
-            if self._flush_period_s is not None:
+            if self._flush_period_s is not None or self._max_file_size \
+                    or self._max_file_duration_ns:
                 raise BagWriterError('appender: only for a writer without the periodic flush '
-                                     '(flush_period_s=None)')
+                                     '(flush_period_s=None) and without splitting')
             entry = self._topics.get(topic)
             if entry is None:
                 raise BagWriterError(f'topic {topic}: not registered; call add_topic first')
@@ -349,11 +457,18 @@ class BagWriter:
         time_range = self._writer.time_range
         start, duration = (time_range[0], time_range[1] - time_range[0]) if time_range \
             else (0, 0)
+        files = [(f.name, f.start_ns, f.duration_ns, f.message_count)
+                 for f in self._closed_files]
+        files.append((self._final_name, start, duration, self._writer.message_count))
+        spans = [(s, s + d) for _, s, d, count in files if count]
+        first = min((s for s, _ in spans), default=0)
+        last = max((e for _, e in spans), default=0)
         return bag_information(
-            file_name=self._final_name, start_ns=start, duration_ns=duration,
+            file_name=self._final_name, start_ns=first, duration_ns=last - first,
             topics=[(t.name, t.type_name, t.qos_profiles_yaml, t.type_hash,
-                     self._writer.channel_message_count(t.channel_id))
-                    for t in self._topics.values()])
+                     t.earlier_count + self._writer.channel_message_count(t.channel_id))
+                    for t in self._topics.values()],
+            files=files)
 
     def close(self) -> None:
         """
@@ -369,14 +484,9 @@ class BagWriter:
             self._stop.set()
             try:
                 if self._failure is None:
-                    information = self.bag_information()
-                    serialized = dump_yaml(information)
-                    self._writer.add_metadata('rosbag2', {'serialized_metadata': serialized})
-                    self._writer.finish()
-                    self._file.flush()
-                    os.fsync(self._file.fileno())
+                    self._finish_file_locked()
                     if self._writes_metadata_yaml:
-                        write_metadata_yaml(self._directory, information)
+                        write_metadata_yaml(self._directory, self.bag_information())
             except OSError as err:
                 self._fail(err)
             finally:
@@ -435,14 +545,19 @@ def _qos_profiles(topic: str, qos_profiles_yaml: str) -> list[Any]:
 
 
 def bag_information(*, file_name: str, start_ns: int, duration_ns: int,
-                    topics: Sequence[tuple[str, str, str, str, int]]) -> dict[str, Any]:
+                    topics: Sequence[tuple[str, str, str, str, int]],
+                    files: Sequence[tuple[str, int, int, int]] | None = None
+                    ) -> dict[str, Any]:
     """
-    Build rosbag2's ``rosbag2_bagfile_information`` (version 9) for a one-file bag.
+    Build rosbag2's ``rosbag2_bagfile_information`` (version 9).
 
-    ``topics`` holds (name, type, offered QoS YAML string, type hash, message count) rows.
-    Field order follows rosbag2_storage/yaml.hpp.
+    ``topics`` holds (name, type, offered QoS YAML string, type hash, message count) rows;
+    ``files`` the (name, start, duration, message count) of each file of a split bag (None:
+    the one file ``file_name``, spanning the bag). Field order follows rosbag2_storage/yaml.hpp.
     """
     message_count = sum(row[4] for row in topics)
+    if files is None:
+        files = [(file_name, start_ns, duration_ns, message_count)]
     return {
         'version': METADATA_VERSION,
         'storage_identifier': STORAGE_IDENTIFIER,
@@ -458,11 +573,12 @@ def bag_information(*, file_name: str, start_ns: int, duration_ns: int,
             for name, type_name, qos_yaml, type_hash, count in topics],
         'compression_format': '',
         'compression_mode': '',
-        'relative_file_paths': [file_name],
-        'files': [{'path': file_name,
-                   'starting_time': {'nanoseconds_since_epoch': int(start_ns)},
-                   'duration': {'nanoseconds': int(duration_ns)},
-                   'message_count': message_count}],
+        'relative_file_paths': [name for name, _, _, _ in files],
+        'files': [{'path': name,
+                   'starting_time': {'nanoseconds_since_epoch': int(start)},
+                   'duration': {'nanoseconds': int(duration)},
+                   'message_count': int(count)}
+                  for name, start, duration, count in files],
         'custom_data': None,
         'ros_distro': os.environ.get('ROS_DISTRO') or 'jazzy',
     }

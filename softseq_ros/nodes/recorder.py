@@ -13,11 +13,17 @@ from datetime import datetime, timezone
 from functools import partial
 import importlib
 from pathlib import Path
+import re
 import signal
 import sys
 from typing import Any, Sequence
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
+from rcl_interfaces.msg import (
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidTopicNameException
@@ -106,7 +112,8 @@ class Recorder(Node):
     # What --help says of its topics: they are a parameter's, not the contract's.
     HELP_TOPICS = (
         'subscribes to the topics of its topics parameter, by default every topic of the '
-        f'rig\'s contract: {", ".join(RIG_TOPICS)}; each once it has a publisher',)
+        f'rig\'s contract: {", ".join(RIG_TOPICS)}; each once it has a publisher; with '
+        'all_topics or regex also every topic of the graph they take, as it appears',)
 
     def __init__(self, **node_kwargs: Any) -> None:
         """Declare parameters, open the bag and start looking for the topics."""
@@ -115,8 +122,9 @@ class Recorder(Node):
             'topics', list(RIG_TOPICS), ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
                 description='Topics to record (relative names are resolved in the node '
-                            'namespace; default: every topic of the rig).'),
-        ).value
+                            'namespace; default: every topic of the rig); all_topics and '
+                            'regex add to them, so give "topics:=[]" to record only theirs.'),
+        ).value or []   # rcl reads topics:=[] as a value not set
         # Declared without a value when not given, so its type cannot be static: rclpy's
         # get_parameters service answers nothing at all (not even the other names asked for)
         # when one of them is a statically typed parameter without a value. Its type is
@@ -138,6 +146,49 @@ class Recorder(Node):
                 type=ParameterType.PARAMETER_STRING, read_only=True,
                 description='MCAP chunk compression: zstd, lz4 or none.'),
         ).value
+        all_topics = self.declare_parameter(
+            'all_topics', False, ParameterDescriptor(
+                type=ParameterType.PARAMETER_BOOL, read_only=True,
+                description='Record every topic of the graph as it appears (ros2 bag record '
+                            '-a), hidden ones (a name part starting with _) excepted, besides '
+                            'those of topics.'),
+        ).value
+        pattern = self.declare_parameter(
+            'regex', '', ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING, read_only=True,
+                description='Also record every topic whose absolute name this regular '
+                            'expression matches (Python re.search), as it appears (ros2 bag '
+                            'record -e); empty: none.'),
+        ).value
+        exclude = self.declare_parameter(
+            'exclude_regex', '', ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING, read_only=True,
+                description='Leave out the topics that all_topics or regex would add and this '
+                            'regular expression matches (ros2 bag record -x); empty: none.'),
+        ).value
+        max_size = self.declare_parameter(
+            'max_bag_size', 0, ParameterDescriptor(
+                type=ParameterType.PARAMETER_INTEGER, read_only=True,
+                additional_constraints='>= 0',
+                integer_range=[IntegerRange(from_value=0, to_value=2 ** 62, step=0)],
+                description='Split the bag into a new .mcap file once the current one has '
+                            'this many bytes on disk (at a chunk boundary); 0: never.'),
+        ).value
+        max_duration = self.declare_parameter(
+            'max_bag_duration', 0.0, ParameterDescriptor(
+                type=ParameterType.PARAMETER_DOUBLE, read_only=True, dynamic_typing=True,
+                additional_constraints='>= 0; integer or double',
+                description='Split the bag into a new .mcap file once a message comes this '
+                            "many seconds (log time) after the current file's first; "
+                            '0: never.'),
+        ).value
+        self._patterns = [_compiled('regex', pattern)] if pattern else []
+        self._exclude = _compiled('exclude_regex', exclude) if exclude else None
+        self._all_topics = bool(all_topics)
+        if isinstance(max_duration, bool) or not isinstance(max_duration, (int, float)) \
+                or not 0.0 <= max_duration < float('inf'):
+            raise BagWriterError(f'parameter max_bag_duration: must be a number of seconds '
+                                 f'>= 0, got {max_duration!r}')
         types = list(self.get_parameter('types').value or [])
         if types and len(types) != len(topics):
             raise BagWriterError(
@@ -156,7 +207,9 @@ class Recorder(Node):
             self._wanted[resolved] = canonical_type_name(given) if given else ''
         self._output = Path(output) if output else default_output_directory()
         self._bag = BagWriter(self._output,
-                              compression=None if compression == 'none' else compression)
+                              compression=None if compression == 'none' else compression,
+                              max_file_size_bytes=int(max_size),
+                              max_file_duration_s=float(max_duration))
         self._subscriptions_by_topic: dict[str, Any] = {}
         self._reported: set[str] = set()
         self.bytes_written = 0                 # CDR payload bytes handed to the bag
@@ -184,9 +237,15 @@ class Recorder(Node):
     def _discover(self) -> None:
         # The timer keeps running even when every topic is found: with rclpy 7.1.6 a node
         # whose timer was cancelled sometimes ignores SIGTERM inside spin().
-        if self._bag.closed or len(self._subscriptions_by_topic) == len(self._wanted):
+        discovering = self._all_topics or self._patterns
+        if self._bag.closed or (not discovering
+                                and len(self._subscriptions_by_topic) == len(self._wanted)):
             return
         graph = dict(self.get_topic_names_and_types())
+        if discovering:
+            for topic in graph:
+                if topic not in self._wanted and self._matches(topic):
+                    self._wanted[topic] = ''
         for topic, given_type in self._wanted.items():
             if topic in self._subscriptions_by_topic:
                 continue
@@ -204,6 +263,14 @@ class Recorder(Node):
                 if topic not in self._reported:
                     self._reported.add(topic)
                     self.get_logger().error(f'not recording {topic}: {err}')
+
+    def _matches(self, topic: str) -> bool:
+        """True when all_topics or regex adds ``topic`` (hidden ones never, exclusions not)."""
+        if any(part.startswith('_') for part in topic.split('/')):
+            return False
+        if self._exclude is not None and self._exclude.search(topic):
+            return False
+        return self._all_topics or any(p.search(topic) for p in self._patterns)
 
     def _type_from_graph(self, topic: str, types: list[str]) -> str:
         if len(types) > 1 and topic not in self._reported:
@@ -276,6 +343,14 @@ class Recorder(Node):
         if log:
             self.get_logger().info(line)
         return line
+
+
+def _compiled(name: str, pattern: str) -> 're.Pattern[str]':
+    try:
+        return re.compile(pattern)
+    except re.error as err:
+        raise BagWriterError(f'parameter {name}: {pattern!r} is not a regular expression '
+                             f'({err})') from None
 
 
 def _check_types_parameter(parameters: list[Parameter]) -> SetParametersResult:
