@@ -250,7 +250,7 @@ def test_parameters_are_validated_with_a_reason(context, tmp_path):
         result, = pump.set_parameters([Parameter('rate_hz', value=25)])     # an integer
         assert result.successful and pump.rate_hz == 25.0
         assert pump._timer.timer_period_ns == 40_000_000
-        result, = pump.set_parameters([Parameter('flow_rate_m3_per_s', value=1.0e-6)])
+        result, = pump.set_parameters([Parameter('open_loop', value=True)])
         assert not result.successful and 'read-only' in result.reason
         result, = camera.set_parameters([Parameter('noise_std_m', value=-1.0e-3)])
         assert not result.successful and 'noise_std_m' in result.reason \

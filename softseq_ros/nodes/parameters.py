@@ -300,6 +300,8 @@ class ParameterNode(Node):
         self.add_post_set_parameters_callback(self._post_set)
         # Declarations run the callbacks too; changes apply only once the node is built.
         self.configured = False
+        # Set by a node once all its parameters are declared (values can be checked together).
+        self.declarations_done = False
 
     def _declare(self, name: str, default: Any, descriptor: ParameterDescriptor,
                  rule: _Rule) -> Any:
@@ -446,7 +448,15 @@ class ParameterNode(Node):
             if reason is not None:
                 return SetParametersResult(successful=False,
                                            reason=f'{parameter.name}: {reason}')
+        if self.configured or self.declarations_done:
+            reason = self._validate_together(parameters)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
+
+    def _validate_together(self, parameters: list[Parameter]) -> str | None:
+        """Why values each fine alone cannot run with the node's others; nodes override it."""
+        return None
 
     def _post_set(self, parameters: list[Parameter]) -> None:
         if self.configured:

@@ -25,11 +25,18 @@ from softseq_ros.nodes.diagnostics import ERROR_LEVEL, OK_LEVEL, WARN_LEVEL, Hea
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig import contract
-from softseq_ros.rig.build import pump_core
+from softseq_ros.rig.build import (
+    SettingError,
+    check_programme,
+    end_stop,
+    pump_core,
+    pump_profile,
+)
 from softseq_ros.rig.model import actuator_model
 from softseq_ros.rig.pump import (
     DEFAULT_FEEDBACK_TIMEOUT_S,
     DEFAULT_MAX_PRESSURE_PA,
+    IDLE,
     REACTIONS,
     STOPPED,
     Reply,
@@ -38,8 +45,10 @@ from softseq_ros.rig.values import WARNING
 from softseq_ros.rig.wire import NS_PER_S
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import legs_from_text
-from softseq_ros.scene.programme import MAX_RUN_S, Leg, longest_part
+from softseq_ros.scene.programme import MAX_RUN_S, Leg, PumpProfile, longest_part
 from softseq_ros.scene.validation import SceneError
+
+_LOADED = 'set at run time, it is taken by ~/load or ~/reset when the pump is not running'
 
 
 def parse_legs(text: str) -> tuple[Leg, ...]:
@@ -73,71 +82,108 @@ class SyringePumpNode(CoreNode):
     # lists them from here.
     SERVICES: dict[str, str] = {
         'start': 'idle or held -> running', 'hold': 'running -> held',
-        'stop': '-> stopped', 'reset': "-> idle at the programme's start volume"}
+        'stop': '-> stopped', 'reset': "-> idle at the programme's start volume (a programme "
+        'set since the last load is taken)',
+        'load': 'idle, finished or stopped -> idle with the programme set in the parameters '
+        'legs, cycles, flow_rate_m3_per_s, start_injected_m3 (refused while running or held)'}
+    PROGRAMME_PARAMETERS = ('legs', 'cycles', 'flow_rate_m3_per_s', 'start_injected_m3')
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare parameters (defaults from the scene), build the core, start the timer."""
         super().__init__(self.NODE_NAME, **kwargs)
+        self._declare_all()
+        self._configure_core()
+        self._activate_timer()
+
+    def _declare_all(self) -> None:
+        """Every parameter, with the scene's defaults; the core is built from their values."""
         self.last_gauge_pa: float | None = None   # the highest of the last feedback's
+        self._timer: Any = None
+        self._pump_services: list[Any] = []
         scene = self.declare_scene()
         default = scene.pump.profile
         self.rate_hz = self.declare_number(
             'rate_hz', scene.pump.rate_hz, 'Command publishing rate [Hz].',
             **LIMITS['pump.rate_hz'].bounds())
-        flow = self.declare_number(
-            'flow_rate_m3_per_s', default.flow_rate, 'Pump flow rate [m^3/s].',
-            read_only=True, **LIMITS['pump.flow_rate_m3_per_s'].bounds())
-        legs_text = self.declare_text(
+        # The programme's parameters can be set at run time: a new programme is checked at
+        # once and taken by ~/load (or ~/reset) when the pump is not in the middle of one.
+        self.declare_number(
+            'flow_rate_m3_per_s', default.flow_rate, 'Pump flow rate [m^3/s]; ' + _LOADED,
+            **LIMITS['pump.flow_rate_m3_per_s'].bounds())
+        self.declare_text(
             'legs', '', 'Programme legs as a YAML list in the scene syntax, e.g. '
-            '[{inflate_to_m3: 5.0e-6}, {hold_s: 2}, {deflate_to_m3: 0.0}]; empty: the scene.',
-            read_only=True, check=_legs_reason)
-        cycles = self.declare_integer('cycles', default.cycles, 'Programme repetitions.',
-                                      read_only=True, **LIMITS['pump.cycles'].bounds())
-        start = self.declare_number(
-            'start_injected_m3', default.start_injected, 'Injected volume at run time 0 [m^3].',
-            minimum=0.0, maximum=scene.capacity, read_only=True)
-        autostart = self.declare_flag(
+            '[{inflate_to_m3: 5.0e-6}, {hold_s: 2}, {deflate_to_m3: 0.0}]; empty: the '
+            "scene's; " + _LOADED, check=_legs_reason)
+        self.declare_integer('cycles', default.cycles, 'Programme repetitions; ' + _LOADED,
+                             **LIMITS['pump.cycles'].bounds())
+        self.declare_number(
+            'start_injected_m3', default.start_injected,
+            'Injected volume at run time 0 [m^3]; ' + _LOADED, minimum=0.0,
+            maximum=scene.capacity)
+        self.declare_flag(
             'autostart', True, 'Start running at the first tick (else wait for ~/start).',
             read_only=True)
-        max_pressure = self.declare_number(
+        self.declare_number(
             'max_pressure_pa', DEFAULT_MAX_PRESSURE_PA,
             'Stop when the actuator gauge pressure exceeds this [Pa].', minimum=0.0,
             open_minimum=True)
-        feedback_timeout = self.declare_number(
+        self.declare_number(
             'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
             'Hold when no pressure came from the actuator for this long while running '
             '[s, wall clock].', minimum=0.0, open_minimum=True, maximum=3600.0)
-        open_loop = self.declare_flag(
+        self.declare_flag(
             'open_loop', False, 'Run without pressure feedback (no actuator behind the pump): '
             'no relief valve, no feedback timeout.', read_only=True)
         # The segments' equilibrium gives the pump its limits: the programme must stay in its
         # domain, and the end stop defaults to where the inflation ends.
-        self.core, _ = pump_core(
-            scene, actuator_model(scene), flow_rate_m3_per_s=flow, cycles=cycles,
-            start_injected_m3=start, legs=parse_legs(legs_text) if legs_text else None,
-            autostart=autostart, max_pressure_pa=max_pressure,
-            feedback_timeout_s=feedback_timeout, open_loop=open_loop)
-        self.core.max_injected_m3 = self.declare_number(
-            'max_injected_m3', self.core.max_injected_m3,
+        self._scene = scene
+        self._model = actuator_model(scene)
+        self._pending: PumpProfile | None = None   # a programme set, not loaded yet
+        self.declare_number(
+            'max_injected_m3', end_stop(self._model, self._programme({})),
             'Stop when the commanded injected volume would exceed this [m^3] '
             "(default: where the segments' inflation ends).", minimum=0.0,
             open_minimum=True)
+        self.declarations_done = True
+
+    def _configure_core(self) -> None:
+        """The core from the parameters, its topics and services (no commands yet)."""
+        value = {name: self.get_parameter(name).value for name in (
+            'autostart', 'max_pressure_pa', 'feedback_timeout_s', 'open_loop',
+            'max_injected_m3', 'rate_hz')}
+        self.rate_hz = float(value['rate_hz'])
+        profile = self._programme({})
+        self._pending = None
+        self.core, _ = pump_core(
+            self._scene, self._model, flow_rate_m3_per_s=profile.flow_rate,
+            cycles=profile.cycles, start_injected_m3=profile.start_injected,
+            legs=profile.legs, autostart=value['autostart'],
+            max_pressure_pa=float(value['max_pressure_pa']),
+            feedback_timeout_s=float(value['feedback_timeout_s']),
+            open_loop=value['open_loop'])
+        self.core.max_injected_m3 = float(value['max_injected_m3'])
         # Warnings name the feedback topic as resolved here.
-        self.connect(scene.outputs)
+        self.connect(self._scene.outputs)
         volumes = self.subscription(contract.VOLUMES)
         if volumes is not None:
             self.core.feedback_topic = volumes.topic_name
         for name in self.SERVICES:
-            self.create_service(Trigger, f'~/{name}', self._service(getattr(self.core, name)))
+            request = getattr(self, f'_{name}_request', None) or getattr(self.core, name)
+            self._pump_services.append(
+                self.create_service(Trigger, f'~/{name}', self._service(request)))
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        self.configured = True
+
+    def _activate_timer(self) -> None:
+        """Commands at rate_hz from now on; the current state said on pump/status."""
         self._timer = self.create_timer(1.0 / self.rate_hz, self.tick)
-        self.send(self.core.begin(self.now_ns()))
+        if self.core.state == IDLE:
+            self.send(self.core.begin(self.now_ns()))
         if self.core.duration_s > MAX_RUN_S:
             # A rig may run for days, so this is said, not refused (softseq run refuses it).
             self.get_logger().warning(
                 f'the programme runs {self.core.duration_s:.6g} s of rig time, more than '
                 f'{MAX_RUN_S:g} s ({longest_part(self.core.profile, "pump.")})')
-        self.configured = True
 
     DIAGNOSTIC_TASK = 'syringe pump'
 
@@ -174,6 +220,11 @@ class SyringePumpNode(CoreNode):
 
     def _service(self, request: Any) -> Any:
         def serve(_request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+            if self._timer is None:
+                # A managed pump that is configured but not active: it commands nothing.
+                response.success = False
+                response.message = 'the pump node is inactive: activate it first (lifecycle)'
+                return response
             reply: Reply = request(self.now_ns())
             self.send(reply.outputs)
             response.success, response.message = reply.success, reply.message
@@ -205,11 +256,65 @@ class SyringePumpNode(CoreNode):
         self.send(self.core.feedback(self.now_ns(), stamp.sec * NS_PER_S + stamp.nanosec,
                                      tuple(msg.name), list(msg.position), list(msg.effort)))
 
+    def _programme(self, changes: dict[str, Any]) -> PumpProfile:
+        """The programme of the parameters now, with ``changes``; SettingError if it cannot run."""
+        values = {name: self.get_parameter(name).value for name in self.PROGRAMME_PARAMETERS}
+        values.update(changes)
+        legs = str(values['legs'])
+        profile = pump_profile(
+            self._scene, flow_rate_m3_per_s=float(values['flow_rate_m3_per_s']),
+            legs=parse_legs(legs) if legs else None, cycles=int(values['cycles']),
+            start_injected_m3=float(values['start_injected_m3']))
+        check_programme(self._scene, profile, self._model)
+        return profile
+
+    def _validate_together(self, parameters: list[Parameter]) -> str | None:
+        changes = {p.name: p.value for p in parameters if p.name in self.PROGRAMME_PARAMETERS}
+        if not changes:
+            return None
+        try:
+            self._programme(changes)
+        except (SettingError, NodeConfigError) as err:
+            return ' '.join(str(err).split())
+        return None
+
+    def _load_request(self, now: int) -> Reply:
+        if self._pending is None:
+            return Reply(False, 'nothing to load: set legs, cycles, flow_rate_m3_per_s or '
+                                'start_injected_m3 first', [])
+        return self._take_pending(now, self.core.load)
+
+    def _reset_request(self, now: int) -> Reply:
+        if self._pending is None:
+            return self.core.reset(now)
+        # A reset leaves the programme in any state, so it takes a new one too.
+        return self._take_pending(now, self.core.reset)
+
+    def _take_pending(self, now: int, load: Any) -> Reply:
+        profile = self._pending
+        reply = load(now, profile)
+        if reply.success:
+            self._pending = None
+            self.get_logger().info(
+                f'programme loaded: {len(profile.legs)} legs x {profile.cycles} cycles at '
+                f'{profile.flow_rate * 1e6:.6g} mL/s from {profile.start_injected * 1e6:.6g} mL, '
+                f'{profile.duration():.6g} s')
+            if profile.duration() > MAX_RUN_S:
+                self.get_logger().warning(
+                    f'the programme runs {profile.duration():.6g} s of rig time, more than '
+                    f'{MAX_RUN_S:g} s ({longest_part(profile, "pump.")})')
+            reply = Reply(True, f'{reply.message} with the new programme '
+                                f'({profile.duration():.6g} s)', reply.outputs)
+        return reply
+
     def _parameters_changed(self, parameters: list[Parameter]) -> None:
+        if any(p.name in self.PROGRAMME_PARAMETERS for p in parameters):
+            self._pending = self._programme({})
         for parameter in parameters:
             if parameter.name == 'rate_hz':
                 self.rate_hz = float(parameter.value)
-                self._timer.timer_period_ns = int(round(1e9 / self.rate_hz))
+                if self._timer is not None:
+                    self._timer.timer_period_ns = int(round(1e9 / self.rate_hz))
             elif parameter.name in ('max_pressure_pa', 'max_injected_m3', 'feedback_timeout_s'):
                 setattr(self.core, parameter.name, float(parameter.value))
 

@@ -211,8 +211,12 @@ class PumpCore:
         """Stop where the pump is; only ``reset`` leaves the stopped state."""
         return self._reply(*self._stop(now, 'stop'))
 
-    def reset(self, now: int) -> Reply:
-        """Back to idle at the programme's start volume and run time 0."""
+    def reset(self, now: int, profile: PumpProfile | None = None) -> Reply:
+        """Back to idle at the programme's start volume and run time 0 (with ``profile``)."""
+        if profile is not None:
+            self.profile = profile
+            self.duration_s = profile.duration()
+            self.volume_m3 = profile.start_injected
         self._elapsed_ns = 0
         self._running_since = None
         self._frozen_volume = None
@@ -220,6 +224,18 @@ class PumpCore:
         self._warned.clear()
         self._enter(now, 'reset')
         return self._reply(True, IDLE)
+
+    def load(self, now: int, profile: PumpProfile) -> Reply:
+        """
+        Take a new programme, idle at its start volume; refused while running or held.
+
+        A held pump is in the middle of a programme: stop it (or let it finish) first, so
+        that nothing the pump was doing is replaced under its feet.
+        """
+        if self.state in (RUNNING, HELD):
+            return self._reply(False, f'cannot load a programme while {self.status}; call '
+                                      '~/stop (or wait until it has finished) first')
+        return self.reset(now, profile)
 
     def _reply(self, success: bool, message: str) -> Reply:
         return Reply(success, message, self._take())
