@@ -34,6 +34,7 @@ setup(
         'console_scripts': [
             'softseq = softseq_ros.cli:main',
             'syringe_pump = softseq_ros.nodes.syringe_pump:main',
+            'managed_syringe_pump = softseq_ros.nodes.managed_syringe_pump:main',
             'actuator = softseq_ros.nodes.actuator:main',
             'camera = softseq_ros.nodes.camera:main',
             'recorder = softseq_ros.nodes.recorder:main',

@@ -24,12 +24,12 @@ PACKAGE = 'softseq_ros'
 VENV_BIN = Path(sys.prefix) / 'bin'
 # The executables the README promises to ROS users.
 DOCUMENTED_EXECUTABLES = {'softseq', 'syringe_pump', 'actuator', 'camera', 'recorder',
-                          'sim_clock', 'rig'}
+                          'sim_clock', 'rig', 'managed_syringe_pump'}
 # Top-level modules that exist only with a ROS install (or the ROS wheels).
 ROS_MODULES = {
     'rclpy', 'rcl_interfaces', 'rosidl_runtime_py', 'ament_index_python', 'builtin_interfaces',
     'std_msgs', 'std_srvs', 'geometry_msgs', 'sensor_msgs', 'visualization_msgs', 'nav_msgs',
-    'rosgraph_msgs', 'launch', 'launch_ros',
+    'rosgraph_msgs', 'launch', 'launch_ros', 'diagnostic_msgs', 'lifecycle_msgs',
 }
 # Data flows scene -> segment models -> quasi-static solver -> rig core -> node or batch ->
 # topic -> bag -> analysis: the physics imports none of the later layers, and the rig's cores

@@ -146,6 +146,19 @@ class CoreNode(ParameterNode):
             return Health(self._last_warning_level, self.last_warning, values)
         return Health(OK_LEVEL, 'ok', values)
 
+    def disconnect(self) -> None:
+        """Destroy what :meth:`connect` made (a managed node's cleanup)."""
+        for publisher in self._publishers_by_name.values():
+            self.destroy_publisher(publisher)
+        for subscription in self._subscriptions_by_name.values():
+            self.destroy_subscription(subscription)
+        self._publishers_by_name.clear()
+        self._publishers_by_type.clear()
+        self._subscriptions_by_name.clear()
+        if self.diagnostics is not None:
+            self.diagnostics.destroy()
+            self.diagnostics = None
+
     def publisher(self, topic: contract.Topic) -> Any:
         """The publisher of a contract topic (None when this node does not publish it)."""
         return self._publishers_by_name.get(topic.name)

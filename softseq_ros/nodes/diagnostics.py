@@ -68,6 +68,11 @@ class DiagnosticsPublisher:
         self.timer = node.create_timer(period_s, self.publish,
                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
 
+    def destroy(self) -> None:
+        """Stop publishing: the timer and the publisher are destroyed."""
+        self._node.destroy_timer(self.timer)
+        self._node.destroy_publisher(self.publisher)
+
     def status(self) -> DiagnosticStatus:
         """The node's status now."""
         health = self._health()

@@ -229,6 +229,8 @@ def help_text(node_classes: Sequence[Callable[..., Node]], name: str) -> str:
             lines += ['', _wrap(f'Services of {node_name} (std_srvs/srv/Trigger, in its '
                                 f'private namespace: /{node_name}/NAME at the root):', '')]
             lines += [f'  ~/{service}: {text}' for service, text in services.items()]
+        for note in getattr(node_class, 'HELP_NOTES', ()):
+            lines += ['', _wrap(note, '')]
         lines.append('')
     lines.append('Every node also has the ROS parameter services (ros2 param list/get/set).')
     return '\n'.join(lines)
