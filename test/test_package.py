@@ -201,6 +201,13 @@ def test_colcon_build_installs_the_index_marker_and_package_xml(colcon_workspace
     assert installed_xml.read_text() == (REPO / 'package.xml').read_text()
 
 
+def test_colcon_build_installs_the_launch_file(colcon_workspace):
+    # Where ros2 launch softseq_ros rig.launch.py finds it (test_launch_file.py reads it).
+    installed = colcon_workspace['install'] / PACKAGE / 'share' / PACKAGE / 'launch'
+    assert (installed / 'rig.launch.py').read_bytes() == \
+        (REPO / 'launch' / 'rig.launch.py').read_bytes()
+
+
 def test_colcon_build_leaves_no_outputs_in_the_repository(colcon_workspace):
     before, after = colcon_workspace['repo_outputs']
     assert after == before
