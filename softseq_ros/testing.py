@@ -9,9 +9,10 @@ What a test of a node needs besides the node itself, and what is easy to get sub
   body waits on conditions, then stopped in the order that cannot abort the process (shut
   the executor down, join its thread, then destroy the nodes).
 - :class:`Collector`: a node that subscribes to contract topics with the contract's
-  reliability and durability but a deep queue, and keeps every message. A probe with the
-  contract's own depth of 1 (the latched ``actuator/volumes``) keeps only the newest sample
-  when the test thread is slower than the publisher: it loses samples without a sign.
+  reliability and durability but a deep queue, and keeps every message. A probe of depth 1
+  on the latched ``actuator/volumes`` (as the rig's own consumers read it, newest only) keeps
+  only the newest sample when the test thread is slower than the publisher: it loses
+  samples without a sign.
 - :func:`wait_for` and :meth:`Collector.wait_for_publishers`: wait on a condition (a
   publisher matched, a count reached), never on a sleep: the first message after discovery
   is lost when nobody has matched yet, and a loaded machine is slow in ways no sleep guesses.
