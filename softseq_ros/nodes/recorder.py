@@ -136,52 +136,32 @@ class Recorder(Node):
                 additional_constraints='a list of strings, or not set',
                 description='Message types (pkg/msg/Type), one per entry of topics; an empty '
                             'entry or a missing list means: take the type from the graph.'))
-        output = self.declare_parameter(
-            'output', '', ParameterDescriptor(
-                type=ParameterType.PARAMETER_STRING, read_only=True,
-                description='Bag directory to create; empty: bags/rig_<UTC timestamp>.'),
-        ).value
-        compression = self.declare_parameter(
-            'compression', 'zstd', ParameterDescriptor(
-                type=ParameterType.PARAMETER_STRING, read_only=True,
-                description='MCAP chunk compression: zstd, lz4 or none.'),
-        ).value
-        all_topics = self.declare_parameter(
-            'all_topics', False, ParameterDescriptor(
-                type=ParameterType.PARAMETER_BOOL, read_only=True,
-                description='Record every topic of the graph as it appears (ros2 bag record '
-                            '-a), hidden ones (a name part starting with _) excepted, besides '
-                            'those of topics.'),
-        ).value
-        pattern = self.declare_parameter(
-            'regex', '', ParameterDescriptor(
-                type=ParameterType.PARAMETER_STRING, read_only=True,
-                description='Also record every topic whose absolute name this regular '
-                            'expression matches (Python re.search), as it appears (ros2 bag '
-                            'record -e); empty: none.'),
-        ).value
-        exclude = self.declare_parameter(
-            'exclude_regex', '', ParameterDescriptor(
-                type=ParameterType.PARAMETER_STRING, read_only=True,
-                description='Leave out the topics that all_topics or regex would add and this '
-                            'regular expression matches (ros2 bag record -x); empty: none.'),
-        ).value
-        max_size = self.declare_parameter(
-            'max_bag_size', 0, ParameterDescriptor(
-                type=ParameterType.PARAMETER_INTEGER, read_only=True,
-                additional_constraints='>= 0',
-                integer_range=[IntegerRange(from_value=0, to_value=2 ** 62, step=0)],
-                description='Split the bag into a new .mcap file once the current one has '
-                            'this many bytes on disk (at a chunk boundary); 0: never.'),
-        ).value
-        max_duration = self.declare_parameter(
-            'max_bag_duration', 0.0, ParameterDescriptor(
-                type=ParameterType.PARAMETER_DOUBLE, read_only=True, dynamic_typing=True,
-                additional_constraints='>= 0; integer or double',
-                description='Split the bag into a new .mcap file once a message comes this '
-                            "many seconds (log time) after the current file's first; "
-                            '0: never.'),
-        ).value
+        output = self._read_only('output', '', ParameterType.PARAMETER_STRING,
+                                 'Bag directory to create; empty: bags/rig_<UTC timestamp>.')
+        compression = self._read_only('compression', 'zstd', ParameterType.PARAMETER_STRING,
+                                      'MCAP chunk compression: zstd, lz4 or none.')
+        all_topics = self._read_only(
+            'all_topics', False, ParameterType.PARAMETER_BOOL,
+            'Record every topic of the graph as it appears (ros2 bag record -a), hidden ones '
+            '(a name part starting with _) excepted, besides those of topics.')
+        pattern = self._read_only(
+            'regex', '', ParameterType.PARAMETER_STRING,
+            'Also record every topic whose absolute name this regular expression matches '
+            '(Python re.search), as it appears (ros2 bag record -e); empty: none.')
+        exclude = self._read_only(
+            'exclude_regex', '', ParameterType.PARAMETER_STRING,
+            'Leave out the topics that all_topics or regex would add and this regular '
+            'expression matches (ros2 bag record -x); empty: none.')
+        max_size = self._read_only(
+            'max_bag_size', 0, ParameterType.PARAMETER_INTEGER,
+            'Split the bag into a new .mcap file once the current one has this many bytes on '
+            'disk (at a chunk boundary); 0: never.', additional_constraints='>= 0',
+            integer_range=[IntegerRange(from_value=0, to_value=2 ** 62, step=0)])
+        max_duration = self._read_only(
+            'max_bag_duration', 0.0, ParameterType.PARAMETER_DOUBLE,
+            "Split the bag into a new .mcap file once a message comes this many seconds (log "
+            "time) after the current file's first; 0: never.", dynamic_typing=True,
+            additional_constraints='>= 0; integer or double')
         self._patterns = [_compiled('regex', pattern)] if pattern else []
         self._exclude = _compiled('exclude_regex', exclude) if exclude else None
         self._all_topics = bool(all_topics)
@@ -223,6 +203,12 @@ class Recorder(Node):
         self.create_timer(DISCOVERY_PERIOD_S, self._discover,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._discover()
+
+    def _read_only(self, name: str, default: Any, kind: int, description: str,
+                   **descriptor: Any) -> Any:
+        """Declare a read-only parameter (set at start only); return its value."""
+        return self.declare_parameter(name, default, ParameterDescriptor(
+            type=kind, read_only=True, description=description, **descriptor)).value
 
     @property
     def bag(self) -> BagWriter:
