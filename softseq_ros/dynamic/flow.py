@@ -174,7 +174,7 @@ class NetworkFlow:
         self._recent: list[tuple[float, list[float], tuple]] = []
         # Volumes, pressures and flows of the state now, computed once per state: the rig
         # asks for them several times per output.
-        self._now: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        self._now: tuple[list[float], list[float], list[float]] | None = None
 
     # ------------------------------------------------------------------ the equations
 
@@ -195,8 +195,8 @@ class NetworkFlow:
         """
         asked = np.asarray(volumes, dtype=float).tolist()
         # The rig asks for the pressures of the volumes now, which are known already.
-        if self._now is not None and asked == self._now[0].tolist():
-            return self._now[1].copy()
+        if self._now is not None and asked == self._now[0]:
+            return np.array(self._now[1])
         return np.array(self._pressure_list(asked))
 
     def _pressure_list(self, volumes: list[float]) -> list[float]:
@@ -348,6 +348,16 @@ class NetworkFlow:
         leaves the network there.
         """
         if t <= self.t:
+            return
+        solver = self._solver
+        if solver is not None and t < solver.t and t < self._leaves_at and \
+                self._dense is not None:
+            # Within the last step, short of anything it holds: the rig's tick between two
+            # steps. Interpolated when someone asks: a tick with nothing to say needs no state.
+            self._y, self._y_pending = None, True
+            self.t = t
+            self.injected = self._injected_at(t)
+            self._now = None
             return
         solver = self._current_solver()
         if solver.t < t:
@@ -670,34 +680,46 @@ class NetworkFlow:
     def _materialise(self) -> None:
         """Interpolate the state at ``t`` within the integrator's last step, if not yet done."""
         if self._y_pending:
-            if self._dense is _PENDING:
-                self._dense = _Interpolant(self._solver.dense_output())
-            self._y, self._y_pending = np.asarray(self._dense(self.t), dtype=float), False
+            self._state_list()
 
-    def _current(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Volumes, pressures and channel flows of the state now (computed once per state)."""
+    def _state_list(self) -> list[float]:
+        """The state now as plain floats (interpolated once, if it has not been yet)."""
+        if not self._y_pending:
+            return self._y.tolist()
+        if self._dense is _PENDING:
+            self._dense = _Interpolant(self._solver.dense_output())
+        state = self._dense.at(self.t)
+        self._y, self._y_pending = np.array(state), False
+        return state
+
+    def now(self) -> tuple[list[float], list[float], list[float]]:
+        """
+        Volumes [m^3], gauge pressures [Pa] and channel flows [m^3/s] now, as plain floats.
+
+        Computed once per state: the rig asks for them several times per output. Not to be
+        changed by the caller.
+        """
         if self._now is None:
-            state = self.y.tolist()
+            state = self._state_list()
             volumes = self._volume_list(state, self.injected)
             pressures = self._pressure_list(volumes)
-            self._now = (np.array(volumes), np.array(pressures),
-                         np.array(self._flow_list(state, pressures)))
+            self._now = (volumes, pressures, self._flow_list(state, pressures))
         return self._now
 
     def volumes(self) -> FloatArray:
         """The segment volumes [m^3] now."""
         if self._now is not None:
-            return self._now[0].copy()
+            return np.array(self._now[0])
         # No segment's pressure is needed for the volumes alone.
-        return np.array(self._volume_list(self.y.tolist(), self.injected))
+        return np.array(self._volume_list(self._state_list(), self.injected))
 
     def flows(self) -> FloatArray:
         """The channel flows [m^3/s] now."""
-        return self._current()[2].copy()
+        return np.array(self.now()[2])
 
     def syringe_pressure(self) -> float:
         """The gauge pressure [Pa] at the syringe: the fed segment's plus the supply line's."""
-        fed = float(self._current()[1][self.feed])
+        fed = self.now()[1][self.feed]
         return fed + (self.supply.drop(self.flow) if self.supply is not None else 0.0)
 
 
@@ -1055,15 +1077,21 @@ class _Interpolant:
             self.start = dense.y_old.tolist()
 
     def __call__(self, t: float) -> FloatArray:
+        if not self.fast:
+            return self.dense(t)
+        return np.array(self.at(t))
+
+    def at(self, t: float) -> list[float]:
+        """The state at ``t`` as plain floats (the numbers a call gives)."""
         dense = self.dense
         if not self.fast:
-            return dense(t)
+            return np.asarray(dense(t), dtype=float).tolist()
         x = (t - dense.t_old) / dense.h
         powers = [x]
         for _ in range(dense.order):
             powers.append(powers[-1] * x)
-        return np.array([start + sum(q * p for q, p in zip(row, powers))
-                         for start, row in zip(self.start, self.rows)])
+        return [start + sum(q * p for q, p in zip(row, powers))
+                for start, row in zip(self.start, self.rows)]
 
     def many(self, times: FloatArray) -> FloatArray:
         """The state at each of ``times`` (rows): the same operations as a call, per time."""

@@ -332,15 +332,18 @@ class DynamicModel:
         ended: while the segments only follow the pump, the commands' answers say it all.
         """
         t = self._seconds(now_ns)
-        if t <= self.flow_network.t:
+        network = self.flow_network
+        if t <= network.t:
             return None
         self._run_to(t)
-        snaps = self._take_snaps()
-        if not snaps and not self.flow_network.exchanging:
-            return None
-        return snaps
+        # A tick at the rig's rate, most often with nothing to say: the cheapest way out.
+        if not network.new_snaps:
+            return [] if network.exchanging else None
+        return self._take_snaps()
 
     def _take_snaps(self) -> list[TimedSnap]:
+        if not self.flow_network.new_snaps:
+            return []
         origin = self._origin_ns or 0
         return [TimedSnap(snap.injected, snap.from_volumes, snap.to_volumes, snap.from_pressure,
                           snap.to_pressure, origin + round(snap.start_s * NS_PER_S),
@@ -351,18 +354,17 @@ class DynamicModel:
 
     def channel_state(self) -> tuple[list[float], list[float]]:
         """Each channel's flow [m^3/s] towards the tip and pressure drop [Pa] now."""
-        network = self.flow_network
-        # The flows first: they compute the state's pressures, which the drops then reuse.
-        flows = [float(q) for q in network.flows()]
-        pressures = network.pressures(network.volumes())
-        return flows, [float(pressures[j] - pressures[j + 1]) for j in range(len(flows))]
+        _, pressures, flows = self.flow_network.now()
+        return list(flows), [pressures[j] - pressures[j + 1] for j in range(len(flows))]
 
     def take_warnings(self) -> list[str]:
         """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
         lines = []
         for j, peak in enumerate(self.flow_network.peak_reynolds):
+            if self._warned[j]:
+                continue
             line = laminar_range_warning(self.channel_names[j], peak, self._turbulent[j])
-            if line is not None and not self._warned[j]:
+            if line is not None:
                 self._warned[j] = True
                 lines.append(line)
         return lines
@@ -376,8 +378,11 @@ class DynamicModel:
     def state(self) -> ModelState:
         """Pressure at the syringe (gauge), segment volumes and curvatures now."""
         network = self.flow_network
-        volumes = network.volumes()
-        return FlowState(network.syringe_pressure(), [float(v) for v in volumes],
+        volumes, pressures, _ = network.now()
+        supply = network.supply
+        pressure = pressures[network.feed] + (supply.drop(network.flow) if supply is not None
+                                              else 0.0)
+        return FlowState(pressure, list(volumes),
                          [float(s.curvature(v)) for s, v in zip(self.segments, volumes)])
 
     def saved(self) -> dict[str, object]:
