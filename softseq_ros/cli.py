@@ -392,6 +392,12 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _design(args: argparse.Namespace) -> int:
+    from softseq_ros.fem.design_search import run_design_command
+
+    return run_design_command(args)
+
+
 def _fem(args: argparse.Namespace) -> int:
     from softseq_ros.fem.command import run_fem_command
 
@@ -595,6 +601,27 @@ def build_parser() -> argparse.ArgumentParser:
                      'or ~/.cache/softseq/fem)')
     fem.add_argument('--quiet', action='store_true', help='no progress lines')
     fem.set_defaults(handler=_fem)
+
+    design = sub.add_parser('design', help='segment designs for a target sequence (FEM library '
+                            'search)',
+                            description='Find segment designs (membrane and wall thicknesses, '
+                            'membrane length, material fit within the ranges given) whose '
+                            'assembled sequence meets a target: unit-cell FEM tables on a '
+                            'coarse grid (cached, in parallel), interpolated, searched by '
+                            "scipy's differential evolution, the best verified by direct FEM. "
+                            'Exit 0 when verified, 1 when not, 2 on bad input or an '
+                            'unreachable target (docs/fem.md).')
+    design.add_argument('problem', type=Path, help='problem YAML: segments, ranges, target')
+    design.add_argument('--out', type=Path, help='folder for the designs found and '
+                        'results.yaml (default bags/design_NAME)')
+    design.add_argument('--workers', type=int, help='local worker processes for the FEM '
+                        '(default: one per core)')
+    design.add_argument('--scheduler', help='Dask scheduler address for the FEM, e.g. '
+                        'tcp://10.0.0.5:8786')
+    design.add_argument('--cache-dir', type=Path, help='table cache (default: '
+                        '$SOFTSEQ_FEM_CACHE or ~/.cache/softseq/fem)')
+    design.add_argument('--quiet', action='store_true', help='no progress lines')
+    design.set_defaults(handler=_design)
 
     graph = sub.add_parser('graph', help='transition graph: every stable branch and snap',
                            description='Write graph.json (every stable branch with its state '

@@ -104,6 +104,11 @@ QUICK = {
          r'- unit cells: tables and assembly \d+\.\d s, \*\*\d+\.\dx\*\*'],
         ['bench/fem_actuator_results.json', 'bench/fem_actuator_results.md',
          'docs/fem_actuator.png']),
+    'bench_fem_design.py': (
+        ['# softseq design: FEM calls and wall time to meet a target'],
+        [r'\| quick \| local1 \| [1-9]\d* \| 3 \| [1-9]\d* \| \d+ \|',
+         r'\| quick \| local2 \| [1-9]\d* \|'],
+        ['bench/fem_design_results.json', 'bench/fem_design_results.md']),
 }
 
 

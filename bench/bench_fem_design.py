@@ -1,0 +1,147 @@
+"""
+`softseq design` on the README's targets: FEM calls and wall time to meet each, on one local
+worker, two local workers and a local Dask cluster of two workers, each from an empty cache.
+
+    python bench/bench_fem_design.py            # both targets (tens of minutes on 2 cores)
+    python bench/bench_fem_design.py --quick    # a tiny coarse problem, well under a minute
+
+The targets are config/design_targets/paper_partial.yaml (the paper's: partial, the top
+leading, switch near 30 mL, levelled off from 40 mL, from ranges around Table I) and
+symmetric_pair.yaml (a target the paper did not build, with the material fit as a parameter).
+Results go to bench/fem_design_results.json and .md; the designs found to bench/fem_design/.
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+os.environ.setdefault('OMP_NUM_THREADS', '1')
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from softseq_ros.fem.design_search import (  # noqa: E402
+    load_problem,
+    numbers_text,
+    problem_from_dict,
+    search,
+    values_text,
+    write_result_files,
+)
+
+TARGETS = REPO / 'config' / 'design_targets'
+QUICK_PROBLEM = {
+    'name': 'quick',
+    'segments': [{'name': 'bottom', 'design': 'paper_bottom'},
+                 {'name': 'top', 'design': 'paper_top',
+                  'vary': {'membrane_thickness_m': [0.0004, 0.0006]}}],
+    'target': {'sequence': 'partial', 'leader': 'top',
+               'plateau_pressure_pa': {'value': 2500.0, 'tolerance': 200.0},
+               'max_injected_m3': 3.0e-5},
+    'grid': {'points': 2, 'element_size_m': 0.00375},
+    'search': {'generations': 3, 'population': 4, 'keep': 2},
+}
+
+
+def run_once(problem: object, how: str, out: Path | None) -> dict:
+    """One search from an empty cache: 'local1', 'local2' or 'dask2'."""
+    with tempfile.TemporaryDirectory(prefix='bench_fem_design_') as folder:
+        cache = Path(folder) / 'cache'
+        start = time.perf_counter()
+        if how == 'dask2':
+            from distributed import LocalCluster
+
+            with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                              dashboard_address=':0') as cluster:
+                result = search(problem, cache_dir=cache, scheduler=cluster.scheduler_address,
+                                progress=print)
+        else:
+            result = search(problem, cache_dir=cache, workers=int(how[-1]), progress=print)
+        wall = time.perf_counter() - start
+        if out is not None:
+            write_result_files(result, out)
+    best = result.ranked[0] if result.ranked else None
+    return {'how': how, 'wall_s': round(wall, 1), 'fem_runs': result.fem_runs,
+            'grid_tables': result.grid_tables, 'assembled_pairs': result.evaluations,
+            'met': len(result.ranked), 'verified': result.verified,
+            'timings_s': {k: round(v, 1) for k, v in result.timings.items()},
+            'best': None if best is None else
+            '; '.join(f'{s.name}: {values_text(v)}' for s, v in
+                      zip(problem.segments, best.values))
+            + (f'; {problem.materials[best.material].law}' if len(problem.materials) > 1
+               else ''),
+            'predicted': None if best is None else numbers_text(best.metrics, problem.target),
+            'verification': None if result.verification is None else
+            numbers_text(result.verification.metrics, problem.target)}
+
+
+def report(rows: list[dict], machine: dict, note: str = '') -> str:
+    lines = ['# softseq design: FEM calls and wall time to meet a target', '',
+             f'Written by `python bench/bench_fem_design.py`{note}. Each run from an empty '
+             f'cache. Machine: {machine}.', '',
+             '| target | executor | FEM runs | grid tables | pairs assembled | designs met | '
+             'reach / grid / search / verify [s] | wall [s] | verified |',
+             '|---|---|---:|---:|---:|---:|---|---:|---|']
+    for row in rows:
+        t = row['timings_s']
+        lines.append(f'| {row["target"]} | {row["how"]} | {row["fem_runs"]} | '
+                     f'{row["grid_tables"]} | {row["assembled_pairs"]} | {row["met"]} | '
+                     f'{t["reach_s"]} / {t["grid_s"]} / {t["search_s"]} / {t["verify_s"]} | '
+                     f'{row["wall_s"]} | {row["verified"]} |')
+    lines += ['', '| target | best design | predicted (assembly of interpolated tables) | '
+              'verified (direct FEM) |', '|---|---|---|---|']
+    seen = set()
+    for row in rows:
+        if row['target'] in seen:
+            continue
+        seen.add(row['target'])
+        lines.append(f'| {row["target"]} | {row["best"]} | {row["predicted"]} | '
+                     f'{row["verification"]} |')
+    base = {r['target']: r['wall_s'] for r in rows if r['how'] == 'local1'}
+    speedups = [f'{r["target"]} {r["how"]}: {base[r["target"]] / r["wall_s"]:.2f}x'
+                for r in rows if r['how'] != 'local1' and r['target'] in base]
+    if speedups:
+        lines += ['', 'Speed-up over one worker: ' + ', '.join(speedups) + '.']
+    return '\n'.join(lines) + '\n'
+
+
+def _machine() -> dict:
+    return {'cores': os.cpu_count(), 'load_average': [round(v, 2) for v in os.getloadavg()],
+            'date_utc': time.strftime('%Y-%m-%d %H:%M', time.gmtime())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--quick', action='store_true', help='a tiny coarse problem, 1 and 2 '
+                        'local workers; nothing written into the repository')
+    args = parser.parse_args()
+    if args.quick:
+        problem = problem_from_dict(QUICK_PROBLEM, 'quick.yaml')
+        rows = [{'target': 'quick', **run_once(problem, how, None)}
+                for how in ('local1', 'local2')]
+        print(report(rows, _machine(), ' --quick (a tiny coarse problem: the numbers show '
+                                       'that it runs)'))
+        return
+    rows = []
+    for name, modes in (('paper_partial', ('local1', 'local2', 'dask2')),
+                        ('symmetric_pair', ('local2',))):
+        problem = load_problem(TARGETS / f'{name}.yaml')
+        for how in modes:
+            out = REPO / 'bench' / 'fem_design' / name if how == 'local2' else None
+            rows.append({'target': name, **run_once(problem, how, out)})
+            print(rows[-1], flush=True)
+    machine = _machine()
+    (REPO / 'bench' / 'fem_design_results.json').write_text(
+        json.dumps({'machine': machine, 'rows': rows}, indent=1) + '\n')
+    text = report(rows, machine)
+    (REPO / 'bench' / 'fem_design_results.md').write_text(text)
+    print(text)
+
+
+if __name__ == '__main__':
+    main()

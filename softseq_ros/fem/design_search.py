@@ -1,0 +1,849 @@
+"""
+Inverse design: segment designs whose assembled sequence meets a target (``softseq design``).
+
+The paper's conclusion is that a library of simulated segments makes design fast. This module
+is that library, searched:
+
+1. **Reach.** Each segment's parameter box has two extreme corners: the thinnest, longest
+   membrane on the thinnest walls and the thickest, shortest on the thickest. Softer segments
+   give a lower equilibrium pressure at every total volume, so the pairs of softest and of
+   stiffest corners (the grid's own corners, cached) bound the plateau pressure any pair
+   reaches; a target outside is refused, naming the bound.
+2. **Grid.** Unit-cell FEM tables on a coarse grid of each segment's varied parameters and
+   material fits, cached by their design hash, run on the shared executor
+   (:func:`softseq_ros.parallel.run_jobs`: local processes or a Dask scheduler).
+3. **Interpolation.** Between grid points a segment's curve is interpolated multilinearly at
+   fixed fluid volume per unit cell (pressure, curvature, and the cell's rest volume, which
+   is multilinear in the thicknesses and lengths itself); the segment is its cells times four
+   times its membrane count. ``test_fem_design_search.py`` checks it against direct FEM runs
+   off the grid.
+4. **Search.** The assembly of the two interpolated segments
+   (:func:`softseq_ros.fem.assembly.pair_metrics`) is the inner model; scipy's
+   differential evolution minimises the sum of squared errors over their tolerances, plus a
+   penalty for a wrong sequence type or leader, for each material fit. Every design it
+   evaluated that meets the target is kept; they are ranked by that sum.
+5. **Verification.** The best design's two segments are run by FEM directly (unit cells at
+   their exact parameters, same mesh), assembled and classified; the command says whether
+   that meets the target.
+
+Problem file (YAML, SI units)::
+
+    name: paper_partial
+    segments:                              # base to tip
+      - name: bottom
+        design: paper_bottom               # a shipped design or a design file
+        vary:                              # [low, high] for what may change (others fixed)
+          membrane_thickness_m: [0.0008, 0.0012]
+      - name: top
+        design: paper_top
+        vary:
+          membrane_thickness_m: [0.0004, 0.0006]
+          wall_thickness_m: [0.0015, 0.0025]
+    materials:                             # optional: fits to choose from (one for both)
+      - {law: arruda_boyce, shear_modulus_pa: 16300.0, lambda_m: 3.96}
+    target:
+      sequence: partial                    # none, partial, symmetric or asymmetric
+      leader: top                          # optional: the segment that takes over
+      switch_injected_m3: {value: 2.7e-5, tolerance: 0.5e-5}     # optional
+      plateau_pressure_pa: {value: 2400.0, tolerance: 150.0}     # optional
+      plateau_from_m3: {value: 4.0e-5, tolerance: 0.5e-5}        # optional: within 1 % from
+      tip_distance_m: {injected_m3: 6.0e-5, value: 0.17, tolerance: 0.02}  # optional
+      max_injected_m3: 6.5e-5              # the programme's range (default 65 mL)
+    grid:                                  # optional
+      points: 3                            # per varied parameter
+      element_size_m: 0.002                # the unit cells' mesh
+      thin_layer_cells: 1
+    search:                                # optional
+      seed: 0
+      keep: 5                              # designs listed
+      generations: 12
+      population: 6                        # per varied parameter (scipy's popsize)
+
+Every mistake raises :class:`DesignError` with one line ``<file>: <key path>: <problem>``.
+"""
+
+from dataclasses import dataclass, field, replace
+import itertools
+import math
+from pathlib import Path
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from softseq_ros.fem.assembly import pair_metrics
+from softseq_ros.quasistatic.sequence import SEQUENCE_TYPES, sequence_type
+from softseq_ros.scene.design import (
+    Design,
+    DesignError,
+    Material,
+    cache_path,
+    design_path,
+    load_design,
+    with_changes,
+)
+from softseq_ros.scene.validation import SCENE_NAME, SEGMENT_NAME, Context, SceneError, read_yaml
+
+VARIABLES = ('membrane_thickness_m', 'wall_thickness_m', 'membrane_length_m')
+DEFAULT_MAX_INJECTED_M3 = 6.5e-5
+# Volume samples per unit-cell curve when it is interpolated.
+CURVE_SAMPLES = 241
+# A design whose sequence or leader is wrong scores at least this (a met design scores < n).
+MISMATCH_PENALTY = 100.0
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """A target value and how far from it still meets the target (same unit)."""
+
+    value: float
+    tolerance: float
+
+    def error(self, got: float | None) -> float:
+        """Distance in tolerances (inf when there is nothing to compare)."""
+        return math.inf if got is None else (got - self.value) / self.tolerance
+
+
+@dataclass(frozen=True)
+class Target:
+    """What the assembled pair must do."""
+
+    sequence: str
+    leader: str | None = None
+    switch: Tolerance | None = None
+    plateau: Tolerance | None = None
+    plateau_from: Tolerance | None = None
+    tip_distance: Tolerance | None = None
+    tip_at_m3: float | None = None
+    max_injected_m3: float = DEFAULT_MAX_INJECTED_M3
+
+
+@dataclass(frozen=True)
+class SegmentSpace:
+    """One segment: its base design and the ranges of what may vary."""
+
+    name: str
+    design: Design
+    ranges: dict[str, tuple[float, float]]
+
+    @property
+    def varied(self) -> list[str]:
+        """The parameters with a range of more than one value."""
+        return [k for k, (lo, hi) in self.ranges.items() if hi > lo]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A loaded, checked ``softseq design`` file."""
+
+    name: str
+    segments: list[SegmentSpace]
+    materials: list[Material]
+    target: Target
+    points: int = 3
+    element_size_m: float = 0.002
+    thin_layer_cells: int = 1
+    seed: int = 0
+    keep: int = 5
+    generations: int = 12
+    population: int = 6
+    path: Path | None = None
+
+
+def _tolerance(ctx: Context, raw: object, key: str, gt: float | None = None) -> Tolerance:
+    values = ctx.mapping(raw, key, ('value', 'tolerance'))
+    value = ctx.number(values['value'], f'{key}.value', gt=gt)
+    tolerance = ctx.number(values['tolerance'], f'{key}.tolerance', gt=0.0)
+    return Tolerance(value, tolerance)
+
+
+def problem_from_dict(data: object, path: str | Path | None = None) -> Problem:
+    """Check a parsed problem file; DesignError with one line on any mistake."""
+    shown = str(path) if path is not None else '<design problem>'
+    folder = Path(path).parent if path is not None else Path('.')
+    ctx = Context(shown, folder)
+    try:
+        raw = ctx.mapping(data, '', ('name', 'segments', 'target'),
+                          ('materials', 'grid', 'search', 'description'))
+        name = ctx.text(raw['name'], 'name')
+        if not SCENE_NAME.match(name):
+            raise ctx.error('name', f'must start with a letter or digit and hold only letters, '
+                                    f'digits, _, - and ., got {name!r}')
+        items = ctx.sequence(raw['segments'], 'segments')
+        if len(items) != 2:
+            raise ctx.error('segments', f'must list two segments, base to tip, got {len(items)}')
+        segments = []
+        for index, item in enumerate(items):
+            key = f'segments[{index}]'
+            entry = ctx.mapping(item, key, ('name', 'design'), ('vary',))
+            seg_name = ctx.text(entry['name'], f'{key}.name')
+            if not SEGMENT_NAME.match(seg_name):
+                raise ctx.error(f'{key}.name', f'must be a letter then letters, digits or _, '
+                                               f'got {seg_name!r}')
+            design_name = ctx.text(entry['design'], f'{key}.design')
+            candidate = folder / design_name
+            try:
+                design = load_design(candidate if candidate.is_file()
+                                     else design_path(design_name))
+            except DesignError as err:
+                raise ctx.error(f'{key}.design', str(err)) from None
+            vary = ctx.mapping(entry.get('vary') or {}, f'{key}.vary', (), VARIABLES)
+            ranges = {}
+            for variable in VARIABLES:
+                where = f'{key}.vary.{variable}'
+                if variable not in vary:
+                    continue
+                bounds = ctx.sequence(vary[variable], where)
+                if len(bounds) != 2:
+                    raise ctx.error(where, f'must be [low, high], got {bounds!r}')
+                lo = ctx.number(bounds[0], f'{where}[0]', gt=0.0)
+                hi = ctx.number(bounds[1], f'{where}[1]', gt=0.0)
+                if hi < lo:
+                    raise ctx.error(where, f'high ({hi:g}) is below low ({lo:g})')
+                ranges[variable] = (lo, hi)
+                for value in (lo, hi):   # the design file's own checks at both ends
+                    try:
+                        with_changes(design, {f'geometry.{variable}': value})
+                    except DesignError as err:
+                        problem = str(err).split(': ', 2)[-1]
+                        raise ctx.error(where, f'{value:g} is no valid design: {problem}') \
+                            from None
+            segments.append(SegmentSpace(seg_name, design, ranges))
+        if segments[0].name == segments[1].name:
+            raise ctx.error('segments[1].name', f'{segments[1].name!r} is taken by the first')
+        materials = []
+        if raw.get('materials') is not None:
+            listed = ctx.sequence(raw['materials'], 'materials')
+            if not listed:
+                raise ctx.error('materials', 'must list at least one material fit')
+            for index, item in enumerate(listed):
+                ctx.material(item, f'materials[{index}]')
+                materials.append(Material(law=item['law'],
+                                          params={k: v for k, v in item.items() if k != 'law'}))
+        else:
+            first, second = (s.design.material for s in segments)
+            if first != second:
+                raise ctx.error('materials', 'the two designs have different materials; list '
+                                             'the fits to choose from (both segments share one)')
+            materials = [first]
+        target = _target(ctx, raw['target'], [s.name for s in segments])
+        grid = ctx.mapping(raw.get('grid') or {}, 'grid', (),
+                           ('points', 'element_size_m', 'thin_layer_cells'))
+        points = ctx.integer(grid.get('points', 3), 'grid.points', ge=2)
+        if points > 6:
+            raise ctx.error('grid.points', f'must be at most 6 (a coarse grid: the '
+                                           f'interpolation does the rest), got {points}')
+        element = ctx.number(grid.get('element_size_m', 0.002), 'grid.element_size_m', gt=0.0)
+        thin = ctx.integer(grid.get('thin_layer_cells', 1), 'grid.thin_layer_cells', ge=1)
+        for segment in segments:   # the mesh settings as a design file checks them
+            try:
+                with_changes(segment.design, {'mesh.element_size_m': element,
+                                              'mesh.thin_layer_cells': thin})
+            except DesignError as err:
+                raise ctx.error('grid', str(err).split(': ', 2)[-1]) from None
+        search = ctx.mapping(raw.get('search') or {}, 'search', (),
+                             ('seed', 'keep', 'generations', 'population'))
+        seed = ctx.integer(search.get('seed', 0), 'search.seed', ge=0)
+        keep = ctx.integer(search.get('keep', 5), 'search.keep', ge=1)
+        generations = ctx.integer(search.get('generations', 12), 'search.generations', ge=1)
+        population = ctx.integer(search.get('population', 6), 'search.population', ge=2)
+        if not any(s.varied for s in segments) and len(materials) == 1:
+            raise ctx.error('segments', 'nothing to vary: give a [low, high] range under vary, '
+                                        'or several materials')
+    except DesignError:
+        raise
+    except SceneError as err:
+        raise DesignError(str(err)) from None
+    return Problem(name=name, segments=segments, materials=materials, target=target,
+                   points=points, element_size_m=element, thin_layer_cells=thin, seed=seed,
+                   keep=keep, generations=generations, population=population,
+                   path=Path(path) if path is not None else None)
+
+
+def _target(ctx: Context, value: object, names: list[str]) -> Target:
+    raw = ctx.mapping(value, 'target', ('sequence',),
+                      ('leader', 'switch_injected_m3', 'plateau_pressure_pa', 'plateau_from_m3',
+                       'tip_distance_m', 'max_injected_m3'))
+    sequence = ctx.text(raw['sequence'], 'target.sequence')
+    if sequence not in SEQUENCE_TYPES:
+        raise ctx.error('target.sequence', f'unknown sequence type {sequence!r}; expected one '
+                                           f'of {", ".join(SEQUENCE_TYPES)}')
+    top = ctx.number(raw.get('max_injected_m3', DEFAULT_MAX_INJECTED_M3),
+                     'target.max_injected_m3', gt=0.0)
+    leader = None
+    if raw.get('leader') is not None:
+        leader = ctx.text(raw['leader'], 'target.leader')
+        if leader not in names:
+            raise ctx.error('target.leader', f'{leader!r} is none of the segments '
+                                             f'({", ".join(names)})')
+    switch = plateau = plateau_from = tip = None
+    tip_at = None
+    if raw.get('switch_injected_m3') is not None:
+        switch = _tolerance(ctx, raw['switch_injected_m3'], 'target.switch_injected_m3', gt=0.0)
+        if not switch.value < top:
+            raise ctx.error('target.switch_injected_m3.value',
+                            f'must be below target.max_injected_m3 ({top:g}), got '
+                            f'{switch.value:g}')
+        if sequence == 'none':
+            raise ctx.error('target.switch_injected_m3', "a 'none' sequence has no switch")
+    if raw.get('plateau_pressure_pa') is not None:
+        plateau = _tolerance(ctx, raw['plateau_pressure_pa'], 'target.plateau_pressure_pa',
+                             gt=0.0)
+    if raw.get('plateau_from_m3') is not None:
+        plateau_from = _tolerance(ctx, raw['plateau_from_m3'], 'target.plateau_from_m3', gt=0.0)
+        if not plateau_from.value <= top:
+            raise ctx.error('target.plateau_from_m3.value',
+                            f'must be at most target.max_injected_m3 ({top:g}), got '
+                            f'{plateau_from.value:g}')
+    if raw.get('tip_distance_m') is not None:
+        key = 'target.tip_distance_m'
+        entry = ctx.mapping(raw['tip_distance_m'], key, ('injected_m3', 'value', 'tolerance'))
+        tip_at = ctx.number(entry['injected_m3'], f'{key}.injected_m3', gt=0.0)
+        if tip_at > top:
+            raise ctx.error(f'{key}.injected_m3', f'must be at most target.max_injected_m3 '
+                                                  f'({top:g}), got {tip_at:g}')
+        tip = _tolerance(ctx, {k: entry[k] for k in ('value', 'tolerance')}, key, gt=0.0)
+    return Target(sequence=sequence, leader=leader, switch=switch, plateau=plateau,
+                  plateau_from=plateau_from, tip_distance=tip, tip_at_m3=tip_at,
+                  max_injected_m3=top)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Load and check a problem file; DesignError with one line."""
+    path = Path(path)
+    if not path.is_file():
+        raise DesignError(f'{path}: design problem file not found')
+    try:
+        data = read_yaml(path, str(path))
+    except SceneError as err:
+        raise DesignError(str(err).replace('scene file', 'design problem file')) from None
+    return problem_from_dict(data, path)
+
+
+# --- the grid of unit cells ------------------------------------------------------------------
+
+def cell_design(problem: Problem, segment: SegmentSpace, material: Material,
+                values: dict[str, float]) -> Design:
+    """The unit-cell design of a segment at these parameter values, on the search's mesh."""
+    base = replace(segment.design, material=material)
+    changes = {f'geometry.{k}': float(v) for k, v in values.items()}
+    changes.update({'mesh.model': 'unit_cell', 'mesh.element_size_m': problem.element_size_m,
+                    'mesh.thin_layer_cells': problem.thin_layer_cells,
+                    'volume.max_injected_m3': problem.target.max_injected_m3})
+    return with_changes(base, changes)
+
+
+def grid_axes(problem: Problem, segment: SegmentSpace) -> dict[str, np.ndarray]:
+    """Grid values of each varied parameter of a segment."""
+    return {k: np.linspace(*segment.ranges[k], problem.points) for k in segment.varied}
+
+
+def grid_designs(problem: Problem) -> list[tuple[int, int, tuple[int, ...], Design]]:
+    """Every grid point: (segment index, material index, grid index, unit-cell design)."""
+    out = []
+    for s, segment in enumerate(problem.segments):
+        axes = grid_axes(problem, segment)
+        for m, material in enumerate(problem.materials):
+            for index in itertools.product(*(range(len(v)) for v in axes.values())):
+                values = {k: axes[k][i] for k, i in zip(axes, index)}
+                out.append((s, m, index, cell_design(problem, segment, material, values)))
+    return out
+
+
+def corner_designs(problem: Problem) -> list[tuple[int, int, str, Design]]:
+    """Each segment's softest and stiffest corner, per material: (segment, material, which)."""
+    out = []
+    for s, segment in enumerate(problem.segments):
+        for m, material in enumerate(problem.materials):
+            for which in ('lowest', 'highest'):
+                values = {}
+                for k in segment.varied:
+                    lo, hi = segment.ranges[k]
+                    # Thicker membranes and walls stiffen; a longer membrane softens.
+                    stiff = hi if k != 'membrane_length_m' else lo
+                    soft = lo if k != 'membrane_length_m' else hi
+                    values[k] = stiff if which == 'highest' else soft
+                out.append((s, m, which, cell_design(problem, segment, material, values)))
+    return out
+
+
+def grid_table_job(design: Design) -> str:
+    """Run one unit cell (in a worker): its table's text."""
+    import os
+    import tempfile
+
+    from softseq_ros.fem.table import run_design, write_table
+
+    os.environ.setdefault('OMP_NUM_THREADS', '1')
+    result = run_design(design)
+    with tempfile.TemporaryDirectory() as folder:
+        return write_table(result, Path(folder) / 'table.csv').read_text()
+
+
+def ensure_tables(designs: list[Design], cache_dir: Path | None, workers: int,
+                  scheduler: str | None, progress: Callable[[str], None] | None,
+                  what: str) -> tuple[dict[str, Path], int]:
+    """The cached table of every design, computing the missing ones; (paths, FEM runs)."""
+    from softseq_ros.parallel import run_jobs
+
+    paths = {d.digest(): cache_path(d, cache_dir) for d in designs}
+    missing = {d.digest(): d for d in designs if not paths[d.digest()].is_file()}
+    todo = list(missing.values())
+    if todo:
+        def on_done(done: int, total: int, text: str) -> None:
+            if progress is not None:
+                progress(f'{what}: {done}/{total} unit-cell tables computed')
+
+        texts = run_jobs(grid_table_job, todo, workers=workers,
+                         backend='dask' if scheduler else 'processes', scheduler=scheduler,
+                         progress=on_done, name=lambda d: f'design {d.name} ({d.digest()})')
+        for design, text in zip(todo, texts):
+            path = paths[design.digest()]
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix('.csv.tmp')
+            tmp.write_text(text)
+            tmp.replace(path)
+    elif progress is not None:
+        progress(f'{what}: {len(designs)} unit-cell tables from the cache')
+    return paths, len(todo)
+
+
+# --- interpolation -------------------------------------------------------------------------
+
+def _membranes(design: Design, values: dict[str, float]) -> int:
+    g = design.geometry
+    length = values.get('membrane_length_m', g.membrane_length_m)
+    return max(1, round(g.length_m / (g.wall_length_m + length)))
+
+
+def _read_cell(path: Path, design: Design) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """A unit-cell table as (cell rest volume, cell injected volumes, pressures, curvatures)."""
+    from softseq_ros.scene.tables import read_table
+
+    table = read_table(path, name='cell', length=design.geometry.length_m)
+    factor = 4.0 * design.geometry.membranes
+    volumes = table.volumes / factor
+    return volumes[0], volumes - volumes[0], table.pressures, table.curvatures
+
+
+@dataclass
+class SegmentFamily:
+    """A segment's unit-cell curves over its parameter grid (one material), interpolated."""
+
+    segment: SegmentSpace
+    axes: dict[str, np.ndarray]
+    rest: Any        # interpolant of the cell's rest volume
+    curves: Any      # interpolant of (pressures, curvatures) at the cell volumes ``cell_u``
+    cell_u: np.ndarray
+
+    @classmethod
+    def from_tables(cls, segment: SegmentSpace, axes: dict[str, np.ndarray],
+                    tables: dict[tuple[int, ...], tuple[Path, Design]]) -> 'SegmentFamily':
+        """Build from the grid's tables (index -> (path, design))."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        cells = {index: _read_cell(path, design) for index, (path, design) in tables.items()}
+        reach = min(u[-1] for _, u, _, _ in cells.values())
+        cell_u = np.linspace(0.0, reach, CURVE_SAMPLES)
+        shape = tuple(len(v) for v in axes.values())
+        rest = np.zeros(shape)
+        curves = np.zeros(shape + (2 * CURVE_SAMPLES,))
+        for index, (v0, u, p, k) in cells.items():
+            rest[index] = v0
+            curves[index] = np.concatenate([np.interp(cell_u, u, p), np.interp(cell_u, u, k)])
+        if not shape:   # nothing varied: one table
+            return cls(segment, axes, lambda x: np.array([rest]),
+                       lambda x: curves[None, :], cell_u)
+        grid = tuple(axes.values())
+        return cls(segment, axes, RegularGridInterpolator(grid, rest),
+                   RegularGridInterpolator(grid, curves), cell_u)
+
+    def build(self, values: dict[str, float], name: str | None = None) -> Any:
+        """The interpolated segment (a TabulatedSegment) at these parameter values."""
+        from softseq_ros.segments.models import TabulatedSegment
+
+        point = np.array([[values[k] for k in self.axes]]) if self.axes else None
+        rest = float(self.rest(point)[0])
+        curves = self.curves(point)[0]
+        factor = 4.0 * _membranes(self.segment.design, values)
+        n = self.cell_u.size
+        return TabulatedSegment(name or self.segment.name, self.segment.design.geometry.length_m,
+                                factor * (rest + self.cell_u), curves[:n], curves[n:],
+                                source=f'interpolated {self.segment.name}')
+
+
+# --- the objective -------------------------------------------------------------------------
+
+@dataclass
+class Evaluation:
+    """One candidate pair: its parameters, predicted numbers, score and whether it meets."""
+
+    material: int
+    values: list[dict[str, float]]
+    metrics: dict[str, Any]
+    score: float
+    meets: bool
+    errors: dict[str, float] = field(default_factory=dict)
+
+
+def inflation_sequence(metrics: dict[str, Any]) -> str:
+    """The sequence type from the inflation path alone (no snap: the same path back)."""
+    from softseq_ros.fem.assembly import share_of_inflow
+
+    path = metrics['path']
+    return sequence_type(bool(path.events), 0.0, 1.0, share_of_inflow(path))
+
+
+def judge(target: Target, metrics: dict[str, Any], sequence: str
+          ) -> tuple[float, bool, dict[str, float]]:
+    """Score (sum of squared errors in tolerances, plus penalties) and whether it meets."""
+    errors: dict[str, float] = {}
+    score = 0.0
+    meets = True
+    if sequence != target.sequence:
+        score += MISMATCH_PENALTY
+        meets = False
+    if target.leader is not None and metrics['leader'] != target.leader:
+        score += MISMATCH_PENALTY
+        meets = False
+    checks = [('switch_injected_m3', target.switch, metrics.get('switch_injected_m3')),
+              ('plateau_pressure_pa', target.plateau, metrics.get('plateau_pressure_pa')),
+              ('plateau_from_m3', target.plateau_from, metrics.get('plateau_from_m3'))]
+    if target.tip_distance is not None:
+        checks.append(('tip_distance_m', target.tip_distance, metrics.get('tip_distance_m')))
+    for key, tolerance, got in checks:
+        if tolerance is None:
+            continue
+        error = tolerance.error(got)
+        errors[key] = error
+        score += min(error * error, MISMATCH_PENALTY)
+        meets = meets and abs(error) <= 1.0
+    return score, meets, errors
+
+
+def predict(target: Target, segments: list[Any], full: bool = False) -> dict[str, Any]:
+    """The assembly's numbers for a pair (``full``: classified from inflation and deflation)."""
+    volumes = (target.tip_at_m3 * 1e6,) if target.tip_at_m3 is not None else ()
+    metrics = pair_metrics(segments, target.max_injected_m3, samples=401,
+                           with_sequence=full, report_volumes_ml=volumes)
+    if target.tip_at_m3 is not None:
+        i = int(np.argmin(np.abs(metrics['history_m3'] - target.tip_at_m3)))
+        metrics['tip_distance_m'] = float(np.hypot(*metrics['tip_m'][i]))
+    if not full:
+        metrics['sequence'] = inflation_sequence(metrics)
+    return metrics
+
+
+# --- the search ----------------------------------------------------------------------------
+
+@dataclass
+class SearchResult:
+    """What ``softseq design`` found."""
+
+    problem: Problem
+    ranked: list[Evaluation]
+    evaluations: int
+    fem_runs: int
+    grid_tables: int
+    verification: Evaluation | None
+    verified: bool
+    timings: dict[str, float]
+    reach: dict[str, tuple[float, float]]
+
+
+class ReachError(DesignError):
+    """A target outside what the parameter ranges can reach."""
+
+
+def check_reach(problem: Problem, cache_dir: Path | None, workers: int,
+                scheduler: str | None, progress: Callable[[str], None] | None
+                ) -> tuple[dict[str, tuple[float, float]], int]:
+    """The plateau pressures the ranges reach (from the corners); ReachError outside them."""
+    from softseq_ros.scene.tables import read_table
+
+    corners = corner_designs(problem)
+    paths, runs = ensure_tables([d for *_, d in corners], cache_dir, workers, scheduler,
+                                progress, 'reach (corners)')
+    # Softer segments give a lower equilibrium pressure at every total volume: the pair of
+    # softest corners has the lowest plateau any pair in the box has, the stiffest the highest.
+    plateaus = {}
+    for m in range(len(problem.materials)):
+        for which in ('lowest', 'highest'):
+            segments = [read_table(paths[d.digest()], name=problem.segments[s].name,
+                                   length=d.geometry.length_m)
+                        for s, m2, w, d in corners if m2 == m and w == which]
+            plateaus[(m, which)] = predict(problem.target, segments)['plateau_pressure_pa']
+    low = min(v for (m, w), v in plateaus.items() if w == 'lowest')
+    high = max(v for (m, w), v in plateaus.items() if w == 'highest')
+    reach = {'plateau_pressure_pa': (low, high)}
+    plateau = problem.target.plateau
+    if plateau is not None:
+        if plateau.value - plateau.tolerance > high:
+            raise _unreachable(problem, plateau, high, 'highest')
+        if plateau.value + plateau.tolerance < low:
+            raise _unreachable(problem, plateau, low, 'lowest')
+    return reach, runs
+
+
+def _unreachable(problem: Problem, plateau: Tolerance, bound: float, which: str) -> ReachError:
+    """The one-line refusal of a plateau beyond the pair of ``which`` ('highest') corners."""
+    side, limit, corner, end = (('above', 'at most', 'stiffest', 'upper')
+                                if which == 'highest' else
+                                ('below', 'at least', 'softest', 'lower'))
+    corners = '; '.join(f'{segment.name}: {_corner_text(segment, which)}'
+                        for segment in problem.segments if segment.varied)
+    return ReachError(
+        f'{problem.path or "<design problem>"}: target.plateau_pressure_pa: '
+        f'{plateau.value:g} Pa (within {plateau.tolerance:g}) is {side} what the ranges reach: '
+        f'{limit} {bound:.0f} Pa, both segments at their {corner} corners ({corners}); widen '
+        f'those {end} bounds')
+
+
+def _corner_text(segment: SegmentSpace, which: str) -> str:
+    parts = []
+    for k in segment.varied:
+        lo, hi = segment.ranges[k]
+        upper = (which == 'highest') != (k == 'membrane_length_m')
+        parts.append(f'{k} {hi if upper else lo:g}, its {"upper" if upper else "lower"} bound')
+    return '; '.join(parts) or 'nothing varied'
+
+
+def _vector_to_values(problem: Problem, x: np.ndarray) -> list[dict[str, float]]:
+    values, i = [], 0
+    for segment in problem.segments:
+        current = {}
+        for k in segment.varied:
+            current[k] = float(x[i])
+            i += 1
+        values.append(current)
+    return values
+
+
+def _watcher(problem: Problem, evaluations: list[Evaluation], label: str,
+             progress: Callable[[str], None] | None) -> Callable[[Any], bool]:
+    """Differential evolution's callback: progress, and a stop once the target is well met."""
+    generation = {'n': 0}
+
+    def callback(intermediate_result: Any) -> bool:
+        generation['n'] += 1
+        met = sum(e.meets for e in evaluations)
+        if progress is not None:
+            progress(f'search ({label}): generation {generation["n"]}, best score '
+                     f'{float(intermediate_result.fun):.3g}, {len(evaluations)} pairs '
+                     f'assembled, {met} meet the target')
+        # Enough designs meet the target and the best is well inside every tolerance.
+        return float(intermediate_result.fun) < 0.05 and met >= problem.keep
+
+    return callback
+
+
+def search(problem: Problem, cache_dir: Path | None = None, workers: int = 1,
+           scheduler: str | None = None, progress: Callable[[str], None] | None = None,
+           verify: bool = True) -> SearchResult:
+    """Reach, grid, interpolation, optimisation and verification (see the module notes)."""
+    from scipy.optimize import differential_evolution
+
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    reach, corner_runs = check_reach(problem, cache_dir, workers, scheduler, progress)
+    timings['reach_s'] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    grid = grid_designs(problem)
+    paths, grid_runs = ensure_tables([d for *_, d in grid], cache_dir, workers, scheduler,
+                                     progress, 'grid')
+    timings['grid_s'] = time.perf_counter() - start
+
+    families: dict[tuple[int, int], SegmentFamily] = {}
+    for s, segment in enumerate(problem.segments):
+        axes = grid_axes(problem, segment)
+        for m in range(len(problem.materials)):
+            tables = {index: (paths[d.digest()], d) for s2, m2, index, d in grid
+                      if s2 == s and m2 == m}
+            families[(s, m)] = SegmentFamily.from_tables(segment, axes, tables)
+
+    bounds = [segment.ranges[k] for segment in problem.segments for k in segment.varied]
+    evaluations: list[Evaluation] = []
+    start = time.perf_counter()
+
+    def evaluate(material: int, values: list[dict[str, float]]) -> Evaluation:
+        segments = [families[(s, material)].build(v) for s, v in enumerate(values)]
+        try:
+            metrics = predict(problem.target, segments)
+        except Exception as err:  # noqa: BLE001 (a pair the assembly cannot solve: no design)
+            return Evaluation(material, values, {'error': str(err)}, 10 * MISMATCH_PENALTY,
+                              False)
+        score, meets, errors = judge(problem.target, metrics, metrics['sequence'])
+        evaluation = Evaluation(material, values, metrics, score, meets, errors)
+        evaluations.append(evaluation)
+        return evaluation
+
+    for m, material in enumerate(problem.materials):
+        label = f'{material.law} ' + ', '.join(f'{k} {v:g}' for k, v in material.params.items())
+        if not bounds:
+            evaluate(m, [{} for _ in problem.segments])
+            continue
+        def objective(x: np.ndarray, m: int = m) -> float:
+            return evaluate(m, _vector_to_values(problem, x)).score
+
+        differential_evolution(objective, bounds, seed=problem.seed + m,
+                               popsize=problem.population, maxiter=problem.generations,
+                               init='sobol', polish=False, tol=0.0, atol=0.0,
+                               callback=_watcher(problem, evaluations, label, progress),
+                               updating='immediate')
+    timings['search_s'] = time.perf_counter() - start
+
+    ranked: list[Evaluation] = []
+    seen = set()
+    for evaluation in sorted((e for e in evaluations if e.meets), key=lambda e: e.score):
+        key = (evaluation.material, tuple(round(v, 7) for values in evaluation.values
+                                          for v in values.values()))
+        if key not in seen:
+            seen.add(key)
+            ranked.append(evaluation)
+        if len(ranked) == problem.keep:
+            break
+
+    verification, verified, verify_runs = None, False, 0
+    start = time.perf_counter()
+    candidate = ranked[0] if ranked else (min(evaluations, key=lambda e: e.score)
+                                          if evaluations else None)
+    if verify and candidate is not None:
+        designs = [cell_design(problem, segment, problem.materials[candidate.material],
+                               candidate.values[s])
+                   for s, segment in enumerate(problem.segments)]
+        direct, verify_runs = ensure_tables(designs, cache_dir, workers, scheduler, progress,
+                                            'verification')
+        from softseq_ros.scene.tables import read_table
+
+        segments = [read_table(direct[d.digest()], name=segment.name,
+                               length=d.geometry.length_m)
+                    for d, segment in zip(designs, problem.segments)]
+        metrics = predict(problem.target, segments, full=True)
+        score, meets, errors = judge(problem.target, metrics, metrics['sequence'])
+        verification = Evaluation(candidate.material, candidate.values, metrics, score, meets,
+                                  errors)
+        verified = meets
+    timings['verify_s'] = time.perf_counter() - start
+    return SearchResult(problem=problem, ranked=ranked, evaluations=len(evaluations),
+                        fem_runs=corner_runs + grid_runs + verify_runs,
+                        grid_tables=len(grid), verification=verification, verified=verified,
+                        timings=timings, reach=reach)
+
+
+# --- the command ---------------------------------------------------------------------------
+
+def values_text(values: dict[str, float]) -> str:
+    """Parameter values for people: millimetres."""
+    return ', '.join(f'{k.removesuffix("_m")} {v * 1e3:.3f} mm' for k, v in values.items()) \
+        or 'as designed'
+
+
+def numbers_text(metrics: dict[str, Any], target: Target) -> str:
+    """A pair's sequence, leader, switch, plateau and tip in one line."""
+    switch = metrics.get('switch_injected_m3')
+    parts = [f'{metrics.get("sequence")}', f'{metrics.get("leader")} leads',
+             f'switch {switch * 1e6:.1f} mL' if switch is not None else 'no switch',
+             f'plateau {metrics.get("plateau_pressure_pa", float("nan")):.0f} Pa from '
+             f'{metrics.get("plateau_from_m3", float("nan")) * 1e6:.1f} mL']
+    if target.tip_at_m3 is not None and 'tip_distance_m' in metrics:
+        parts.append(f'tip {metrics["tip_distance_m"] * 1e3:.0f} mm from the base at '
+                     f'{target.tip_at_m3 * 1e6:g} mL')
+    return ', '.join(parts)
+
+
+def write_result_files(result: SearchResult, out: Path) -> list[Path]:
+    """Design files of the ranked pairs and results.yaml (SI) into ``out``."""
+    import yaml
+
+    out.mkdir(parents=True, exist_ok=True)
+    problem = result.problem
+    written = []
+    rows = []
+    for rank, evaluation in enumerate(result.ranked, start=1):
+        material = problem.materials[evaluation.material]
+        files = {}
+        for segment, values in zip(problem.segments, evaluation.values):
+            design = replace(segment.design, material=material)
+            if values:
+                design = with_changes(design, {f'geometry.{k}': v for k, v in values.items()})
+            data = {'name': f'{problem.name}_{rank}_{segment.name}',
+                    'description': f'found by softseq design for {problem.name} (rank {rank}): '
+                                   f'{numbers_text(evaluation.metrics, problem.target)}',
+                    'geometry': {k: v for k, v in design.geometry.__dict__.items()
+                                 if v is not None and not (k == 'skin_band_thickness_m'
+                                                           and design.geometry.wall_reading
+                                                           == 'skin_bands')},
+                    'material': {'law': material.law, **material.params},
+                    'mesh': dict(design.mesh.__dict__), 'volume': dict(design.volume.__dict__)}
+            path = out / f'{data["name"]}.yaml'
+            path.write_text(yaml.safe_dump(data, sort_keys=False))
+            written.append(path)
+            files[segment.name] = path.name
+        rows.append({'rank': rank, 'score': float(evaluation.score), 'designs': files,
+                     'parameters': {s.name: v for s, v in zip(problem.segments,
+                                                              evaluation.values)},
+                     'predicted': _plain(evaluation.metrics)})
+    summary = {'problem': str(problem.path) if problem.path else problem.name,
+               'ranked': rows, 'assembled_pairs': result.evaluations,
+               'fem_runs': result.fem_runs, 'grid_tables': result.grid_tables,
+               'timings_s': {k: round(v, 2) for k, v in result.timings.items()},
+               'reach': {k: list(v) for k, v in result.reach.items()},
+               'verified': result.verified,
+               'verification': (_plain(result.verification.metrics)
+                                if result.verification else None)}
+    path = out / 'results.yaml'
+    path.write_text('# softseq design: ranked designs (SI units, gauge pressures)\n'
+                    + yaml.safe_dump(summary, sort_keys=False))
+    written.append(path)
+    return written
+
+
+def _plain(metrics: dict[str, Any]) -> dict[str, Any]:
+    keep = ('sequence', 'leader', 'switch_injected_m3', 'plateau_pressure_pa',
+            'plateau_from_m3', 'min_share', 'tip_distance_m', 'snap_throughs')
+    return {k: (float(v) if isinstance(v, (float, np.floating)) else v)
+            for k, v in metrics.items() if k in keep}
+
+
+def run_design_command(args: Any) -> int:
+    """``softseq design PROBLEM.yaml``: exit 0 when the best design is verified, else 1."""
+    import os
+    import sys
+
+    from softseq_ros.progress import end_progress, write_progress
+
+    problem = load_problem(args.problem)
+    if args.scheduler is not None and args.workers is not None:
+        raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if workers < 1:
+        raise DesignError(f'--workers: must be >= 1, got {workers}')
+    out = args.out if args.out is not None else Path('bags') / f'design_{problem.name}'
+    stream = None if args.quiet else sys.stderr
+    start = time.perf_counter()
+    result = search(problem, cache_dir=args.cache_dir, workers=workers,
+                    scheduler=args.scheduler,
+                    progress=None if stream is None else
+                    (lambda line: write_progress(stream, line)))
+    end_progress(stream)
+    wall = time.perf_counter() - start
+    target = problem.target
+    print(f'{problem.name}: {result.evaluations} pairs assembled on {result.grid_tables} '
+          f'grid tables ({result.fem_runs} FEM runs now, the rest from the cache) in '
+          f'{wall:.1f} s')
+    if not result.ranked:
+        print('no design met the target; the closest:')
+    for rank, evaluation in enumerate(result.ranked, start=1):
+        material = problem.materials[evaluation.material]
+        print(f'{rank}. ' + '; '.join(f'{s.name}: {values_text(v)}' for s, v in
+                                      zip(problem.segments, evaluation.values))
+              + (f'; {material.law}' if len(problem.materials) > 1 else '')
+              + f' -> predicted {numbers_text(evaluation.metrics, target)}')
+    if result.verification is not None:
+        verdict = 'meets the target' if result.verified else 'does NOT meet the target'
+        print(f'verification (direct FEM of the best design): '
+              f'{numbers_text(result.verification.metrics, target)}: {verdict}')
+    written = write_result_files(result, Path(out))
+    print(f'designs and results.yaml in {Path(out)} ({len(written)} files)')
+    return 0 if result.verified else 1

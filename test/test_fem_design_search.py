@@ -1,0 +1,180 @@
+"""`softseq design` on a tiny coarse grid: a target met and verified, one refused, interpolated."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from softseq_ros.fem.design_search import (
+    SegmentFamily,
+    cell_design,
+    ensure_tables,
+    grid_axes,
+    grid_designs,
+    load_problem,
+    search,
+)
+from softseq_ros.scene.design import load_design
+from softseq_ros.scene.tables import read_table
+
+# The paper's pair on a coarse mesh; only the top membrane may change, over two grid points.
+TINY = {
+    'name': 'tiny',
+    'segments': [{'name': 'bottom', 'design': 'paper_bottom'},
+                 {'name': 'top', 'design': 'paper_top',
+                  'vary': {'membrane_thickness_m': [0.0004, 0.0006]}}],
+    'target': {'sequence': 'partial', 'leader': 'top',
+               'plateau_pressure_pa': {'value': 2500.0, 'tolerance': 200.0},
+               'max_injected_m3': 3.0e-5},
+    'grid': {'points': 2, 'element_size_m': 0.00375},
+    'search': {'generations': 4, 'population': 4, 'keep': 3},
+}
+
+
+def _problem(folder: Path, name: str = 'tiny.yaml', **changes: object) -> Path:
+    data = yaml.safe_load(yaml.safe_dump(TINY))
+    for dotted, value in changes.items():
+        node = data
+        *parents, leaf = dotted.split('.')
+        for key in parents:
+            node = node[int(key)] if isinstance(node, list) else node[key]
+        node[leaf] = value
+    path = folder / name
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.fixture(scope='module')
+def library(tmp_path_factory):
+    """The corners and the grid computed once, on a real local Dask cluster, into a cache."""
+    from distributed import LocalCluster
+
+    folder = tmp_path_factory.mktemp('design')
+    problem = load_problem(_problem(folder))
+    cache = folder / 'cache'
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=':0') as cluster:
+        result = search(problem, cache_dir=cache, scheduler=cluster.scheduler_address,
+                        verify=False)
+    # Two top corners (the grid's two points) and the bottom as designed: three FEM runs.
+    assert result.fem_runs == 3
+    return folder, cache
+
+
+def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, capsys):
+    from softseq_ros.cli import main
+
+    folder, cache = library
+    out = folder / 'found'
+    code = main(['design', str(_problem(folder)), '--cache-dir', str(cache), '--out', str(out),
+                 '--workers', '2', '--quiet'])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    # The grid came from the Dask cluster's cache; only the verification ran now.
+    assert '(1 FEM runs now' in printed
+    assert 'verification (direct FEM of the best design): partial, top leads' in printed
+    assert 'meets the target' in printed and 'NOT' not in printed
+    results = yaml.safe_load((out / 'results.yaml').read_text())
+    assert results['verified'] is True
+    best = results['ranked'][0]
+    thickness = best['parameters']['top']['membrane_thickness_m']
+    assert 0.0004 <= thickness <= 0.0006
+    # Predicted and verified plateau both within the target's tolerance.
+    for numbers in (best['predicted'], results['verification']):
+        assert numbers['sequence'] == 'partial' and numbers['leader'] == 'top'
+        assert abs(numbers['plateau_pressure_pa'] - 2500.0) <= 200.0
+    # The designs found are design files `softseq fem` reads.
+    top = load_design(out / best['designs']['top'])
+    assert top.geometry.membrane_thickness_m == pytest.approx(thickness)
+    assert top.material.law == 'arruda_boyce'
+
+
+def test_a_target_beyond_the_ranges_is_refused_naming_the_bound(library, capsys):
+    from softseq_ros.cli import main
+
+    folder, cache = library
+    problem = _problem(folder, 'too_stiff.yaml',
+                       **{'target.plateau_pressure_pa': {'value': 9000.0, 'tolerance': 500.0}})
+    out = folder / 'refused'
+    assert main(['design', str(problem), '--cache-dir', str(cache), '--out', str(out),
+                 '--quiet']) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('softseq design: error: ')
+    assert 'target.plateau_pressure_pa: 9000 Pa' in lines[0]
+    assert 'above what the ranges reach' in lines[0]
+    assert 'both segments at their stiffest corners (top: membrane_thickness_m 0.0006, its ' \
+        'upper bound)' in lines[0]
+    assert not out.exists()
+
+
+def test_interpolated_curve_matches_a_direct_fem_run_off_the_grid(library):
+    folder, cache = library
+    problem = load_problem(_problem(folder))
+    grid = grid_designs(problem)
+    paths, runs = ensure_tables([d for *_, d in grid], cache, 1, None, None, 'grid')
+    assert runs == 0
+    top = problem.segments[1]
+    family = SegmentFamily.from_tables(top, grid_axes(problem, top),
+                                       {i: (paths[d.digest()], d) for s, _, i, d in grid
+                                        if s == 1})
+    # Half-way between the grid points: where linear interpolation is worst.
+    design = cell_design(problem, top, problem.materials[0], {'membrane_thickness_m': 0.0005})
+    direct_path, _ = ensure_tables([design], cache, 1, None, None, 'direct')
+    direct = read_table(direct_path[design.digest()], name='top', length=0.111)
+    interpolated = family.build({'membrane_thickness_m': 0.0005})
+    assert interpolated.rest_volume == pytest.approx(direct.rest_volume, rel=1e-12)
+    volumes = direct.volumes[1:]
+    error = interpolated.pressure(volumes) / direct.pressures[1:] - 1
+    assert np.max(np.abs(error)) < 0.02
+    assert interpolated.pressures.max() == pytest.approx(direct.pressures.max(), rel=0.01)
+    assert np.max(np.abs(interpolated.curvature(volumes) - direct.curvatures[1:])) < \
+        0.01 * direct.curvatures.max()
+
+
+@pytest.mark.parametrize('change, expected', [
+    ({'target.sequence': 'spiral'}, "target.sequence: unknown sequence type 'spiral'"),
+    ({'target.leader': 'middle'}, "target.leader: 'middle' is none of the segments"),
+    ({'segments.1.vary': {'membrane_thickness_m': [0.0006, 0.0004]}},
+     'segments[1].vary.membrane_thickness_m: high (0.0004) is below low (0.0006)'),
+    ({'segments.1.vary': {'membrane_thickness_m': [0.0004, 0.02]}},
+     'segments[1].vary.membrane_thickness_m: 0.02 is no valid design'),
+    ({'segments.1.vary': {'membrane_thickness_mm': [0.4, 0.6]}},
+     'segments[1].vary.membrane_thickness_mm: wrong or missing unit suffix'),
+    ({'target.switch_injected_m3': {'value': 7e-5, 'tolerance': 5e-6}},
+     'target.switch_injected_m3.value: must be below target.max_injected_m3'),
+    ({'segments.1.design': 'no_such_design'}, 'segments[1].design: no_such_design'),
+    ({'grid.points': 20}, 'grid.points: must be at most 6'),
+])
+def test_bad_problems_are_refused_in_one_line_before_any_work(change, expected, tmp_path,
+                                                              capsys):
+    from softseq_ros.cli import main
+
+    problem = _problem(tmp_path, **change)
+    assert main(['design', str(problem), '--cache-dir', str(tmp_path / 'cache')]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], lines
+    assert not (tmp_path / 'cache').exists()
+
+
+def test_the_tip_reach_is_the_chord_of_the_backbone_and_judged_in_tolerances():
+    from softseq_ros.fem.design_search import Target, Tolerance, judge, predict
+    from softseq_ros.segments.models import TabulatedSegment
+
+    # Two segments bent at one constant curvature: the backbone is one arc of 0.222 m.
+    k = 8.0
+    volumes = np.linspace(1e-5, 5e-5, 9)
+    segments = [TabulatedSegment(name, 0.111, volumes, 1e3 + 1e8 * (volumes - 1e-5) * stiff,
+                                 np.full(volumes.size, k))
+                for name, stiff in (('bottom', 2.0), ('top', 1.0))]
+    target = Target(sequence='none', tip_distance=Tolerance(0.2, 0.005), tip_at_m3=3e-5,
+                    max_injected_m3=6e-5)
+    metrics = predict(target, segments)
+    chord = 2 * np.sin(k * 0.222 / 2) / k
+    assert metrics['tip_distance_m'] == pytest.approx(chord, rel=1e-9)
+    score, meets, errors = judge(target, metrics, metrics['sequence'])
+    assert errors['tip_distance_m'] == pytest.approx((chord - 0.2) / 0.005)
+    assert meets == (abs(chord - 0.2) <= 0.005) and metrics['sequence'] == 'none'
+    # The softer top takes two thirds of the fluid throughout: it leads, and nothing switches.
+    assert metrics['leader'] == 'top' and metrics['switch_injected_m3'] is None
