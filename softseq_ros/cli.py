@@ -282,10 +282,13 @@ def _figure_options(parser: argparse.ArgumentParser) -> None:
 
 def _compare_figure(args: argparse.Namespace) -> list[Path]:
     """compare.png: both bags' curves over each other, in the figure style asked for."""
-    from softseq_ros.analysis.compare import write_overlay
+    from softseq_ros.analysis.compare import write_overlay, write_transients_overlay
 
-    return write_overlay(args.a, args.b, args.out, args.namespace_a, args.namespace_b,
-                         _figure_style(args))
+    style = _figure_style(args)
+    return (write_overlay(args.a, args.b, args.out, args.namespace_a, args.namespace_b, style)
+            # and around each snap-through in time, when either bag has one
+            + write_transients_overlay(args.a, args.b, args.out, args.namespace_a,
+                                       args.namespace_b, style))
 
 
 def _library(args: argparse.Namespace) -> int:
@@ -498,8 +501,10 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument('--scene', help='the scene (file or shipped name) whose segments made '
                          'both bags: with it a dynamic bag also shows its lag behind the '
                          'quasi-static path')
-    compare.add_argument('--out', type=Path, help='folder for compare.md, compare.json and '
-                         'compare.png (both PV curves and volume planes over each other)')
+    compare.add_argument('--out', type=Path, help='folder for compare.md, compare.json, '
+                         'compare.png (both PV curves and volume planes over each other) and, '
+                         'when a bag has snap-throughs in time, compare_transients.png (both '
+                         'around each snap)')
     _figure_options(compare)
     compare.set_defaults(handler=_compare)
 

@@ -182,3 +182,38 @@ def test_softseq_compare_with_the_scene_shows_the_lag(fast, quasi_static, capsys
     # Measured for the dynamic bag (B), absent for the quasi-static one (A).
     assert all(line.split('|')[3].strip() == '-' and float(line.split('|')[4]) > 0.0
                for line in lag_rows)
+
+
+def test_compare_lays_both_bags_transients_over_each_other(fast, slow, quasi_static, tmp_path,
+                                                           capsys):
+    import numpy as np
+
+    from softseq_ros.analysis.compare import transients_overlay, write_transients_overlay
+    from softseq_ros.cli import main
+
+    recordings = [load_recording(bag) for _, bag in (fast, slow)]
+    overlay = transients_overlay(*recordings, ('A', 'B'))
+    assert len(overlay.windows) == 1
+    # Each bag's own stretch of recording around its own snap, as the actuator reported it:
+    # pressure and volumes as recorded, time from that snap's start.
+    for window, recording, (_, bag) in zip(overlay.windows[0], recordings, (fast, slow)):
+        event = events_in(bag)[0]
+        assert window.snap.duration_s == event['duration_s']
+        assert window.snap.start_s == pytest.approx(event['start_ns'] / 1e9, abs=1e-9)
+        assert window.time_s[0] < 0.0 < window.time_s[-1]
+        rows = np.searchsorted(recording.state_time_s, window.time_s + window.snap.start_s - 1e-9)
+        np.testing.assert_allclose(window.pressure, recording.pressure[rows])
+        np.testing.assert_allclose(window.volumes, recording.volumes[rows])
+    # The faster pump's snap starts later (in injected volume): it lags further behind.
+    assert overlay.windows[0][0].snap.injected > overlay.windows[0][1].snap.injected
+    # A quasi-static bag has no snap in time: the other's alone; two of them: no figure.
+    only_b = transients_overlay(load_recording(quasi_static), recordings[0], ('A', 'B'))
+    assert only_b.windows[0][0] is None and only_b.windows[0][1] is not None
+    assert transients_overlay(*[load_recording(quasi_static)] * 2, ('A', 'B')) is None
+    out = tmp_path / 'compare'
+    assert main(['compare', str(fast[1]), str(slow[1]), '--out', str(out),
+                 '--style', 'screen']) == 0
+    assert 'compare_transients.png' in capsys.readouterr().out
+    assert (out / 'compare_transients.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert write_transients_overlay(quasi_static, quasi_static, tmp_path / 'none') == []
+    assert not (tmp_path / 'none').exists()

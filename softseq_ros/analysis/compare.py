@@ -6,9 +6,11 @@ Values are shown in mL, kPa, mJ, mm and ms; the difference is B minus A. When ei
 dynamic (a scene with a fluid network) the table adds its transients: each snap-through's
 duration, fluid moved, which segments gave and took it, and peak exchange, and the lag
 behind the quasi-static path, which needs the scene (``-`` without it, and for a bag that has
-no such row). A metric that does not apply
-to a bag (a switch where no segment takes over, a plateau on a curve that never levels off)
-shows as ``does not apply``, with the reason under the table.
+no such row). A metric that does not apply to a bag (a switch where no segment takes over, a
+plateau on a curve that never levels off) shows as ``does not apply``, with the reason under
+the table. With an output folder, ``compare.png`` lays both bags' curves over each other, and
+``compare_transients.png`` their pressure and volume time series around each snap-through in
+time (:func:`write_transients_overlay`).
 """
 
 from dataclasses import dataclass
@@ -187,3 +189,130 @@ def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
         if skipped:
             lines += ['', f'{label} skipped:'] + [f'- {line}' for line in skipped]
     return metrics_a, metrics_b, '\n'.join(lines) + '\n'
+
+
+# ---------------------------------------------------------------- the transients of both bags
+
+TRANSIENTS_FIGURE = 'compare_transients.png'
+# Per segment, base to tip, in either bag's colour.
+SEGMENT_LINES = ('-', '--', ':', '-.')
+
+
+@dataclass(frozen=True)
+class TransientsOverlay:
+    """
+    Both bags' windows around their snap-throughs in time, paired by number (1st with 1st).
+
+    ``windows[k]``: (A's window, B's window) of snap k + 1, None where a bag has no such snap
+    (a quasi-static bag has none); each window's time runs from its own snap's start.
+    """
+
+    labels: tuple[str, str]
+    segment_names: tuple[tuple[str, ...], tuple[str, ...]]
+    windows: list[tuple[object | None, object | None]]
+
+
+def transients_overlay(recording_a: object, recording_b: object,
+                       labels: tuple[str, str]) -> TransientsOverlay | None:
+    """The windows to lay over each other; None when neither bag has a snap-through in time."""
+    from softseq_ros.analysis.figures import MAX_POINTS, MAX_TRANSIENT_SNAPS
+    from softseq_ros.analysis.transients import analyse_transients, transient_windows
+
+    windows = []
+    for recording in (recording_a, recording_b):
+        found = analyse_transients(recording)
+        windows.append(transient_windows(recording, found, MAX_TRANSIENT_SNAPS, MAX_POINTS)
+                       if found is not None else [])
+    count = max(len(w) for w in windows)
+    if not count:
+        return None
+    pairs = [tuple(w[k] if k < len(w) else None for w in windows) for k in range(count)]
+    return TransientsOverlay(labels, (recording_a.segment_names, recording_b.segment_names),
+                             pairs)
+
+
+def write_transients_overlay(bag_a: str | os.PathLike, bag_b: str | os.PathLike, out: Path,
+                             namespace_a: str | None = None, namespace_b: str | None = None,
+                             style: object | None = None, svg: bool = False) -> list[Path]:
+    """
+    ``compare_transients.png`` in ``out``: both bags around each snap-through in time.
+
+    Nothing is written (and nothing returned) when neither bag has a snap-through in time.
+    ``style``: a :class:`softseq_ros.analysis.figures.FigureStyle` (default: paper).
+    """
+    from softseq_ros.analysis.figures import PAPER
+
+    overlay = transients_overlay(load_recording(bag_a, namespace_a),
+                                 load_recording(bag_b, namespace_b),
+                                 (f'A: {Path(bag_a).name}', f'B: {Path(bag_b).name}'))
+    if overlay is None:
+        return []
+    style = style or PAPER
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
+    with style.context():
+        return plot_transients_overlay(overlay, out / TRANSIENTS_FIGURE, svg, style)
+
+
+def plot_transients_overlay(overlay: TransientsOverlay, out: Path, svg: bool = False,
+                            style: object | None = None) -> list[Path]:
+    """
+    Per snap number, gauge pressure above and segment volumes below, both bags over each other.
+
+    A colour per bag (as in ``compare.png``), a line style per segment; time from each bag's
+    own snap start (dotted), in s, or in ms when every window is shorter than 2 s.
+    """
+    from softseq_ros.analysis.figures import (
+        BAG_COLOURS,
+        GAUGE,
+        KPA,
+        ML,
+        PAPER,
+        new_figure,
+        save_figure,
+    )
+
+    style = style or PAPER
+    count = len(overlay.windows)
+    width, height = style.size(2.3 * count + 0.5, 3.8)
+    fig, axes = new_figure(width, height, 2, count,
+                           {'left': 0.6 / width, 'right': 1 - 0.15 / width, 'top': 0.9,
+                            'bottom': 0.16, 'wspace': 0.35}, sharex='col')
+    spans = [w.snap.window_s[1] - w.snap.window_s[0]
+             for pair in overlay.windows for w in pair if w is not None]
+    scale, unit = (1e3, 'ms') if max(spans) < 2.0 else (1.0, 's')
+    for column, pair in enumerate(overlay.windows):
+        top, bottom = axes[0, column], axes[1, column]
+        said = []
+        for window, label, names, colour in zip(pair, overlay.labels, overlay.segment_names,
+                                                BAG_COLOURS):
+            if window is None:
+                said.append(f'{label[0]}: none')
+                continue
+            time = window.time_s * scale
+            top.plot(time, window.pressure * KPA, '-', lw=1.2, color=colour, label=label)
+            for j, name in enumerate(names):
+                bottom.plot(time, window.volumes[:, j] * ML, SEGMENT_LINES[j % len(SEGMENT_LINES)],
+                            lw=1.1, color=colour, label=f'{label[0]}: {name}')
+            duration = window.snap.duration_s
+            said.append(f'{label[0]}: ' + (f'{duration:.3g} s' if duration >= 1.0
+                                           else f'{duration * 1e3:.3g} ms'))
+        for ax in (top, bottom):
+            ax.axvline(0.0, color='0.5', lw=0.8, ls=':')
+            ax.grid(alpha=0.3)
+        top.set_title(f'snap {column + 1}, 10-90 % ' + ', '.join(said), fontsize=7)
+        bottom.set_xlabel(f"time from the snap's start [{unit}]")
+        if column == 0:
+            top.set_ylabel(GAUGE)
+            bottom.set_ylabel('segment volume [mL]')
+            top.legend(loc='best')
+    handles, labels = axes[1, 0].get_legend_handles_labels()
+    for column in range(1, count):
+        for handle, label in zip(*axes[1, column].get_legend_handles_labels()):
+            if label not in labels:
+                handles.append(handle)
+                labels.append(label)
+    fig.legend(handles, labels, loc='lower center', ncol=min(len(labels), 4))
+    if not style.paper:
+        fig.suptitle('Both recordings around each snap-through in time', fontsize=10)
+    return save_figure(fig, out, svg, style)
