@@ -7,6 +7,7 @@ bifurcation deterministically, the segment nearest the base taking the larger sh
 """
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -160,18 +161,88 @@ def test_fewer_than_two_segments_are_refused():
         EquilibriumMap(linear_pair()[:1])
 
 
-def test_tables_in_other_units_are_refused_naming_the_column_and_the_fix(tmp_path):
-    from softseq_ros.segments.models import TableError
+# (case, rows, the column and words the one line must hold)
+OTHER_UNITS = [
+    ('mL', '11.0,0,0\n30.0,9000,1\n60.0,9500,2', 'volume_m3: .*in mL\\?'),
+    # A small rest volume in mL (0.5 mL) used to pass: only a rest volume above 1 m^3 was seen.
+    ('mL_small_rest', '0.5,0,0\n3.0,9000,1\n6.0,9500,2', 'volume_m3: the largest volume is 6 m'),
+    ('MPa', '1.1e-5,0,0\n3.0e-5,0.009,1\n6.0e-5,0.0095,2', 'pressure_pa: .*kPa or MPa\\?'),
+    # kPa used to pass unless every pressure was within 1 Pa of zero.
+    ('kPa', '1.1e-5,0,0\n3.0e-5,9.0,1\n6.0e-5,9.5,2', 'pressure_pa: .*largest 9.5 Pa.*in kPa'),
+    ('kPa_vacuum', '1.1e-5,0,0\n3.0e-5,-40,1\n6.0e-5,-60,2', 'pressure_pa: .*largest 60 Pa'),
+    # Pressures of 1e307 Pa used to end in scipy's "`dydx` must contain only finite values".
+    ('x1e304', '1.1e-5,0,0\n3.0e-5,9.0e307,1\n6.0e-5,9.5e307,2',
+     'pressure_pa: a pressure of 9.5e\\+307 Pa is beyond 1e\\+09 Pa'),
+]
 
-    header = 'volume_m3,pressure_pa,curvature_per_m\n'
-    in_ml = tmp_path / 'in_ml.csv'
-    in_ml.write_text(header + '11.0,0,0\n30.0,9000,1\n60.0,9500,2\n')
-    with pytest.raises(TableError, match=r'in_ml\.csv: column volume_m3: .*in mL\?'):
-        read_table(in_ml, length=0.1)
-    in_mpa = tmp_path / 'in_mpa.csv'
-    in_mpa.write_text(header + '1.1e-5,0,0\n3.0e-5,0.009,1\n6.0e-5,0.0095,2\n')
-    with pytest.raises(TableError, match=r'in_mpa\.csv: column pressure_pa: .*kPa or MPa\?'):
-        read_table(in_mpa, length=0.1)
+
+@pytest.mark.parametrize('rows, words', [case[1:] for case in OTHER_UNITS],
+                         ids=[case[0] for case in OTHER_UNITS])
+def test_tables_in_other_units_are_refused_naming_the_column_and_the_fix(tmp_path, rows, words):
+    path = write_table(tmp_path, 'other.csv', HEADER + rows + '\n')
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')   # no numpy or scipy warning on the way
+        with pytest.raises(TableError, match=r'other\.csv: column ' + words):
+            read_table(path, length=0.1)
+
+
+def test_the_unit_checks_keep_real_segments_at_their_edges(tmp_path):
+    # 100 Pa at the peak and a volume of 100 times the cubed length are still taken.
+    read_table(write_table(tmp_path, 'soft.csv', HEADER + '1.0e-6,0,0\n5.0e-2,100,1\n'),
+               length=0.1)
+    read_table(write_table(tmp_path, 'stiff.csv', HEADER + '1.0e-6,0,0\n2.0e-6,1.0e9,1\n'),
+               length=0.1)
+    # The stated limit: a table in mL whose numbers stay below 100 times the cubed length
+    # (6 uL in a segment of 10 cm, read as 6 L) is not seen.
+    read_table(write_table(tmp_path, 'micro.csv', HEADER + '0.001,0,0\n0.006,9500,1\n'),
+               length=0.1)
+
+
+def _balloon_scene(tmp_path, material: dict, **segment) -> str:
+    import yaml
+
+    from softseq_ros.scene.paths import config_dir
+    data = yaml.safe_load((config_dir() / 'fig1_symmetric.yaml').read_text(encoding='utf-8'))
+    data['segments'][1]['balloon']['material'] = material
+    data['segments'][1]['balloon'].update(segment)
+    path = tmp_path / 'scene.yaml'
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return str(path)
+
+
+@pytest.mark.parametrize('material, segment, words', [
+    # An exponent that overflows: numpy's warnings, then 'these segments have no stable
+    # equilibrium at all' and a traceback, before.
+    ({'law': 'ogden', 'mu_pa': [34.0e3], 'alpha': [1000.0]}, {}, 'pressure is inf at'),
+    ({'law': 'gent', 'shear_modulus_pa': 1.0e306, 'jm': 50.0}, {},
+     'pressure reaches 2.5.e\\+305 Pa'),
+    # Taken without a word before.
+    ({'law': 'yeoh', 'c1_pa': 17.0e3, 'c2_pa': 1.0e300, 'c3_pa': 1.0e300}, {},
+     'pressure reaches .*e\\+30. Pa at .* beyond 1e\\+09 Pa'),
+    # A radius in mm.
+    ({'law': 'neo_hookean', 'shear_modulus_pa': 34.0e3}, {'radius_m': 10.0},
+     'largest volume is .* m\\^3, more than 100 times the cube'),
+], ids=['ogden_alpha_1000', 'gent_1e306', 'yeoh_1e300', 'radius_in_mm'])
+def test_overflowing_laws_are_refused_naming_the_segment(tmp_path, material, segment, words):
+    from softseq_ros.scene.loader import SceneError, load_scene
+
+    scene = _balloon_scene(tmp_path, material, **segment)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        with pytest.raises(SceneError, match=r'scene\.yaml: segments\[1\]\.balloon: .*' + words):
+            load_scene(scene)
+
+
+def test_an_overflowing_law_is_one_line_and_exit_2_from_the_command(tmp_path):
+    import subprocess
+    import sys
+
+    scene = _balloon_scene(tmp_path, {'law': 'ogden', 'mu_pa': [34.0e3], 'alpha': [1000.0]})
+    result = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'classify', scene],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith('softseq classify: error: ') and 'segments[1].balloon' in line
 
 
 def test_a_table_saved_as_csv_utf8_with_a_byte_order_mark_is_read(tmp_path):
@@ -207,3 +278,66 @@ def test_the_solver_logs_whether_its_iterative_solves_converged():
     assert not Tracker(starved).sweep([0.0, 0.5 * starved.injected_range[1]]).converged
     with pytest.raises(ValueError, match='inversion_steps must be an integer >= 1'):
         Tolerances(inversion_steps=0)
+
+
+# (case, comment lines, pressures, what the one line must hold)
+EXPERIMENTS = [
+    # Absolute readings in kPa used to become -101 kPa gauge without a word.
+    ('absolute_in_kPa', '# pressure_kind: absolute', (101.3, 105.0, 110.0),
+     r'column pressure_pa \(declared absolute\): an absolute pressure of 101.3 Pa is below'),
+    ('ambient_in_kPa', '# pressure_kind: absolute\n# ambient_pressure_pa: 101.325',
+     (101325.0, 105000.0, 110000.0), r'"# ambient_pressure_pa: 101.325": 101.325 Pa is no'),
+    ('ambient_nan', '# pressure_kind: absolute\n# ambient_pressure_pa: nan',
+     (101325.0, 105000.0, 110000.0), r'"# ambient_pressure_pa: nan": not a number'),
+    ('gauge_in_kPa', '# pressure_kind: gauge', (0.0, 4.5, 9.0),
+     r'column pressure_pa \(declared gauge\): every pressure is within 100 Pa'),
+    ('undeclared_in_kPa', '', (0.0, 4.5, 9.0),
+     r'column pressure_pa \(undeclared, read as gauge\): every pressure'),
+    ('gauge_below_vacuum', '# pressure_kind: gauge', (0.0, -150.0e3, 9.0e3),
+     r'column pressure_pa \(declared gauge\): a gauge pressure of -150000 Pa is below vacuum'),
+]
+
+
+@pytest.mark.parametrize('comments, pressures, words', [case[1:] for case in EXPERIMENTS],
+                         ids=[case[0] for case in EXPERIMENTS])
+def test_an_experiment_file_in_other_units_is_refused(tmp_path, comments, pressures, words):
+    from softseq_ros.analysis.experiment import ExperimentError, read_experiment
+
+    path = tmp_path / 'rig.csv'
+    rows = '\n'.join(f'{1.0e-6 * (k + 1)},{p}' for k, p in enumerate(pressures))
+    path.write_text(f'{comments}\ninjected_m3,pressure_pa\n{rows}\n', encoding='utf-8')
+    with pytest.raises(ExperimentError, match=r'rig\.csv: ' + words):
+        read_experiment(path)
+
+
+@pytest.mark.ros
+def test_camera_triggers_no_programme_reaches_are_refused_by_the_node_and_the_rig(context):
+    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.parameter import Parameter
+
+    from softseq_ros.nodes.camera import CameraNode
+    from softseq_ros.nodes.core_node import LocalCores
+    from softseq_ros.nodes.syringe_pump import SyringePumpNode
+
+    scene = Parameter('scene', value='fig1_none')   # 0 -> 65 mL; the segments hold 130 mL
+
+    def camera(triggers, **keywords):
+        return CameraNode(context=context, parameter_overrides=[
+            scene, Parameter('trigger_injected_m3', value=triggers)], **keywords)
+    # On its own the camera knows what the segments hold together: beyond it, never reached.
+    with pytest.raises(InvalidParameterValueException,
+                       match=r'^/camera: parameter trigger_injected_m3: 0.5 m\^3 is never '
+                             r'reached: the segments hold together 0.00013 m\^3$'):
+        camera([1.0e-5, 0.5])
+    camera([1.0e-5, 1.0e-4]).destroy_node()   # another pump programme may reach 100 mL
+    # In the rig it knows the pump's programme.
+    local = LocalCores()
+    pump = SyringePumpNode(context=context, local=local, parameter_overrides=[
+        scene, Parameter('legs', value='[{inflate_to_m3: 5.0e-5}]')])
+    try:
+        with pytest.raises(InvalidParameterValueException,
+                           match=r"7e-05 m\^3 is never reached: the pump's programme goes up to "
+                                 r'5e-05 m\^3'):
+            camera([1.0e-5, 7.0e-5], local=local)
+    finally:
+        pump.destroy_node()

@@ -21,6 +21,11 @@ from numpy.typing import NDArray
 from softseq_ros.analysis.metrics import Trace, monotone_leg
 from softseq_ros.errors import UserError
 from softseq_ros.scene.csv_columns import numeric_columns, read_rows
+from softseq_ros.scene.plausibility import (
+    absolute_problem,
+    ambient_problem,
+    small_pressure_problem,
+)
 
 FloatArray = NDArray[np.float64]
 DEFAULT_AMBIENT_PA = 101325.0
@@ -105,10 +110,25 @@ def read_experiment(path: str | os.PathLike) -> Experiment:
         try:
             ambient = float(directives.get('ambient_pressure_pa', DEFAULT_AMBIENT_PA))
         except ValueError:
+            ambient = math.nan
+        problem = ambient_problem(ambient) if math.isfinite(ambient) else 'not a number'
+        if problem is not None:
             raise ExperimentError(f'{path}: "# ambient_pressure_pa: '
-                                  f'{directives["ambient_pressure_pa"]}": not a number') from None
+                                  f'{directives["ambient_pressure_pa"]}": {problem}')
+        # Readings declared absolute in kPa (101 to 110) would become -101 kPa gauge.
+        problem = absolute_problem(pressure)
+        if problem is not None:
+            raise ExperimentError(f'{path}: column pressure_pa (declared absolute): {problem}')
         experiment.pressure = pressure - ambient
-    elif kind is None:
+    else:
+        problem = small_pressure_problem(pressure)
+        if problem is None and np.min(pressure) < -DEFAULT_AMBIENT_PA:
+            problem = (f'a gauge pressure of {np.min(pressure):.6g} Pa is below vacuum '
+                       f'({-DEFAULT_AMBIENT_PA:g} Pa gauge)')
+        if problem is not None:
+            said = 'declared gauge' if kind else 'undeclared, read as gauge'
+            raise ExperimentError(f'{path}: column pressure_pa ({said}): {problem}')
+    if kind is None:
         lo, hi = ABSOLUTE_LOOKING_PA
         if np.all((pressure > lo) & (pressure < hi)):
             experiment.warnings.append(

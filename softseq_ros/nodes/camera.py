@@ -14,7 +14,7 @@ filling dozens of rclpy Pose objects. Subscribers receive ordinary PoseArray and
 messages.
 """
 
-from typing import Any
+from typing import Any, Callable
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Parameter
@@ -32,12 +32,18 @@ from softseq_ros.scene.limits import LIMITS
 IMAGE_CHECK_S = 0.05
 
 
-def _increasing_reason(value: list[float]) -> str | None:
-    if any(not b > a for a, b in zip(value, value[1:])):
-        return 'must be increasing'
-    if any(v < 0.0 for v in value):
-        return 'must be >= 0'
-    return None
+def _triggers_reason(reach_m3: float, reach: str) -> Callable[[list[float]], str | None]:
+    """The check of trigger volumes: increasing, >= 0 and within ``reach_m3``."""
+    def reason(value: list[float]) -> str | None:
+        if any(not b > a for a, b in zip(value, value[1:])):
+            return 'must be increasing'
+        if any(v < 0.0 for v in value):
+            return 'must be >= 0'
+        beyond = [v for v in value if v > reach_m3]
+        if beyond:
+            return f'{beyond[0]:g} m^3 is never reached: {reach} {reach_m3:g} m^3'
+        return None
+    return reason
 
 
 class CameraNode(CoreNode):
@@ -65,10 +71,18 @@ class CameraNode(CoreNode):
         points = self.declare_integer(
             'points_per_segment', cam.points_per_segment, 'Backbone points per segment.',
             read_only=True, **LIMITS['camera.points_per_segment'].bounds())
+        # A trigger no volume of the programme reaches would never take its snapshot. In the
+        # rig the pump's programme is known; a camera on its own knows what the segments hold.
+        pump = self.local.nodes.get(contract.PUMP) if self.local is not None else None
+        if pump is not None:
+            reach = _triggers_reason(pump.core.profile.max_injected(),
+                                     "the pump's programme goes up to")
+        else:
+            reach = _triggers_reason(scene.capacity, 'the segments hold together')
         triggers = self.declare_numbers(
             'trigger_injected_m3', cam.trigger_injected_m3,
-            'Injected volumes [m^3] at which a snapshot is taken (increasing).',
-            read_only=True, check=_increasing_reason)
+            'Injected volumes [m^3] at which a snapshot is taken (increasing, within reach).',
+            read_only=True, check=reach)
         width = self.declare_integer('width', cam.image_width_px, 'Image width [px].',
                                      read_only=True, **LIMITS['camera.image_width_px'].bounds())
         height = self.declare_integer('height', cam.image_height_px, 'Image height [px].',

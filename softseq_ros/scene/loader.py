@@ -51,6 +51,7 @@ from softseq_ros.scene.design import DesignError, cached_table, design_path, loa
 from softseq_ros.scene.network import NetworkSettings, read_network
 from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.scene.paths import scene_path
+from softseq_ros.scene.plausibility import segment_problem
 from softseq_ros.scene.programme import (
     DEFAULT_FLOW_RATE,
     Leg,
@@ -190,7 +191,8 @@ def _segment(ctx: Context, value: object, key_path: str) -> Segment:
             max_volume = ctx.number(params['max_volume_m3'], join(where, 'max_volume_m3'),
                                  gt=rest)
             gain = ctx.number(params.get(gain_key, 0.0), join(where, gain_key))
-            return LinearSegment(name, length, rest, stiffness, max_volume, curvature_gain=gain)
+            return _plausible(ctx, where, LinearSegment(name, length, rest, stiffness, max_volume,
+                                                        curvature_gain=gain))
         params = ctx.mapping(spec, where,
                           ('material', 'radius_m', 'thickness_m', 'max_stretch'), (gain_key,))
         material = ctx.material(params['material'], join(where, 'material'))
@@ -202,13 +204,21 @@ def _segment(ctx: Context, value: object, key_path: str) -> Segment:
                             f'must be below the stretch at which the material locks '
                             f'({material.max_stretch:.6g}), got {max_stretch:g}')
         gain = ctx.number(params.get(gain_key, 0.0), join(where, gain_key))
-        return BalloonSegment(name, length, material, radius, thickness, max_stretch,
-                              curvature_gain=gain)
+        return _plausible(ctx, where, BalloonSegment(name, length, material, radius, thickness,
+                                                     max_stretch, curvature_gain=gain))
     except SceneError:
         raise
     except ValueError as err:
         # The segment models check their own consistency; keep their words, add the key path.
         raise ctx.error(where, str(err)) from None
+
+
+def _plausible(ctx: Context, where: str, segment: Segment) -> Segment:
+    """``segment``, unless its volumes or its curve are no soft segment's in SI units."""
+    problem = segment_problem(segment)
+    if problem is not None:
+        raise ctx.error(where, problem)
+    return segment
 
 
 def _designed(ctx: Context, text: str, where: str, name: str, length: float,
