@@ -135,13 +135,14 @@ def _graph(args: argparse.Namespace) -> int:
 
     if args.reversals is not None and args.reversals < 0:
         raise UserError(f'--reversals must be >= 0, got {args.reversals}')
+    style = _figure_style(args)
     scene = load_scene(args.scene)
     emap = build_map(scene.segments, scene.solver.resolution)
     graph = transition_graph(emap)
     out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}'
     out.mkdir(parents=True, exist_ok=True)
     write_graph_json(out / 'graph.json', graph, args.reversals)
-    plot_graph(graph, out / 'graph.png', emap, args.reversals)
+    plot_graph(graph, out / 'graph.png', emap, args.reversals, style=style)
     _warn_unconverged('graph', emap)
     least = graph.min_reversals()
     off_path = [b.index for b in graph.branches if not b.default_path]
@@ -296,8 +297,9 @@ def _library(args: argparse.Namespace) -> int:
     from softseq_ros.parallel import worker_option
 
     jobs = worker_option('--jobs', args.jobs)
+    style = _figure_style(args)
     out = args.out or Path('bags') / f'library_{Path(args.source).stem}'
-    _, table = write_library(args.source, out, args.triples, args.length_m, jobs)
+    _, table = write_library(args.source, out, args.triples, args.length_m, jobs, style=style)
     print(table, end='')
     print(f'written: {out / "library.md"}, {out / "library.json"}, {out / "library.png"}')
     return 0
@@ -339,6 +341,7 @@ def _rates(args: argparse.Namespace) -> int:
     workers = count('--workers', args.workers, 1)
     if args.scheduler is not None and workers is not None:
         raise RatesError('--workers: not with --scheduler (the cluster has its own workers)')
+    style = _figure_style(args)
     scene = load_scene(args.scene)
     check_grid(scene, flows, radii)
     out = args.out or Path('bags') / f'rates_{scene.name}'
@@ -346,7 +349,8 @@ def _rates(args: argparse.Namespace) -> int:
     rows = run_rates(scene, flows, radii, workers=workers, scheduler=args.scheduler,
                      samples_per_leg=samples)
     table = write_rates_csv(out / 'rates.csv', rows, scene.name, reference)
-    figure = rates_figure(rows, scene.segment_names, reference, scene.name, out / 'rates.png')
+    figure = rates_figure(rows, scene.segment_names, reference, scene.name, out / 'rates.png',
+                          style)
     print(reference_line(reference))
     print(rates_markdown(rows), end='')
     print(f'written: {table}, {figure}')
@@ -520,6 +524,7 @@ def build_parser() -> argparse.ArgumentParser:
     library.add_argument('--jobs', metavar='N', help='worker processes, at least 1 (default: '
                          'one per core)')
     library.add_argument('--out', type=Path, help='output folder (default bags/library_NAME)')
+    _figure_options(library)
     library.set_defaults(handler=_library)
 
     rates = sub.add_parser('rates', help='rate map: the sequence over pump flows and radii',
@@ -540,6 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
     rates.add_argument('--workers', help='local worker processes (default: one per core)')
     rates.add_argument('--scheduler', help='Dask scheduler address, e.g. tcp://10.0.0.5:8786')
     rates.add_argument('--out', type=Path, help='output folder (default bags/rates_NAME)')
+    _figure_options(rates)
     rates.set_defaults(handler=_rates)
 
     play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
@@ -638,6 +644,7 @@ def build_parser() -> argparse.ArgumentParser:
     graph.add_argument('--reversals', type=int, metavar='K', help='mark the branches a '
                        'history from rest with at most K reversals reaches (default: any '
                        'number)')
+    _figure_options(graph)
     graph.set_defaults(handler=_graph)
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')

@@ -3,6 +3,8 @@
 import io
 from pathlib import Path
 
+from figure_checks import capture_figures, laid_out, share_of, titles
+from matplotlib.colors import to_hex
 import pytest
 
 from softseq_ros.analysis.library import LibraryError, library_entries, write_library
@@ -13,7 +15,10 @@ from softseq_ros.scene.loader import load_scene
 LIBRARY = Path(__file__).resolve().parents[1] / 'config' / 'library'
 
 
-def test_three_segments_give_nine_pairs_typed_like_classify(tmp_path):
+def test_three_segments_give_nine_pairs_typed_like_classify(tmp_path, monkeypatch):
+    from softseq_ros.analysis import library
+
+    drawn = capture_figures(monkeypatch, library)
     progress = io.StringIO()
     results, table = write_library(LIBRARY, tmp_path, processes=2, progress=progress)
     names = sorted(p.stem for p in LIBRARY.glob('*.csv'))
@@ -37,10 +42,20 @@ pump:
         # The sweep's own metrics reach the same verdict by the rules applied to its path.
         assert result['sequence_type_of_sweep'] == expected, result['segments']
         assert (len(result['snaps']) > 0) == (expected == 'asymmetric')
+        for snap in result['snaps']:
+            # Under volume control a snap on inflation leaves a pressure peak (the pressure
+            # falls), one on deflation a valley (it rises): the figure's arrows point so.
+            fall = snap['pressure_before_pa'] - snap['pressure_after_pa']
+            assert fall > 0 if snap['direction'] == 'inflation' else fall < 0, snap
         types.add(expected)
     assert types == {'none', 'partial', 'symmetric', 'asymmetric'}
     assert table.count('\n') == 2 + 9
-    assert (tmp_path / 'library.png').stat().st_size > 0
+    # The figure in the paper style: no title, 300 dpi, cropped, each type's colour drawn.
+    [fig] = drawn
+    assert not titles(fig)
+    pixels = laid_out(tmp_path / 'library.png')
+    for colour in library.TYPE_COLOURS.values():
+        assert share_of(pixels, to_hex(colour)) > 1e-4, colour
 
 
 def test_a_folder_without_tables_or_lengths_is_refused(tmp_path):

@@ -5,6 +5,7 @@ from pathlib import Path
 import subprocess
 import sys
 
+from figure_checks import capture_figures, laid_out, png_pixels, share_of, titles, whole
 import numpy as np
 import pytest
 import yaml
@@ -180,32 +181,6 @@ def test_a_bag_with_a_pump_reset_is_split_into_runs_each_reported(two_runs, tmp_
 # ------------------------------------------------------------------------ figures for a paper
 
 
-def _png(path: Path) -> np.ndarray:
-    from PIL import Image
-
-    with Image.open(path) as image:
-        return np.asarray(image.convert('RGB'), dtype=float)
-
-
-def _blank_band(pixels: np.ndarray) -> float:
-    """The tallest band of all-white rows or columns, as a share of the image's side."""
-    worst = 0.0
-    for axis in (0, 1):
-        blank = np.all(pixels > 250, axis=(1 - axis, 2))
-        run = longest = 0
-        for row in blank:
-            run = run + 1 if row else 0
-            longest = max(longest, run)
-        worst = max(worst, longest / blank.size)
-    return worst
-
-
-def _share_of(pixels: np.ndarray, colour: str) -> float:
-    """The share of pixels within a small distance of ``colour`` (hex)."""
-    rgb = np.array([int(colour[k:k + 2], 16) for k in (1, 3, 5)], dtype=float)
-    return float(np.mean(np.linalg.norm(pixels - rgb, axis=2) < 30.0))
-
-
 def test_paper_figures_are_cropped_titleless_and_show_both_directions(linear, peaked, tmp_path,
                                                                       monkeypatch):
     from softseq_ros.analysis import figures
@@ -218,29 +193,22 @@ def test_paper_figures_are_cropped_titleless_and_show_both_directions(linear, pe
     # An experiment whose deflation retraces its inflation, as the model's does here.
     experiment_file.write_text(synthetic_experiment(recording_trace(recording), 0.0, 1.0,
                                                     rows=200))
-    drawn = []
-    save = figures.save_figure
-    monkeypatch.setattr(figures, 'save_figure',
-                        lambda fig, out, svg, style=None: drawn.append(fig) or save(
-                            fig, out, svg, style))
+    drawn = capture_figures(monkeypatch, figures)
     metrics, _ = write_report(peaked, tmp_path / 'peaked')
     metrics, _ = write_report(linear, tmp_path / 'linear', experiment_csv=experiment_file)
     # No titles: a paper's caption says what a figure shows.
-    for fig in drawn:
-        assert fig._suptitle is None
-        assert all(not ax.get_title() for ax in fig.axes)
+    assert drawn and not any(titles(fig) for fig in drawn)
     for folder in ('peaked', 'linear'):
         for png in (tmp_path / folder).glob('*.png'):
-            pixels = _png(png)
             # Cropped to what is drawn: no blank band across a figure (the former shapes
             # figure had a fifth of its height blank under its legends).
-            assert _blank_band(pixels) < 0.04, png
-    pv = _png(tmp_path / 'linear' / 'pv.png')
+            laid_out(png)
+    pv = png_pixels(tmp_path / 'linear' / 'pv.png')
     # The deflation retraces the inflation: both must still show.
     for colour in (figures.STYLE['inflation']['color'], figures.STYLE['deflation']['color'],
                    figures.EXPERIMENT_STYLE['inflation']['color'],
                    figures.EXPERIMENT_STYLE['deflation']['color']):
-        assert _share_of(pv, colour) > 1e-4, colour
+        assert share_of(pv, colour) > 1e-4, colour
 
 
 def test_figure_size_and_resolution_are_settable_and_bad_ones_refused(linear, tmp_path):
@@ -264,6 +232,35 @@ def test_figure_size_and_resolution_are_settable_and_bad_ones_refused(linear, tm
         assert not (tmp_path / 'refused').exists()
     with pytest.raises(FigureStyleError):
         FigureStyle('paper', dpi=2000)
+
+
+@pytest.mark.parametrize('command', [
+    ['library', str(CONFIG / 'library')],
+    ['rates', 'rate_inversion', '--flows', '1e-7', '--radii', '2e-4'],
+    ['graph', 'fig1_asymmetric'],
+])
+def test_every_command_that_draws_refuses_a_bad_figure_option_before_any_work(tmp_path, capsys,
+                                                                               command):
+    from softseq_ros.cli import main
+
+    for flags, message in ((('--dpi', '5'), '--dpi 5: a resolution'),
+                           (('--width', '0.1'), '--width 0.1: a figure width')):
+        out = tmp_path / flags[0].strip('-')
+        assert main([*command, '--out', str(out), *flags]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+        assert not out.exists()
+
+
+def test_screen_figures_have_their_titles_and_nothing_cut_off(linear, tmp_path, monkeypatch):
+    from softseq_ros.analysis import figures
+
+    drawn = capture_figures(monkeypatch, figures)
+    write_report(linear, tmp_path, style=figures.FigureStyle('screen'))
+    assert drawn and all(titles(fig) for fig in drawn)
+    for png in tmp_path.glob('*.png'):
+        # The title above the axes and the legend below them were cut by the canvas once.
+        whole(png, dpi=110)
 
 
 def test_steps_say_how_far_the_tip_bends(peaked, tmp_path):
@@ -293,9 +290,8 @@ def test_compare_writes_an_overlay_figure_of_both_bags(linear, peaked, tmp_path)
                             capture_output=True, text=True, timeout=120,
                             stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr
-    pixels = _png(tmp_path / 'compare.png')
-    assert all(_share_of(pixels, colour) > 1e-3 for colour in BAG_COLOURS)
-    assert _blank_band(pixels) < 0.04
+    pixels = laid_out(tmp_path / 'compare.png', dpi=120)
+    assert all(share_of(pixels, colour) > 1e-3 for colour in BAG_COLOURS)
     assert str(tmp_path / 'compare.png') in result.stdout
 
 

@@ -12,10 +12,12 @@ import csv
 import json
 import math
 
+from figure_checks import capture_figures, laid_out, share_of, titles, whole
 import numpy as np
 import pytest
 import yaml
 
+from softseq_ros.analysis.figures import STYLE
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import recording_metrics, summary_text
 from softseq_ros.batch import BatchRun
@@ -300,7 +302,10 @@ def test_snap_energy_and_fluid_agree_with_the_closed_form(asymmetric):
     assert largest.fluid_moved == pytest.approx(23.6 * ML, abs=0.1 * ML)
 
 
-def test_softseq_graph_writes_si_json_and_the_figure(tmp_path, capsys):
+def test_softseq_graph_writes_si_json_and_the_figure(tmp_path, capsys, monkeypatch):
+    from softseq_ros.analysis import graph_figure
+
+    drawn = capture_figures(monkeypatch, graph_figure)
     assert main(['graph', 'fig1_asymmetric', '--out', str(tmp_path)]) == 0
     data = json.loads((tmp_path / 'graph.json').read_text(encoding='utf-8'))
     assert data['segments'] == ['bottom', 'top']
@@ -314,8 +319,29 @@ def test_softseq_graph_writes_si_json_and_the_figure(tmp_path, capsys):
     assert {'injected_m3', 'fluid_moved_m3', 'energy_released_j', 'volumes_before_m3',
             'gauge_pressure_after_pa'} <= set(snaps[0])
     assert all(t['energy_released_j'] > 0 for t in snaps)
-    assert (tmp_path / 'graph.png').stat().st_size > 10_000
     assert '9 stable branches, 4 snaps, 9 on the default path' in capsys.readouterr().out
+    # The figure in the paper style: no title, 300 dpi, a page wide, cropped to what is drawn.
+    [fig] = drawn
+    assert not titles(fig)
+    pixels = laid_out(tmp_path / 'graph.png')
+    assert 6.5 * 300 <= pixels.shape[1] <= 7.3 * 300
+    # Each snap's direction in its colour: inflation's blue, deflation's vermillion.
+    for direction in ('inflation', 'deflation'):
+        assert share_of(pixels, STYLE[direction]['color']) > 1e-4, direction
+
+
+def test_the_graph_figure_takes_the_style_width_and_resolution_asked_for(tmp_path, monkeypatch):
+    from softseq_ros.analysis import graph_figure
+
+    drawn = capture_figures(monkeypatch, graph_figure)
+    assert main(['graph', 'fig1_partial', '--out', str(tmp_path / 'column'), '--width', '3.5',
+                 '--dpi', '100']) == 0
+    # 3.5 in at 100 dpi, cropped to what is drawn (the key below may widen it a little).
+    assert 300 <= laid_out(tmp_path / 'column' / 'graph.png', dpi=100).shape[1] <= 390
+    assert main(['graph', 'fig1_partial', '--out', str(tmp_path / 'screen'), '--style',
+                 'screen']) == 0
+    whole(tmp_path / 'screen' / 'graph.png', dpi=110)
+    assert titles(drawn[-1])
 
 
 def test_softseq_graph_refuses_a_negative_number_of_reversals(tmp_path, capsys):

@@ -6,6 +6,7 @@ channel radius, classified by the same rules as a recording, against the quasi-s
 import csv
 from pathlib import Path
 
+from figure_checks import capture_figures, laid_out, titles
 import pytest
 import yaml
 
@@ -56,13 +57,19 @@ def test_a_slow_pump_reproduces_the_quasistatic_classification(tmp_path, inflate
         assert snap['duration_s'] > 0.0
 
 
-def test_the_shipped_scene_inverts_the_order_at_a_fast_pump(tmp_path, capsys):
+def test_the_shipped_scene_inverts_the_order_at_a_fast_pump(tmp_path, capsys, monkeypatch):
+    from softseq_ros.analysis import figures
+
+    drawn = capture_figures(monkeypatch, figures)
     out = tmp_path / 'map'
     assert cli.main(['rates', 'rate_inversion', '--flows', '3e-9,1e-7', '--radii',
                      '0.2e-3', '--samples', '100', '--workers', '2', '--out', str(out)]) == 0
     printed = capsys.readouterr().out
     comments, rows = read_table(out / 'rates.csv')
-    assert (out / 'rates.png').stat().st_size > 10_000
+    # The figure in the paper style: no title, 300 dpi, cropped to what is drawn.
+    [fig] = drawn
+    assert not titles(fig)
+    laid_out(out / 'rates.png')
     # One row per grid point; SI throughout.
     assert [(float(r['flow_rate_m3_per_s']), float(r['channel_radius_m'])) for r in rows] == [
         (3e-9, 0.2e-3), (1e-7, 0.2e-3)]

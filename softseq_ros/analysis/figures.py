@@ -13,8 +13,10 @@ snap-throughs in time.
 
 A :class:`FigureStyle` sets how they look: ``paper`` (the default: no titles, a caption says
 what a figure shows; sized for a 3.5 in journal column or a 7.2 in page, 8 pt type, 300 dpi,
-cropped to what is drawn) or ``screen`` (short titles, larger, 110 dpi, for a quick look);
-the width and the resolution can be set for either.
+cropped to what is drawn) or ``screen`` (short titles, larger, 110 dpi, for a quick look;
+cropped too); the width and the resolution can be set for either. ``softseq library``,
+``softseq rates`` and ``softseq graph`` draw their figures in the same styles, through the
+same helpers (:class:`FigureStyle`, :func:`new_figure`, :func:`save_figure`).
 
 Figures are drawn with matplotlib's object API on the Agg canvas (no pyplot: it costs half a
 second to import), and long recordings are thinned to a few thousand points per line, keeping
@@ -46,6 +48,10 @@ INJECTED = 'injected volume [mL]'
 # Snaps a transients figure shows side by side (more would be too narrow to read).
 MAX_TRANSIENT_SNAPS = 4
 SEGMENT_COLOURS = ['#009E73', '#CC79A7', '#E69F00', '#56B4E9', '#000000']
+UNSTABLE_COLOUR = '#CC79A7'
+# A journal's column and page widths [in]: what the paper style sizes its figures for.
+COLUMN_IN = 3.5
+PAGE_IN = 7.2
 # An experiment's markers: about this many per direction, inflation's pointing up.
 EXPERIMENT_MARKERS = 24
 EXPERIMENT_STYLE = {INFLATION: {'marker': '^', 'color': '#555555'},
@@ -83,7 +89,7 @@ class FigureStyle:
 
     @property
     def paper(self) -> bool:
-        """No titles, print sizes, cropped to what is drawn."""
+        """No titles, print sizes (the screen style: short titles, 1.6 times larger)."""
         return self.name == 'paper'
 
     @property
@@ -103,10 +109,10 @@ class FigureStyle:
             width, height = self.width_in, height * self.width_in / width
         return width, height
 
-    def title(self, ax: object, text: str) -> None:
-        """A short title on screen; none in a paper (its caption says it)."""
+    def title(self, ax: object, text: str, pad: float | None = None) -> None:
+        """A short title on screen, ``pad`` points above the axes; none in a paper."""
         if not self.paper:
-            ax.set_title(text, fontsize=9)
+            ax.set_title(text, fontsize=9, pad=pad)
 
     def context(self) -> object:
         """The settings of matplotlib for this style, for drawing and saving."""
@@ -117,7 +123,7 @@ class FigureStyle:
                 'legend.frameon': False, 'legend.handlelength': 2.6,
                 'axes.linewidth': 0.6, 'xtick.major.width': 0.6, 'ytick.major.width': 0.6,
                 'xtick.major.size': 3.0, 'ytick.major.size': 3.0, 'grid.linewidth': 0.4,
-                'lines.markersize': 3.5, 'savefig.pad_inches': 0.02,
+                'lines.markersize': 3.5, 'savefig.pad_inches': 0.03,
                 'svg.fonttype': 'none'}
         if not self.paper:
             base.update({'font.size': 10.0, 'axes.labelsize': 10.0, 'xtick.labelsize': 9.0,
@@ -168,6 +174,18 @@ def new_figure(width: float, height: float, rows: int = 1, cols: int = 1,  # noq
                            'hspace': 0.12, 'wspace': 0.08, **(margins or {})})
     axes = fig.subplots(rows, cols, squeeze=False, **kwargs)
     return fig, axes
+
+
+def legend_below(fig: object, handles: list, ncol: int = 2) -> None:
+    """
+    One key for every panel of ``fig``, just below all that is drawn (its x labels included).
+
+    ``handles``: the artists to name, each with its label.
+    """
+    renderer = fig.canvas.get_renderer()
+    bottom = min(ax.get_tightbbox(renderer).y0 for ax in fig.axes if ax.get_visible())
+    fig.legend(handles=handles, loc='upper center', ncol=ncol, borderaxespad=0.0,
+               bbox_to_anchor=(0.5, bottom / fig.bbox.height))
 
 
 def _thin(size: int, keep: NDArray[np.intp] | None = None) -> NDArray[np.intp]:
@@ -224,14 +242,14 @@ def _broken(values: NDArray[np.float64], rows: NDArray[np.intp],
     return out
 
 
-def _darker(colour: object) -> tuple[float, float, float]:
+def darker(colour: object) -> tuple[float, float, float]:
     """A darker shade of ``colour``: a segment's deflation, dashed over its inflation."""
     from matplotlib.colors import to_rgb
 
     return tuple(0.5 * c for c in to_rgb(colour))
 
 
-def _direction_key(ax: object) -> None:
+def direction_key(ax: object) -> None:
     """Legend entries that say which line style is which direction (per-segment colours)."""
     for direction, shade in ((INFLATION, '0.55'), (DEFLATION, '0.15')):
         style = {k: v for k, v in STYLE[direction].items() if k in ('ls', 'lw')}
@@ -246,7 +264,7 @@ def _draw_legs(ax: object, recording: Recording, x: NDArray[np.float64],
 
     ``label`` starts each leg's legend entry; with ``directions`` it ends with the leg's
     direction, else only the first inflation leg is named (a figure with a colour per segment
-    says once, with :func:`_direction_key`, which style is which direction). A colour given in
+    says once, with :func:`direction_key`, which style is which direction). A colour given in
     ``extra`` is the inflation's; deflation is drawn in a darker shade of it.
     """
     snaps = _snap_rows(recording)
@@ -256,7 +274,7 @@ def _draw_legs(ax: object, recording: Recording, x: NDArray[np.float64],
         style = dict(STYLE[direction])
         style.update(extra)
         if 'color' in extra and direction == DEFLATION:
-            style['color'] = _darker(extra['color'])
+            style['color'] = darker(extra['color'])
         # Runs after the first (a reset or restarted pump) are named and drawn fainter.
         run = int(np.searchsorted(starts, rows[0], side='right')) + 1 if starts.size else 0
         key = (run, direction)
@@ -357,7 +375,7 @@ def plot_segments(recording: Recording, out: Path, svg: bool = False,
             _draw_legs(axes[2, 0], recording, u,
                        np.degrees(recording.curvatures[:, j] * lengths[j]),
                        label=name, directions=False, color=colour)
-    _direction_key(axes[0, 0])
+    direction_key(axes[0, 0])
     if angles:
         _draw_legs(axes[2, 0], recording, u,
                    np.degrees(recording.curvatures @ np.asarray(lengths)),
@@ -393,19 +411,13 @@ def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path
         for volumes, stable in model.equilibria:
             cv = (volumes - rest) * ML
             for mask, colour, label in ((stable, '0.2', 'stable equilibria'),
-                                        (~stable, '#CC79A7', 'unstable equilibria')):
+                                        (~stable, UNSTABLE_COLOUR, 'unstable equilibria')):
                 if mask.any():
                     ax.plot(np.where(mask, cv[:, 0], np.nan), np.where(mask, cv[:, 1], np.nan),
                             color=colour, lw=0.7, alpha=0.7, zorder=1,
                             label=None if label in shown else label)
                     shown.add(label)
-    step = nice_step(2 * limit / 8)
-    for total in np.arange(step, 2 * limit + step, step):
-        ax.plot([0, total], [total, 0], color='0.8', lw=0.5, zorder=0)
-        if total < limit:
-            # Labelled next to the x axis, away from the path, which leaves the origin upward.
-            ax.text(total - 0.03 * limit, 0.03 * limit, f'{total:g} mL', fontsize=5.5,
-                    color='0.45', rotation=-45, ha='center', va='center')
+    total_volume_lines(ax, limit)
     _draw_legs(ax, recording, dv[:, 0], dv[:, 1])
     ax.set_xlabel(f'volume added to {names[0]} [mL]')
     ax.set_ylabel(f'volume added to {names[1]} [mL]')
@@ -413,7 +425,8 @@ def plot_volume_split(recording: Recording, model: ModelCurves | None, out: Path
     ax.set_xlim(0, limit)
     ax.set_ylim(0, limit)
     ax.grid(alpha=0.2)
-    ax.legend(loc='upper right')
+    # Below the axes, as the PV curve's: the path may run through any corner of the plane.
+    ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.13), ncol=2)
     style.title(ax, 'Volume distribution; grey: constant total volume')
     return save_figure(fig, out, svg, style)
 
@@ -429,13 +442,27 @@ def _segments_instead(recording: Recording, out: Path, svg: bool,
     for j, name in enumerate(recording.segment_names):
         _draw_legs(ax, recording, u, (recording.volumes[:, j] - rest[j]) * ML,
                    label=name, directions=False, color=SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)])
-    _direction_key(ax)
+    direction_key(ax)
     ax.set_xlabel(INJECTED)
     ax.set_ylabel('volume added to segment [mL]')
     ax.grid(alpha=0.3)
     ax.legend()
     style.title(ax, 'Volume distribution')
     return save_figure(fig, out, svg, style)
+
+
+def total_volume_lines(ax: object, limit: float) -> float:
+    """
+    Grey lines of constant total added volume on a v1-v2 plane of ``limit`` mL; their spacing.
+
+    Named once in the legend with their spacing: a label on the plane would sit on the path
+    wherever it runs along an axis.
+    """
+    step = nice_step(2 * limit / 8) if limit > 0 else 1.0
+    for k, total in enumerate(np.arange(step, 2 * limit + step, step)):
+        ax.plot([0, total], [total, 0], color='0.8', lw=0.5, zorder=0,
+                label=None if k else f'total volume, every {step:g} mL')
+    return step
 
 
 def nice_step(raw: float) -> float:
@@ -562,7 +589,7 @@ def plot_overlay(recordings: list[tuple[str, Recording]], out: Path, svg: bool =
     # The square plane beside the wider PV curve, without room left over between them.
     fig, axes = new_figure(*style.size(6.0 if plane else 3.5, 2.9), 1, 1 + plane,
                            {'left': 0.08 if plane else 0.14, 'bottom': 0.15, 'top': 0.97,
-                            'right': 0.98, 'wspace': 0.25},
+                            'right': 0.98, 'wspace': 0.2},
                            gridspec_kw={'width_ratios': [1.35, 1] if plane else [1]})
     ranges = []
     limit = 0.0
@@ -579,7 +606,7 @@ def plot_overlay(recordings: list[tuple[str, Recording]], out: Path, svg: bool =
     _x_limits(axes[0, 0], *ranges)
     axes[0, 0].set_xlabel(INJECTED)
     axes[0, 0].set_ylabel(GAUGE)
-    _direction_key(axes[0, 0])
+    direction_key(axes[0, 0])
     axes[0, 0].legend(loc='upper center', bbox_to_anchor=(0.5, -0.155), ncol=2)
     if plane:
         names = [r.segment_names for _, r in recordings]
@@ -796,16 +823,15 @@ _FIGURE_FUNCTIONS = {'pv': plot_pv, 'segments': plot_segments, 'volume_split': p
                      'transients': plot_transients}
 
 
-def save_figure(fig: object, out: Path, svg: bool,
-                style: FigureStyle | None = None) -> list[Path]:
+def save_figure(fig: object, out: Path, svg: bool, style: FigureStyle) -> list[Path]:
     """
     Write ``fig`` as PNG (and SVG), a failed write naming the file; the paths written.
 
-    With a ``style``: at its resolution, and cropped to what is drawn (no blank margins);
-    without, at 110 dpi as laid out.
+    At the style's resolution, cropped to what is drawn: no blank margins, and nothing cut off
+    (a screen figure's title above its axes, a legend below them).
     """
-    style = style or SCREEN_AS_LAID_OUT
-    crop = {'bbox_inches': 'tight', 'pad_inches': 0.02} if style.paper else {}
+    # 0.03 in: at a screen's 110 dpi 0.02 in left a spine on the image's last pixel.
+    crop = {'bbox_inches': 'tight', 'pad_inches': 0.03}
     # zlib's fastest level: a fifth of a figure's time at the default level, for 7 % more bytes.
     with writing(out):
         fig.savefig(out, dpi=style.resolution, pil_kwargs={'compress_level': 1}, **crop)
@@ -816,6 +842,3 @@ def save_figure(fig: object, out: Path, svg: bool,
         written.append(out.with_suffix('.svg'))
     return written
 
-
-# What the figures saved without a style (the graph's and the library's own) look like.
-SCREEN_AS_LAID_OUT = FigureStyle('screen')

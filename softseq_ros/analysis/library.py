@@ -23,11 +23,28 @@ from typing import TextIO
 
 import numpy as np
 
+from softseq_ros.analysis.figures import (
+    GAUGE,
+    INJECTED,
+    KPA,
+    ML,
+    PAGE_IN,
+    PAPER,
+    STYLE,
+    FigureStyle,
+    darker,
+    direction_key,
+    legend_below,
+    new_figure,
+    save_figure,
+)
 from softseq_ros.analysis.metrics import Trace, analyse
+from softseq_ros.analysis.recording import DEFLATION, INFLATION
 from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.parallel import run_jobs
 
 SWEEP_POINTS = 2001
+PV_CURVE_EVERY = 20   # the sweep's rows kept for the figure (and the snaps' neighbours)
 POOL_FROM = 5  # assemblies; below this a pool costs more than it saves
 _LENGTH_LINE = re.compile(r'^\s*#\s*length_m\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
 
@@ -166,20 +183,39 @@ def assemble(entries: tuple[Entry, ...]) -> dict:
                               float(max(rising.pressure.max(), falling.pressure.max()))],
         'switch_injected_m3': switch['injected_m3'] if switch else None,
         'switch_segment': switch['segment_taking_over'] if switch else None,
-        'snaps': [{'injected_m3': e.injected, 'direction': 'inflation',
-                   'fluid_moved_m3': float(0.5 * np.abs(e.to_volumes - e.from_volumes).sum())}
-                  for e in rising.events]
-        + [{'injected_m3': e.injected, 'direction': 'deflation',
-            'fluid_moved_m3': float(0.5 * np.abs(e.to_volumes - e.from_volumes).sum())}
-           for e in falling.events],
+        'snaps': [_snap(e, 'inflation') for e in rising.events]
+        + [_snap(e, 'deflation') for e in falling.events],
         'hysteresis_area_j': metrics['hysteresis_area_j'],
         'tip_at_full_inflation_m': [float(x) for x in tip[-1]],
         'tip_reach_min_m': float(reach.min()),
-        'pv_curve': {'injected_m3': rising.injected[::20].tolist() + falling.injected[::20]
-                     .tolist(), 'pressure_pa': rising.pressure[::20].tolist()
-                     + falling.pressure[::20].tolist(), 'inflation_rows':
-                     len(rising.injected[::20])},
+        'pv_curve': _pv_curve(rising, falling),
     }
+
+
+def _snap(event: object, direction: str) -> dict:
+    """A snap-through of a sweep (SI, gauge): where, which way, the pressure either side."""
+    return {'injected_m3': event.injected, 'direction': direction,
+            'fluid_moved_m3': float(0.5 * np.abs(event.to_volumes - event.from_volumes).sum()),
+            'pressure_before_pa': float(event.from_pressure),
+            'pressure_after_pa': float(event.to_pressure)}
+
+
+def _pv_curve(rising: object, falling: object) -> dict:
+    """
+    The sweep's PV curve for the figure: every PV_CURVE_EVERY-th row of each direction.
+
+    The rows either side of each snap-through are kept, so the curve ends where it snaps.
+    """
+    columns: dict = {'injected_m3': [], 'pressure_pa': []}
+    for path in (rising, falling):
+        snaps = np.flatnonzero(path.snap)
+        rows = np.union1d(np.arange(0, path.injected.size, PV_CURVE_EVERY),
+                          np.concatenate([snaps - 1, snaps, [path.injected.size - 1]]))
+        rows = rows[rows >= 0]
+        columns['injected_m3'] += path.injected[rows].tolist()
+        columns['pressure_pa'] += path.pressure[rows].tolist()
+        columns.setdefault('inflation_rows', len(rows))
+    return columns
 
 
 def run_library(entries: list[Entry], triples: bool = False, processes: int | None = None,
@@ -224,19 +260,36 @@ def library_markdown(results: list[dict]) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def library_figure(results: list[dict], names: list[str], out: Path) -> Path:
-    """The pairs' PV curves in a grid: base segment by row, tip segment by column."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+# The sequence types' colours (Okabe-Ito): a panel's curve and its type, written in it.
+TYPE_COLOURS = {'none': '0.3', 'partial': '#009E73', 'symmetric': '#0072B2',
+                'asymmetric': '#D55E00'}
 
+
+def library_figure(results: list[dict], names: list[str], out: Path,
+                   style: FigureStyle = PAPER) -> list[Path]:
+    """
+    The pairs' PV curves in a grid: base segment by row, tip segment by column.
+
+    Each panel's curve and its sequence type (written in its corner) take the type's colour;
+    inflation solid, deflation dashed in a darker shade on top, snap-throughs as arrows, as in
+    a report's figures. One gauge pressure scale for every panel, so the pairs compare.
+    """
+    with style.context():
+        return _library_figure(results, names, out, style)
+
+
+def _library_figure(results: list[dict], names: list[str], out: Path,
+                    style: FigureStyle) -> list[Path]:
     pairs = {tuple(r['segments']): r for r in results if len(r['segments']) == 2}
     n = len(names)
-    fig = Figure(figsize=(2.6 * n + 0.6, 2.2 * n + 0.6))
-    FigureCanvasAgg(fig)
-    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.08, top=0.9, hspace=0.45, wspace=0.3)
-    axes = fig.subplots(n, n, squeeze=False)
-    colours = {'none': '0.3', 'partial': 'tab:green', 'symmetric': 'tab:blue',
-               'asymmetric': 'tab:red'}
+    # A page wide from three segments on, a panel of about 2.2 x 1.5 in below that.
+    width = min(PAGE_IN, 0.7 + 2.2 * n)
+    panel = (width - 0.7) / n
+    height = 0.55 + 0.68 * panel * n
+    fig, axes = new_figure(*style.size(width, height), n, n,
+                           {'left': 0.6 / width, 'right': 0.99, 'bottom': 0.45 / height,
+                            'top': 1 - 0.18 / height, 'hspace': 0.18, 'wspace': 0.08},
+                           sharey=True)
     for i, base in enumerate(names):
         for j, tip in enumerate(names):
             ax = axes[i, j]
@@ -244,32 +297,56 @@ def library_figure(results: list[dict], names: list[str], out: Path) -> Path:
             if r is None:
                 ax.set_visible(False)
                 continue
-            curve = r['pv_curve']
-            k = curve['inflation_rows']
-            u = np.asarray(curve['injected_m3']) * 1e6
-            p = np.asarray(curve['pressure_pa']) * 1e-3
-            colour = colours[r['sequence_type']]
-            ax.plot(u[:k], p[:k], '-', color=colour, lw=1.2)
-            ax.plot(u[k:], p[k:], '--', color=colour, lw=1.0)
-            for snap in r['snaps']:
-                ax.axvline(snap['injected_m3'] * 1e6, color=colour, lw=0.5, alpha=0.5)
-            ax.set_title(f'{base} -> {tip}\n{r["sequence_type"]}', fontsize=7, color=colour)
-            ax.tick_params(labelsize=6)
+            _draw_pair(ax, r)
             ax.grid(alpha=0.3)
             if i == n - 1:
-                ax.set_xlabel('injected volume [mL]', fontsize=7)
+                ax.set_xlabel(INJECTED)
             if j == 0:
-                ax.set_ylabel('gauge pressure [kPa]', fontsize=7)
-    fig.suptitle('Segment library: every ordered pair on one supply (row: base, column: tip; '
-                 'solid inflation, dashed deflation)', fontsize=8)
-    fig.savefig(out, dpi=110)
-    return out
+                ax.set_ylabel(f'base: {base}\n{GAUGE}')
+            if i == 0:
+                # The tip's name heads its column (a label of the grid, not a title).
+                ax.annotate(f'tip: {tip}', (0.5, 1.0), xycoords='axes fraction',
+                            xytext=(0, 3), textcoords='offset points', ha='center',
+                            va='bottom')
+    axes[0, 0].set_ylim(bottom=0.0)
+    direction_key(axes[0, 0])
+    legend_below(fig, axes[0, 0].get_legend_handles_labels()[0])
+    style.title(axes[0, 0], 'Segment library: every ordered pair (row: base, column: tip)')
+    return save_figure(fig, out, False, style)
+
+
+def _draw_pair(ax: object, result: dict) -> None:
+    """One pair's PV curve: each direction in its style, broken and arrowed at its snaps."""
+    curve = result['pv_curve']
+    k = curve['inflation_rows']
+    u = np.asarray(curve['injected_m3']) * ML
+    p = np.asarray(curve['pressure_pa']) * KPA
+    colour = TYPE_COLOURS[result['sequence_type']]
+    for direction, rows, sign in ((INFLATION, slice(0, k), 1.0), (DEFLATION, slice(k, None),
+                                                                   -1.0)):
+        x, y = u[rows], p[rows]
+        snaps = [s for s in result['snaps'] if s['direction'] == direction]
+        # No line across a snap: the curve stops before it and goes on after it.
+        cuts = sorted(int(np.argmax(sign * (x - s['injected_m3'] * ML) >= 0)) for s in snaps)
+        x, y = np.insert(x, cuts, np.nan), np.insert(y, cuts, np.nan)
+        style = dict(STYLE[direction])
+        style['color'] = colour if direction == INFLATION else darker(colour)
+        ax.plot(x, y, **style)
+        for s in snaps:
+            at = s['injected_m3'] * ML
+            ax.annotate('', xy=(at, s['pressure_after_pa'] * KPA),
+                        xytext=(at, s['pressure_before_pa'] * KPA), zorder=4,
+                        arrowprops={'arrowstyle': '->', 'color': style['color'], 'lw': 1.0,
+                                    'shrinkA': 0, 'shrinkB': 0})
+    ax.text(0.97, 0.05, result['sequence_type'], transform=ax.transAxes, ha='right',
+            va='bottom', color=colour, fontweight='bold')
 
 
 def write_library(source: str | os.PathLike, out: str | os.PathLike, triples: bool = False,
                   length_m: float | None = None, processes: int | None = None,
-                  progress: TextIO | None = sys.stderr) -> tuple[list[dict], str]:
-    """Run the library and write library.md, library.json and library.png into ``out``."""
+                  progress: TextIO | None = sys.stderr,
+                  style: FigureStyle = PAPER) -> tuple[list[dict], str]:
+    """Run the library; write library.md, library.json and library.png (in ``style``)."""
     entries = library_entries(source, length_m, progress)
     out = Path(out)
     results = run_library(entries, triples, processes, progress)
@@ -280,6 +357,5 @@ def write_library(source: str | os.PathLike, out: str | os.PathLike, triples: bo
     write_text(out / 'library.md', f'# Segment library `{source}`\n\nPressures are gauge.\n\n'
                + table + '\n![library](library.png)\n')
     write_text(out / 'library.json', json.dumps(results, indent=2) + '\n')
-    with writing(out / 'library.png'):
-        library_figure(results, [e.name for e in entries], out / 'library.png')
+    library_figure(results, [e.name for e in entries], out / 'library.png', style)
     return results, table

@@ -30,7 +30,7 @@ import math
 from pathlib import Path
 import sys
 import time
-from typing import Any, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +38,9 @@ from numpy.typing import NDArray
 from softseq_ros.analysis.metrics import Trace, analyse
 from softseq_ros.errors import UserError
 from softseq_ros.parallel import run_jobs
+
+if TYPE_CHECKING:
+    from softseq_ros.analysis.figures import FigureStyle
 
 FloatArray = NDArray[np.float64]
 # Samples of the path per leg of the programme: 2 % of the shares' bins each at the least
@@ -325,42 +328,92 @@ def _seconds(value: float) -> str:
 
 
 def rates_figure(rows: list[dict], names: Sequence[str], reference: dict, title: str,
-                 out: Path) -> Path:
-    """The flow x radius grid coloured by the leading segment, annotated per cell."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+                 out: Path, style: 'FigureStyle | None' = None) -> Path:
+    """
+    The flow x radius grid coloured by the leading segment, annotated per cell.
+
+    Each cell says the sequence type and its inflation snap-throughs' 10-90 % durations; a
+    column left of the grid, apart, holds the quasi-static path along the same programme (the
+    limit of a slow pump, whatever the channel). ``style``: a
+    :class:`softseq_ros.analysis.figures.FigureStyle` (the paper style by default), as the
+    report's figures; ``title`` names the scene in the screen style's title.
+    """
+    from softseq_ros.analysis.figures import PAPER
+
+    style = style or PAPER
+    with style.context():
+        return _rates_figure(rows, names, reference, title, out, style)
+
+
+def _rates_figure(rows: list[dict], names: Sequence[str], reference: dict, title: str,
+                  out: Path, style: 'FigureStyle') -> Path:
     from matplotlib.patches import Patch, Rectangle
+
+    from softseq_ros.analysis.figures import (
+        PAGE_IN,
+        SEGMENT_COLOURS,
+        legend_below,
+        new_figure,
+        save_figure,
+    )
 
     flows = sorted({row['flow_rate_m3_per_s'] for row in rows})
     radii = sorted({row['channel_radius_m'] for row in rows})
-    palette = ['tab:blue', 'tab:orange', 'tab:green', 'tab:purple', 'tab:brown']
-    colours = {name: palette[k % len(palette)] for k, name in enumerate(names)}
-    fig = Figure(figsize=(1.25 * len(flows) + 2.4, 0.6 * len(radii) + 1.6))
-    FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.12, 0.26, 0.85, 0.6))
+    colours = {name: SEGMENT_COLOURS[k % len(SEGMENT_COLOURS)] for k, name in enumerate(names)}
+    # A cell of about 0.9 x 0.4 in (two lines of 6.7 pt), a page wide at most; the grid at
+    # least as tall as the radius axis's label on two lines.
+    width = min(PAGE_IN, 1.0 + 0.9 * (len(flows) + 1))
+    height = 0.75 + max(0.4 * len(radii), 0.8)
+    fig, axes = new_figure(*style.size(width, height),
+                           margins={'left': 0.6 / width, 'right': 0.99, 'top': 0.98,
+                                    'bottom': 0.75 / height})
+    ax = axes[0, 0]
+    shade = {'alpha': 0.55, 'edgecolor': 'white', 'lw': 1.0}
+    refused = False
     for row in rows:
         i, j = flows.index(row['flow_rate_m3_per_s']), radii.index(row['channel_radius_m'])
-        lead = row['leading_segment']
-        ax.add_patch(Rectangle((i, j), 1, 1, facecolor=colours.get(lead, '0.85'), alpha=0.55,
-                               edgecolor='white'))
-        rising = [s for s in row['snaps'] if s['direction'] == 'inflation']
-        durations = ', '.join(_seconds(s['duration_s']) for s in rising[:2]) or 'no snap'
         if row['refused']:
-            durations = 'beyond a curve'
-        ax.text(i + 0.5, j + 0.5, f'{row["sequence_type"]}\n{durations}', ha='center',
-                va='center', fontsize=6.5)
-    ax.set_xlim(0, len(flows))
+            refused = True
+            ax.add_patch(Rectangle((i, j), 1, 1, facecolor='white', hatch='////',
+                                   **{**shade, 'edgecolor': '0.75', 'alpha': 1.0}))
+            text = 'refused:\nbeyond a curve'
+        else:
+            ax.add_patch(Rectangle((i, j), 1, 1, facecolor=colours.get(row['leading_segment'],
+                                                                       '0.85'), **shade))
+            rising = [s for s in row['snaps'] if s['direction'] == 'inflation']
+            snaps = ', '.join(_seconds(s['duration_s']) for s in rising[:2])
+            text = f'{row["sequence_type"]}\n' + (f'snap {snaps}' if snaps else 'no snap')
+        ax.text(i + 0.5, j + 0.5, text, ha='center', va='center', fontsize='small',
+                linespacing=1.15, zorder=3)
+    # The quasi-static path: one cell over every radius, apart from the grid.
+    left = -1.12
+    ax.add_patch(Rectangle((left, 0), 1, len(radii), facecolor=colours.get(
+        reference['leading_segment'], '0.85'), **shade))
+    ax.text(left + 0.5, 0.5 * len(radii), f'{reference["sequence_type"]}\n'
+            + ('instant snaps' if reference['snaps'] else 'no snap'), ha='center',
+            va='center', fontsize='small', linespacing=1.15)
+    ax.set_xlim(left, len(flows))
     ax.set_ylim(0, len(radii))
-    ax.set_xticks(np.arange(len(flows)) + 0.5, [f'{q * 1e6:g}' for q in flows], fontsize=7)
-    ax.set_yticks(np.arange(len(radii)) + 0.5, [f'{r * 1e3:g}' for r in radii], fontsize=7)
-    ax.set_xlabel('pump flow rate [mL/s]', fontsize=8)
-    ax.set_ylabel('channel radius [mm]', fontsize=8)
+    ax.set_xticks(np.concatenate([[left + 0.5], np.arange(len(flows)) + 0.5]),
+                  ['quasi-static'] + [f'{q * 1e6:g}' for q in flows])
+    ax.set_yticks(np.arange(len(radii)) + 0.5, [f'{r * 1e3:g}' for r in radii])
+    ax.tick_params(length=0)
+    for side in ax.spines.values():
+        side.set_visible(False)
+    ax.set_xlabel('pump flow rate [mL/s]')
+    # Under the flows' columns, not under the quasi-static one.
+    ax.xaxis.label.set_x((0.5 * len(flows) - left) / (len(flows) - left))
+    ax.set_ylabel('channel\nradius [mm]')
     handles = [Patch(facecolor=colours[name], alpha=0.55, label=f'{name} leads')
                for name in names]
-    ax.legend(handles=handles, loc='upper center', bbox_to_anchor=(0.5, -0.16), ncol=len(names),
-              fontsize=7, frameon=False)
-    fig.suptitle(f'{title}: who takes over the inflow, the sequence type and the inflation '
-                 "snap-throughs' 10-90 % durations", fontsize=7.5)
-    ax.set_title(reference_line(reference), fontsize=6.5)
-    fig.savefig(out, dpi=100)
+    if any(not row['leading_segment'] and not row['refused'] for row in rows) \
+            or not reference['leading_segment']:
+        handles.append(Patch(facecolor='0.85', alpha=0.55, label='no segment leads'))
+    if refused:
+        handles.append(Patch(facecolor='white', edgecolor='0.75', hatch='////',
+                             label='refused (a segment filled beyond its curve)'))
+    legend_below(fig, handles, ncol=len(handles))
+    style.title(ax, f'{title}: who takes over the inflow, the sequence type and the '
+                "inflation snap-throughs' 10-90 % durations")
+    save_figure(fig, out, False, style)
     return out
