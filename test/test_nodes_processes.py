@@ -16,6 +16,7 @@ import sys
 
 import numpy as np
 import pytest
+from rclpy.node import Node
 from test_nodes import (
     check_against_solver,
     check_poses,
@@ -25,6 +26,9 @@ from test_nodes import (
 )
 import yaml
 
+from softseq_ros.analysis.recording import load_recording
+from softseq_ros.analysis.report import write_report
+from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.paths import config_dir
@@ -262,3 +266,55 @@ def test_rig_runs_the_three_nodes_in_one_process_with_state_triggered_frames(
     # camera's rate), far more than the scene's own 10 Hz camera would take.
     assert len(got['/camera/backbone']) >= 0.8 * len(got['/actuator/curvatures'])
     assert rig.returncode == 0, (tmp_path / 'rig.log').read_text()
+
+
+def _recorded_by(node: Node, topics: list[str]) -> bool:
+    """Whether the recorder node subscribes to every one of ``topics`` (absolute names)."""
+    return all(any(info.node_name == Recorder.NODE_NAME
+                   for info in node.get_subscriptions_info_by_topic(topic)) for topic in topics)
+
+
+def test_a_recording_through_an_actuator_restart_is_reported_as_two_runs(context, ros_env,
+                                                                         tmp_path):
+    # A pump at 0.1 mL/s to 30 mL (300 s: far longer than the test), as patient as a loaded
+    # machine needs while its actuator is down; the recorder running throughout.
+    scene_path = write_scene(tmp_path, flow_rate_m3_per_s=1.0e-7, rate_hz=20,
+                             legs=[{'inflate_to_m3': 3.0e-5}])
+    bag = tmp_path / 'bag'
+    collector = Collector(['actuator/scene', 'actuator/volumes'], context)
+    scenes, answers = (collector.received[t] for t in ('/actuator/scene', '/actuator/volumes'))
+    actuator = {'scene': scene_path, 'resume_timeout_s': 0.2}
+    with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
+        recorder = start('recorder', 'recorder', output=str(bag))
+        start('pump', 'syringe_pump', scene=scene_path, autostart='false',
+              feedback_timeout_s=2 * STARTUP_TIMEOUT_S)
+        first = start('actuator', 'actuator', **actuator)
+        collector.wait_for_publishers(timeout=STARTUP_TIMEOUT_S)
+        wait_for(lambda: _recorded_by(collector, ['/pump/command', '/pump/status',
+                                                  '/actuator/volumes', '/actuator/scene']),
+                 'the recorder on the pump and actuator topics', timeout=STARTUP_TIMEOUT_S)
+        assert call_trigger(collector, '/syringe_pump/start').success
+        rest = sum(segment.rest_volume for segment in load_scene(scene_path).segments)
+        wait_for(lambda: answers and sum(answers[-1].position) - rest > 0.2e-6,
+                 "the first actuator's answers to the running pump")
+        # Stopped and started again mid-programme, as a user restarts a node by hand.
+        first.send_signal(signal.SIGINT)
+        assert first.wait(timeout=30) == 0
+        answered = len(answers)
+        start('actuator_again', 'actuator', **actuator)
+        wait_for(lambda: len(scenes) >= 2 and len(answers) >= answered + 10,
+                 "the restarted actuator's answers", timeout=STARTUP_TIMEOUT_S,
+                 explain=lambda: _log_tails(tmp_path))
+        recorder.send_signal(signal.SIGINT)
+        assert recorder.wait(timeout=30) == 0
+    recording = load_recording(bag)
+    [restart] = recording.run_starts
+    assert restart.cause == 'the actuator started again (it named its scene anew)'
+    first_run, second_run = recording.runs()
+    # The pump went on while the actuator was down: run 2 starts where run 1's commands left.
+    assert second_run.state_injected.min() > first_run.state_injected.max() > 0.0
+    metrics, text = write_report(bag, tmp_path / 'report', figures=False)
+    assert [run['run'] for run in metrics['runs']] == [1, 2]
+    assert metrics['runs'][1]['from_s'] == restart.time_s
+    assert any(w.startswith('the bag holds 2 ') for w in metrics['warnings'])
+    assert f'run 2 (from {restart.time_s:.3f} s' in text
