@@ -83,9 +83,13 @@ def quadratic_extreme(a: float, b: float, c: float, lo: float,
 
 
 def _largest_magnitude(a: float, b: float, c: float, lo: float, hi: float) -> float:
-    top, _ = quadratic_extreme(a, b, c, lo, hi)
-    bottom, _ = quadratic_extreme(-a, -b, -c, lo, hi)
-    return max(top, bottom)
+    """The largest |a + b x + c x^2| on [lo, hi]: at an end or at the vertex."""
+    largest = max(abs(a + lo * (b + lo * c)), abs(a + hi * (b + hi * c)))
+    if c != 0.0:
+        vertex = -b / (2.0 * c)
+        if lo < vertex < hi:
+            largest = max(largest, abs(a + vertex * (b + vertex * c)))
+    return largest
 
 
 def _cubic(start: float, q: Sequence[float], x: float) -> float:
@@ -145,7 +149,7 @@ def crossings(start: float, q: Sequence[float], lo: float, hi: float,
     return found
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class StepCurve:
     """
     One integrator step's continuous solution, as the segments' volumes.

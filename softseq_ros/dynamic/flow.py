@@ -604,20 +604,22 @@ class NetworkFlow:
         self._recent = []
         self._fresh = True
         _, _, flows, rates = self._balance(self.t, self.y)
-        self._note_exchange(flows, rates)
+        for j, flow in enumerate(flows.tolist()):
+            self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
+        self._note_exchange(rates.tolist())
 
     def _watch_step(self, solver: 'Radau | _ScalarRadau') -> None:
         """The rest of the last step, now that time has reached its end."""
         self._watch(solver.t, 1.0)
-        _, _, flows, rates = self._balance(solver.t, solver.y)
-        self._note_exchange(flows, rates)
+        # The state's rates at the step's end: the solver's own last evaluation of them (the
+        # channels' flows there are in the step's peak flows).
+        rates = [solver.f] if isinstance(solver, _ScalarRadau) else solver.f.tolist()
+        self._note_exchange(rates)
 
-    def _note_exchange(self, flows: FloatArray, rates: FloatArray) -> None:
+    def _note_exchange(self, rates: list[float]) -> None:
         """Whether fluid moves between the segments at an instant (a transient runs)."""
-        for j, flow in enumerate(flows.tolist()):
-            self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
         # The tip's rate from mass: the pump's flow less the others'.
-        volume_rates = rates[:self.n - 1].tolist()
+        volume_rates = rates[:self.n - 1]
         volume_rates.append(self.flow - sum(volume_rates))
         exchange = exchange_flow(volume_rates, self.flow)
         self.exchanging = exchange > max(QUIET_SHARE_OF_FLOW * abs(self.flow),
