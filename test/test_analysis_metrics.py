@@ -211,6 +211,22 @@ def test_paper_figures_are_cropped_titleless_and_show_both_directions(linear, pe
         assert share_of(pv, colour) > 1e-4, colour
 
 
+def test_a_report_without_a_scene_imports_no_scipy(linear, tmp_path, ros_env):
+    # scipy costs a report half a second to import: without a scene or an experiment to fit
+    # (which need it) nothing on the report's way may import it, its figures' neither.
+    code = ('import sys\n'
+            'from softseq_ros.analysis import figure_workers\n'
+            'figure_workers.start_workers = lambda svg=False: None\n'
+            'from softseq_ros.analysis.report import write_report\n'
+            f'write_report({str(linear)!r}, {str(tmp_path)!r})\n'
+            'print(sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"}))')
+    result = subprocess.run([sys.executable, '-c', code], env=ros_env, capture_output=True,
+                            text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[-1] == "['matplotlib']"
+    assert (tmp_path / 'pv.png').exists()
+
+
 def test_figure_size_and_resolution_are_settable_and_bad_ones_refused(linear, tmp_path):
     from PIL import Image
 

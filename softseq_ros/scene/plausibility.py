@@ -22,10 +22,15 @@ soft actuator can be, and say which unit was likely meant. Each has its limit, s
   below about 2.3 kPa at room temperature), or an ambient pressure outside 10 kPa to 1 MPa.
 """
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.segments.models import Segment
+if TYPE_CHECKING:
+    # For the annotations only: the models import scipy, which the report (reading an
+    # experiment file through these rules) must not pay for.
+    from softseq_ros.segments.models import Segment
 
 MAX_VOLUME_M3 = 1.0
 VOLUME_PER_CUBED_LENGTH = 100.0
@@ -59,7 +64,7 @@ def small_pressure_problem(pressures: NDArray[np.float64]) -> str | None:
     return None
 
 
-def curve_problem(segment: Segment) -> str | None:
+def curve_problem(segment: 'Segment') -> str | None:
     """Why ``segment``'s pressure curve is no soft segment's (not finite, > 1 GPa), or None."""
     volumes = np.linspace(segment.rest_volume, segment.max_volume, CURVE_SAMPLES)
     with np.errstate(all='ignore'):
@@ -77,7 +82,7 @@ def curve_problem(segment: Segment) -> str | None:
     return None
 
 
-def segment_problem(segment: Segment) -> str | None:
+def segment_problem(segment: 'Segment') -> str | None:
     """The first unit or overflow problem of a segment of any model, or None."""
     return volume_problem(segment.max_volume, segment.length) or curve_problem(segment)
 
