@@ -3,7 +3,7 @@
 worker, two local workers and a local Dask cluster of two workers, each from an empty cache.
 
     python bench/bench_fem_design.py            # both targets (tens of minutes on 2 cores)
-    python bench/bench_fem_design.py --quick    # a tiny coarse problem, well under a minute
+    python bench/bench_fem_design.py --quick    # config/design_targets/tiny.yaml
 
 The targets are config/design_targets/paper_partial.yaml (the paper's: partial, the top
 leading, switch near 30 mL, levelled off from 40 mL, from ranges around Table I) and
@@ -28,24 +28,14 @@ sys.path.insert(0, str(REPO))
 from softseq_ros.fem.design_search import (  # noqa: E402
     load_problem,
     numbers_text,
-    problem_from_dict,
     search,
     values_text,
     write_result_files,
 )
 
 TARGETS = REPO / 'config' / 'design_targets'
-QUICK_PROBLEM = {
-    'name': 'quick',
-    'segments': [{'name': 'bottom', 'design': 'paper_bottom'},
-                 {'name': 'top', 'design': 'paper_top',
-                  'vary': {'membrane_thickness_m': [0.0004, 0.0006]}}],
-    'target': {'sequence': 'partial', 'leader': 'top',
-               'plateau_pressure_pa': {'value': 2500.0, 'tolerance': 200.0},
-               'max_injected_m3': 3.0e-5},
-    'grid': {'points': 2, 'element_size_m': 0.00375},
-    'search': {'generations': 3, 'population': 4, 'keep': 2},
-}
+# --quick: the shipped tiny problem (also the one test/test_fem_design_search.py runs).
+QUICK_PROBLEM = TARGETS / 'tiny.yaml'
 
 
 def run_once(problem: object, how: str, out: Path | None) -> dict:
@@ -121,8 +111,8 @@ def main() -> None:
                         'local workers; nothing written into the repository')
     args = parser.parse_args()
     if args.quick:
-        problem = problem_from_dict(QUICK_PROBLEM, 'quick.yaml')
-        rows = [{'target': 'quick', **run_once(problem, how, None)}
+        problem = load_problem(QUICK_PROBLEM)
+        rows = [{'target': problem.name, **run_once(problem, how, None)}
                 for how in ('local1', 'local2')]
         print(report(rows, _machine(), ' --quick (a tiny coarse problem: the numbers show '
                                        'that it runs)'))

@@ -107,8 +107,8 @@ QUICK = {
          'docs/fem_actuator.png']),
     'bench_fem_design.py': (
         ['# softseq design: FEM calls and wall time to meet a target'],
-        [r'\| quick \| local1 \| [1-9]\d* \| 3 \| [1-9]\d* \| \d+ \|',
-         r'\| quick \| local2 \| [1-9]\d* \|'],
+        [r'\| tiny \| local1 \| [1-9]\d* \| 3 \| [1-9]\d* \| \d+ \|',
+         r'\| tiny \| local2 \| [1-9]\d* \|'],
         ['bench/fem_design_results.json', 'bench/fem_design_results.md']),
 }
 
