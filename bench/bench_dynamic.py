@@ -524,19 +524,25 @@ def rig_section(sizes, folder):
              "base segment collapses below its rest volume and pulls the tip's fluid through "
              "the channel). Between the pump's commands the actuator speaks at its rate while "
              'fluid moves between the segments. The quasi-static run '
-             'is the same programme without the network. The batch runner is one thread: '
-             'its CPU time is what its wall time is on an idle core, so on a loaded machine '
-             '(see the load average above) rig time / CPU says what a quiet one gives, '
-             'rig time / wall what this one gave.', '',
+             'is the same programme without the network. The batch runner computes on one '
+             'thread (another only flushes the bag now and then). On a loaded machine (the '
+             'load average above) its wall time stretches with the load and its CPU time less '
+             '(shared caches slow it too): rig time / wall is what this machine gave, and the '
+             "network's CPU time as a multiple of the quasi-static run's in the same run is "
+             'what the network costs.', '',
              '| model | actuator rate [Hz] | rig time [s] | wall [s] | CPU [s] | messages '
-             '| rig time / wall | rig time / CPU |', '|---|---:|---:|---:|---:|---:|---:|---:|']
+             '| rig time / wall | rig time / CPU | CPU / quasi-static |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---:|']
     runs = [('quasi-static', '(pump 50)', False, 200.0)] + \
         [('network', f'{rate:g}', True, rate) for rate in sizes.rig_rates_hz]
+    baseline = None
     for model, shown, network, rate in runs:
         sim, wall, cpu, messages, state = rig_run(folder, legs, sizes.rig_triggers, rate,
                                                   network)
+        baseline = baseline or cpu
         lines.append(f'| {model} | {shown} | {sim:.0f} | {wall:.1f} | {cpu:.1f} | '
-                     f'{messages:,} | {sim / wall:.0f}x | **{sim / cpu:.0f}x** |')
+                     f'{messages:,} | **{sim / wall:.0f}x** | {sim / cpu:.0f}x | '
+                     f'{cpu / baseline:.2f} |')
         print(f'  rig {model} {shown} Hz: {sim / wall:.0f}x real time, {sim / cpu:.0f}x per '
               f'CPU second ({state})', flush=True)
     return lines + ['']

@@ -78,9 +78,10 @@ QUICK = {
          r'\| 1e-05 \| \d+\.\d{3} \| [1-9]\d* \| \d\.\d\de-\d\d \|',
          # FONSim runs when its own environment exists, and is said to be skipped otherwise.
          r'(\| 2 \| \d+\.\d\d \| [1-9]\d* \| \d\.\d\de-\d\d \||\*\*FONSim skipped\*\*)',
-         r'\| quasi-static \| \(pump 50\) \| \d+ \| \d+\.\d \| \d+\.\d \| [\d,]+ \| \d+x \| '
-         r'\*\*\d+x\*\* \|',
-         r'\| network \| 200 \| \d+ \| \d+\.\d \| \d+\.\d \| [\d,]+ \| \d+x \| \*\*\d+x\*\* \|'],
+         r'\| quasi-static \| \(pump 50\) \| \d+ \| \d+\.\d \| \d+\.\d \| [\d,]+ \| '
+         r'\*\*\d+x\*\* \| \d+x \| 1\.00 \|',
+         r'\| network \| 200 \| \d+ \| \d+\.\d \| \d+\.\d \| [\d,]+ \| \*\*\d+x\*\* \| \d+x \| '
+         r'\d+\.\d\d \|'],
         ['bench/dynamic_results.md']),
     'bench_graph.py': (
         ['# Equilibrium map and transition graph: N peaked segments',

@@ -15,15 +15,15 @@ tolerance tightens instead of depending on where the steps fall:
 - the exchange between the segments, half of sum_i |dv_i/dt| less the pump's |Q|: a
   piecewise quadratic (the pieces end where a rate changes sign); a snap-through is an
   episode where it exceeds SNAP_EXCHANGE_PER_FLOW |Q| (:class:`SnapWatcher`), whose start and
-  end are roots, whose fluid moved is the exchange's integral (piecewise cubic), whose peak is
-  a quadratic's largest value and whose 10 % and 90 % times invert that integral;
+  end are roots, whose fluid moved is the exchange's integral (piecewise cubic), whose 10 % and
+  90 % times invert that integral, and whose peak is found where the quadratic peaks (its value
+  there from the equations themselves, at the state the step's cubic gives);
 - each channel's peak flow (for its Reynolds number): a quadratic's largest magnitude.
 
-As with every event location on step polynomials (scipy's solve_ivp events alike), a level the
-state crosses and crosses back within one step of the exchange is seen; one crossed and
-crossed back between two evaluations of the polynomial cannot be missed, since the polynomial
-is solved, not sampled. What the polynomial itself does not show (a bump narrower than a step
-that the error control let through) is beyond any output of the integrator.
+Unlike event location that tests a function's sign at the step points (scipy's solve_ivp
+events), the polynomials are solved, not sampled: a level the state crosses and crosses back
+within one step is found. What a step's polynomial does not show (a wiggle narrower than the
+step that the error control let through) no output of the integrator shows either.
 
 Pure floats: a network has a handful of segments, and this runs once per step.
 """
