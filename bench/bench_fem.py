@@ -172,6 +172,17 @@ SHIPPED_TABLES = {'paper_top': 'paper_fem_top', 'paper_bottom': 'paper_fem_botto
                   'paper_bottom_yeoh': 'paper_fem_yeoh_bottom'}
 
 
+def _current_table(path: Path) -> bool:
+    """Whether a stored table exists and was made by the current FEM code (else: recompute)."""
+    from softseq_ros.scene.design import FEM_CODE_VERSION
+
+    if not path.is_file():
+        return False
+    with path.open() as handle:
+        header = ''.join(line for line in handle if line.startswith('#'))
+    return f'FEM code {FEM_CODE_VERSION},' in header
+
+
 def convergence_cases(sizes: tuple[float, ...] = MESH_SIZES) -> list:
     """Sweep cases: the Arruda-Boyce pair at each size, the Yeoh pair at the default only."""
     from softseq_ros.fem.sweep import SweepCase
@@ -199,7 +210,7 @@ def part_convergence(sizes: tuple[float, ...] = MESH_SIZES, out: Path = CONVERGE
     from softseq_ros.fem.sweep import run_sweep
 
     cases = convergence_cases(sizes)
-    missing = [case for case in cases if not (out / f'{case.label}.csv').is_file()]
+    missing = [case for case in cases if not _current_table(out / f'{case.label}.csv')]
     if missing:
         run_sweep(missing, out, workers=2, progress=print)
     if ship:
@@ -317,12 +328,12 @@ def part_materials() -> None:
             base = load_design(DESIGNS / f'paper_{name}.yaml')
             data_changes = {'mesh.element_size_m': 0.001}
             design = with_changes(base, data_changes)
-            design = _with_material(design, material)
+            design = _with_material(design, material, label)
             slug = f'{name}__' + ''.join(c if c.isalnum() else '_' for c in label)[:40]
             cases.append(SweepCase(label=slug, changes={'material': label}, design=design))
     out = REPO / 'bench' / 'fem_materials'
-    # Tables already there are kept (delete the folder to recompute them all).
-    missing = [case for case in cases if not (out / f'{case.label}.csv').is_file()]
+    # Tables of the current FEM code are kept (delete the folder to recompute them all).
+    missing = [case for case in cases if not _current_table(out / f'{case.label}.csv')]
     if missing:
         run_sweep(missing, out, workers=2, progress=print)
     rows = []
@@ -334,14 +345,19 @@ def part_materials() -> None:
     _store('materials', {'machine': _machine(), 'rows': rows, 'element_size_m': 0.001})
 
 
-def _with_material(design: object, material: dict) -> object:
+def _with_material(design: object, material: dict, label: str) -> object:
+    """The design with another material; its description (a table's provenance) says which."""
     from dataclasses import replace
 
     from softseq_ros.scene.design import Material
 
+    # The design's own description names its own material: keep only what it says of the shape.
+    shape = design.description.split(';')[0]
     return replace(design, material=Material(law=material['law'],
                                              params={k: v for k, v in material.items()
-                                                     if k != 'law'}))
+                                                     if k != 'law'}),
+                   description=f'{shape}; Ecoflex 00-30 as {label}, one of the fits compared '
+                               'in docs/fem.md.')
 
 
 def _pair_summary(bottom: Path, top: Path) -> dict:
