@@ -49,9 +49,10 @@ def run_once(problem: object, how: str, out: Path | None) -> dict:
             with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                               dashboard_address=':0') as cluster:
                 result = search(problem, cache_dir=cache, scheduler=cluster.scheduler_address,
-                                progress=print)
+                                progress=print, announce=print)
         else:
-            result = search(problem, cache_dir=cache, workers=int(how[-1]), progress=print)
+            result = search(problem, cache_dir=cache, workers=int(how[-1]), progress=print,
+                            announce=print)
         wall = time.perf_counter() - start
         if out is not None:
             write_result_files(result, out)

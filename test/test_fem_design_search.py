@@ -1,4 +1,4 @@
-"""`softseq design` on a tiny coarse grid: a target met and verified, one refused, interpolated."""
+"""`softseq design` on a tiny coarse grid: a target met and verified, refusals, interpolation."""
 
 from pathlib import Path
 
@@ -15,7 +15,7 @@ from softseq_ros.fem.design_search import (
     load_problem,
     search,
 )
-from softseq_ros.scene.design import load_design
+from softseq_ros.scene.design import cache_path, load_design
 from softseq_ros.scene.tables import read_table
 
 # The shipped tiny problem: the paper's pair on the coarsest mesh, the top membrane varied over
@@ -39,25 +39,48 @@ def _problem(folder: Path, name: str = 'tiny.yaml', **changes: object) -> Path:
 
 @pytest.fixture(scope='module')
 def library(tmp_path_factory):
-    """The corners and the grid computed once, on a real local Dask cluster, into a cache."""
+    """
+    The corners and the grid computed once, on a real local Dask cluster, into a cache.
+
+    Returns the folder, the cache, the search's result and what it said, in order.
+    """
     from distributed import LocalCluster
 
     folder = tmp_path_factory.mktemp('design')
     problem = load_problem(_problem(folder))
     cache = folder / 'cache'
+    said = []
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                       dashboard_address=':0') as cluster:
         result = search(problem, cache_dir=cache, scheduler=cluster.scheduler_address,
-                        verify=False)
+                        verify=False, progress=lambda line: said.append(('progress', line)),
+                        announce=lambda line: said.append(('announce', line)))
     # Two top corners (the grid's two points) and the bottom as designed: three FEM runs.
     assert result.fem_runs == 3
-    return folder, cache
+    return folder, cache, result, said
+
+
+def _corner_pairs(cache: Path, problem_path: Path) -> dict[tuple[str, str], dict]:
+    """The tiny problem's corner pairs assembled from their cached tables (no reach code)."""
+    from softseq_ros.fem.assembly import pair_metrics
+
+    problem = load_problem(problem_path)
+    bottom = cell_design(problem, problem.segments[0], problem.materials[0], {})
+    tops = {which: cell_design(problem, problem.segments[1], problem.materials[0],
+                               {'membrane_thickness_m': value})
+            for which, value in (('soft', 0.0004), ('stiff', 0.0006))}
+    out = {}
+    for which, top in tops.items():
+        segments = [read_table(cache_path(d, cache), name=name, length=0.111)
+                    for d, name in ((bottom, 'bottom'), (top, 'top'))]
+        out[which] = pair_metrics(segments, 3e-5, samples=401, with_sequence=False)
+    return out
 
 
 def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, capsys):
     from softseq_ros.cli import main
 
-    folder, cache = library
+    folder, cache, _, _ = library
     out = folder / 'found'
     code = main(['design', str(_problem(folder)), '--cache-dir', str(cache), '--out', str(out),
                  '--workers', '2', '--quiet'])
@@ -80,29 +103,98 @@ def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, cap
     top = load_design(out / best['designs']['top'])
     assert top.geometry.membrane_thickness_m == pytest.approx(thickness)
     assert top.material.law == 'arruda_boyce'
+    # What the ranges reach, and what the check could not bound, are in the results too.
+    low, high = results['reach']['plateau_pressure_pa']
+    assert low <= results['verification']['plateau_pressure_pa'] <= high
+    assert any(note.startswith('switch_injected_m3, leader and sequence')
+               for note in results['reach_notes'])
+    assert {tuple(pair['corners']) for pair in results['corner_pairs']} == {
+        ('soft', 'soft'), ('soft', 'stiff')}   # the bottom is fixed: its corners are one
+    assert 'reach of the ranges: plateau' in printed
 
 
-def test_a_target_beyond_the_ranges_is_refused_naming_the_bound(library, capsys):
+def test_the_corners_are_announced_before_they_run_and_the_grid_reuses_them(library):
+    _, _, _, said = library
+    assert said[0] == ('announce', 'reach: 3 of the 3 corner designs must be computed before '
+                                   'the target can be checked against the ranges (unit cells '
+                                   "on the search's mesh; grid points all, so the search "
+                                   'reuses them)')
+    assert said[1] == ('progress', 'reach (corners): 1/3 unit-cell tables computed')
+    assert ('progress', 'grid: 3 unit-cell tables from the cache') in said
+
+
+def test_every_pair_of_the_ranges_lies_within_the_reach(library):
+    folder, cache, result, _ = library
+    bounds = result.reach.bounds
+    pairs = _corner_pairs(cache, _problem(folder))
+    # Sound: the corner pairs (assembled here from their tables) and every design the search
+    # found lie within the bounds; and useful: the corner pairs are near the pressure bounds.
+    low, high = bounds['plateau_pressure_pa']
+    assert low <= pairs['soft']['plateau_pressure_pa'] <= 1.03 * low
+    assert high / 1.03 <= pairs['stiff']['plateau_pressure_pa'] <= high
+    first, last = bounds['plateau_from_m3']
+    for metrics in [*pairs.values(), *(e.metrics for e in result.ranked)]:
+        assert low <= metrics['plateau_pressure_pa'] <= high
+        assert first <= metrics['plateau_from_m3'] <= last
+    assert bounds['tip_distance_m'] == (0.0, pytest.approx(0.222))
+    assert not any('premise fails' in note for note in result.reach.notes)
+
+
+@pytest.mark.parametrize('change, says', [
+    ({'target.plateau_pressure_pa': {'value': 9000.0, 'tolerance': 500.0}},
+     ['target.plateau_pressure_pa: 9000 Pa (within 500) is above what the ranges reach: at '
+      'most ', ' Pa, both segments at their stiffest corners (top: membrane_thickness_m '
+      '0.0006); widen top membrane_thickness_m above 0.0006']),
+    ({'target.plateau_pressure_pa': {'value': 1500.0, 'tolerance': 100.0}},
+     ['target.plateau_pressure_pa: 1500 Pa (within 100) is below what the ranges reach: at '
+      'least ', ' Pa, both segments at their softest corners (top: membrane_thickness_m '
+      '0.0004); widen top membrane_thickness_m below 0.0004']),
+    ({'target.plateau_from_m3': {'value': 5e-6, 'tolerance': 2e-6}},
+     ['target.plateau_from_m3: 5 mL (within 2) is earlier than the ranges reach: the pressure '
+      'is within 1 % of its plateau from ', ' mL on at the earliest', 'widen the ranges at '
+      'either end (top membrane_thickness_m [0.0004, 0.0006])']),
+])
+def test_a_target_beyond_the_ranges_is_refused_naming_the_bound(library, capsys, change, says):
     from softseq_ros.cli import main
 
-    folder, cache = library
-    problem = _problem(folder, 'too_stiff.yaml',
-                       **{'target.plateau_pressure_pa': {'value': 9000.0, 'tolerance': 500.0}})
+    folder, cache, _, _ = library
+    problem = _problem(folder, 'beyond.yaml', **change)
     out = folder / 'refused'
     assert main(['design', str(problem), '--cache-dir', str(cache), '--out', str(out),
                  '--quiet']) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith('softseq design: error: ')
-    assert 'target.plateau_pressure_pa: 9000 Pa' in lines[0]
-    assert 'above what the ranges reach' in lines[0]
-    assert 'both segments at their stiffest corners (top: membrane_thickness_m 0.0006, its ' \
-        'upper bound)' in lines[0]
+    assert len(lines) == 1 and lines[0].startswith(f'softseq design: error: {problem}: ')
+    assert all(part in lines[0] for part in says), lines[0]
     assert not out.exists()
+    # The bound it names holds for the corner pair at that end (assembled here).
+    bound = float(lines[0].split(says[0])[1].split(says[1])[0])
+    pairs = _corner_pairs(cache, problem)
+    if 'plateau_pressure_pa: 9000' in says[0]:
+        assert bound >= pairs['stiff']['plateau_pressure_pa']
+    elif 'plateau_pressure_pa' in says[0]:
+        assert bound <= pairs['soft']['plateau_pressure_pa']
+    else:
+        assert bound <= min(p['plateau_from_m3'] for p in pairs.values()) * 1e6
+
+
+def test_a_tip_beyond_the_actuators_length_is_refused_before_any_work(tmp_path, capsys):
+    from softseq_ros.cli import main
+
+    problem = _problem(tmp_path, **{'target.tip_distance_m': {'injected_m3': 2e-5,
+                                                              'value': 0.3, 'tolerance': 0.02}})
+    assert main(['design', str(problem), '--cache-dir', str(tmp_path / 'cache')]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1
+    assert ('target.tip_distance_m: 0.3 m (within 0.02) is beyond what any design reaches: the '
+            "tip is at most the actuator's length from its base, 0.222 m") in lines[0]
+    # Nothing computed, nothing announced: the paper's segments are 111 mm each.
+    assert not (tmp_path / 'cache').exists() and 'reach:' not in captured.out
 
 
 def test_interpolated_curve_matches_a_direct_fem_run_off_the_grid(library):
-    folder, cache = library
+    folder, cache, result, _ = library
     problem = load_problem(_problem(folder))
     grid = grid_designs(problem)
     paths, runs = ensure_tables([d for *_, d in grid], cache, 1, None, None, 'grid')
@@ -123,6 +215,16 @@ def test_interpolated_curve_matches_a_direct_fem_run_off_the_grid(library):
     assert interpolated.pressures.max() == pytest.approx(direct.pressures.max(), rel=0.01)
     assert np.max(np.abs(interpolated.curvature(volumes) - direct.curvatures[1:])) < \
         0.01 * direct.curvatures.max()
+    # A design between the corners, by direct FEM, lies within what the ranges reach.
+    from softseq_ros.fem.assembly import pair_metrics
+
+    bottom = cell_design(problem, problem.segments[0], problem.materials[0], {})
+    pair = pair_metrics([read_table(cache_path(bottom, cache), name='bottom', length=0.111),
+                         direct], 3e-5, samples=401, with_sequence=False)
+    low, high = result.reach.bounds['plateau_pressure_pa']
+    assert low <= pair['plateau_pressure_pa'] <= high
+    first, last = result.reach.bounds['plateau_from_m3']
+    assert first <= pair['plateau_from_m3'] <= last
 
 
 @pytest.mark.parametrize('change, expected', [
