@@ -327,3 +327,49 @@ def test_what_starts_a_run_and_what_does_not():
     # An actuator that names its scene again after its first state started again.
     [start] = find_run_starts(time, u, sign, status, [-0.5, 5.001], 0.0)
     assert start.time_s == pytest.approx(5.02) and 'actuator started again' in start.cause
+
+
+def _jumps_step_by_step(time: np.ndarray, u: np.ndarray, sign: np.ndarray) -> list[int]:
+    """The jump rule as its docstring says it, one step at a time (the reference)."""
+    from softseq_ros.analysis.recording import JUMP_FACTOR, JUMP_SHARE
+
+    def flow(k: int) -> float:
+        if not 0 <= k < u.size - 1 or sign[k + 1] == 0 or time[k + 1] <= time[k]:
+            return 0.0
+        return abs(u[k + 1] - u[k]) / (time[k + 1] - time[k])
+
+    span = float(np.ptp(u)) or 1.0
+    found = []
+    for k in range(u.size - 1):
+        allowed = JUMP_FACTOR * max(flow(k - 1), flow(k + 1)) * (time[k + 1] - time[k]) \
+            if sign[k + 1] != 0 else 0.0
+        if abs(u[k + 1] - u[k]) > max(allowed, JUMP_SHARE * span):
+            found.append(k)
+    return found
+
+
+def test_volume_jumps_follow_the_rule_and_take_no_column_sized_temporaries():
+    import tracemalloc
+
+    from softseq_ros.analysis.recording import _volume_jumps
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(2, 30))
+        time = np.cumsum(rng.choice([0.0, 0.01, 0.02, 0.04], n))
+        u = np.concatenate([[0.0], np.cumsum(rng.choice([0.0, 1e-3, 5e-3, 0.5, -0.3], n - 1)
+                                             * rng.random(n - 1))])
+        sign = rng.choice([-1, 0, 1], n).astype(np.int8)
+        assert _volume_jumps(time, u, sign).tolist() == _jumps_step_by_step(time, u, sign)
+    # Two million commands of a pump at 1 mL/s with one reset: found while holding no more
+    # than the steps and their mask beside the columns (the rule as whole columns held seven).
+    time = np.arange(2_000_000) * 0.02
+    u = np.concatenate([np.arange(1_000_000), np.arange(1_000_000)]) * 2e-8
+    sign = np.ones(u.size, np.int8)
+    tracemalloc.start()
+    try:
+        assert _volume_jumps(time, u, sign).tolist() == [999_999]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1.5 * u.nbytes

@@ -271,15 +271,7 @@ def find_run_starts(pump_time_s: FloatArray, pump_u: FloatArray,
         was_active = was_active or state != 'idle'
         previous = state
     if pump_u.size > 1:
-        du = np.abs(np.diff(pump_u))
-        dt = np.diff(pump_time_s)
-        rate = np.divide(du, dt, out=np.zeros_like(du), where=dt > 0)
-        rate[flow_sign[1:] == 0] = 0.0
-        # The flow on the commands either side: a jump is far beyond both.
-        local = np.maximum(np.concatenate([[0.0], rate[:-1]]), np.concatenate([rate[1:], [0.0]]))
-        span = float(np.ptp(pump_u)) or 1.0
-        allowed = np.where(flow_sign[1:] != 0, JUMP_FACTOR * local * dt, 0.0)
-        for row in np.flatnonzero(du > np.maximum(allowed, JUMP_SHARE * span)).tolist():
+        for row in _volume_jumps(pump_time_s, pump_u, flow_sign).tolist():
             found.append((float(pump_time_s[row + 1]),
                           f'the commanded volume jumped from {pump_u[row] * 1e6:.4f} mL to '
                           f'{pump_u[row + 1] * 1e6:.4f} mL in one command'))
@@ -298,6 +290,38 @@ def find_run_starts(pump_time_s: FloatArray, pump_u: FloatArray,
         row = min(int(np.searchsorted(pump_time_s, time_s)), pump_time_s.size - 1)
         starts.append(RunStart(float(pump_time_s[row]), cause))
     return starts
+
+
+def _volume_jumps(pump_time_s: FloatArray, pump_u: FloatArray,
+                  flow_sign: NDArray[np.int8]) -> NDArray[np.intp]:
+    """
+    The steps ``k`` (command ``k`` to ``k + 1``) whose commanded volume jumps.
+
+    A jump moves further than JUMP_FACTOR times the flow of the steps either side over its time
+    (a step where the pump stands still, or of no time, has no flow), and at all by more than
+    JUMP_SHARE of the range. Only the steps beyond that share are looked at further: a long
+    bag's columns have millions of rows, and the rule's terms as whole columns cost the report
+    of an 18-cycle bag 115 MB of temporaries.
+    """
+    du = np.diff(pump_u)
+    np.abs(du, out=du)
+    span = float(np.ptp(pump_u)) or 1.0
+    rows = np.flatnonzero(du > JUMP_SHARE * span)
+    if not rows.size:
+        return rows
+
+    def flow(steps: NDArray[np.intp]) -> FloatArray:
+        inside = (steps >= 0) & (steps < du.size)
+        steps = np.clip(steps, 0, du.size - 1)
+        dt = pump_time_s[steps + 1] - pump_time_s[steps]
+        moving = inside & (dt > 0) & (flow_sign[steps + 1] != 0)
+        return np.where(moving, du[steps] / np.where(dt > 0, dt, 1.0), 0.0)
+
+    # The flow on the steps either side: a jump is far beyond both.
+    local = np.maximum(flow(rows - 1), flow(rows + 1))
+    dt = pump_time_s[rows + 1] - pump_time_s[rows]
+    allowed = np.where(flow_sign[rows + 1] != 0, JUMP_FACTOR * local * dt, 0.0)
+    return rows[du[rows] > np.maximum(allowed, JUMP_SHARE * span)]
 
 
 def _topic(namespace: str, spec: contract.Topic) -> str:
