@@ -34,13 +34,13 @@ setup(
     entry_points={
         'console_scripts': [
             'softseq = softseq_ros.cli:main',
-            'syringe_pump = softseq_ros.nodes.syringe_pump:main',
-            'managed_syringe_pump = softseq_ros.nodes.managed_syringe_pump:main',
-            'actuator = softseq_ros.nodes.actuator:main',
-            'camera = softseq_ros.nodes.camera:main',
-            'recorder = softseq_ros.nodes.recorder:main',
-            'sim_clock = softseq_ros.nodes.sim_clock:main',
-            'rig = softseq_ros.nodes.rig:main',
+            'syringe_pump = softseq_ros.nodes.entry:syringe_pump',
+            'managed_syringe_pump = softseq_ros.nodes.entry:managed_syringe_pump',
+            'actuator = softseq_ros.nodes.entry:actuator',
+            'camera = softseq_ros.nodes.entry:camera',
+            'recorder = softseq_ros.nodes.entry:recorder',
+            'sim_clock = softseq_ros.nodes.entry:sim_clock',
+            'rig = softseq_ros.nodes.entry:rig',
         ],
     },
 )

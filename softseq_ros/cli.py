@@ -6,9 +6,9 @@ import math
 from pathlib import Path
 import signal
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, NoReturn, Sequence
 
-from softseq_ros.errors import UserError
+from softseq_ros.errors import UserError, one_line
 from softseq_ros.stopping import TerminatedError, raise_terminated
 
 # A user's input that cannot be used, or a file the system cannot read or write: one line.
@@ -362,7 +362,16 @@ def _play(args: argparse.Namespace) -> int:
 
     # Held from before rclpy loads: a signal inside its import would end in an ImportError.
     with HeldSignals() as held:
-        from softseq_ros.nodes.player import parse_remaps, play
+        from softseq_ros.nodes.player import PlayError, parse_remaps, play, rate_reason
+
+        reason = rate_reason(args.rate)
+        if reason is not None:
+            raise PlayError(f'--{reason}')
+        for option, seconds in (('--start-offset', args.start_offset),
+                                ('--wait-for-subscribers', args.wait_for_subscribers)):
+            if not (math.isfinite(seconds) and seconds >= 0.0):
+                raise PlayError(f'{option}: must be a finite number of seconds >= 0, got '
+                                f'{seconds}')
 
         result = play(str(args.bag), rate=args.rate, loop=args.loop, clock=args.clock,
                       topics=args.topics, wait_s=args.wait_for_subscribers, held=held,
@@ -430,9 +439,17 @@ def _scenes(args: argparse.Namespace) -> int:
     return 0
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose mistakes are one line, as every other refusal of softseq."""
+
+    def error(self, message: str) -> NoReturn:
+        """Missing, unknown or malformed arguments: one line, exit 2 (usage: --help)."""
+        self.exit(2, f'{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='softseq',
         description='Emulated rig of a soft actuator with a hardware-encoded inflation sequence.')
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
@@ -649,6 +666,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)
+    parser.commands = dict(sub.choices)
     return parser
 
 
@@ -661,13 +679,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     is 130 or 143.
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        # Said by the subcommand's parser, as its other mistakes are.
+        parser.commands[args.command].error(f'unrecognized arguments: {" ".join(unknown)}')
     handler: Callable[[argparse.Namespace], int] = args.handler
     previous = signal.signal(signal.SIGTERM, raise_terminated)
     try:
         return handler(args)
     except USER_ERRORS as err:
-        print(f'softseq {args.command}: error: {err}', file=sys.stderr)
+        # One line, also where the reason quotes a library's message of several lines; a
+        # file the system refused is named first, as every other refusal names its input.
+        reason = f'{err.filename}: {err.strerror}' if isinstance(err, OSError) \
+            and err.filename and err.strerror else str(err)
+        print(f'softseq {args.command}: error: {one_line(reason)}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f'softseq {args.command}: interrupted', file=sys.stderr)

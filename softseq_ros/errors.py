@@ -17,6 +17,11 @@ class UserError(ValueError):
     """Input that cannot be used; the message is one line that names the input and the fault."""
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: a library's message of several lines (YAML's) joined by spaces."""
+    return ' '.join(part.strip() for part in text.splitlines() if part.strip())
+
+
 class OutputWriteError(UserError):
     """An output file that cannot be written: full disk, read-only folder."""
 

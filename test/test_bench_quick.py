@@ -106,6 +106,12 @@ QUICK = {
          r'- unit cells: tables and assembly \d+\.\d s, \*\*\d+\.\dx\*\*'],
         ['bench/fem_actuator_results.json', 'bench/fem_actuator_results.md',
          'docs/fem_actuator.png']),
+    'bench_adversarial.py': (
+        ['| class | what is tried | tried | held | broken |', '(quick sample)'],
+        [r'\*\*[1-9]\d* bad inputs tried, [1-9]\d* held, 0 broken\*\*',
+         r'\| scene \| [^|]+ \| 1 \| 1 \| 0 \|', r'\| topic \| [^|]+ \| 1 \| 1 \| 0 \|',
+         r'\| node_parameter \| [^|]+ \| 1 \| 1 \| 0 \|'],
+        ['bench/adversarial_results.md', 'docs/faults.md']),
     'bench_fem_design.py': (
         ['# softseq design: FEM calls and wall time to meet a target'],
         [r'\| tiny \| local1 \| [1-9]\d* \| 3 \| [1-9]\d* \| \d+ \|',

@@ -318,3 +318,26 @@ def test_a_recording_through_an_actuator_restart_is_reported_as_two_runs(context
     assert metrics['runs'][1]['from_s'] == restart.time_s
     assert any(w.startswith('the bag holds 2 ') for w in metrics['warnings'])
     assert f'run 2 (from {restart.time_s:.3f} s' in text
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_a_signal_while_a_node_loads_ends_it_quietly(ros_env, tmp_path, signum):
+    # A Ctrl-C in the second a node needs to load (rclpy, numpy, its scene) used to end in a
+    # KeyboardInterrupt traceback through the imports.
+    script = os.path.join(sys.prefix, 'bin', 'camera')
+    process = subprocess.Popen([script, '--ros-args', '-p', 'scene:=fig1_none'], env=ros_env,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+
+    def loading_rclpy() -> bool:
+        # rcl's library mapped: the entry point has begun to load the node's module.
+        try:
+            with open(f'/proc/{process.pid}/maps', encoding='ascii', errors='replace') as maps:
+                return 'librcl' in maps.read()
+        except FileNotFoundError:
+            return True
+    wait_for(loading_rclpy, 'the camera to load rclpy', timeout=STARTUP_TIMEOUT_S)
+    process.send_signal(signum)
+    output, _ = process.communicate(timeout=60)
+    assert b'Traceback' not in output and b'KeyboardInterrupt' not in output, output
+    # At once, as a shell reports the signal (0 only if it was up already: a clean stop).
+    assert process.returncode in (128 + signum, 0), output

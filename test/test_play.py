@@ -101,7 +101,7 @@ def test_a_subscriber_receives_what_the_bag_holds(context, small_bag):
 
 
 def test_bad_options_are_refused_before_anything_is_published(context, small_bag):
-    with pytest.raises(PlayError, match='rate must be > 0'):
+    with pytest.raises(PlayError, match='rate: must be > 0'):
         BagPlayer(str(small_bag), rate=0.0, context=context)
     with pytest.raises(PlayError, match='no topic /nope'):
         BagPlayer(str(small_bag), topics=['/nope'], context=context)
@@ -240,7 +240,7 @@ def test_pause_resume_toggle_and_rate_over_ros(context, small_bag):
             result, = future.result().results
             assert result.successful == ok, result.reason
             if not ok:
-                assert 'rate must be' in result.reason
+                assert 'rate: must be' in result.reason
         assert player.rate == 50.0
         replay.join(timeout=30.0)
         assert not replay.is_alive()

@@ -192,3 +192,65 @@ def test_report_refuses_a_malformed_reference_file_naming_the_key(tmp_path, text
     assert_one_line(result, 'report', names)
     assert str(reference) in result.stderr
     assert not (tmp_path / 'report').exists()
+
+
+# (arguments, the one line's command, what it must name); argparse printed its usage first.
+ARGUMENT_MISTAKES = [
+    (['run'], 'run', 'the following arguments are required: scene, --out'),
+    (['solve', 'fig1_none', '--out', 'p.csv', '--bogus'], 'solve',
+     'unrecognized arguments: --bogus'),
+    (['scenes', '--bogus'], 'scenes', 'unrecognized arguments: --bogus'),
+    (['play', 'bag', '--rate', 'abc'], 'play', "argument --rate: invalid float value: 'abc'"),
+    (['report', 'bag', '--style', 'ugly'], 'report', 'argument --style: invalid choice'),
+    (['solve', 'fig1_none', '--out', '/proc/no/such/p.csv'], 'solve',
+     '/proc/no: No such file or directory'),
+    (['library', str(config_dir() / 'segments'), '--length-m', 'nan'], 'library',
+     '--length-m: must be a finite length > 0 (m), got nan'),
+]
+
+
+@pytest.mark.parametrize('arguments, command, names', ARGUMENT_MISTAKES,
+                         ids=[' '.join(a[:1] + a[-2:]) for a, _, _ in ARGUMENT_MISTAKES])
+def test_argument_mistakes_are_one_line_of_the_subcommand(tmp_path, monkeypatch, capsys,
+                                                          arguments, command, names):
+    from softseq_ros.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(arguments)
+    except SystemExit as exit_:
+        code = exit_.code
+    stderr = capsys.readouterr().err
+    lines = stderr.strip().splitlines()
+    assert code == 2 and len(lines) == 1, stderr
+    assert lines[0].startswith(f'softseq {command}: error: ') and names in lines[0], lines[0]
+    assert 'usage:' not in stderr
+
+
+def test_play_options_are_refused_naming_them(tmp_path, capsys):
+    from softseq_ros.cli import main
+
+    # Refused before the bag is opened (this one does not exist) and before rclpy starts.
+    for option, value in (('--rate', '0'), ('--start-offset', '-1'),
+                          ('--wait-for-subscribers', '-1'), ('--wait-for-subscribers', 'nan')):
+        assert main(['play', str(tmp_path / 'bag'), option, value]) == 2
+        (line,) = capsys.readouterr().err.strip().splitlines()
+        assert line.startswith(f'softseq play: error: {option}: must be '), line
+
+
+def test_a_reference_naming_a_segment_the_recording_lacks_is_refused(tmp_path):
+    from softseq_ros.analysis.report import (
+        ReferenceFileError,
+        check_reference_segments,
+        load_reference,
+    )
+
+    reference = _write(tmp_path / 'reference.yaml',
+                       'reported:\n  segment_plateau_lower: middle\n')
+    loaded = load_reference(reference)
+    check_reference_segments(reference, load_reference(_write(
+        tmp_path / 'good.yaml', 'reported:\n  segment_plateau_lower: top\n')), ('bottom', 'top'))
+    with pytest.raises(ReferenceFileError, match=r"reference\.yaml: reported\."
+                       r"segment_plateau_lower: 'middle' is no segment of this recording "
+                       r'\(bottom, top\)'):
+        check_reference_segments(reference, loaded, ('bottom', 'top'))

@@ -393,7 +393,14 @@ def test_camera_warns_about_unusable_states_and_keeps_the_last_good_one(tmp_path
     camera = camera_core(scene, outputs=frozenset({'poses'}))
     camera.handle(SegmentCurvatures(1, ('bottom', 'top'), [1.0, 2.0]), 1)
     bad = camera.handle(SegmentCurvatures(2, ('bottom',), [math.nan]), 2)
-    assert [n.level for n in bad] == [WARNING] and 'expected 2 finite' in bad[0].text
+    assert [n.level for n in bad] == [WARNING] and "joints ['bottom'] are not the " \
+        "segments ['bottom', 'top']" in bad[0].text
+    # Another actuator's joints, or a NaN, are no state of these segments either (each
+    # counted; the warning is said once per kind every 2 s).
+    camera.handle(SegmentCurvatures(2, ('left', 'right'), [3.0, 4.0]), 2)
+    camera.handle(SegmentCurvatures(2, ('bottom', 'top'), [math.nan, 4.0]), 2)
+    camera.handle(SegmentVolumes(2, ('a', 'b'), [1.0e-5, 1.0e-5], 0.0), 2)
+    assert camera.refused_states == 4
     frame, = topic_values(camera.tick(3), Backbone)
     points, _ = backbone_batch(np.array([[1.0, 2.0]]), np.array(scene.lengths),
                                scene.camera.points_per_segment)

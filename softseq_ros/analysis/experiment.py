@@ -211,8 +211,11 @@ def compare(trace: Trace, experiment: Experiment, snapshots: list | None = None)
     best = int(np.argmin(costs))
     if math.isfinite(costs[best]):
         lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
-        found = minimize_scalar(lambda s: misfit(s)[0], bounds=(lo, hi), method='bounded',
-                                options={'xatol': 1e-6 * span})
+        # Where too few rows overlap the misfit is infinite; scipy's bounded search needs
+        # finite values (inf - inf ends in NaN and a RuntimeWarning): a finite ceiling.
+        ceiling = 1.0e6 * (costs[best] + 1.0)
+        found = minimize_scalar(lambda s: min(misfit(s)[0], ceiling), bounds=(lo, hi),
+                                method='bounded', options={'xatol': 1e-6 * span})
         shift = float(found.x) if found.fun <= costs[best] else float(grid[best])
         rmse, scale, used = misfit(shift)
         result['alignment'] = {'volume_shift_m3': shift, 'pressure_scale': scale,

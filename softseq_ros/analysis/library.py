@@ -14,6 +14,7 @@ processes (:func:`softseq_ros.parallel.run_jobs`).
 from dataclasses import dataclass
 import itertools
 import json
+import math
 import os
 from pathlib import Path
 import re
@@ -106,6 +107,8 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None,
     with a note on ``notes``.
     """
     path = Path(source)
+    if length_m is not None and not (math.isfinite(length_m) and length_m > 0.0):
+        raise LibraryError(f'--length-m: must be a finite length > 0 (m), got {length_m}')
     if path.is_file():
         from softseq_ros.scene.loader import load_scene
 
@@ -127,12 +130,23 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None,
     entries = []
     for table, text in texts.items():
         found = _LENGTH_LINE.search(text)
-        length = float(found.group(1)) if found else length_m
+        length = _length_line(table, found.group(1)) if found else length_m
         if length is None:
             raise LibraryError(f'{table}: no "# length_m:" line; give the length with '
                                '--length-m')
         entries.append(Entry(table.stem, str(table), length))
     return entries
+
+
+def _length_line(table: Path, text: str) -> float:
+    """The length a table's ``# length_m:`` line gives; LibraryError naming it when none."""
+    try:
+        length = float(text)
+    except ValueError:
+        length = math.nan
+    if not (math.isfinite(length) and length > 0.0):
+        raise LibraryError(f'{table}: "# length_m: {text}": must be a finite length > 0 (m)')
+    return length
 
 
 def _segment(entry: Entry) -> object:

@@ -268,6 +268,15 @@ def _check_reported(path: Path, reported: dict) -> None:
                 volume(f'{where}.{key}', entry[key])
 
 
+def check_reference_segments(path: str | os.PathLike, reference: dict,
+                             segments: tuple[str, ...] | list[str]) -> None:
+    """Refuse a reference that names a segment the recording does not have (before writing)."""
+    named = reference['reported'].get('segment_plateau_lower')
+    if named is not None and named not in segments:
+        raise ReferenceFileError(f'{path}: reported.segment_plateau_lower: {named!r} is no '
+                                 f'segment of this recording ({", ".join(segments)})')
+
+
 def against_reference(metrics: dict, reference: dict) -> dict:
     """Each reported fact beside what the recording shows, with the difference."""
     reported = reference['reported']
@@ -359,6 +368,8 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
 
         scene = load_scene(scene_name)
     recording = load_recording(bag, namespace)
+    if reference is not None:
+        check_reference_segments(reference_file, reference, recording.segment_names)
     notes = []
     if scene is not None:
         # Before the equilibrium set is assembled and before anything is written.

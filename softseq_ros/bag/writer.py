@@ -152,12 +152,12 @@ class BagWriter:
         self._closed_files: list[_ClosedFile] = []
         self._file_start_ns: int | None = None
         self._schema_texts: dict[str, str] = {}
-        if file_name is None:
-            if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
-                raise BagWriterError(
-                    f'{directory}: bag directory already exists and is not empty')
-            file_name = f'{directory.name}_0.mcap'
         try:
+            if file_name is None:
+                if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
+                    raise BagWriterError(
+                        f'{directory}: bag directory already exists and is not empty')
+                file_name = f'{directory.name}_0.mcap'
             directory.mkdir(parents=True, exist_ok=True)
             self._file: BinaryIO = open(directory / file_name, 'xb')
         except OSError as err:

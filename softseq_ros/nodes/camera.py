@@ -112,7 +112,8 @@ class CameraNode(CoreNode):
         """For /diagnostics: the frame rate asked for and the images rendered, with the rest."""
         base = super().health()
         base.values = {'rate_hz': self.core.rate_hz,
-                       'images_rendered': self.core.images_rendered, **base.values}
+                       'images_rendered': self.core.images_rendered,
+                       'refused_states': self.core.refused_states, **base.values}
         return base
 
     def _update_image_wanted(self) -> None:

@@ -286,6 +286,8 @@ class ParameterNode(Node):
             read = read_rules(self.parameter_rules, node_kwargs.get('context'))
             node_kwargs['parameter_overrides'] = read + list(
                 node_kwargs.get('parameter_overrides') or [])
+        # What the node was given, to word a refusal of rclpy's in ours.
+        self._parameter_overrides_given = list(node_kwargs.get('parameter_overrides') or [])
         try:
             super().__init__(node_name, **node_kwargs)
         except InvalidParameterTypeException as err:
@@ -307,8 +309,23 @@ class ParameterNode(Node):
                  rule: _Rule) -> Any:
         self._rules[name] = rule
         descriptor.name = name
+        return self.declare_checked(name, default, descriptor)
+
+    def declare_checked(self, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
+        """
+        ``declare_parameter``'s value; a value refused is one line naming node and parameter.
+
+        ParameterValueError: ``/rig_b/camera: parameter rate_hz: must be > 0, got 0``.
+        """
         try:
             return self.declare_parameter(name, default, descriptor).value
+        except InvalidParameterTypeException:
+            # A parameter rclpy types itself (a read-only text) given another type.
+            given = next((p for p in self._parameter_overrides_given if p.name == name), None)
+            reason = type_reason(name, Parameter.Type(descriptor.type), given) \
+                if given is not None else f'{name}: of the wrong type'
+            raise ParameterValueError(f'{self.get_fully_qualified_name()}: parameter {reason}') \
+                from None
         except InvalidParameterValueException as err:
             # rclpy wraps the reason in its own words ("Invalid parameter value (0) for
             # parameter. Reason: ...: rate_hz"); ours names the node, which in a rig of three

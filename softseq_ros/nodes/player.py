@@ -100,9 +100,9 @@ class PlayError(UserError):
 def rate_reason(rate: object) -> str | None:
     """Why ``rate`` cannot be a replay's speed factor, or None."""
     if isinstance(rate, bool) or not isinstance(rate, (int, float)):
-        return f'rate must be a number, got {rate!r}'
+        return f'rate: must be a number, got {rate!r}'
     if not (0.0 < rate <= MAX_RATE):
-        return f'rate must be > 0 and <= {MAX_RATE:g}, got {rate}'
+        return f'rate: must be > 0 and <= {MAX_RATE:g}, got {rate}'
     return None
 
 
@@ -474,6 +474,9 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
             return play(bag, rate, loop, clock, topics, wait_s, args, own,
                         start_offset_s=start_offset_s, remap=remap,
                         qos_overrides_path=qos_overrides_path)
+    if not (isinstance(wait_s, (int, float)) and math.isfinite(wait_s) and wait_s >= 0.0):
+        raise PlayError(f'--wait-for-subscribers: must be a finite number of seconds >= 0, '
+                        f'got {wait_s}')
     held.check()
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

@@ -28,7 +28,6 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.validate_topic_name import validate_topic_name
@@ -43,7 +42,7 @@ from softseq_ros.nodes.diagnostics import (
     DiagnosticsPublisher,
     Health,
 )
-from softseq_ros.nodes.parameters import NodeConfigError
+from softseq_ros.nodes.parameters import NodeConfigError, ParameterNode
 from softseq_ros.nodes.runner import build_nodes, exit_with_help, init_ros
 from softseq_ros.rig import contract
 
@@ -52,6 +51,8 @@ from softseq_ros.rig import contract
 # scene does not list, such as the image by default) is not in the bag.
 RIG_TOPICS: tuple[str, ...] = tuple(topic.name for topic in contract.RIG_TOPICS)
 DISCOVERY_PERIOD_S = 0.5
+# The longest split a bag's int64 nanoseconds carry with room to spare (31 years).
+MAX_BAG_DURATION_S = 1.0e9
 QUEUE_DEPTH = 1000
 
 
@@ -104,7 +105,7 @@ def message_class(type_name: str) -> type:
             f'message type {type_name}: its Python package is not installed') from None
 
 
-class Recorder(Node):
+class Recorder(ParameterNode):
     """Subscribe to a list of topics and write everything received into one bag."""
 
     NODE_NAME = 'recorder'
@@ -118,19 +119,19 @@ class Recorder(Node):
     def __init__(self, **node_kwargs: Any) -> None:
         """Declare parameters, open the bag and start looking for the topics."""
         super().__init__(self.NODE_NAME, **node_kwargs)
-        topics = self.declare_parameter(
+        topics = self.declare_checked(
             'topics', list(RIG_TOPICS), ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True,
                 description='Topics to record (relative names are resolved in the node '
                             'namespace; default: every topic of the rig); all_topics and '
                             'regex add to them, so give "topics:=[]" to record only theirs.'),
-        ).value or []   # rcl reads topics:=[] as a value not set
+        ) or []   # rcl reads topics:=[] as a value not set
         # Declared without a value when not given, so its type cannot be static: rclpy's
         # get_parameters service answers nothing at all (not even the other names asked for)
         # when one of them is a statically typed parameter without a value. Its type is
         # checked here instead.
         self.add_on_set_parameters_callback(_check_types_parameter)
-        self.declare_parameter(
+        self.declare_checked(
             'types', None, ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, read_only=True, dynamic_typing=True,
                 additional_constraints='a list of strings, or not set',
@@ -166,9 +167,9 @@ class Recorder(Node):
         self._exclude = _compiled('exclude_regex', exclude) if exclude else None
         self._all_topics = bool(all_topics)
         if isinstance(max_duration, bool) or not isinstance(max_duration, (int, float)) \
-                or not 0.0 <= max_duration < float('inf'):
+                or not 0.0 <= max_duration <= MAX_BAG_DURATION_S:
             raise BagWriterError(f'parameter max_bag_duration: must be a number of seconds '
-                                 f'>= 0, got {max_duration!r}')
+                                 f'>= 0 and <= {MAX_BAG_DURATION_S:g}, got {max_duration!r}')
         types = list(self.get_parameter('types').value or [])
         if types and len(types) != len(topics):
             raise BagWriterError(
@@ -186,10 +187,16 @@ class Recorder(Node):
             resolved = self.resolve_topic_name(topic)
             self._wanted[resolved] = canonical_type_name(given) if given else ''
         self._output = Path(output) if output else default_output_directory()
-        self._bag = BagWriter(self._output,
-                              compression=None if compression == 'none' else compression,
-                              max_file_size_bytes=int(max_size),
-                              max_file_duration_s=float(max_duration))
+        try:
+            self._bag = BagWriter(self._output,
+                                  compression=None if compression == 'none' else compression,
+                                  max_file_size_bytes=int(max_size),
+                                  max_file_duration_s=float(max_duration))
+        except BagWriterError as err:
+            if not str(err).startswith(str(self._output)):
+                raise
+            # The folder cannot be made: say which parameter gave it.
+            raise BagWriterError(f'parameter output: {err}') from None
         self._subscriptions_by_topic: dict[str, Any] = {}
         self._reported: set[str] = set()
         self.bytes_written = 0                 # CDR payload bytes handed to the bag
@@ -207,8 +214,8 @@ class Recorder(Node):
     def _read_only(self, name: str, default: Any, kind: int, description: str,
                    **descriptor: Any) -> Any:
         """Declare a read-only parameter (set at start only); return its value."""
-        return self.declare_parameter(name, default, ParameterDescriptor(
-            type=kind, read_only=True, description=description, **descriptor)).value
+        return self.declare_checked(name, default, ParameterDescriptor(
+            type=kind, read_only=True, description=description, **descriptor))
 
     @property
     def bag(self) -> BagWriter:

@@ -40,8 +40,9 @@ class SimClockNode(ParameterNode):
         self.speedup = self.declare_number(
             'speedup', 100.0, 'Sim seconds per wall second.', minimum=0.0, open_minimum=True,
             maximum=1.0e6)
+        # The largest second a builtin_interfaces/Time carries (int32), by far enough.
         start_s = self.declare_number('start_s', 0.0, 'Sim time at start [s].', minimum=0.0,
-                                      read_only=True)
+                                      maximum=float(2 ** 31 - 1), read_only=True)
         self._wall_ns = wall_ns or time.monotonic_ns
         self._origin_wall = self._wall_ns()
         self._origin_sim = int(round(start_s * 1e9))

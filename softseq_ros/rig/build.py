@@ -144,6 +144,7 @@ def camera_core(scene: Scene, **settings: Any) -> CameraCore:
             points_per_segment=int(settings.get('points_per_segment', cam.points_per_segment)),
             triggers=tuple(settings.get('trigger_injected_m3', cam.trigger_injected_m3)),
             image_size=(int(settings.get('width', cam.image_width_px)),
-                        int(settings.get('height', cam.image_height_px))))
+                        int(settings.get('height', cam.image_height_px))),
+            segment_names=scene.segment_names)
     except ValueError as err:
         raise SettingError(f'camera: {err}') from None

@@ -62,8 +62,13 @@ class CameraCore:
                  rate_hz: float, outputs: frozenset[str] = frozenset(CAMERA_OUTPUTS),
                  frame_trigger: str = 'timer', noise_std_m: float = 0.0, seed: int = 0,
                  points_per_segment: int = 20, triggers: Sequence[float] = (),
-                 image_size: tuple[int, int] = (640, 480)) -> None:
-        """A camera for segments of ``lengths`` [m] holding ``rest_volume_m3`` at rest."""
+                 image_size: tuple[int, int] = (640, 480),
+                 segment_names: Sequence[str] | None = None) -> None:
+        """
+        A camera for segments of ``lengths`` [m] holding ``rest_volume_m3`` at rest.
+
+        ``segment_names``: the segments, base to tip, a state must name (None: not checked).
+        """
         if frame_trigger not in FRAME_TRIGGERS:
             raise ValueError(f'frame_trigger must be timer or state, got {frame_trigger!r}')
         self.rate_hz = rate_hz
@@ -89,6 +94,8 @@ class CameraCore:
         # Whether someone wants the image now; the driver keeps it up to date.
         self.image_wanted = 'image' in self.outputs
         self.images_rendered = 0
+        self.segment_names = None if segment_names is None else tuple(segment_names)
+        self.refused_states = 0   # states it could not use (another actuator's, NaN, a size)
         self._throttle = Throttle()
 
         self._curvatures: list[float] | None = None
@@ -104,10 +111,21 @@ class CameraCore:
 
     # ---------------------------------------------------------------- inputs
 
-    def _usable(self, values: Sequence[float]) -> bool:
-        return len(values) == self.n_segments and all(map(math.isfinite, values))
+    def _fault(self, names: Sequence[str], values: Sequence[float]) -> str | None:
+        """What makes a state unusable (another actuator's joints, a size, a NaN), or None."""
+        expected = self.segment_names
+        if expected is not None and tuple(names) != expected:
+            shown = list(names[:4]) + (['...'] if len(names) > 4 else [])
+            return f'joints {shown} are not the segments {list(expected)}'
+        if len(values) != self.n_segments:
+            return f'{len(values)} values for {self.n_segments} segments'
+        if not all(map(math.isfinite, values)):
+            return 'a value that is not finite'
+        return None
 
-    def _warn(self, key: str, text: str) -> list[Output]:
+    def _refuse(self, key: str, text: str) -> list[Output]:
+        """Count an unusable state and warn (throttled per kind); the last good one stays."""
+        self.refused_states += 1
         admitted = self._throttle.admit(key, text)
         return [] if admitted is None else [Notice(self.role, WARNING, admitted)]
 
@@ -121,9 +139,9 @@ class CameraCore:
 
     def _on_curvatures(self, value: SegmentCurvatures, now: int) -> list[Output]:
         curvatures = value.curvatures_per_m
-        if not self._usable(curvatures):
-            return self._warn('curvatures', f'ignoring curvatures with {len(curvatures)} '
-                                            f'values (expected {self.n_segments} finite)')
+        fault = self._fault(value.names, curvatures)
+        if fault is not None:
+            return self._refuse('curvatures', f'ignoring curvatures: {fault}')
         curvatures = list(curvatures)  # the sender may reuse its buffer
         if curvatures != self._curvatures:
             self._curvatures = curvatures
@@ -144,8 +162,11 @@ class CameraCore:
         if not self._watch_triggers:
             return []   # the volumes serve the snapshots only
         volumes = value.volumes_m3
-        if not self._usable(volumes):
-            return self._warn('volumes', 'ignoring volumes of the wrong size')
+        fault = self._fault(value.names, volumes)
+        if fault is None and min(volumes) < 0.0:
+            fault = 'a negative volume'
+        if fault is not None:
+            return self._refuse('volumes', f'ignoring volumes: {fault}')
         injected = sum(volumes) - self.rest_total
         # Triggers at or below the injected volume: a crossing changes this count.
         below = bisect_right(self.triggers, injected)

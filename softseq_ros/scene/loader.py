@@ -294,7 +294,7 @@ def read_legs(ctx: Context, value: object, key_path: str) -> list[Leg]:
         where = f'{key_path}[{index}]'
         if isinstance(item, dict) and len(item) != 1:
             raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}, '
-                                   f'got {len(item)} keys')
+                                   f'got {len(item)} keys ({", ".join(map(str, item))})')
         leg = ctx.mapping(item, where, (), LEG_KEYS)
         if not leg:
             raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}')

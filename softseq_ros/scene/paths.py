@@ -51,14 +51,20 @@ def scene_path(name_or_path: str | Path) -> Path:
     A bare name (no folder, no suffix) means ``<config_dir()>/<name>.yaml``.
     """
     path = Path(name_or_path)
-    if path.is_file():
-        return path
     text = str(name_or_path)
     is_bare = path.suffix == '' and os.sep not in text and '/' not in text
-    if is_bare and text:
-        shipped = config_dir() / f'{text}.yaml'
-        if shipped.is_file():
+    shipped = config_dir() / f'{text}.yaml' if is_bare and text else None
+    try:
+        if path.is_file():
+            return path
+        if shipped is not None and shipped.is_file():
             return shipped
+    except (OSError, ValueError) as err:
+        # A name the system cannot even look up (too long, a NUL byte).
+        shown = text if len(text) <= 80 else f'{text[:60]}... ({len(text)} characters)'
+        raise SceneError(f'{shown}: not a scene file or a shipped scene name '
+                         f'({getattr(err, "strerror", None) or err})') from None
+    if shipped is not None:
         known = ', '.join(shipped_scenes())
         raise SceneError(f'{text}: no such scene file and no shipped scene of that name '
                          f'(shipped: {known})')

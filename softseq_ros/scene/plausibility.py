@@ -18,10 +18,14 @@ soft actuator can be, and say which unit was likely meant. Each has its limit, s
   +-:data:`MAX_PRESSURE_PA` (1 GPa: steel yields at a quarter of that, an elastomer bursts at a
   few MPa) or is not a finite number: a parameter in the wrong unit, or a law that overflows
   (an Ogden exponent of 1000, a modulus of 1e306 Pa).
+- Material: a law whose initial shear modulus passes 1 GPa, or whose stress overflows at
+  a stretch up to 4 (or just short of its locking stretch): checked where a scene's balloon
+  or a FEM design names it, before anything is solved or meshed.
 - Absolute pressure: an absolute reading below :data:`MIN_ABSOLUTE_PA` (1 kPa: a liquid boils
   below about 2.3 kPa at room temperature), or an ambient pressure outside 10 kPa to 1 MPa.
 """
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,6 +34,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     # For the annotations only: the models import scipy, which the report (reading an
     # experiment file through these rules) must not pay for.
+    from softseq_ros.segments.materials import Material
     from softseq_ros.segments.models import Segment
 
 MAX_VOLUME_M3 = 1.0
@@ -40,6 +45,8 @@ MIN_ABSOLUTE_PA = 1.0e3
 AMBIENT_RANGE_PA = (1.0e4, 1.0e6)
 # Where a law's curve is looked at: enough to see an overflow anywhere along it.
 CURVE_SAMPLES = 513
+# A soft segment's membranes stretch a few times at most; a law is looked at up to here.
+MATERIAL_STRETCH = 4.0
 
 ML_HINT = 'is it in mL? Volumes are in m^3 (1 mL = 1e-6 m^3)'
 KPA_HINT = 'is it in kPa or MPa? Pressures are in Pa (1 kPa = 1000 Pa)'
@@ -79,6 +86,23 @@ def curve_problem(segment: 'Segment') -> str | None:
         return (f'its pressure reaches {pressures[at]:.3g} Pa at {volumes[at]:.6g} m^3, beyond '
                 f'{MAX_PRESSURE_PA:.0e} Pa (no soft segment holds a GPa: a parameter in the '
                 'wrong unit, or beyond any material)')
+    return None
+
+
+def material_problem(material: 'Material') -> str | None:
+    """Why a material law is no elastomer's in Pa (a GPa modulus, an overflow), or None."""
+    modulus = float(material.shear_modulus)
+    if not (math.isfinite(modulus) and abs(modulus) <= MAX_PRESSURE_PA):
+        return (f'its initial shear modulus is {modulus:.3g} Pa, beyond {MAX_PRESSURE_PA:.0e} '
+                'Pa: no elastomer is that stiff (moduli are in Pa)')
+    top = min(MATERIAL_STRETCH, 1.0 + 0.999 * (material.max_stretch - 1.0))
+    stretches = np.linspace(1.0, top, CURVE_SAMPLES)
+    with np.errstate(all='ignore'):
+        stress = np.asarray(material.energy_derivative(stretches), dtype=float)
+    bad = ~np.isfinite(stress)
+    if bad.any():
+        return (f'its stress is {stress[int(np.argmax(bad))]} at stretch '
+                f'{stretches[int(np.argmax(bad))]:.4g}: the law overflows there')
     return None
 
 

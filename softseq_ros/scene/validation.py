@@ -16,6 +16,7 @@ import yaml
 
 from softseq_ros.errors import UserError
 from softseq_ros.scene.limits import LIMITS
+from softseq_ros.scene.plausibility import material_problem
 from softseq_ros.segments.materials import LAW_NAMES, make_material, material_parameter_names
 
 SEGMENT_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
@@ -249,6 +250,10 @@ class Context:
                              f'needs as many values as mu_pa ({len(checked["mu_pa"])}), '
                              f'got {len(checked["alpha"])}')
         try:
-            return make_material(law, checked)
+            material = make_material(law, checked)
         except ValueError as err:
             raise self.error(key_path, str(err)) from None
+        problem = material_problem(material)
+        if problem is not None:
+            raise self.error(key_path, problem)
+        return material
