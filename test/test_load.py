@@ -26,7 +26,7 @@ import pytest
 from rclpy.node import Node
 from scenes import inside_the_hysteresis_loop, write_scene
 from sensor_msgs.msg import JointState
-from test_nodes_processes import STARTUP_TIMEOUT_S, node_processes
+from test_nodes_processes import PATIENT_FEEDBACK_TIMEOUT_S, STARTUP_TIMEOUT_S, node_processes
 
 from softseq_ros.bag.reader import read_bag
 from softseq_ros.nodes.core_node import qos_profile
@@ -234,8 +234,10 @@ def test_an_actuator_under_a_10_khz_pump_lives_and_keeps_the_pump_running(
     with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
         actuator = start('actuator', 'actuator', scene='fig1_asymmetric', resume_timeout_s=0.0,
                          state_file="''")
+        # Patient as a loaded machine needs: the actuator process may stall for seconds.
         pump = start('pump', 'syringe_pump', scene='fig1_asymmetric', rate_hz=10000,
-                     autostart='false', legs=legs, flow_rate_m3_per_s=target)
+                     autostart='false', legs=legs, flow_rate_m3_per_s=target,
+                     feedback_timeout_s=PATIENT_FEEDBACK_TIMEOUT_S)
         collector.wait_for_publishers(timeout=STARTUP_TIMEOUT_S)
         assert call_trigger(collector, 'syringe_pump/start').success
         # The programme reaches its hold in 1 s of run time; the pump runs on as long as the
@@ -297,7 +299,7 @@ def test_a_recorder_that_stalls_at_200_hz_keeps_every_answer_a_probe_got(
         start('actuator', 'actuator', scene=scene_path, resume_timeout_s=0.0,
               state_file="''")
         pump = start('pump', 'syringe_pump', scene=scene_path, autostart='false',
-                     feedback_timeout_s=30.0)
+                     feedback_timeout_s=PATIENT_FEEDBACK_TIMEOUT_S)
         probe.wait_for_publishers(timeout=STARTUP_TIMEOUT_S)
         assert call_trigger(probe, 'syringe_pump/start').success
 
@@ -330,7 +332,7 @@ def test_a_recorder_that_stalls_at_200_hz_keeps_every_answer_a_probe_got(
         # What the recorder missed while it stood still reaches it again from the publishers'
         # history (a reliable writer repeats it when asked, at the latest at its heartbeat,
         # every 3 s); the publishers stay up meanwhile.
-        wait_for(lambda: not any(missing().values()), 'the recorder to catch up',
+        wait_for(lambda: not any(missing().values()), 'the recorder to catch up', timeout=60.0,
                  explain=lambda: f'missing {missing()}')
         for process in (pump, recorder):
             process.send_signal(signal.SIGINT)
