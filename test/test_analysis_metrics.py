@@ -348,10 +348,10 @@ def _jumps_step_by_step(time: np.ndarray, u: np.ndarray, sign: np.ndarray) -> li
     return found
 
 
-def test_volume_jumps_follow_the_rule_and_take_no_column_sized_temporaries():
+def testvolume_jumps_follow_the_rule_and_take_no_column_sized_temporaries():
     import tracemalloc
 
-    from softseq_ros.analysis.recording import _volume_jumps
+    from softseq_ros.analysis.recording import volume_jumps
 
     rng = np.random.default_rng(7)
     for _ in range(300):
@@ -360,7 +360,7 @@ def test_volume_jumps_follow_the_rule_and_take_no_column_sized_temporaries():
         u = np.concatenate([[0.0], np.cumsum(rng.choice([0.0, 1e-3, 5e-3, 0.5, -0.3], n - 1)
                                              * rng.random(n - 1))])
         sign = rng.choice([-1, 0, 1], n).astype(np.int8)
-        assert _volume_jumps(time, u, sign).tolist() == _jumps_step_by_step(time, u, sign)
+        assert volume_jumps(time, u, sign).tolist() == _jumps_step_by_step(time, u, sign)
     # Two million commands of a pump at 1 mL/s with one reset: found while holding no more
     # than the steps and their mask beside the columns (the rule as whole columns held seven).
     time = np.arange(2_000_000) * 0.02
@@ -368,7 +368,7 @@ def test_volume_jumps_follow_the_rule_and_take_no_column_sized_temporaries():
     sign = np.ones(u.size, np.int8)
     tracemalloc.start()
     try:
-        assert _volume_jumps(time, u, sign).tolist() == [999_999]
+        assert volume_jumps(time, u, sign).tolist() == [999_999]
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

@@ -271,7 +271,7 @@ def find_run_starts(pump_time_s: FloatArray, pump_u: FloatArray,
         was_active = was_active or state != 'idle'
         previous = state
     if pump_u.size > 1:
-        for row in _volume_jumps(pump_time_s, pump_u, flow_sign).tolist():
+        for row in volume_jumps(pump_time_s, pump_u, flow_sign).tolist():
             found.append((float(pump_time_s[row + 1]),
                           f'the commanded volume jumped from {pump_u[row] * 1e6:.4f} mL to '
                           f'{pump_u[row + 1] * 1e6:.4f} mL in one command'))
@@ -292,7 +292,7 @@ def find_run_starts(pump_time_s: FloatArray, pump_u: FloatArray,
     return starts
 
 
-def _volume_jumps(pump_time_s: FloatArray, pump_u: FloatArray,
+def volume_jumps(pump_time_s: FloatArray, pump_u: FloatArray,
                   flow_sign: NDArray[np.int8]) -> NDArray[np.intp]:
     """
     The steps ``k`` (command ``k`` to ``k + 1``) whose commanded volume jumps.
