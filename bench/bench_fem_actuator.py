@@ -13,8 +13,9 @@ Run times are measured in the same run: the whole actuator against the two segme
 their assembly, and against the assembly alone (tables from a library). Results go to
 bench/fem_actuator_results.json and .md, the figure to docs/fem_actuator.png.
 
-``--quick`` checks that it runs in well under a minute: two short segments (two pitches each)
-on a coarse mesh to 3 mL, into a temporary folder, the report printed.
+``--quick`` checks that it runs, in a few seconds of CPU: two short segments (two pitches each)
+on a coarse mesh to 1.5 mL, each run in a forked process, into a temporary folder, the report
+printed.
 """
 
 import argparse
@@ -39,6 +40,7 @@ from softseq_ros.scene.design import load_design, with_changes  # noqa: E402
 
 DESIGNS = REPO / 'config' / 'designs'
 STEPS_ML = (25, 45, 60)   # the paper's simulated steps 3, 4, 5
+QUICK_ML = 1.5            # --quick: two short segments to this volume
 
 
 def _actuator_child(designs: list, folder: str) -> dict:
@@ -80,8 +82,14 @@ def _table_child(design: object, path: str) -> dict:
     return {'wall_s': result.wall_s, 'dofs': result.dofs, 'stop_reason': result.stop_reason}
 
 
+# How each FEM run's process starts: 'spawn' (a fresh interpreter: its time and memory are
+# the run's own) for the measurements, 'fork' for --quick (no interpreter and imports to pay
+# five times over for runs of a second).
+START_METHOD = 'spawn'
+
+
 def _fresh(function: object, *args: object) -> dict:
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn')) as pool:
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context(START_METHOD)) as pool:
         return pool.submit(function, *args).result()
 
 
@@ -175,8 +183,9 @@ def report(data: dict, note: str = '') -> str:
     lines = ['# The whole actuator against the assembly of its segment tables', '',
              f'Written by `python bench/bench_fem_actuator.py`{note}. Table I pair, Arruda-Boyce '
              f'(mu 16.3 kPa, lambda_m 3.96), every model at {data["element_size_m"] * 1e3:g} mm '
-             f'elements, 0 -> {data["max_ml"]:g} mL; each FEM run single-threaded in a fresh '
-             f'process. Machine: {data.get("machine")}.', '',
+             f'elements, 0 -> {data["max_ml"]:g} mL; each FEM run single-threaded in a '
+             f'{"forked" if data.get("start_method") == "fork" else "fresh"} process. Machine: '
+             f'{data.get("machine")}.', '',
              '## Run times', '',
              '| model | unknowns | wall [s] |', '|---|---:|---:|',
              f'| whole actuator (one cavity) | {data["dofs"]["actuator"]} | '
@@ -301,16 +310,19 @@ def _machine() -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--quick', action='store_true', help='a check that it runs: two short '
-                        'segments, a coarse mesh, 3 mL; nothing written into the repository')
+                        'segments, a coarse mesh, 1.5 mL; nothing written into the repository')
     parser.add_argument('--element-size-m', type=float, default=0.002)
     args = parser.parse_args()
     if args.quick:
+        global START_METHOD
+        START_METHOD = 'fork'
         designs = _designs(0.003, 1, {'geometry.length_m': 0.02,
-                                      'volume.max_injected_m3': 3e-6,
+                                      'volume.max_injected_m3': QUICK_ML * 1e-6,
                                       'volume.max_step_m3': 1e-6})
         with tempfile.TemporaryDirectory(prefix='bench_fem_actuator_') as folder:
-            data = run(designs, Path(folder), 3.0)
+            data = run(designs, Path(folder), QUICK_ML)
             data['machine'] = _machine()
+            data['start_method'] = START_METHOD
             figure(data, Path(folder) / 'fem_actuator.png')
             print(report(data, ' --quick (two short segments, coarse: the numbers show that '
                                'it runs)'))
