@@ -290,3 +290,27 @@ def test_the_tip_reach_is_the_chord_of_the_backbone_and_judged_in_tolerances():
     assert meets == (abs(chord - 0.2) <= 0.005) and metrics['sequence'] == 'none'
     # The softer top takes two thirds of the fluid throughout: it leads, and nothing switches.
     assert metrics['leader'] == 'top' and metrics['switch_injected_m3'] is None
+
+
+def test_the_reach_premise_is_checked_along_every_axis_of_the_grid():
+    # A grid of cell curves: the pressure rises with the membrane thickness and falls with the
+    # membrane length at every cell volume, as the reach's bounds assume.
+    volumes = np.linspace(0.0, 1e-6, 5)
+    thickness = np.array([4e-4, 5e-4, 6e-4])
+    length = np.array([5e-3, 7e-3])
+    level = thickness[:, None, None] / length[None, :, None] * volumes[None, None, :] * 3e10
+    axes = {'membrane_thickness_m': thickness, 'membrane_length_m': length}
+    family = SegmentFamily(segment=None, axes=axes, rest=None, curves=None, cell_u=volumes,
+                           pressures=level)
+    assert family.ordering_violation() == (0.0, '')
+    # The middle thickness 30 % softer than the thinnest at the last volume: found, and where.
+    broken = level.copy()
+    broken[1, 0, -1] = 0.7 * broken[0, 0, -1]
+    excess, where = SegmentFamily(None, axes, None, None, volumes, broken).ordering_violation()
+    assert excess == pytest.approx(0.3 * level[0, 0, -1] - 0.002 * level[0, 0, -1], rel=1e-9)
+    assert where == 'membrane_thickness_m 0.0004 -> 0.0005 at 1000 uL per cell'
+    # A longer membrane stiffer than the shorter: found on the other axis.
+    broken = level.copy()
+    broken[2, 1, 2] = 1.5 * broken[2, 0, 2]
+    excess, where = SegmentFamily(None, axes, None, None, volumes, broken).ordering_violation()
+    assert excess > 0 and where.startswith('membrane_length_m 0.005 -> 0.007')
