@@ -14,8 +14,9 @@ writer's layout). In one run it measures:
 - our reader on a copy of the bag in one sequence of chunks, as mcap's writer (and rosbag2)
   lay it out, against the bag itself, whose camera frames fill chunks of their own;
 - the whole report (read, metrics, five figures), in-process and as the `softseq report`
-  command (Python start-up included), PNG only (the default) and with SVG, the commands taken
-  in turn so that a slower minute of the machine falls on both;
+  command (Python start-up included): the paper style (the default, PNG only), the screen
+  style, with SVG and with the scene, the commands taken in turn so that a slower minute of the
+  machine falls on all, each against the screen style run by run;
 - the peak memory (max RSS) of `softseq report` on the paper bag and on the big bag.
 
 Writes bench/analysis_results.md. In-process times are the best of --repeat runs (the run least
@@ -29,6 +30,7 @@ runs it (test/test_bench_quick.py).
 """
 
 import argparse
+import os
 from pathlib import Path
 import platform
 import resource
@@ -196,7 +198,7 @@ def best(function, repeat: int) -> tuple[float, object]:
 
 
 def commands_in_turn(commands: dict[str, list[str]], runs: int) -> dict[str, list[tuple]]:
-    """Each command ``runs`` times, taken in turn: (wall s, max RSS kB) of every run."""
+    """Each command ``runs`` times, taken in turn: (wall s, CPU s, max RSS kB) of every run."""
     results: dict[str, list[tuple]] = {name: [] for name in commands}
     for _ in range(runs):
         for name, args in commands.items():
@@ -209,12 +211,18 @@ def spread(values: list[float]) -> str:
             f'{len(values)} runs)')
 
 
-def command(args: list[str]) -> tuple[float, int]:
-    """Wall time [s] and max RSS [kB] of a command, from GNU time."""
-    result = subprocess.run(['/usr/bin/time', '-f', '%e %M', *args], capture_output=True,
+def against(runs: list[tuple], baseline: list[tuple], field: int) -> str:
+    """The median of the run-by-run ratios of ``field`` (0 wall, 1 CPU) to the baseline's."""
+    ratios = [a[field] / b[field] for a, b in zip(runs, baseline)]
+    return f'{float(np.median(ratios)):.2f}x'
+
+
+def command(args: list[str]) -> tuple[float, float, int]:
+    """Wall time [s], CPU time [s] (user and system, its children's too) and max RSS [kB]."""
+    result = subprocess.run(['/usr/bin/time', '-f', '%e %U %S %M', *args], capture_output=True,
                             text=True, check=True)
-    wall, rss = result.stderr.strip().splitlines()[-1].split()
-    return float(wall), int(rss)
+    wall, user, system, rss = result.stderr.strip().splitlines()[-1].split()
+    return float(wall), float(user) + float(system), int(rss)
 
 
 def main() -> None:
@@ -247,6 +255,7 @@ def main() -> None:
 
 def measure(args: argparse.Namespace, bags: Path) -> list[str]:
     """Every measurement, the bags in ``bags``; the results as markdown lines."""
+    load_before = os.getloadavg()[0]
     paper = make_bag(bags / 'bench_paper', 1, QUICK_LEGS if args.quick else None)
     count = open_bag(paper).channels
     messages = sum(c.message_count for c in count.values())
@@ -277,16 +286,19 @@ def measure(args: argparse.Namespace, bags: Path) -> list[str]:
     svg_s, _ = best(lambda: write_report(paper, out, svg=True), args.repeat)
     scene_s, _ = best(lambda: write_report(paper, out, scene_name='paper'), args.repeat)
     softseq = [sys.executable, '-m', 'softseq_ros.cli', 'report', str(paper), '--out', str(out)]
-    cli = commands_in_turn({'png': softseq, 'svg': [*softseq, '--svg'],
+    # The screen style in the same run: the baseline each other command's ratio is taken to,
+    # run by run, so a busier minute of the machine falls on both.
+    cli = commands_in_turn({'screen': [*softseq, '--style', 'screen'], 'png': softseq,
+                            'svg': [*softseq, '--svg'],
                             'scene': [*softseq, '--scene', 'paper']}, args.commands)
-    cli_rss = max(rss for _, rss in cli['png'])
+    cli_rss = max(rss for _, _, rss in cli['png'])
     rows = [('paper bag', messages, cli_rss)]
     big_line = ''
     if args.big:
         big = make_bag(bags / 'bench_paper18', 18)
         big_messages = sum(c.message_count for c in open_bag(big).channels.values())
-        wall, rss = command([sys.executable, '-m', 'softseq_ros.cli', 'report', str(big),
-                             '--out', str(bags / 'bench_report18')])
+        wall, _, rss = command([sys.executable, '-m', 'softseq_ros.cli', 'report', str(big),
+                                '--out', str(bags / 'bench_report18')])
         rows.append(('18-cycle paper bag', big_messages, rss))
         big_line = f'`softseq report` of the 18-cycle bag: {wall:.1f} s'
 
@@ -299,7 +311,10 @@ def measure(args: argparse.Namespace, bags: Path) -> list[str]:
         f'{platform.machine()}, Python {platform.python_version()}; the paper bag '
         f'({source}: {messages:,} messages, {read:,} of them on the three topics '
         'read). Best of '
-        f'{args.repeat} runs unless one. All three readers return identical arrays (checked).',
+        f'{args.repeat} runs unless one. All three readers return identical arrays (checked). '
+        f'Load average (1 min) on the {os.cpu_count()} cores: {load_before:.1f} when the run '
+        f'began, {os.getloadavg()[0]:.1f} when it ended (other work on a shared machine '
+        'slows the wall times; the ratios of commands taken in turn hold better).',
         '',
         '| reading pump command, volumes, curvatures (stamps, values) | time | vs ours |',
         '|---|---:|---:|',
@@ -318,10 +333,17 @@ def measure(args: argparse.Namespace, bags: Path) -> list[str]:
         f'| in-process: read, metrics, 5 figures as PNG | {png_s:.2f} s |',
         f'| in-process, PNG and SVG | {svg_s:.2f} s |',
         f'| in-process, with `--scene paper` (equilibrium set) | {scene_s:.2f} s |',
-        '| `softseq report BAG` command (Python and ROS wheel start-up included), median | '
-        f'{spread([w for w, _ in cli["png"]])} |',
-        f'| the command with `--svg` | {spread([w for w, _ in cli["svg"]])} |',
-        f'| the command with `--scene paper` | {spread([w for w, _ in cli["scene"]])} |',
+        '',
+        '| the `softseq report BAG` command (Python and ROS wheel start-up included; the '
+        'commands taken in turn) | wall, median (range) | CPU, median | vs `--style screen`: '
+        'CPU, wall (median of run-by-run ratios) |',
+        '|---|---:|---:|---:|',
+        *[f'| {label} | {spread([w for w, _, _ in cli[name]])} | '
+          f'{float(np.median([c for _, c, _ in cli[name]])):.2f} s | '
+          f'{against(cli[name], cli["screen"], 1)}, {against(cli[name], cli["screen"], 0)} |'
+          for name, label in (('png', 'paper style (the default), PNG'),
+                              ('screen', '`--style screen`'), ('svg', 'with `--svg`'),
+                              ('scene', 'with `--scene paper`'))],
         '',
         '| peak memory of `softseq report` (max RSS) | messages | MB |', '|---|---:|---:|',
         *[f'| {name} | {n:,} | {rss / 1024:.0f} |' for name, n, rss in rows],

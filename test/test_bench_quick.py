@@ -62,7 +62,9 @@ QUICK = {
          r'\| rosbags [^|]* \| \d+\.\d\d s \| \d+x \|',
          r'\| mcap-ros2-support [^|]* \| \d+\.\d\d s \| \d+x \|',
          r'\| in-process: read, metrics, 5 figures as PNG \| \d+\.\d\d s \|',
-         r'\| the command with `--scene paper` \| \d+\.\d\d s',
+         r'\| paper style \(the default\), PNG \| \d+\.\d\d s \([^|]*\| \d+\.\d\d s \| '
+         r'\d+\.\d\dx, \d+\.\d\dx \|',
+         r'\| with `--scene paper` \| \d+\.\d\d s \([^|]*\| \d+\.\d\d s \| \d+\.\d\dx',
          r'\| paper bag \| [\d,]+ \| \d+ \|'],
         ['bench/analysis_results.md']),
     'bench_restructure.py': (
