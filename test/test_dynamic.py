@@ -259,20 +259,30 @@ def test_as_the_pump_slows_the_dynamic_path_converges_to_the_quasistatic_one(fig
         # the quasi-static fold.
         delays.append([flow_rate * snap.peak_s - fold
                        for snap, fold in zip(flow.take_snaps(), snaps)])
-    # Off the snaps the path lags the quasi-static one in proportion to the flow (first order).
+    # Off the snaps the path lags the quasi-static one in proportion to the flow (first order:
+    # ten times closer per decade; measured 10.06, 10.00, 9.91).
     ratios = np.array(distances[:-1]) / np.array(distances[1:])
-    assert np.all(ratios > 8.0) and np.all(ratios < 12.5), distances
+    assert np.all(np.abs(ratios / 10.0 - 1.0) < 0.05), distances
     # The snaps come late by a delay that shrinks like flow^(2/3): the passage through a
     # saddle-node fold, whose slow time scales as flow^(-1/3), so 10^(2/3) = 4.64 per decade as
-    # the flow goes to zero, approached from above (the next order still counts at the faster
-    # flows: measured 6.2, 5.6, 5.2, 4.9 and 4.9, 4.9, 4.8, 4.7 for the two snaps).
+    # the flow goes to zero. The next order adds a share that shrinks like flow^(1/3) (the
+    # normal form's cubic term where the state is flow^(1/3) from the fold, and the pumped
+    # network's own lag), so each decade's factor exceeds 4.64 by an excess that falls towards
+    # 10^(1/3) = 2.15 times per decade. Measured, as multiples of 4.64: 1.332, 1.208, 1.118,
+    # 1.062 and 1.061, 1.056, 1.037, 1.022 for the two snaps, the excess falling 1.59, 1.77,
+    # 1.89 and 1.08, 1.51, 1.70 times per decade.
     delays = np.array(delays)
     assert delays.shape == (5, 2) and np.all(delays > 0.0)
-    per_decade = delays[:-1] / delays[1:]
-    passage = 10.0 ** (2.0 / 3.0)
-    assert np.all(per_decade > 0.97 * passage) and np.all(per_decade < 1.4 * passage), \
-        per_decade
-    assert np.all(np.abs(per_decade[-1] / passage - 1.0) < 0.1), per_decade
+    passage, next_order = 10.0 ** (2.0 / 3.0), 10.0 ** (1.0 / 3.0)
+    excess = delays[:-1] / delays[1:] / passage - 1.0
+    assert np.all(excess > 0.0), excess                    # approached from above,
+    assert np.all(excess[:-1] > excess[1:]), excess        # ever closer,
+    last_fall = excess[-2] / excess[-1]                    # at the next order's pace
+    assert np.all((last_fall > 1.5) & (last_fall < 1.07 * next_order)), last_fall
+    # The last two decades with the next order taken out (Richardson): 4.64 within 2 %
+    # (measured 1.4 % and 0.9 %; the last decade alone is 6.2 % and 2.2 % off).
+    limit = (next_order * excess[-1] - excess[-2]) / (next_order - 1.0)
+    assert np.all(np.abs(limit) < 0.02), limit
     # At the slowest, within a microlitre of the quasi-static snap.
     assert np.all(delays[-1] < 1e-3 * ML)
 
