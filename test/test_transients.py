@@ -5,6 +5,7 @@ quasi-static bag's report without any of it.
 """
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -100,6 +101,9 @@ def test_the_report_of_a_dynamic_bag_shows_the_measured_snap_durations(fast, tmp
     assert (snap['giving_segments'], snap['taking_segments']) == (['top'], ['bottom'])
     assert 'moved (top -> bottom)' in summary
     assert 'lag behind the quasi-static path: needs the scene' in summary
+    # So are the channels' sizes, for their Reynolds numbers.
+    assert transients['peak_reynolds'] is None
+    assert 'peak Reynolds number per channel: needs the scene (--scene)' in summary
     report = (tmp_path / 'report' / 'report.md').read_text()
     assert '## Transients (fluid network)' in report
     assert '![transients.png](transients.png)' in report
@@ -118,6 +122,25 @@ def test_the_lag_shrinks_when_the_pump_is_ten_times_slower(fast, slow):
              for scene_file, bag in (fast, slow)]
     lags = [metrics['transients'] for metrics in every]
     quick, slower = lags
+    # Each channel's peak Reynolds number, 2 rho |q| / (pi r mu) at the largest flow recorded
+    # (read here with the general reader), water at 20 C. Pumped slowly, the pair snaps from
+    # its fold with the whole pressure gap across the channel: a faster exchange than the fast
+    # pump's, past the laminar range (said as a warning, as the actuator words it).
+    peaks = []
+    for (_, bag), lag in zip((fast, slow), lags):
+        largest = max(abs(m.msg.velocity[0])
+                      for m in read_bag(bag, ['/actuator/channel_flows']))
+        peaks.append(2 * 998.0 * largest / (math.pi * CHANNEL['radius_m'] * 1.0e-3))
+        assert lag['peak_reynolds'] == {'bottom_to_top': pytest.approx(peaks[-1], rel=1e-12)}
+    assert 1000 < peaks[0] < 2300 < peaks[1]
+    assert (f'peak Reynolds number per channel (recorded flows; laminar below about 2300): '
+            f'bottom_to_top {peaks[0]:.0f}') in summary_text(every[0])
+    assert f'Peak Reynolds number per channel (recorded flows; laminar below about 2300): ' \
+           f'bottom_to_top {peaks[0]:.0f}.' in markdown(every[0])
+    turbulent = [[w for w in metrics['warnings'] if 'no longer laminar' in w] for metrics in every]
+    assert turbulent == [[], [f'channel bottom_to_top: Reynolds number {peaks[1]:.0f} above '
+                              '2300, no longer laminar (the laminar law underestimates its '
+                              'drop: give it friction: blasius)']]
     # The dynamic snap comes after the quasi-static one (26.39 mL), by a positive volume.
     for lag in lags:
         snap = lag['snaps'][0]
@@ -182,6 +205,10 @@ def test_softseq_compare_with_the_scene_shows_the_lag(fast, quasi_static, capsys
     # Measured for the dynamic bag (B), absent for the quasi-static one (A).
     assert all(line.split('|')[3].strip() == '-' and float(line.split('|')[4]) > 0.0
                for line in lag_rows)
+    # And the channel's peak Reynolds number, which needs the scene's channel too.
+    (row,) = [line for line in table.splitlines() if 'peak Reynolds number' in line]
+    assert row.split('|')[1:4] == [' peak Reynolds number, bottom_to_top ', '  ', ' - ']
+    assert 1000 < float(row.split('|')[4]) < 2300
 
 
 def test_compare_lays_both_bags_transients_over_each_other(fast, slow, quasi_static, tmp_path,

@@ -91,6 +91,8 @@ def _transient_rows(metrics: dict) -> dict[str, tuple[object, str]]:
         delay = snap['delay_injected_m3']
         rows[f'{key} late behind the quasi-static snap'] = (
             delay * 1e6 if delay is not None else None, 'mL')
+    for name, peak in (transients.get('peak_reynolds') or {}).items():
+        rows[f'peak Reynolds number, {name}'] = (peak, '')
     lag = transients['lag'] or {}
     for where, label in (('off_snaps', 'off the snaps'), ('at_snaps', 'at the snaps')):
         spread = lag.get(where) or {}

@@ -107,6 +107,11 @@ def recording_trace(recording: Recording) -> Trace:
                  recording.segment_names)
 
 
+def _network(scene: object | None) -> object | None:
+    """The scene's fluid network, if a scene with one was given."""
+    return getattr(scene, 'network', None)
+
+
 def recording_metrics(recording: Recording, scene: object | None = None,
                       emap: object | None = None, transients: Transients | None = None) -> dict:
     """
@@ -171,7 +176,7 @@ def recording_metrics(recording: Recording, scene: object | None = None,
                 f'{metrics["sequence_type_of_scene"]} over its whole range (the pump may not '
                 'cover it)')
     if transients is None:
-        transients = analyse_transients(recording, emap)
+        transients = analyse_transients(recording, emap, _network(scene))
     if transients is not None:
         metrics['transients'] = transients.metrics
         metrics['warnings'].extend(transients.warnings)
@@ -377,7 +382,7 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
         from softseq_ros.quasistatic.solve import build_map
 
         emap = build_map(scene.segments, scene.solver.resolution)
-    transients = analyse_transients(recording, emap)
+    transients = analyse_transients(recording, emap, _network(scene))
     metrics = recording_metrics(recording, scene, emap, transients)
     metrics['notes'].extend(notes)
     if experiment is not None:
@@ -458,6 +463,15 @@ def parties(snap: dict) -> str:
     return f'{" + ".join(giving or []) or "-"} -> {" + ".join(taking or []) or "-"}'
 
 
+def _reynolds_line(transients: dict, sentence: bool = False) -> str:
+    """Each channel's peak Reynolds number over the recorded flows, or what it needs."""
+    reynolds = transients.get('peak_reynolds')
+    line = ('peak Reynolds number per channel: needs the scene (--scene)' if reynolds is None else
+            'peak Reynolds number per channel (recorded flows; laminar below about 2300): '
+            + ', '.join(f'{name} {peak:.0f}' for name, peak in reynolds.items()))
+    return 'P' + line[1:] + '.' if sentence else line
+
+
 def _transient_lines(transients: dict) -> list[str]:
     """The summary's lines on a dynamic recording's transients."""
     snaps = transients['snaps']
@@ -475,6 +489,7 @@ def _transient_lines(transients: dict) -> list[str]:
             f'    peak channel flow {_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)}'
             f', peak pressure drop {_peak_channel(snap["peak_pressure_drop_pa"], _kpa)}'
             + _delay(snap))
+    lines.append('  ' + _reynolds_line(transients))
     lag = transients['lag']
     if lag is None:
         lines.append('  lag behind the quasi-static path: needs the scene (--scene)')
@@ -655,6 +670,7 @@ def _transient_markdown(transients: dict) -> list[str]:
                 f'{_ml(snap["delay_injected_m3"], 3)} |')
     else:
         lines.append('No snap-through in time was reported.')
+    lines += ['', _reynolds_line(transients, sentence=True)]
     lag = transients['lag']
     lines += ['', 'Lag behind the quasi-static path: the largest difference of a segment '
               'volume from the quasi-static one at the same injected volume.', '']

@@ -4,7 +4,8 @@ The transients of a dynamic bag: its snap-throughs in time, how far it lags the 
 A bag of a scene with a fluid network (docs/dynamic.md) holds the channel flows and snap-through
 events that carry their start, duration (10 % to 90 % of the fluid moved), fluid moved and peak
 exchange. From those and the recorded states this module finds, for each timed snap, the peak
-channel flow and pressure drop around it; given the scene's equilibrium map, it also measures the
+channel flow and pressure drop around it; given the scene's network, each channel's peak Reynolds
+number over the recorded flows; given the scene's equilibrium map, it also measures the
 lag: how far the recorded segment volumes are from the quasi-static ones at the same injected
 volume, off the snaps and at them, and how much later than the quasi-static path each snap
 starts (in injected volume). A quasi-static bag has no transients: :func:`analyse_transients`
@@ -103,12 +104,15 @@ def _timed(event: dict) -> bool:
     return event.get('start_ns') is not None and event.get('duration_s') is not None
 
 
-def analyse_transients(recording: Recording, emap: object | None = None) -> Transients | None:
+def analyse_transients(recording: Recording, emap: object | None = None,
+                       network: object | None = None) -> Transients | None:
     """
     The transients of a dynamic recording (None for a quasi-static one).
 
     ``emap``: the scene's :class:`softseq_ros.quasistatic.equilibrium.EquilibriumMap`; without
     it there is no quasi-static path to measure the lag against, and ``lag`` is None.
+    ``network``: the scene's :class:`softseq_ros.scene.network.NetworkSettings`; without it
+    the channels' sizes are unknown, and ``peak_reynolds`` is None.
     """
     if not is_dynamic(recording):
         return None
@@ -121,6 +125,15 @@ def analyse_transients(recording: Recording, emap: object | None = None) -> Tran
     flows = recording.channel_flows
     names = flows.names if flows is not None else ()
     entries = [_snap_entry(snap, recording) for snap in snaps]
+    reynolds = _peak_reynolds(flows, network)
+    if reynolds is not None:
+        from softseq_ros.dynamic.network import laminar_range_warning
+        from softseq_ros.scene.network import BLASIUS
+
+        for (name, peak), tube in zip(reynolds.items(), network.channels):
+            line = laminar_range_warning(name, peak, tube.friction == BLASIUS)
+            if line is not None:
+                warnings.append(line)
     quasi_static = lag = None
     if emap is not None:
         from softseq_ros.quasistatic.equilibrium import DomainError
@@ -136,9 +149,28 @@ def analyse_transients(recording: Recording, emap: object | None = None) -> Tran
                       'at the same injected volume',
         'channels': list(names),
         'snaps': entries,
+        'peak_reynolds': reynolds,
         'lag': lag,
     }
     return Transients(snaps, names, quasi_static, metrics, warnings)
+
+
+def _peak_reynolds(flows: object | None, network: object | None) -> dict | None:
+    """
+    Each channel's largest Reynolds number over the recorded flows, by name.
+
+    None without the scene's network, or when the recording's channels are not its channels.
+    The actuator's states come at the network's rate while fluid moves, so the recorded peak is
+    the peak of those samples (the model's own, between them, can be a little higher).
+    """
+    if network is None or flows is None or len(network.channels) != len(flows.names):
+        return None
+    from softseq_ros.dynamic.network import tube_law
+
+    peaks = np.max(np.abs(flows.flow), axis=0) if flows.flow.shape[0] else \
+        np.zeros(len(flows.names))
+    return {name: tube_law(tube, network.fluid).reynolds(float(peak))
+            for name, tube, peak in zip(flows.names, network.channels, peaks)}
 
 
 def timed_snaps(recording: Recording) -> list[TimedSnap]:
