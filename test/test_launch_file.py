@@ -7,6 +7,7 @@ launch argument it uses is declared, and setup.py installs it where ros2 launch 
 import ast
 from functools import lru_cache
 import importlib
+import inspect
 from pathlib import Path
 
 from rclpy.node import Node
@@ -51,8 +52,19 @@ def declared_names(cls: type) -> frozenset[str]:
 
 
 def node_class(target: str) -> type:
-    """The node class an executable (``module:main``) runs: the module's Node subclass."""
-    module = importlib.import_module(target.partition(':')[0])
+    """
+    The node class an executable (``module:function``) runs: the module's Node subclass.
+
+    An executable in ``softseq_ros.nodes.entry`` loads its node's module by name
+    (``_run('actuator')``): that module is read off the function's body.
+    """
+    module_name, _, function = target.partition(':')
+    module = importlib.import_module(module_name)
+    if module_name == 'softseq_ros.nodes.entry':
+        body = ast.parse(inspect.getsource(getattr(module, function)))
+        loads = [ast.literal_eval(call.args[0]) for call in _calls(body, '_run')]
+        assert len(loads) == 1, f'{target}: expected one _run call, found {loads}'
+        module = importlib.import_module(f'softseq_ros.nodes.{loads[0]}')
     classes = [value for value in vars(module).values()
                if isinstance(value, type) and issubclass(value, Node)
                and value.__module__ == module.__name__ and hasattr(value, 'NODE_NAME')]

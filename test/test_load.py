@@ -247,7 +247,9 @@ def test_an_actuator_under_a_10_khz_pump_lives_and_keeps_the_pump_running(
                  explain=lambda: f'{len(answers)} answers; states {collector.states()}')
         before = len(answers)
         collector.wait_for_count('actuator/volumes', before + 300, timeout=60.0)
-        assert collector.states() == ['idle', 'running']
+        # Running since its start and never tripped: the idle it said before may have gone
+        # before the collector's subscription matched on a loaded machine.
+        assert collector.states() in (['idle', 'running'], ['running'])
         assert actuator.poll() is None and pump.poll() is None
         pump.send_signal(signal.SIGINT)
         assert pump.wait(timeout=30) == 0
@@ -310,13 +312,21 @@ def test_a_recorder_that_stalls_at_200_hz_keeps_every_answer_a_probe_got(
                  'the recorder to write every topic', timeout=STARTUP_TIMEOUT_S)
         firsts = {t: min(_recorded(bag)['/' + t]) for t in recorded}
         stalled_from = time.time_ns()
-        # A loaded machine, made certain: the recorder's process stops for a second while
-        # the actuator answers 200 commands a second (its old depth of 1 on actuator/volumes
-        # kept one of them for the recorder, 100 on pressure and curvatures half of them).
+
+        def stamped_since_stall(topic: str) -> int:
+            return len({stamp_ns(m.header) for m in probe.messages(topic)
+                        if stamp_ns(m.header) >= stalled_from})
+        # A loaded machine, made certain: the recorder's process stops for a second or more
+        # while the actuator answers 200 commands a second (its old depth of 1 on
+        # actuator/volumes kept one of them for the recorder, 100 on pressure and curvatures
+        # half of them). Counted by stamp, not by arrival: a busy probe may still be taking
+        # in what was published before the stall.
         recorder.send_signal(signal.SIGSTOP)
         try:
-            probe.wait_for_count('actuator/volumes',
-                                 len(probe.messages('actuator/volumes')) + 200)
+            wait_for(lambda: all(stamped_since_stall(t) >= 200 for t in recorded),
+                     'the probe to get 200 messages per topic while the recorder stands still',
+                     timeout=60.0,
+                     explain=lambda: str({t: stamped_since_stall(t) for t in recorded}))
         finally:
             recorder.send_signal(signal.SIGCONT)
         probe.wait_for_count('actuator/volumes', len(probe.messages('actuator/volumes')) + 50)
