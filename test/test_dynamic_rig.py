@@ -363,3 +363,54 @@ def test_suction_beyond_vacuum_is_refused_and_the_rig_holds_its_last_state(tmp_p
     assert core.rejected_commands > 0
     volumes = core.model.state().volumes
     assert np.all(np.isfinite(volumes)) and volumes[0] < 0.905 * ML
+
+
+def test_a_held_pump_stays_held_while_the_fluid_evens_out_and_resumes_when_asked(tmp_path):
+    from softseq_ros.rig.build import actuator_core, pump_core
+    from softseq_ros.rig.values import PumpCommand, PumpStatus, SegmentVolumes
+
+    # The pair through a narrow channel: pumped at 0.2 mL/s the top lags far behind its share.
+    # The pump is held at 2 mL (its hold service) and started again 5 s later. While held it
+    # commands the same volume with no flow; the actuator answers those commands (fresh
+    # feedback: the pump neither times out nor trips) and, between them, says the fluid still
+    # moving at the network's rate, with the injected volume held.
+    scene = fig1_with_network(tmp_path, {'channels': [{'length_m': 0.02, 'radius_m': 0.2e-3}],
+                                         'rate_hz': 200}, top=4.0e-6)
+    pump, _ = pump_core(scene, feedback_timeout_s=0.5, feedback_clock=lambda: now)
+    actuator = actuator_core(scene)
+    rest = sum(s.rest_volume for s in scene.segments)
+    held_at, resumed_at = 10.0, 15.0
+    said, statuses = [], []
+    for k in range(0, 5101):             # 25.5 s at the actuator's 200 Hz, the pump at 50 Hz
+        now = k * 5_000_000
+        if now == held_at * 1e9:
+            statuses += [v.state for v in pump.hold(now).outputs if type(v) is PumpStatus]
+        if now == resumed_at * 1e9:
+            statuses += [v.state for v in pump.start(now).outputs if type(v) is PumpStatus]
+        out = actuator.tick(now)
+        if k % 4 == 0:
+            for value in pump.tick(now):
+                if type(value) is PumpStatus:
+                    statuses.append(value.state)
+                    finished_ns = value.stamp_ns
+                elif type(value) is PumpCommand:
+                    out += actuator.handle(value, now)
+        for value in out:
+            if type(value) is SegmentVolumes:
+                said.append((now, value, k % 4 != 0))
+                pump.handle(value, now)
+    assert statuses == ['running', 'held', 'running', 'finished']
+    while_held = [(v, ticked) for t, v, ticked in said if held_at + 0.1 < t / 1e9 < resumed_at]
+    # The actuator spoke at its own rate between the held commands: the fluid evened out.
+    assert sum(ticked for _, ticked in while_held) > 0.9 * 150 * (resumed_at - held_at - 0.1)
+    bottoms = [v.volumes_m3[0] for v, _ in while_held]
+    assert bottoms[0] - bottoms[-1] > 0.1 * ML and np.all(np.diff(bottoms) <= 0.0)
+    # The held volume, to 1e-12 of the segments' capacity, at every output of the hold.
+    held = 2e-7 * held_at
+    for state, _ in while_held:
+        assert abs(sum(state.volumes_m3) - rest - held) <= 1e-12 * scene.capacity
+    # Resumed, the programme ran to its end: 4 mL in 20 s of run time, the hold's 5 s not
+    # counted.
+    _, last, _ = said[-1]
+    assert abs(sum(last.volumes_m3) - rest - 4.0e-6) <= 1e-12 * scene.capacity
+    assert finished_ns == 25_000_000_000
