@@ -8,6 +8,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -148,6 +149,18 @@ def test_the_lag_shrinks_when_the_pump_is_ten_times_slower(fast, slow):
         assert snap['delay_injected_m3'] == pytest.approx(
             snap['injected_m3'] - snap['quasi_static_injected_m3'])
         assert snap['delay_injected_m3'] > 0
+    # At the snaps: the snap's window and the fold passage's approach, as far before the
+    # quasi-static snap as the recorded one came after it (there the quasi-static volumes run
+    # away like the square root of the distance to the fold, and the lag is the passage's).
+    for (_, bag), lag in zip((fast, slow), lags):
+        recording = load_recording(bag)
+        injected = recording.volumes.sum(axis=1) - emap.total_rest_volume
+        snap = lag['snaps'][0]
+        reach = snap['quasi_static_injected_m3'] - snap['delay_injected_m3']
+        inside = (recording.state_time_s <= snap['window_s'][1]) & (
+            (injected >= reach) | (recording.state_time_s >= snap['window_s'][0]))
+        assert lag['lag']['at_snaps']['states'] == int(np.sum(inside))
+        assert lag['lag']['off_snaps']['states'] == int(np.sum(~inside))
     # Off the snaps the state trails the slow manifold by about its time constant times the
     # pump's flow: first order, ten times less.
     for statistic in ('largest_m3', 'median_m3'):

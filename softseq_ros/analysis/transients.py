@@ -19,10 +19,12 @@ Definitions (docs/analysis.md, "Transients of a dynamic bag"):
 - the distance of a state from the quasi-static path is the largest difference of one segment's
   volume from its quasi-static volume at the same injected volume (the segments' volumes less
   their rest volumes: exact, by mass);
-- *at the snaps* are the states in a recorded snap's window, and those from where the
-  quasi-static path snaps to it (the approach to a fold is slow, and the quasi-static volumes run
-  away from it there); a quasi-static snap the recording never follows counts to the end of the
-  recording. Every other state is *off the snaps*, where the lag is the steady one of a pumped
+- *at the snaps* are the states in a recorded snap's window, and those from the approach to the
+  fold the quasi-static path snaps from, as far before its snap as the recorded snap came after
+  it (in injected volume: near the fold the quasi-static volumes run away like the square root
+  of the distance to it, and the lag there is the fold passage's, which scales as the delay
+  does); a quasi-static snap the recording never follows counts to the end of the recording.
+  Every other state is *off the snaps*, where the lag is the steady one of a pumped
   network (about its time constant times the pump's flow).
 """
 
@@ -268,7 +270,8 @@ def _lag(recording: Recording, emap: object, snaps: list[TimedSnap],
             later = 1.0 if snap.direction == INFLATION else -1.0
             entry['quasi_static_injected_m3'] = partner.injected
             entry['delay_injected_m3'] = later * (snap.injected - partner.injected)
-            first = min(first, partner.row)
+            first = min(first, _approach(injected, partner, later,
+                                         abs(snap.injected - partner.injected)))
         at_snaps[first:last] = True
     for never_followed in unpaired:
         at_snaps[never_followed.row:] = True
@@ -278,6 +281,25 @@ def _lag(recording: Recording, emap: object, snaps: list[TimedSnap],
         'at_snaps': _spread(distance[at_snaps], span),
         'quasi_static_snaps_not_followed_m3': [q.injected for q in unpaired],
     }
+
+
+def _approach(injected: FloatArray, partner: QuasiStaticSnap, later: float,
+              delay: float) -> int:
+    """
+    The first row of the fold passage's approach to a quasi-static snap.
+
+    As far before the quasi-static snap as the recorded snap came after it, in injected
+    volume, along the leg that reaches the fold. Near a fold the quasi-static volumes run away
+    like the square root of the distance to it while the recorded state lags: the lag there is
+    the fold passage's (its width and the delay both scale as the flow to the 2/3), not the
+    steady lag of a pumped network.
+    """
+    row = partner.row
+    reach = partner.injected - later * delay
+    while row > 0 and later * (injected[row - 1] - reach) >= 0.0 \
+            and later * (injected[row - 1] - injected[row]) <= 0.0:
+        row -= 1
+    return row
 
 
 def _quasi_static_snaps(recording: Recording, emap: object, injected: FloatArray,
