@@ -46,22 +46,23 @@ def main():
         from fonsim.fluid.fluid import IdealIncompressible
     fluid = IdealIncompressible(name='water', rho=job['density_kg_per_m3'],
                                 mu=job['viscosity_pa_s'])
-    arrays, times = {}, {}
+    arrays, times, cpu = {}, {}, {}
     for k, step in enumerate(job['steps_s']):
         system, segments = network(fonsim, fluid, job)
         with contextlib.redirect_stdout(io.StringIO()):
             simulation = fonsim.Simulation(system, duration=job['duration_s'], step=step,
                                            discretization='backward', verbose=0,
                                            **job.get('options', {}))
-            start = time.perf_counter()
+            start, cpu_start = time.perf_counter(), time.process_time()
             simulation.run()
             times[str(step)] = time.perf_counter() - start
+            cpu[str(step)] = time.process_time() - cpu_start
         arrays[f't{k}'] = np.asarray(simulation.times, dtype=float)
         arrays[f'v{k}'] = np.column_stack([s.get_state('mass') / job['density_kg_per_m3']
                                            for s in segments])
     np.savez(job['out'], **arrays)
     Path(job['out']).with_suffix('.json').write_text(json.dumps(
-        {'run_s': times, 'version': importlib.metadata.version('fonsim')}))
+        {'run_s': times, 'cpu_s': cpu, 'version': importlib.metadata.version('fonsim')}))
 
 
 if __name__ == '__main__':
