@@ -32,14 +32,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.errors import UserError
-from softseq_ros.quasistatic.assembly import (
-    Assembly,
-    Branch,
-    EquilibriumCurve,
-    FloatArray,
-    SegmentNumerics,
-)
+from softseq_ros.quasistatic.assembly import Assembly, EquilibriumCurve
 from softseq_ros.quasistatic.branch_ends import BranchEnds
+from softseq_ros.quasistatic.branches import Branch
+from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics
 from softseq_ros.quasistatic.sequence import (
     SEQUENCE_TYPES,
     SOLVED_HYSTERESIS_TOLERANCE,
@@ -150,7 +146,7 @@ class EquilibriumMap:
         # segment's piece count (a brute-force enumeration's).
         self.configurations_tried = len(assembly.configurations)
         self.configurations_possible = math.prod(len(p) for p in numerics.pieces)
-        self._curves = assembly.curves
+        self._assembly = assembly
         self.branches: list[Branch] = assembly.branches
         if not self.branches:
             raise ValueError('these segments have no stable equilibrium at all')
@@ -158,9 +154,7 @@ class EquilibriumMap:
         self.read = self.reader.read
         self._lo = np.array([b.lo for b in self.branches])
         self._hi = np.array([b.hi for b in self.branches])
-        ends = BranchEnds(numerics, self.branches, self.reader)
-        for index in range(len(self.branches)):
-            ends.connect(index)
+        BranchEnds(numerics, self.branches, self.reader).connect_all()
         self.start_branch = int(np.argmin(self._lo))
         self.injected_range = (self.branches[self.start_branch].lo - self.total_rest_volume,
                                self._inflation_limit() - self.total_rest_volume)
@@ -183,7 +177,7 @@ class EquilibriumMap:
 
     def equilibrium_set(self) -> list[EquilibriumCurve]:
         """Every configuration's equilibria, stable and unstable (Fig. 1B / 4B)."""
-        return list(self._curves)
+        return self._assembly.curves()
 
     def branch_at(self, injected: float, volumes: ArrayLike | None = None) -> int:
         """

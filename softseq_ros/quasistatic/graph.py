@@ -19,8 +19,8 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.quasistatic.assembly import Branch, FloatArray
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, inflate_and_deflate
+from softseq_ros.quasistatic.numerics import FloatArray
 from softseq_ros.segments.models import Piece, Segment
 
 INFLATION = 'inflation'
@@ -34,6 +34,7 @@ _DIRECTION_WORDS = {1: 'rising', -1: 'falling', 0: 'flat'}
 # sub-interval ends) exactly.
 _GAUSS_NODES = 8
 _MIN_SUBINTERVALS = 64
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(_GAUSS_NODES)
 
 
 def piece_labels(segment: Segment) -> list[str]:
@@ -68,22 +69,44 @@ def stored_energy(segments: Sequence[Segment], volumes: FloatArray) -> float:
     Composite Gauss-Legendre on each segment's pressure function, split at the model's own
     knots, so the energy comes from the same curves the equilibria do.
     """
-    return sum(_pressure_integral(s, s.rest_volume, float(v)) for s, v in zip(segments, volumes))
+    return stored_energies(segments, np.asarray(volumes, dtype=float)[None, :])[0]
 
 
-def _pressure_integral(segment: Segment, a: float, b: float) -> float:
-    if b == a:
-        return 0.0
+def stored_energies(segments: Sequence[Segment], volumes: FloatArray) -> list[float]:
+    """
+    :func:`stored_energy` of many states (rows of ``volumes``).
+
+    Each segment's pressure is evaluated once for all of them: the same numbers as one state
+    at a time.
+    """
+    integrals = np.zeros(volumes.shape)
+    for i, segment in enumerate(segments):
+        blocks = []
+        for row, v in enumerate(volumes[:, i].tolist()):
+            if v != segment.rest_volume:
+                blocks.append((row, *_quadrature(segment, segment.rest_volume, v)))
+        if not blocks:
+            continue
+        values = np.asarray(segment.pressure(np.concatenate([b[3] for b in blocks])),
+                            dtype=float)
+        start = 0
+        for row, sign, weights, points in blocks:
+            block = values[start:start + points.size].reshape(weights.shape)
+            start += points.size
+            integrals[row, i] = sign * float(np.sum(weights * block))
+    return [sum(row) for row in integrals.tolist()]
+
+
+def _quadrature(segment: Segment, a: float, b: float) -> tuple[float, FloatArray, FloatArray]:
+    """The sign, weights and points of the integral of ``segment``'s pressure from a to b."""
     sign = 1.0 if b > a else -1.0
     lo, hi = min(a, b), max(a, b)
     knots = segment.knots()
     edges = np.unique(np.concatenate([np.linspace(lo, hi, _MIN_SUBINTERVALS + 1),
                                       knots[(knots > lo) & (knots < hi)]]))
-    x, w = np.polynomial.legendre.leggauss(_GAUSS_NODES)
     left, width = edges[:-1, None], np.diff(edges)[:, None]
-    points = left + 0.5 * width * (x[None, :] + 1.0)
-    values = np.asarray(segment.pressure(points.ravel()), dtype=float).reshape(points.shape)
-    return sign * float(np.sum(0.5 * width * w[None, :] * values))
+    points = left + 0.5 * width * (_GAUSS_X[None, :] + 1.0)
+    return sign, 0.5 * width * _GAUSS_W[None, :], points.ravel()
 
 
 @dataclass(frozen=True)
@@ -359,11 +382,7 @@ def transition_graph(emap: EquilibriumMap) -> TransitionGraph:
         branches.append(GraphBranch(i, branch.lo - rest, branch.hi - rest, labels,
                                     float(branch.pressure[0]), float(branch.pressure[-1]),
                                     i in visited))
-    transitions = []
-    for i, branch in enumerate(emap.branches):
-        for direction in (INFLATION, DEFLATION):
-            transitions.append(_transition(emap, i, branch, direction,
-                                           (i, direction) in on_path))
+    transitions = _transitions(emap, on_path)
     return TransitionGraph(tuple(s.name for s in segments),
                            tuple(tuple(piece_labels(s)) for s in segments), branches,
                            transitions, emap.start_branch,
@@ -393,32 +412,47 @@ def _default_path(emap: EquilibriumMap) -> dict[tuple[int, str], tuple[str, int 
     return passed
 
 
-def _transition(emap: EquilibriumMap, index: int, branch: Branch, direction: str,
-                default: bool) -> Transition:
-    upward = direction == INFLATION
-    end = branch.upper if upward else branch.lower
-    total = branch.hi if upward else branch.lo
-    before = emap.read(index, np.array([total]))
-    v_before, p_before = before.volumes[0], float(before.pressure[0])
-    kind = _KINDS[end.kind]
-    if kind == END:
-        target, v_after, p_after = None, v_before, p_before
-    else:
-        target = end.target
-        after = emap.read(target, np.array([total]))
-        v_after, p_after = after.volumes[0], float(after.pressure[0])
-    if kind == SNAP:
-        moved = 0.5 * float(np.sum(np.abs(v_after - v_before)))
-        # Both states hold the same total volume, so the released energy is the drop of the
-        # segments' stored energy alone (the supply does no work during the snap).
-        released = (stored_energy(emap.segments, v_before)
-                    - stored_energy(emap.segments, v_after))
-    else:
-        moved = released = 0.0
+def _transitions(emap: EquilibriumMap, on_path: dict) -> list[Transition]:
+    """Both ends of every branch as transitions; the states they read, read once per branch."""
+    ends = []
+    wanted: dict[int, list[float]] = {}
+    for index, branch in enumerate(emap.branches):
+        for direction in (INFLATION, DEFLATION):
+            upward = direction == INFLATION
+            end = branch.upper if upward else branch.lower
+            total = branch.hi if upward else branch.lo
+            kind = _KINDS[end.kind]
+            target = None if kind == END else end.target
+            ends.append((index, direction, kind, target, total))
+            wanted.setdefault(index, []).append(total)
+            if kind == SNAP:
+                wanted.setdefault(target, []).append(total)
+    states: dict[tuple[int, float], tuple[FloatArray, float]] = {}
+    for index, totals in wanted.items():
+        rows = emap.read(index, np.array(totals))
+        for total, volumes, pressure in zip(totals, rows.volumes, rows.pressure.tolist()):
+            states[(index, total)] = (volumes, pressure)
+    snaps = [(states[(i, total)][0], states[(target, total)][0])
+             for i, _, kind, target, total in ends if kind == SNAP]
+    # Both states of a snap hold the same total volume, so the released energy is the drop
+    # of the segments' stored energy alone (the supply does no work during the snap).
+    energies = iter(stored_energies(emap.segments, np.array([v for pair in snaps
+                                                             for v in pair]))
+                    if snaps else [])
+    transitions = []
+    for index, direction, kind, target, total in ends:
+        v_before, p_before = states[(index, total)]
         v_after, p_after = v_before, p_before
-    return Transition(index, direction, kind, target, total - emap.total_rest_volume,
-                      tuple(float(v) for v in v_before), tuple(float(v) for v in v_after),
-                      p_before, p_after, moved, released, default)
+        moved = released = 0.0
+        if kind == SNAP:
+            v_after, p_after = states[(target, total)]
+            moved = 0.5 * float(np.sum(np.abs(v_after - v_before)))
+            released = next(energies) - next(energies)
+        transitions.append(Transition(
+            index, direction, kind, target, total - emap.total_rest_volume,
+            tuple(float(v) for v in v_before), tuple(float(v) for v in v_after), p_before,
+            p_after, moved, released, (index, direction) in on_path))
+    return transitions
 
 
 def write_graph_json(path: str | Path, graph: TransitionGraph,

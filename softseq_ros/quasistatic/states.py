@@ -12,7 +12,8 @@ from typing import NamedTuple, overload
 
 import numpy as np
 
-from softseq_ros.quasistatic.assembly import Branch, FloatArray, SegmentNumerics
+from softseq_ros.quasistatic.branches import Branch
+from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics
 
 
 class StatePoint(NamedTuple):
@@ -70,7 +71,7 @@ class StateReader:
         """
         branch = self.branches[index]
         total = np.clip(np.asarray(total, dtype=float), branch.lo, branch.hi)
-        values = branch.spline(total)
+        values = branch.evaluate(total)
         if self.polish and branch.any_rough:
             interval = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
                                branch.total.size - 2)
@@ -86,12 +87,7 @@ class StateReader:
         i = min(max(bisect_right(branch.knots, total) - 1, 0), len(branch.knots) - 2)
         if self.polish and branch.rough_list[i]:
             return self.rows(index, np.array([total]))[0].tolist()
-        rows = branch.rows
-        if not rows:
-            rows.extend([None] * (len(branch.knots) - 1))
-        coefficients = rows[i]
-        if coefficients is None:
-            coefficients = rows[i] = branch.spline.c[:, i, :].T.tolist()
+        coefficients = branch.coefficient_rows(i)
         dt = total - branch.knots[i]
         # The same Horner steps as numpy's on the arrays, so the same numbers.
         return [((a * dt + b) * dt + c) * dt + d for a, b, c, d in coefficients]

@@ -1,0 +1,267 @@
+"""
+Where snaps land: the redistribution flow from every fold of a map, integrated side by side.
+
+At a fold the fluid redistributes between the segments at constant total volume, along the
+gradient flow of the stored energy on sum v = V with equal conductances,
+dv_i/dt = -(p_i - mean p), until it rests on a stable state: the one whose basin the flow is in.
+The flow only has to reach the right basin (the landing state is then read off its branch
+exactly), so it stops as soon as the basin is certain: the state lies within a ball around a
+stable branch's state on which the energy is convex (:func:`certified_radius`); a gradient flow
+never leaves such a ball and ends at its centre.
+
+All the folds' flows are integrated at once, each with its own step, by the Rosenbrock method
+RODAS4 (6 stages, order 4, stiffly accurate, with an embedded order-3 error estimate; Hairer
+and Wanner, Solving ODEs II): stiff near a segment's stiff end, so implicit,
+and linearly implicit, so each step costs four solves of an N x N system with the exact
+Jacobian d(dv_i/dt)/dv_j = k_j / N - k_i delta_ij, done for every fold in one array call.
+One flow at a time cost a few hundred steps of scipy's LSODA, each several Python calls per
+segment; side by side a step is a few dozen array calls for all of them.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from softseq_ros.quasistatic.branches import Branch
+from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics, cofactor_sum
+from softseq_ros.quasistatic.states import StateReader
+
+# RODAS4 (Hairer and Wanner) in the form G K_i = f(Y_i) + sum_j C_ij K_j / h with
+# G = I / (h gamma) - J, Y_i = y + sum_j A_ij K_j, y_new = y + sum_j M_j K_j; the last stage
+# is the error estimate.
+GAMMA = 0.25
+_A7 = (1.221224509226641, 6.019134481288629, 12.53708332932087, -0.6878860361058950)
+A = ((), (1.544,), (0.9466785280815826, 0.2557011698983284),
+     (3.314825187068521, 2.896124015972201, 0.9986419139977817), _A7, (*_A7, 1.0))
+C = ((), (-5.6688,), (-2.430093356833875, -0.2063599157091915),
+     (-0.1073529058151375, -9.594562251023355, -20.47028614809616),
+     (7.496443313967647, -10.24680431464352, -33.99990352819905, 11.70890893206160),
+     (8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136,
+      -6.058818238834054))
+M = (*_A7, 1.0, 1.0)
+ORDER = 4        # of the error estimate's leading term: the step grows as err^(-1/4)
+SAFETY, GROWTH, SHRINK = 0.9, 6.0, 0.2
+MAX_STEPS = 20_000
+HORIZON = 1e14
+# Radii of the balls tried around a stable state, as shares of the volume scale, and how
+# many stiffness samples per segment span a ball's box.
+RADII = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
+PROBES = 33
+
+
+@dataclass
+class Landing:
+    """Where one fold's flow went: the branch whose basin it reached (-1: none certain)."""
+
+    branch: int
+    volumes: FloatArray    # that branch's state at the fold's total, or where the flow stopped
+
+
+def certified_radius(numerics: SegmentNumerics, centre: FloatArray) -> float:
+    """
+    The largest radius of :data:`RADII` around ``centre`` on whose box the energy is convex.
+
+    On sum v = V the energy's Hessian is diag(k_i(v_i)) restricted to sum dv = 0; it is
+    positive definite on a box of volumes when it is at each segment's smallest stiffness over
+    the box (the quadratic form grows with every k_i). The smallest stiffness over a box's side
+    is sampled: evenly spaced volumes and a table's rows inside it. 0 when no radius passes.
+    """
+    room = float(np.min(np.minimum(centre - numerics.rest_volumes,
+                                   numerics.max_volumes - centre)))
+    radii = np.array([share * numerics.v_scale for share in RADII])
+    radii = radii[radii < room]
+    if radii.size == 0:
+        return 0.0
+    offsets = np.linspace(-1.0, 1.0, PROBES)
+    smallest = np.empty((radii.size, centre.size))
+    for i, (segment, c) in enumerate(zip(numerics.segments, centre.tolist())):
+        knots = segment.knots()
+        knots = knots[(knots > c - radii[0]) & (knots < c + radii[0])]
+        even = segment.stiffness((c + radii[:, None] * offsets).ravel()).reshape(radii.size, -1)
+        smallest[:, i] = np.min(even, axis=1)
+        if knots.size:
+            at_knots = segment.stiffness(knots)
+            for r, radius in enumerate(radii.tolist()):
+                inside = (knots > c - radius) & (knots < c + radius)
+                if inside.any():
+                    smallest[r, i] = min(smallest[r, i], float(np.min(at_knots[inside])))
+    k = smallest / numerics.k_scale
+    passes = (np.sum(k < 0.0, axis=1) <= 1) & (cofactor_sum(k)
+                                               > numerics.tolerances.stable_cofactor)
+    return float(radii[np.argmax(passes)]) if passes.any() else 0.0
+
+
+class FlowLandings:
+    """The redistribution flows of many folds, integrated together until each basin is certain."""
+
+    def __init__(self, numerics: SegmentNumerics, branches: list[Branch],
+                 reader: StateReader) -> None:
+        """The flows run on the map's ``branches``; ``reader`` reads their states."""
+        self.numerics = numerics
+        self.branches = branches
+        self.reader = reader
+
+    def land(self, sources: list[int], totals: FloatArray, starts: FloatArray) -> list[Landing]:
+        """
+        Integrate every flow from ``starts`` (S, N) at ``totals`` until its basin is certain.
+
+        ``sources``: the branch each fold ends, which no flow lands back on. A flow that
+        leaves a segment's range, comes to rest first, stalls or runs out of steps gets
+        branch -1 and the state where it stopped.
+        """
+        count = len(sources)
+        basins = _Basins(self, np.asarray(sources), np.asarray(totals, dtype=float))
+        numerics = self.numerics
+        scale_v = numerics.v_scale
+        lo, hi = numerics.rest_volumes, numerics.max_volumes
+        tolerances = numerics.tolerances
+        y = np.asarray(starts, dtype=float) / scale_v
+        origin = y.copy()
+        t = np.zeros(count)
+        results: list[Landing | None] = [None] * count
+        _, k = self._forces(y)
+        h = 1e-3 / np.maximum(1.0, np.max(np.abs(k - k / k.shape[1]), axis=1))
+        next_rest_check = np.full(count, 100.0)
+        active = np.arange(count)
+        for _ in range(MAX_STEPS):
+            if active.size == 0:
+                break
+            y_new, error = self._step(y[active], h[active])
+            scale = tolerances.flow_atol + np.maximum(
+                tolerances.flow_rtol * np.maximum(np.abs(y[active]), np.abs(y_new)),
+                tolerances.flow_rtol_moved * np.maximum(np.abs(y[active] - origin[active]),
+                                                        np.abs(y_new - origin[active])))
+            with np.errstate(invalid='ignore', over='ignore'):
+                err = np.sqrt(np.mean((error / scale) ** 2, axis=1))
+            err = np.where(np.isfinite(err) & np.all(np.isfinite(y_new), axis=1), err, np.inf)
+            accept = err <= 1.0
+            with np.errstate(divide='ignore'):
+                factor = np.clip(SAFETY * err ** (-1.0 / ORDER), SHRINK, GROWTH)
+            factor = np.where(accept, factor, np.minimum(factor, 1.0))
+            moved = active[accept]
+            t[moved] += h[moved]
+            y[moved] = y_new[accept]
+            h[active] *= factor
+            stalled = active[h[active] <= 1e-14 * np.maximum(t[active], 1.0)]
+            finished = np.concatenate([stalled, moved[t[moved] >= HORIZON]])
+            for index in finished.tolist():
+                results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
+            v = y[moved] * scale_v
+            # A segment out of its model's range: the domain ends there.
+            out = np.any((v <= lo) | (v >= hi), axis=1)
+            for index, volumes in zip(moved[out].tolist(), v[out]):
+                results[index] = Landing(-1, np.clip(volumes, lo, hi))
+            inside = moved[~out]
+            for index, branch in zip(inside.tolist(), basins.holding(inside, v[~out])):
+                if branch >= 0 and results[index] is None:
+                    results[index] = Landing(branch, basins.state(index, branch))
+            # At rest means balanced pressures at a stable state: a fold is balanced too
+            # (so the flow's start is). Looked at once per decade of time.
+            due = inside[t[inside] >= next_rest_check[inside]]
+            for index in due.tolist():
+                while next_rest_check[index] <= t[index]:
+                    next_rest_check[index] *= 10.0
+                if results[index] is not None:
+                    continue
+                force, _ = self._forces(y[index][None, :])
+                volumes = y[index] * scale_v
+                if (np.max(np.abs(force)) < tolerances.flow_rest
+                        and self._stable(volumes)):
+                    results[index] = Landing(-1, np.clip(volumes, lo, hi))
+            active = np.array([i for i in active.tolist() if results[i] is None], dtype=np.intp)
+        for index in active.tolist():
+            results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
+        return [r for r in results if r is not None]
+
+    def _forces(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """dy/dt (the flow, scaled) and the scaled stiffnesses at scaled volumes ``y`` (m, N)."""
+        numerics = self.numerics
+        v = np.clip(y * numerics.v_scale, numerics.rest_volumes, numerics.max_volumes)
+        p = numerics.model_pressures(v) / numerics.p_scale
+        return (np.mean(p, axis=1, keepdims=True) - p,
+                numerics.model_stiffnesses(v) / numerics.k_scale)
+
+    def _flow(self, y: FloatArray) -> FloatArray:
+        """dy/dt alone (no stiffness): the stages' evaluations."""
+        numerics = self.numerics
+        v = np.clip(y * numerics.v_scale, numerics.rest_volumes, numerics.max_volumes)
+        p = numerics.model_pressures(v) / numerics.p_scale
+        return np.mean(p, axis=1, keepdims=True) - p
+
+    def _step(self, y: FloatArray, h: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """One RODAS3 step of every flow (its own h): the new state and the error estimate."""
+        force, k = self._forces(y)
+        n = y.shape[1]
+        hh = h[:, None]
+        # G = I / (h gamma) - J with J = 1 k^T / N - diag(k).
+        g = np.broadcast_to(-k[:, None, :] / n, (y.shape[0], n, n)).copy()
+        g[:, np.arange(n), np.arange(n)] += 1.0 / (hh * GAMMA) + k
+        try:
+            inverse = np.linalg.inv(g)
+        except np.linalg.LinAlgError:
+            inverse = np.linalg.pinv(g)
+        stages: list[FloatArray] = []
+        for i in range(len(M)):
+            f = self._flow(y + sum(a * s for a, s in zip(A[i], stages))) if i else force
+            rhs = f + sum(c * s for c, s in zip(C[i], stages)) / hh if i else f
+            stages.append(np.einsum('mij,mj->mi', inverse, rhs))
+        return y + sum(m * s for m, s in zip(M, stages)), stages[-1]
+
+    def _stable(self, volumes: FloatArray) -> bool:
+        numerics = self.numerics
+        k = np.array([s.stiffness(x) for s, x in zip(numerics.segments, volumes)])
+        k /= numerics.k_scale
+        return bool(np.sum(k < 0.0) <= 1
+                    and cofactor_sum(k) > numerics.tolerances.stable_cofactor)
+
+
+class _Basins:
+    """Per fold, the stable states at its total volume and the certified balls around them."""
+
+    def __init__(self, flows: FlowLandings, sources: NDArray[np.intp],
+                 totals: FloatArray) -> None:
+        numerics = flows.numerics
+        branches = flows.branches
+        tol = numerics.tol_v
+        lo = np.array([b.lo for b in branches])
+        hi = np.array([b.hi for b in branches])
+        holds = (lo[None, :] - tol <= totals[:, None]) & (totals[:, None] <= hi[None, :] + tol)
+        holds[np.arange(sources.size), sources] = False
+        most = max(int(holds.sum(axis=1).max()) if holds.size else 0, 1)
+        n = len(numerics.segments)
+        self.numerics = numerics
+        self.branch = np.full((sources.size, most), -1, dtype=np.intp)
+        self.states = np.full((sources.size, most, n), np.inf)
+        self.radius = np.full((sources.size, most), np.nan)
+        slot = np.zeros(sources.size, dtype=np.intp)
+        # Each branch read once for all the folds it holds (the reads' numbers are elementwise).
+        for j in np.flatnonzero(holds.any(axis=0)).tolist():
+            folds = np.flatnonzero(holds[:, j])
+            at = np.minimum(np.maximum(totals[folds], branches[j].lo), branches[j].hi)
+            states = flows.reader.read(j, at).volumes
+            self.branch[folds, slot[folds]] = j
+            self.states[folds, slot[folds]] = states
+            slot[folds] += 1
+
+    def holding(self, folds: NDArray[np.intp], volumes: FloatArray) -> list[int]:
+        """Per fold, the branch whose certified ball holds its state ``volumes``, or -1."""
+        with np.errstate(invalid='ignore'):
+            distance = np.sqrt(np.sum((self.states[folds] - volumes[:, None, :]) ** 2, axis=2))
+        nearest = np.argmin(distance, axis=1)
+        found = []
+        for fold, slot, d in zip(folds.tolist(), nearest.tolist(),
+                                 distance[np.arange(folds.size), nearest].tolist()):
+            if self.branch[fold, slot] < 0:
+                found.append(-1)
+                continue
+            if math.isnan(self.radius[fold, slot]):
+                self.radius[fold, slot] = certified_radius(self.numerics,
+                                                           self.states[fold, slot])
+            found.append(int(self.branch[fold, slot]) if d < self.radius[fold, slot] else -1)
+        return found
+
+    def state(self, fold: int, branch: int) -> FloatArray:
+        """The stable state of ``branch`` at fold ``fold``'s total volume."""
+        return self.states[fold, int(np.flatnonzero(self.branch[fold] == branch)[0])].copy()

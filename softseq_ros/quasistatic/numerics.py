@@ -1,0 +1,427 @@
+"""
+The numbers every stage of the equilibrium map shares: pieces, scales, inversions, stiffnesses.
+
+A segment's volume on one monotone piece of its curve at a given pressure (the inversion) is the
+map's innermost operation. :class:`PieceInverse` does it by a safeguarded Newton iteration, for
+many pressures at once and elementwise: a volume does not depend on which other pressures were
+inverted with it, so stages that batch their inversions differently get the same numbers.
+"""
+
+from bisect import bisect_right
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from softseq_ros.segments.models import (
+    Piece,
+    Segment,
+    at_piece_ends,
+    evaluate_cubics,
+    newton_start,
+)
+from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
+
+FloatArray = NDArray[np.float64]
+# Up to this many pressures, a table's piece is inverted on Python floats, one at a time.
+SCALAR_INVERSIONS = 16
+EPS = float(np.finfo(float).eps)
+
+
+def cofactor_sum(k: FloatArray) -> FloatArray:
+    """D = sum_i prod_{j != i} k_j along the last axis, without dividing by a k that may be 0."""
+    return np.sum(cofactors(k), axis=-1)
+
+
+def cofactors(k: FloatArray) -> FloatArray:
+    """W_i = prod_{j != i} k_j (proportional to 1/k_i, finite where a k is 0)."""
+    ones = np.ones(k.shape[:-1] + (1,))
+    prefix = np.concatenate([ones, np.cumprod(k[..., :-1], axis=-1)], axis=-1)
+    suffix = np.concatenate([np.cumprod(k[..., :0:-1], axis=-1)[..., ::-1], ones], axis=-1)
+    return prefix * suffix
+
+
+def soft_direction(k: FloatArray) -> FloatArray:
+    """Unit redistribution (sum 0) along which the restricted Hessian diag(k) is softest."""
+    n = k.size
+    basis = np.linalg.qr(np.eye(n) - 1.0 / n, mode='reduced')[0][:, : n - 1]
+    _, vectors = np.linalg.eigh(basis.T @ np.diag(k) @ basis)
+    direction = basis @ vectors[:, 0]
+    return direction / np.linalg.norm(direction)
+
+
+class PieceInverse:
+    """
+    Volumes on one monotone piece of one segment where the pressure equals given values.
+
+    :meth:`Segment.invert`'s safeguarded Newton iteration, step for step. For a table, the
+    PCHIP cubics are evaluated here with array arithmetic (:func:`evaluate_cubics`: the same
+    numbers as the model's own calls, to the bit) instead of through two interpolator calls
+    per step, which cost several times the arithmetic on the thousands of pressures an
+    assembly inverts at once.
+    """
+
+    def __init__(self, segment: Segment, piece: Piece, tolerances: Tolerances,
+                 log: ConvergenceLog) -> None:
+        """``log`` records whether each inversion converged."""
+        self.segment, self.piece = segment, piece
+        self.tolerances, self.log = tolerances, log
+        self.cubics = segment.pressure_cubics() if piece.direction != 0 else None
+        if self.cubics is not None:
+            breaks, pressure, stiffness = self.cubics
+            # The same cubics as Python floats, for a few pressures at a time.
+            self.breaks_list = breaks.tolist()
+            self.pressure_rows = pressure.T.tolist()
+            self.stiffness_rows = stiffness.T.tolist()
+
+    def __call__(self, p: FloatArray) -> FloatArray:
+        """The volumes at pressures ``p`` (those outside the piece's range: its nearer end)."""
+        if self.cubics is None:
+            return self.segment.invert(self.piece, p, self.tolerances, self.log)
+        target = np.asarray(p, dtype=float)
+        if target.size <= SCALAR_INVERSIONS:
+            volumes, converged = [], True
+            for value in target.ravel().tolist():
+                volume, done = self._one(value)
+                volumes.append(volume)
+                converged &= done
+            self.log.record('inversion', converged)
+            return np.array(volumes).reshape(target.shape)
+        lo, hi, x, _ = newton_start(self.piece, target, self.tolerances.round_off_ulps)
+        x = self._newton(target.ravel(), lo.ravel(), hi.ravel(), x.ravel().copy())
+        return at_piece_ends(self.piece, target, x.reshape(target.shape))
+
+    def bracketed(self, p: FloatArray, lo: FloatArray, hi: FloatArray,
+                  start: FloatArray) -> FloatArray:
+        """
+        The volumes at pressures ``p``, each known to lie in [``lo``, ``hi``] on this piece.
+
+        The same iteration and stopping rule as a call, from ``start`` (inside the bracket)
+        instead of the piece-wide guess: from a good start it stops after one or two steps,
+        at round-off of the same volume (not the same bits as a call, whose steps differ).
+        """
+        target = np.asarray(p, dtype=float).ravel()
+        x = self._newton(target, np.array(lo, dtype=float).ravel(),
+                         np.array(hi, dtype=float).ravel(), np.array(start, dtype=float).ravel())
+        return at_piece_ends(self.piece, target, x)
+
+    def _newton(self, goal: FloatArray, lo: FloatArray, hi: FloatArray,
+                x: FloatArray) -> FloatArray:
+        """Safeguarded Newton on the pressures not converged yet (a converged one stays)."""
+        piece, tolerances = self.piece, self.tolerances
+        sign = float(piece.direction)
+        ulps = tolerances.round_off_ulps
+        floor = ulps * EPS * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+        if self.cubics is not None:
+            breaks, pressure_c, stiffness_c = self.cubics
+
+            def pressure(v: FloatArray) -> FloatArray:
+                return evaluate_cubics(breaks, pressure_c, v)
+
+            def stiffness(v: FloatArray) -> FloatArray:
+                return evaluate_cubics(breaks, stiffness_c, v)
+        else:
+            pressure, stiffness = self.segment.pressure, self.segment.stiffness
+        converged = False
+        active = np.arange(x.size)
+        for _ in range(tolerances.inversion_steps):
+            xa, ta = x[active], goal[active]
+            residual = sign * (pressure(xa) - ta)
+            above = residual > 0.0
+            ha = np.where(above, xa, hi[active])
+            la = np.where(above, lo[active], xa)
+            done = (np.abs(residual) <= floor) | (
+                ha - la <= ulps * np.spacing(np.maximum(np.abs(ha), 1e-300)))
+            if np.all(done):
+                converged = True
+                break
+            slope = sign * stiffness(xa)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                step = xa - residual / slope
+            inside = np.isfinite(step) & (step > la) & (step < ha)
+            going = ~done
+            active, xa, la, ha = active[going], xa[going], la[going], ha[going]
+            x[active] = np.where(inside[going], step[going], 0.5 * (la + ha))
+            lo[active], hi[active] = la, ha
+        self.log.record('inversion', converged)
+        return x
+
+    def _cubic(self, rows: list[list[float]], v: float) -> float:
+        """One cubic at one volume: :func:`evaluate_cubics`' operations on Python floats."""
+        breaks = self.breaks_list
+        i = min(max(bisect_right(breaks, v) - 1, 0), len(breaks) - 2)
+        offset = v - breaks[i]
+        row = rows[i]
+        value = row[-1]
+        power = offset
+        value = value + row[-2] * power
+        for coefficient in row[-3::-1]:
+            power = power * offset
+            value = value + coefficient * power
+        return value
+
+    def _one(self, target: float) -> tuple[float, bool]:
+        """
+        One pressure's volume and whether it converged: the array iteration's steps on floats.
+
+        IEEE arithmetic on Python floats and on numpy's elements gives the same numbers, and
+        an element of the array iteration stops moving once it is done, so the volume is the
+        one the arrays give; a few pressures at a time cost a fraction of the array calls.
+        """
+        piece = self.piece
+        sign = float(piece.direction)
+        lo, hi = piece.v_lo, piece.v_hi
+        span = piece.p_at_hi - piece.p_at_lo
+        x = (piece.v_lo + (piece.v_hi - piece.v_lo)
+             * min(max((target - piece.p_at_lo) / span, 0.0), 1.0)) if span else 0.5 * (lo + hi)
+        ulps = self.tolerances.round_off_ulps
+        floor = ulps * EPS * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
+        converged = False
+        for _ in range(self.tolerances.inversion_steps):
+            residual = sign * (self._cubic(self.pressure_rows, x) - target)
+            if residual > 0.0:
+                hi = x
+            else:
+                lo = x
+            if abs(residual) <= floor or hi - lo <= ulps * math.ulp(max(abs(hi), 1e-300)):
+                converged = True
+                break
+            slope = sign * self._cubic(self.stiffness_rows, x)
+            step = x - residual / slope if slope != 0.0 else math.nan
+            x = step if (math.isfinite(step) and lo < step < hi) else 0.5 * (lo + hi)
+        if target == piece.p_at_lo:
+            x = piece.v_lo
+        if target == piece.p_at_hi:
+            x = piece.v_hi
+        return x, converged
+
+
+class SegmentNumerics:
+    """The numbers every stage shares: segments, their pieces, scales and tolerances."""
+
+    def __init__(self, segments: Sequence[Segment],
+                 tolerances: Tolerances = DEFAULT_TOLERANCES) -> None:
+        """Pieces and scales of ``segments`` (base to tip); ``convergence`` logs the solves."""
+        self.segments = list(segments)
+        self.tolerances = tolerances
+        self.convergence = ConvergenceLog()
+        self.rest_volumes = np.array([s.rest_volume for s in self.segments])
+        self.max_volumes = np.array([s.max_volume for s in self.segments])
+        self.total_rest_volume = float(self.rest_volumes.sum())
+        self.v_scale = float(np.sum(self.max_volumes - self.rest_volumes))
+        self.pieces = [s.monotone_pieces() for s in self.segments]
+        p_extent = max(max(abs(pc.p_at_lo), abs(pc.p_at_hi))
+                       for pieces in self.pieces for pc in pieces)
+        self.p_scale = p_extent if p_extent > 0.0 else 1.0
+        self.k_scale = self.p_scale / self.v_scale
+        self.tol_v = tolerances.same_volume * self.v_scale
+        self._inverses: dict[tuple[int, Piece], PieceInverse] = {}
+        self._piece_ids = [{piece: a for a, piece in enumerate(pieces)} for pieces in self.pieces]
+        # Every piece's numbers in one array (6, N, most pieces), for per-element lookups.
+        most = max(len(pieces) for pieces in self.pieces)
+        self._piece_table = np.full((6, len(self.segments), most), np.nan)
+        ulps = tolerances.round_off_ulps
+        for i, pieces in enumerate(self.pieces):
+            for a, pc in enumerate(pieces):
+                self._piece_table[:, i, a] = (
+                    pc.v_lo, pc.v_hi, pc.p_at_lo, pc.p_at_hi, float(pc.direction),
+                    ulps * EPS * max(abs(pc.p_at_lo), abs(pc.p_at_hi), 1e-300))
+        # Pressure and stiffness of each segment for arrays of volumes inside its range: for a
+        # table, scipy's PPoly calls (the numbers of evaluate_cubics, and faster for arrays).
+        self._curve = [(seg.pressure, seg.stiffness) for seg in self.segments]
+
+    def volumes_at(self, config: tuple[Piece, ...], p: FloatArray) -> FloatArray:
+        """Each segment's volume on its piece of ``config`` at the pressures ``p``."""
+        return np.stack([self.inverse(i, piece)(p) for i, piece in enumerate(config)], axis=-1)
+
+    def piece_indices(self, config: tuple[Piece, ...]) -> list[int]:
+        """The index of each segment's piece of ``config`` among the segment's pieces."""
+        return [self._piece_ids[i][piece] for i, piece in enumerate(config)]
+
+    def states_at(self, piece_index: NDArray[np.intp],
+                  p: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """
+        Volumes and scaled stiffnesses (m, N) at pressures ``p`` (m,), each row on its own pieces.
+
+        ``piece_index`` (m, N) gives each row's piece per segment (:meth:`piece_indices`).
+        """
+        m, n = piece_index.shape
+        segment = np.tile(np.arange(n), m)
+        piece = piece_index.ravel()
+        volumes = self.invert(segment, piece, np.repeat(p, n))
+        return (volumes.reshape(m, n),
+                self.element_stiffness(segment, piece, volumes).reshape(m, n))
+
+    def invert(self, segment: NDArray[np.intp], piece: NDArray[np.intp], target: FloatArray,
+               bracket: tuple[FloatArray, FloatArray, FloatArray] | None = None) -> FloatArray:
+        """
+        Volumes where each element's segment, on its piece (by index), has pressure ``target``.
+
+        :class:`PieceInverse`'s iteration on every element at once, whatever its segment and
+        piece: each element takes the steps it takes alone, so the numbers are the ones a
+        call per piece gives, and a batch of small groups costs one iteration, not one per
+        group. ``bracket`` (lo, hi, start) starts from a known bracket and guess instead of
+        the piece's (:meth:`PieceInverse.bracketed`).
+        """
+        target = np.asarray(target, dtype=float)
+        table = self._element_pieces(segment, piece)
+        v_lo, v_hi, p_lo, p_hi, sign, floor = table
+        if bracket is None:
+            span = p_hi - p_lo
+            with np.errstate(divide='ignore', invalid='ignore'):
+                guess = v_lo + (v_hi - v_lo) * np.clip((target - p_lo) / span, 0.0, 1.0)
+            x = np.where(span != 0.0, guess, 0.5 * (v_lo + v_hi))
+            lo, hi = v_lo.copy(), v_hi.copy()
+        else:
+            lo, hi, x = (np.array(a, dtype=float) for a in bracket)
+        ulps = self.tolerances.round_off_ulps
+        groups = [np.flatnonzero(segment == i) for i in range(len(self.segments))]
+        groups_start = [g.copy() for g in groups]
+        curves = [self._curve_within(i, lo[rows], hi[rows]) if bracket is not None
+                  else self._curve[i] for i, rows in enumerate(groups)]
+        for _ in range(self.tolerances.inversion_steps):
+            for i, active in enumerate(groups):
+                if active.size == 0:
+                    continue
+                xa, sa = x[active], sign[active]
+                pressure, stiffness = curves[i]
+                if bracket is not None and curves[i] is not self._curve[i]:
+                    # Evaluated on each element's own table interval: the elements still
+                    # going, in the order the group started with.
+                    where = np.searchsorted(groups_start[i], active)
+                    residual = sa * (pressure(xa, where) - target[active])
+                else:
+                    residual = sa * (pressure(xa) - target[active])
+                above = residual > 0.0
+                ha = np.where(above, xa, hi[active])
+                la = np.where(above, lo[active], xa)
+                going = ~((np.abs(residual) <= floor[active]) | (
+                    ha - la <= ulps * np.spacing(np.maximum(np.abs(ha), 1e-300))))
+                active, xa, sa, la, ha = (active[going], xa[going], sa[going], la[going],
+                                          ha[going])
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    if bracket is not None and curves[i] is not self._curve[i]:
+                        slope = stiffness(xa, where[going])
+                    else:
+                        slope = stiffness(xa)
+                    step = xa - residual[going] / (sa * slope)
+                inside = np.isfinite(step) & (step > la) & (step < ha)
+                x[active] = np.where(inside, step, 0.5 * (la + ha))
+                lo[active], hi[active] = la, ha
+                groups[i] = active
+            if not any(g.size for g in groups):
+                break
+        self.convergence.record('inversion', not any(g.size for g in groups))
+        x = np.where(target == p_lo, v_lo, x)
+        return np.where(target == p_hi, v_hi, x)
+
+    def _curve_within(self, index: int, lo: FloatArray, hi: FloatArray) -> tuple:
+        """
+        Pressure and stiffness of segment ``index`` for volumes known to stay in [lo, hi].
+
+        For a table, when each bracket lies in one interval of its rows, the cubics are
+        evaluated on that interval directly (:func:`evaluate_cubics`' operations without its
+        search per call); otherwise the model's own calls.
+        """
+        cubics = self.segments[index].pressure_cubics()
+        if cubics is None or lo.size == 0:
+            return self._curve[index]
+        breaks, pressure_c, stiffness_c = cubics
+        interval = np.clip(np.searchsorted(breaks, lo, side='right') - 1, 0, breaks.size - 2)
+        if not np.all(hi <= breaks[interval + 1]):
+            return self._curve[index]
+
+        def on_interval(coefficients: FloatArray) -> Callable[[FloatArray, NDArray[np.intp]],
+                                                               FloatArray]:
+            def evaluate(v: FloatArray, rows: NDArray[np.intp]) -> FloatArray:
+                i = interval[rows]
+                offset = v - breaks[i]
+                value = coefficients[-1, i]
+                power = offset
+                value = value + coefficients[-2, i] * power
+                for m in range(coefficients.shape[0] - 3, -1, -1):
+                    power = power * offset
+                    value = value + coefficients[m, i] * power
+                return value
+            return evaluate
+
+        return on_interval(pressure_c), on_interval(stiffness_c)
+
+    def element_stiffness(self, segment: NDArray[np.intp], piece: NDArray[np.intp],
+                          volumes: FloatArray) -> FloatArray:
+        """:meth:`piece_stiffness` of each element on its segment's piece (by index)."""
+        k = np.empty_like(volumes)
+        for i, seg in enumerate(self.segments):
+            rows = np.flatnonzero(segment == i)
+            if rows.size:
+                k[rows] = seg.stiffness(volumes[rows]) / self.k_scale
+        v_lo, v_hi, _, _, sign, _ = self._element_pieces(segment, piece)
+        turning = (((v_lo > self.rest_volumes[segment]) & (volumes == v_lo))
+                   | ((v_hi < self.max_volumes[segment]) & (volumes == v_hi)))
+        k = np.where(turning, 0.0, k)
+        return np.where(sign > 0, np.maximum(k, 0.0),
+                        np.where(sign < 0, np.minimum(k, 0.0), 0.0 * k))
+
+    def round_off_floor(self, segment: NDArray[np.intp],
+                        piece: NDArray[np.intp]) -> FloatArray:
+        """Per element: the pressure residual its inversion counts as round-off [Pa]."""
+        return self._element_pieces(segment, piece)[5]
+
+    def _element_pieces(self, segment: NDArray[np.intp],
+                        piece: NDArray[np.intp]) -> tuple[FloatArray, ...]:
+        """Per element: its piece's v_lo, v_hi, p_at_lo, p_at_hi, direction, round-off floor."""
+        flat = self._piece_table[:, segment, piece] if segment.size else np.empty((6, 0))
+        return tuple(flat)
+
+    def inverse(self, index: int, piece: Piece) -> PieceInverse:
+        """The inversion of segment ``index`` on ``piece`` (built once, then reused)."""
+        key = (index, piece)
+        found = self._inverses.get(key)
+        if found is None:
+            found = self._inverses[key] = PieceInverse(self.segments[index], piece,
+                                                       self.tolerances, self.convergence)
+        return found
+
+    def stiffness(self, config: tuple[Piece, ...], volumes: FloatArray) -> FloatArray:
+        """Scaled dp/dv, clipped to the sign its piece promises (exactly 0 on a flat piece)."""
+        return np.stack([self.piece_stiffness(i, piece, volumes[..., i])
+                         for i, piece in enumerate(config)], axis=-1)
+
+    def piece_stiffness(self, index: int, piece: Piece, v: FloatArray) -> FloatArray:
+        """:meth:`stiffness` of one segment on one piece at volumes ``v``."""
+        seg = self.segments[index]
+        k = seg.stiffness(v) / self.k_scale
+        # A piece end inside the model's range is a peak or a valley: the slope there is
+        # zero by definition, not the round-off of a numerical derivative.
+        turning = np.zeros(np.shape(v), dtype=bool)
+        if piece.v_lo > seg.rest_volume:
+            turning |= v == piece.v_lo
+        if piece.v_hi < seg.max_volume:
+            turning |= v == piece.v_hi
+        k = np.where(turning, 0.0, k)
+        if piece.direction > 0:
+            return np.maximum(k, 0.0)
+        if piece.direction < 0:
+            return np.minimum(k, 0.0)
+        return np.zeros_like(k)
+
+    def model_pressures(self, volumes: FloatArray) -> FloatArray:
+        """Each segment's gauge pressure at volumes (m, N) inside its range [Pa]."""
+        return np.stack([self._curve[i][0](volumes[:, i]) for i in range(volumes.shape[1])],
+                        axis=1)
+
+    def model_stiffnesses(self, volumes: FloatArray) -> FloatArray:
+        """Each segment's dp/dv at volumes (m, N) inside its range [Pa/m^3], unclipped."""
+        return np.stack([self._curve[i][1](volumes[:, i]) for i in range(volumes.shape[1])],
+                        axis=1)
+
+    def curvatures(self, volumes: FloatArray) -> FloatArray:
+        """Per-segment curvature for volumes (n, N), in 1/m."""
+        return np.stack([s.curvature(volumes[:, j]) for j, s in enumerate(self.segments)],
+                        axis=1)
+
+    def curvature_slopes(self, volumes: FloatArray) -> FloatArray:
+        """Per-segment d(curvature)/dv for volumes (n, N), in 1/m per m^3."""
+        return np.stack([s.curvature_slope(volumes[:, j]) for j, s in enumerate(self.segments)],
+                        axis=1)
