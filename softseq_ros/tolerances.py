@@ -30,17 +30,17 @@ class Tolerances:
     round_off_ulps: float = 4.0
     # Volumes closer than this share of the volume scale are the same (branch ends, joins).
     same_volume: float = 1e-9
-    # A snap-through's redistribution flow starts this share of the volume scale off the fold,
-    # is integrated to these tolerances in scaled units (relative to the state, or to how far
-    # it moved from its start where that is looser: the escape from the fold, a millionth of
-    # the range at first, is followed to flow_rtol; the way across, to flow_rtol_moved of the
-    # way; softseq_ros.quasistatic.landing), and is at rest when the scaled pressures balance
-    # to this; a state is stable when the cofactor sum of its scaled stiffnesses exceeds this;
-    # the branch it lands on lies within this share of the volume scale of where the flow
-    # came to rest.
+    # A snap-through's redistribution flow starts this share of the volume scale off the fold
+    # and is integrated to these tolerances in scaled units: relative to the state, or, where
+    # that is looser, to how far the state has moved from the fold (the escape from the fold,
+    # at a millionth of the range at first, is followed to flow_rtol of the state, the way
+    # across to flow_rtol_moved of the way; softseq_ros.quasistatic.landing). It is at rest
+    # when the scaled pressures balance to flow_rest; a state is stable when the cofactor sum
+    # of its scaled stiffnesses exceeds stable_cofactor; the branch it lands on lies within
+    # landing_distance (a share of the volume scale) of where the flow came to rest.
     fold_offset: float = 1e-6
-    flow_rtol: float = 1e-7
-    flow_rtol_moved: float = 1e-5
+    flow_rtol: float = 1e-6
+    flow_rtol_moved: float = 1e-4
     flow_atol: float = 1e-12
     flow_rest: float = 1e-9
     stable_cofactor: float = 1e-6

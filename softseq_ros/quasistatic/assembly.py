@@ -159,6 +159,7 @@ class Assembly:
         # A stretch is (config, its grid places, the fold pressures at its ends) until the
         # folds are known; a plateau's stretches come ready.
         pending: list[tuple[tuple[Piece, ...], NDArray[np.intp], list[int]] | BranchSamples] = []
+        # (configuration, grid places, the folds below and above it: -1 for none)
         folds: list[tuple[tuple[Piece, ...], float, float, float, float]] = []
         for config in self.configurations:
             flats = [i for i, pc in enumerate(config) if pc.direction == 0]
@@ -181,11 +182,11 @@ class Assembly:
             for start, stop in zip(starts, stops):
                 if not stable[start]:
                     continue
-                ends = []
+                ends = [-1, -1]
                 # The fold between the last unstable and the first stable sample, and back.
-                for a, b in ((start - 1, start), (stop - 1, stop)):
+                for side, (a, b) in enumerate(((start - 1, start), (stop - 1, stop))):
                     if 0 <= a and b < p.size:
-                        ends.append(len(folds))
+                        ends[side] = len(folds)
                         folds.append((config, float(p[a]), float(p[b]), float(d[a]),
                                       float(d[b])))
                 pending.append((config, places[start:stop], ends))
@@ -200,16 +201,19 @@ class Assembly:
             if isinstance(entry, BranchSamples):
                 stretches.append(entry)
                 continue
-            config, places, ends = entry
+            config, places, (lower, upper) = entry
+            pressure = self.grid.p[places]
+            # A fold lies between its two samples: before the stretch's first sample or
+            # after its last; at a sample's own pressure, the sample stands for it.
+            before = [lower] if lower >= 0 and fold_p[lower] < pressure[0] else []
+            after = [upper] if upper >= 0 and fold_p[upper] > pressure[-1] else []
             columns = self.grid.columns(config, places,
                                         ('volumes', 'stiffness', 'curvature_slope'))
-            # Sorted, a fold at a sample's pressure taking the sample's place.
-            pressure, first = np.unique(np.concatenate([self.grid.p[places], fold_p[ends]]),
-                                        return_index=True)
-            stretches.append(BranchSamples(pressure, *(
-                np.concatenate([column, at[ends]])[first]
-                for column, at in zip(columns, (at_volumes, at_stiffness, at_curvature))),
-                config))
+            if before or after:
+                pressure = np.concatenate([fold_p[before], pressure, fold_p[after]])
+                columns = [np.concatenate([at[before], column, at[after]]) for column, at in
+                           zip(columns, (at_volumes, at_stiffness, at_curvature))]
+            stretches.append(BranchSamples(pressure, *columns, config))
         return stretches
 
     def _folds(self, folds: list[tuple[tuple[Piece, ...], float, float, float, float]]

@@ -99,14 +99,15 @@ class BranchEnds:
         """
         if not ends:
             return []
-        starts, totals = [], []
+        folds, starts, totals = [], [], []
         for index, upward in ends:
             branch = self.branches[index]
             end = -1 if upward else 0
+            folds.append(branch.volumes[end])
             starts.append(self._flow_start(branch, branch.volumes[end]))
             totals.append(float(branch.total[end]))
         landings = FlowLandings(self.numerics, self.branches, self.reader).land(
-            [index for index, _ in ends], np.array(totals), np.array(starts))
+            [index for index, _ in ends], np.array(totals), np.array(folds), np.array(starts))
         found = []
         for (index, _), total, start, landing in zip(ends, totals, starts, landings):
             if landing.branch >= 0:

@@ -25,7 +25,6 @@ from scipy.interpolate import PPoly
 from softseq_ros.quasistatic.numerics import (
     FloatArray,
     SegmentNumerics,
-    cofactor_sum,
     cofactors,
 )
 from softseq_ros.segments.models import Piece
@@ -35,7 +34,7 @@ from softseq_ros.segments.models import Piece
 CUBIC_TOLERANCE = 1e-10
 REFINEMENTS = 16
 # Intervals checked in one go in the first round (bounds the memory of an 8-segment map).
-CHUNK_INTERVALS = 1 << 17
+CHUNK_INTERVALS = 1 << 15
 # Up to this many intervals of a branch read at once, their cubics are computed one by one
 # and kept; beyond, all of the branch's at once.
 FEW_INTERVALS = 64
@@ -162,9 +161,10 @@ def sample_slopes(numerics: SegmentNumerics, stiffness: FloatArray, volumes: Flo
     dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D; the curvatures ride along.
     """
     n = volumes.shape[1]
-    d = cofactor_sum(stiffness)
+    weights = cofactors(stiffness)
+    d = np.sum(weights, axis=-1)     # cofactor_sum, its cofactors computed once
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        slopes = np.concatenate([cofactors(stiffness), np.prod(stiffness, axis=1, keepdims=True)
+        slopes = np.concatenate([weights, np.prod(stiffness, axis=1, keepdims=True)
                                  * numerics.k_scale], axis=1) / d[:, None]
         if curvature_slope is None:
             curvature_slope = numerics.curvature_slopes(volumes)
@@ -365,7 +365,7 @@ class _Fitter:
 
         The middle's volumes come from Newton started close by (:meth:`_middle_volumes`),
         which stops within a bound of where the sampling's own inversion stops; where that
-        bound could move the verdict (an interval next to a fold, whose width in V is
+        bound could move the verdict (next to a fold, where an interval's width in V is
         round-off), the middle is inverted as the sampling does, so the verdict is the one
         those volumes give.
         """
@@ -373,26 +373,38 @@ class _Fitter:
             return np.zeros(0, dtype=bool)
         h = (b.total - a.total)[:, None]
         cubic = hermite(a.volumes, b.volumes, a.slopes, b.slopes, h)
-        if not self.numerics.convergence.converged:
-            # An inversion ran out of its budget (a curve the models did not foresee, or a
-            # budget set too low): the bound below needs converged inversions, so every
-            # middle is inverted as the sampling does.
-            exact = self._exact(a.branch, 0.5 * (a.pressure + b.pressure)).volumes
-            return self._verdict(cubic, exact, a.total, h)[0]
-        middle, bound = self._middle_volumes(a, b)
-        miss, distance, t = self._verdict(cubic, middle, a.total, h)
-        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-            c0, c1, c2, _ = np.abs(cubic)
-            steepness = c2 + 2.0 * c1 * np.abs(t) + 3.0 * c0 * t * t
-            shift = np.max(bound + steepness * (np.sum(bound, axis=1, keepdims=True) / h),
-                           axis=1)
         tolerance = CUBIC_TOLERANCE * self.numerics.v_scale
-        unsure = np.flatnonzero(~(np.abs(distance - tolerance) > 4.0 * shift))
-        if unsure.size:
-            exact = self._exact(a.branch[unsure], 0.5 * (a.pressure[unsure]
-                                                         + b.pressure[unsure])).volumes
-            miss[unsure] = self._verdict(cubic[:, unsure], exact, a.total[unsure],
-                                         h[unsure])[0]
+        miss = np.zeros(h.size, dtype=bool)
+        if self.numerics.convergence.converged:
+            bound = self._bound(a, b)
+            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+                c0, c1, c2, _ = np.abs(cubic)
+                spread = np.sum(bound, axis=1, keepdims=True) / h
+                # With t in [0, 1], how far the verdict's distance may move at most.
+                most = np.max(bound + (c2 + 2.0 * c1 + 3.0 * c0) * spread, axis=1)
+            near = np.flatnonzero(most < 0.125 * tolerance)
+            if near.size == h.size:
+                middle = self._middle_volumes(a, b)
+            else:
+                middle = self._middle_volumes(a.take(near), b.take(near))
+            miss[near], distance, t = self._verdict(cubic[:, near], middle, a.total[near],
+                                                    h[near])
+            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+                steepness = c2[near] + 2.0 * c1[near] * np.abs(t) + 3.0 * c0[near] * t * t
+                shift = np.max(bound[near] + steepness * spread[near], axis=1)
+            unsure = np.ones(h.size, dtype=bool)
+            unsure[near[np.abs(distance - tolerance) > 4.0 * shift]] = False
+            exact = np.flatnonzero(unsure)
+        else:
+            # An inversion ran out of its budget (a curve the models did not foresee, or a
+            # budget set too low): the bound needs converged inversions, so every middle is
+            # inverted as the sampling does.
+            exact = np.arange(h.size)
+        if exact.size:
+            volumes = self._exact(a.branch[exact], 0.5 * (a.pressure[exact]
+                                                          + b.pressure[exact])).volumes
+            miss[exact] = self._verdict(cubic[:, exact], volumes, a.total[exact],
+                                        h[exact])[0]
         return miss
 
     def _verdict(self, cubic: FloatArray, middle: FloatArray, start: FloatArray,
@@ -404,16 +416,31 @@ class _Fitter:
         distance = np.max(np.abs(guess - middle), axis=1)
         return ~(distance <= CUBIC_TOLERANCE * self.numerics.v_scale), distance, t
 
-    def _middle_volumes(self, a: _Ends, b: _Ends) -> tuple[FloatArray, FloatArray]:
+    def _bound(self, a: _Ends, b: _Ends) -> FloatArray:
         """
-        The volumes halfway in pressure between two samples, and how far they may be off.
+        How far the middle's volumes from :meth:`_middle_volumes` may be from the sampling's.
+
+        Both inversions stop where the pressure is within round-off of the target or the
+        bracket within a few ulps: twice that pressure round-off over the smaller stiffness
+        (halved, for how it may vary in between), plus the ulps.
+        """
+        numerics = self.numerics
+        ulps = numerics.tolerances.round_off_ulps
+        floor = numerics.round_off_floor(self.piece_index[a.branch])
+        with np.errstate(divide='ignore', invalid='ignore'):
+            softest = 0.25 * numerics.k_scale * np.minimum(np.abs(a.stiffness),
+                                                           np.abs(b.stiffness))
+            bound = 2.0 * (floor / softest + 2.0 * ulps * np.spacing(
+                np.maximum(np.abs(a.volumes), np.abs(b.volumes))))
+        return np.where(np.isnan(bound), np.inf, bound)
+
+    def _middle_volumes(self, a: _Ends, b: _Ends) -> FloatArray:
+        """
+        The volumes halfway in pressure between two samples, started close by.
 
         Each lies between its two samples' volumes on its piece: Newton from the cubic
         Hermite guess in p (the slopes dv/dp = 1/k are known at both ends) reaches round-off
-        in a step or two, where the piece-wide start takes several. Both stop where the
-        pressure is within round-off of the target or the bracket within a few ulps, so they
-        differ by at most the bound returned: twice that pressure round-off over the
-        smaller stiffness (halved, for how it may vary in between) plus the ulps.
+        in a step or two, where the piece-wide start takes several.
         """
         numerics = self.numerics
         target = 0.5 * (a.pressure + b.pressure)
@@ -422,21 +449,9 @@ class _Fitter:
         with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
             guess = (0.5 * (a.volumes + b.volumes) + 0.125 * span / numerics.k_scale
                      * (1.0 / a.stiffness - 1.0 / b.stiffness))
-            softest = 0.25 * numerics.k_scale * np.minimum(np.abs(a.stiffness),
-                                                           np.abs(b.stiffness))
         start = np.where(np.isfinite(guess) & (guess > lo) & (guess < hi), guess,
                          0.5 * (lo + hi))
-        m = target.size
-        segment = np.tile(np.arange(self.n), m)
-        piece = self.piece_index[a.branch].ravel()
-        volumes = numerics.invert(segment, piece, np.repeat(target, self.n),
-                                  (lo.ravel(), hi.ravel(), start.ravel())).reshape(m, self.n)
-        ulps = numerics.tolerances.round_off_ulps
-        floor = numerics.round_off_floor(segment, piece).reshape(m, self.n)
-        with np.errstate(divide='ignore', invalid='ignore'):
-            bound = 2.0 * (floor / softest + 2.0 * ulps * np.spacing(np.maximum(np.abs(lo),
-                                                                              np.abs(hi))))
-        return volumes, np.where(np.isnan(bound), np.inf, bound)
+        return numerics.invert_rows(self.piece_index[a.branch], target, (lo, hi, start))
 
     def _exact(self, branch: NDArray[np.intp], pressure: FloatArray) -> _Ends:
         """Samples at new pressures, inverted exactly as the sampling does (the same numbers)."""

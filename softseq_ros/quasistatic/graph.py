@@ -76,37 +76,49 @@ def stored_energies(segments: Sequence[Segment], volumes: FloatArray) -> list[fl
     """
     :func:`stored_energy` of many states (rows of ``volumes``).
 
-    Each segment's pressure is evaluated once for all of them: the same numbers as one state
-    at a time.
+    Each segment's quadrature is built for all states at once and its pressure evaluated in
+    one call: the same sub-intervals, points and sums as one state at a time.
     """
     integrals = np.zeros(volumes.shape)
     for i, segment in enumerate(segments):
-        blocks = []
-        for row, v in enumerate(volumes[:, i].tolist()):
-            if v != segment.rest_volume:
-                blocks.append((row, *_quadrature(segment, segment.rest_volume, v)))
-        if not blocks:
-            continue
-        values = np.asarray(segment.pressure(np.concatenate([b[3] for b in blocks])),
-                            dtype=float)
-        start = 0
-        for row, sign, weights, points in blocks:
-            block = values[start:start + points.size].reshape(weights.shape)
-            start += points.size
-            integrals[row, i] = sign * float(np.sum(weights * block))
+        rows = np.flatnonzero(volumes[:, i] != segment.rest_volume)
+        if rows.size:
+            integrals[rows, i] = _pressure_integrals(segment, volumes[rows, i])
     return [sum(row) for row in integrals.tolist()]
 
 
-def _quadrature(segment: Segment, a: float, b: float) -> tuple[float, FloatArray, FloatArray]:
-    """The sign, weights and points of the integral of ``segment``'s pressure from a to b."""
-    sign = 1.0 if b > a else -1.0
-    lo, hi = min(a, b), max(a, b)
+def _pressure_integrals(segment: Segment, ends: FloatArray) -> list[float]:
+    """
+    The integrals of ``segment``'s pressure from its rest volume to each of ``ends``.
+
+    Per integral: composite Gauss-Legendre on 64 equal sub-intervals, further split at the
+    model's knots inside (np.unique of both, as one integral alone builds them), summed by
+    np.sum over its (sub-intervals, nodes) block.
+    """
+    rest = segment.rest_volume
+    lo, hi = np.minimum(rest, ends), np.maximum(rest, ends)
+    sign = np.where(ends > rest, 1.0, -1.0)
+    even = np.linspace(lo, hi, _MIN_SUBINTERVALS + 1, axis=1)
     knots = segment.knots()
-    edges = np.unique(np.concatenate([np.linspace(lo, hi, _MIN_SUBINTERVALS + 1),
-                                      knots[(knots > lo) & (knots < hi)]]))
-    left, width = edges[:-1, None], np.diff(edges)[:, None]
+    first = np.searchsorted(knots, lo, side='right')
+    count = np.searchsorted(knots, hi, side='left') - first
+    inside = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
+    row = np.concatenate([np.repeat(np.arange(ends.size), _MIN_SUBINTERVALS + 1),
+                          np.repeat(np.arange(ends.size), count)])
+    value = np.concatenate([even.ravel(), knots[inside]])
+    order = np.lexsort((value, row))
+    row, value = row[order], value[order]
+    keep = np.ones(value.size, dtype=bool)
+    keep[1:] = (row[1:] != row[:-1]) | (value[1:] != value[:-1])
+    row, edges = row[keep], value[keep]
+    inner = np.flatnonzero(row[:-1] == row[1:])
+    left, width = edges[inner][:, None], (edges[inner + 1] - edges[inner])[:, None]
     points = left + 0.5 * width * (_GAUSS_X[None, :] + 1.0)
-    return sign, 0.5 * width * _GAUSS_W[None, :], points.ravel()
+    weighted = 0.5 * width * _GAUSS_W[None, :] * np.asarray(
+        segment.pressure(points.ravel()), dtype=float).reshape(points.shape)
+    stops = np.cumsum(np.bincount(row[inner], minlength=ends.size))
+    return [s * float(np.sum(weighted[a:b])) for s, a, b in
+            zip(sign.tolist(), np.concatenate([[0], stops[:-1]]).tolist(), stops.tolist())]
 
 
 @dataclass(frozen=True)
@@ -427,11 +439,11 @@ def _transitions(emap: EquilibriumMap, on_path: dict) -> list[Transition]:
             wanted.setdefault(index, []).append(total)
             if kind == SNAP:
                 wanted.setdefault(target, []).append(total)
-    states: dict[tuple[int, float], tuple[FloatArray, float]] = {}
-    for index, totals in wanted.items():
-        rows = emap.read(index, np.array(totals))
-        for total, volumes, pressure in zip(totals, rows.volumes, rows.pressure.tolist()):
-            states[(index, total)] = (volumes, pressure)
+    pairs = [(index, total) for index, totals in wanted.items() for total in totals]
+    rows = emap.reader.rows_many(np.array([p[0] for p in pairs], dtype=np.intp),
+                                 np.array([p[1] for p in pairs]))
+    n = len(emap.segments)
+    states = {pair: (row[:n], float(row[n])) for pair, row in zip(pairs, rows)}
     snaps = [(states[(i, total)][0], states[(target, total)][0])
              for i, _, kind, target, total in ends if kind == SNAP]
     # Both states of a snap hold the same total volume, so the released energy is the drop

@@ -19,7 +19,6 @@ segment; side by side a step is a few dozen array calls for all of them.
 """
 
 from dataclasses import dataclass
-import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -103,9 +102,13 @@ class FlowLandings:
         self.branches = branches
         self.reader = reader
 
-    def land(self, sources: list[int], totals: FloatArray, starts: FloatArray) -> list[Landing]:
+    def land(self, sources: list[int], totals: FloatArray, folds: FloatArray,
+             starts: FloatArray) -> list[Landing]:
         """
         Integrate every flow from ``starts`` (S, N) at ``totals`` until its basin is certain.
+
+        ``folds``: the fold each flow starts next to; the error is measured against how far
+        the flow has moved from it.
 
         ``sources``: the branch each fold ends, which no flow lands back on. A flow that
         leaves a segment's range, comes to rest first, stalls or runs out of steps gets
@@ -118,7 +121,7 @@ class FlowLandings:
         lo, hi = numerics.rest_volumes, numerics.max_volumes
         tolerances = numerics.tolerances
         y = np.asarray(starts, dtype=float) / scale_v
-        origin = y.copy()
+        origin = np.asarray(folds, dtype=float) / scale_v
         t = np.zeros(count)
         results: list[Landing | None] = [None] * count
         _, k = self._forces(y)
@@ -235,32 +238,28 @@ class _Basins:
         self.branch = np.full((sources.size, most), -1, dtype=np.intp)
         self.states = np.full((sources.size, most, n), np.inf)
         self.radius = np.full((sources.size, most), np.nan)
-        slot = np.zeros(sources.size, dtype=np.intp)
-        # Each branch read once for all the folds it holds (the reads' numbers are elementwise).
-        for j in np.flatnonzero(holds.any(axis=0)).tolist():
-            folds = np.flatnonzero(holds[:, j])
-            at = np.minimum(np.maximum(totals[folds], branches[j].lo), branches[j].hi)
-            states = flows.reader.read(j, at).volumes
-            self.branch[folds, slot[folds]] = j
-            self.states[folds, slot[folds]] = states
-            slot[folds] += 1
+        # Every fold's candidates read at once (the same numbers as one read each).
+        fold, branch = np.nonzero(holds)
+        lo_b, hi_b = lo[branch], hi[branch]
+        states = flows.reader.rows_many(branch, np.minimum(np.maximum(totals[fold], lo_b),
+                                                           hi_b))[:, :n]
+        slot = np.arange(fold.size) - np.searchsorted(fold, fold)
+        self.branch[fold, slot] = branch
+        self.states[fold, slot] = states
 
     def holding(self, folds: NDArray[np.intp], volumes: FloatArray) -> list[int]:
         """Per fold, the branch whose certified ball holds its state ``volumes``, or -1."""
         with np.errstate(invalid='ignore'):
             distance = np.sqrt(np.sum((self.states[folds] - volumes[:, None, :]) ** 2, axis=2))
         nearest = np.argmin(distance, axis=1)
-        found = []
-        for fold, slot, d in zip(folds.tolist(), nearest.tolist(),
-                                 distance[np.arange(folds.size), nearest].tolist()):
-            if self.branch[fold, slot] < 0:
-                found.append(-1)
-                continue
-            if math.isnan(self.radius[fold, slot]):
-                self.radius[fold, slot] = certified_radius(self.numerics,
-                                                           self.states[fold, slot])
-            found.append(int(self.branch[fold, slot]) if d < self.radius[fold, slot] else -1)
-        return found
+        closest = distance[np.arange(folds.size), nearest]
+        branch = self.branch[folds, nearest]
+        radius = self.radius[folds, nearest]
+        for row in np.flatnonzero(np.isnan(radius) & (branch >= 0)).tolist():
+            fold, slot = int(folds[row]), int(nearest[row])
+            radius[row] = self.radius[fold, slot] = certified_radius(self.numerics,
+                                                                     self.states[fold, slot])
+        return np.where((branch >= 0) & (closest < radius), branch, -1).tolist()
 
     def state(self, fold: int, branch: int) -> FloatArray:
         """The stable state of ``branch`` at fold ``fold``'s total volume."""

@@ -36,6 +36,17 @@ def cofactor_sum(k: FloatArray) -> FloatArray:
 
 def cofactors(k: FloatArray) -> FloatArray:
     """W_i = prod_{j != i} k_j (proportional to 1/k_i, finite where a k is 0)."""
+    if k.ndim == 2 and k.shape[0] > 64:
+        # Many rows: the running products along the segments as whole-column products (the
+        # same products in the same order; numpy's cumprod along a short last axis is slow).
+        columns = k.T
+        prefix = np.ones(columns.shape)
+        suffix = np.ones(columns.shape)
+        for i in range(1, columns.shape[0]):
+            prefix[i] = prefix[i - 1] * columns[i - 1] if i > 1 else columns[0]
+            j = columns.shape[0] - 1 - i
+            suffix[j] = suffix[j + 1] * columns[j + 1] if i > 1 else columns[-1]
+        return np.ascontiguousarray((prefix * suffix).T)
     ones = np.ones(k.shape[:-1] + (1,))
     prefix = np.concatenate([ones, np.cumprod(k[..., :-1], axis=-1)], axis=-1)
     suffix = np.concatenate([np.cumprod(k[..., :0:-1], axis=-1)[..., ::-1], ones], axis=-1)
@@ -239,101 +250,99 @@ class SegmentNumerics:
         """The index of each segment's piece of ``config`` among the segment's pieces."""
         return [self._piece_ids[i][piece] for i, piece in enumerate(config)]
 
-    def states_at(self, piece_index: NDArray[np.intp],
-                  p: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def states_at(self, piece_index: NDArray[np.intp], p: FloatArray,
+                  stiffness: bool = True) -> tuple[FloatArray, FloatArray | None]:
         """
         Volumes and scaled stiffnesses (m, N) at pressures ``p`` (m,), each row on its own pieces.
 
         ``piece_index`` (m, N) gives each row's piece per segment (:meth:`piece_indices`).
         """
-        m, n = piece_index.shape
-        segment = np.tile(np.arange(n), m)
-        piece = piece_index.ravel()
-        volumes = self.invert(segment, piece, np.repeat(p, n))
-        return (volumes.reshape(m, n),
-                self.element_stiffness(segment, piece, volumes).reshape(m, n))
+        volumes = self.invert_rows(piece_index, p)
+        if not stiffness:
+            return volumes, None
+        return volumes, np.stack([self._element_stiffness(i, piece_index[:, i], volumes[:, i])
+                                  for i in range(volumes.shape[1])], axis=1)
 
-    def invert(self, segment: NDArray[np.intp], piece: NDArray[np.intp], target: FloatArray,
-               bracket: tuple[FloatArray, FloatArray, FloatArray] | None = None) -> FloatArray:
+    def invert_rows(self, piece_index: NDArray[np.intp], p: FloatArray,
+                    bracket: tuple[FloatArray, FloatArray, FloatArray] | None = None
+                    ) -> FloatArray:
         """
-        Volumes where each element's segment, on its piece (by index), has pressure ``target``.
+        :meth:`invert` of whole rows: each segment's volume (m, N) at pressures ``p`` (m,).
 
-        :class:`PieceInverse`'s iteration on every element at once, whatever its segment and
-        piece: each element takes the steps it takes alone, so the numbers are the ones a
-        call per piece gives, and a batch of small groups costs one iteration, not one per
-        group. ``bracket`` (lo, hi, start) starts from a known bracket and guess instead of
-        the piece's (:meth:`PieceInverse.bracketed`).
+        ``piece_index`` (m, N) gives each row's piece per segment; ``bracket`` (lo, hi,
+        start), each (m, N), as :meth:`invert`'s.
         """
-        target = np.asarray(target, dtype=float)
-        table = self._element_pieces(segment, piece)
-        v_lo, v_hi, p_lo, p_hi, sign, floor = table
+        volumes = np.empty(piece_index.shape)
+        converged = True
+        for i in range(piece_index.shape[1]):
+            guess = None if bracket is None else tuple(a[:, i] for a in bracket)
+            volumes[:, i], done = self._invert_segment(i, piece_index[:, i], p, guess)
+            converged &= done
+        self.convergence.record('inversion', converged)
+        return volumes
+
+    def _invert_segment(self, index: int, piece: NDArray[np.intp], goal: FloatArray,
+                        bracket: tuple[FloatArray, FloatArray, FloatArray] | None
+                        ) -> tuple[FloatArray, bool]:
+        """:meth:`invert` for elements of one segment; whether all converged."""
+        v_lo, v_hi, p_lo, p_hi, sign, floor = self._piece_table[:, index][:, piece]
         if bracket is None:
             span = p_hi - p_lo
             with np.errstate(divide='ignore', invalid='ignore'):
-                guess = v_lo + (v_hi - v_lo) * np.clip((target - p_lo) / span, 0.0, 1.0)
+                guess = v_lo + (v_hi - v_lo) * np.clip((goal - p_lo) / span, 0.0, 1.0)
             x = np.where(span != 0.0, guess, 0.5 * (v_lo + v_hi))
             lo, hi = v_lo.copy(), v_hi.copy()
+            pressure, stiffness = self._curve[index]
+            within = None
         else:
             lo, hi, x = (np.array(a, dtype=float) for a in bracket)
+            within = self._curve_within(index, lo, hi)
         ulps = self.tolerances.round_off_ulps
-        groups = [np.flatnonzero(segment == i) for i in range(len(self.segments))]
-        groups_start = [g.copy() for g in groups]
-        curves = [self._curve_within(i, lo[rows], hi[rows]) if bracket is not None
-                  else self._curve[i] for i, rows in enumerate(groups)]
+        active = np.arange(goal.size)
         for _ in range(self.tolerances.inversion_steps):
-            for i, active in enumerate(groups):
-                if active.size == 0:
-                    continue
-                xa, sa = x[active], sign[active]
-                pressure, stiffness = curves[i]
-                if bracket is not None and curves[i] is not self._curve[i]:
-                    # Evaluated on each element's own table interval: the elements still
-                    # going, in the order the group started with.
-                    where = np.searchsorted(groups_start[i], active)
-                    residual = sa * (pressure(xa, where) - target[active])
-                else:
-                    residual = sa * (pressure(xa) - target[active])
-                above = residual > 0.0
-                ha = np.where(above, xa, hi[active])
-                la = np.where(above, lo[active], xa)
-                going = ~((np.abs(residual) <= floor[active]) | (
-                    ha - la <= ulps * np.spacing(np.maximum(np.abs(ha), 1e-300))))
-                active, xa, sa, la, ha = (active[going], xa[going], sa[going], la[going],
-                                          ha[going])
-                with np.errstate(divide='ignore', invalid='ignore'):
-                    if bracket is not None and curves[i] is not self._curve[i]:
-                        slope = stiffness(xa, where[going])
-                    else:
-                        slope = stiffness(xa)
-                    step = xa - residual[going] / (sa * slope)
-                inside = np.isfinite(step) & (step > la) & (step < ha)
-                x[active] = np.where(inside, step, 0.5 * (la + ha))
-                lo[active], hi[active] = la, ha
-                groups[i] = active
-            if not any(g.size for g in groups):
+            if active.size == 0:
                 break
-        self.convergence.record('inversion', not any(g.size for g in groups))
-        x = np.where(target == p_lo, v_lo, x)
-        return np.where(target == p_hi, v_hi, x)
+            xa, sa = x[active], sign[active]
+            if within is not None:
+                p_a = within[0](xa, active)
+            else:
+                p_a = pressure(xa)
+            residual = sa * (p_a - goal[active])
+            above = residual > 0.0
+            ha = np.where(above, xa, hi[active])
+            la = np.where(above, lo[active], xa)
+            going = ~((np.abs(residual) <= floor[active]) | (
+                ha - la <= ulps * np.spacing(np.maximum(np.abs(ha), 1e-300))))
+            active, xa, sa, la, ha = (active[going], xa[going], sa[going], la[going],
+                                      ha[going])
+            with np.errstate(divide='ignore', invalid='ignore'):
+                slope = within[1](xa, active) if within is not None else stiffness(xa)
+                step = xa - residual[going] / (sa * slope)
+            inside = np.isfinite(step) & (step > la) & (step < ha)
+            x[active] = np.where(inside, step, 0.5 * (la + ha))
+            lo[active], hi[active] = la, ha
+        x = np.where(goal == p_lo, v_lo, x)
+        return np.where(goal == p_hi, v_hi, x), active.size == 0
 
     def _curve_within(self, index: int, lo: FloatArray, hi: FloatArray) -> tuple:
         """
         Pressure and stiffness of segment ``index`` for volumes known to stay in [lo, hi].
 
-        For a table, when each bracket lies in one interval of its rows, the cubics are
-        evaluated on that interval directly (:func:`evaluate_cubics`' operations without its
-        search per call); otherwise the model's own calls.
+        For a table, each bracket inside one interval of its rows has its cubic evaluated
+        there directly (:func:`evaluate_cubics`' operations without a search per call); a
+        bracket across a row (by round-off, its end at a row) goes through the model's calls.
         """
         cubics = self.segments[index].pressure_cubics()
         if cubics is None or lo.size == 0:
-            return self._curve[index]
+            pressure, stiffness = self._curve[index]
+            return (lambda v, rows: pressure(v)), (lambda v, rows: stiffness(v))
         breaks, pressure_c, stiffness_c = cubics
         interval = np.clip(np.searchsorted(breaks, lo, side='right') - 1, 0, breaks.size - 2)
-        if not np.all(hi <= breaks[interval + 1]):
-            return self._curve[index]
+        across = ~(hi <= breaks[interval + 1])
+        pressure, stiffness = self._curve[index]
 
-        def on_interval(coefficients: FloatArray) -> Callable[[FloatArray, NDArray[np.intp]],
-                                                               FloatArray]:
+        def on_interval(coefficients: FloatArray, model: Callable[[FloatArray], FloatArray]
+                        ) -> Callable[[FloatArray, NDArray[np.intp]], FloatArray]:
             def evaluate(v: FloatArray, rows: NDArray[np.intp]) -> FloatArray:
                 i = interval[rows]
                 offset = v - breaks[i]
@@ -343,36 +352,45 @@ class SegmentNumerics:
                 for m in range(coefficients.shape[0] - 3, -1, -1):
                     power = power * offset
                     value = value + coefficients[m, i] * power
+                other = np.flatnonzero(across[rows])
+                if other.size:
+                    value[other] = model(v[other])
                 return value
             return evaluate
 
-        return on_interval(pressure_c), on_interval(stiffness_c)
+        return on_interval(pressure_c, pressure), on_interval(stiffness_c, stiffness)
 
     def element_stiffness(self, segment: NDArray[np.intp], piece: NDArray[np.intp],
                           volumes: FloatArray) -> FloatArray:
         """:meth:`piece_stiffness` of each element on its segment's piece (by index)."""
         k = np.empty_like(volumes)
-        for i, seg in enumerate(self.segments):
+        for i in range(len(self.segments)):
             rows = np.flatnonzero(segment == i)
             if rows.size:
-                k[rows] = seg.stiffness(volumes[rows]) / self.k_scale
-        v_lo, v_hi, _, _, sign, _ = self._element_pieces(segment, piece)
-        turning = (((v_lo > self.rest_volumes[segment]) & (volumes == v_lo))
-                   | ((v_hi < self.max_volumes[segment]) & (volumes == v_hi)))
+                k[rows] = self._element_stiffness(i, piece[rows], volumes[rows])
+        return k
+
+    def _element_stiffness(self, index: int, piece: NDArray[np.intp],
+                           volumes: FloatArray) -> FloatArray:
+        """:meth:`element_stiffness` for elements of one segment."""
+        seg = self.segments[index]
+        k = seg.stiffness(volumes) / self.k_scale
+        v_lo, v_hi, _, _, sign, _ = self._piece_table[:, index][:, piece]
+        turning = (((v_lo > seg.rest_volume) & (volumes == v_lo))
+                   | ((v_hi < seg.max_volume) & (volumes == v_hi)))
         k = np.where(turning, 0.0, k)
-        return np.where(sign > 0, np.maximum(k, 0.0),
-                        np.where(sign < 0, np.minimum(k, 0.0), 0.0 * k))
+        return np.where(sign > 0, np.maximum(k, 0.0), np.where(sign < 0, np.minimum(k, 0.0), 0.0))
 
-    def round_off_floor(self, segment: NDArray[np.intp],
-                        piece: NDArray[np.intp]) -> FloatArray:
-        """Per element: the pressure residual its inversion counts as round-off [Pa]."""
-        return self._element_pieces(segment, piece)[5]
+    def round_off_floor(self, piece_index: NDArray[np.intp]) -> FloatArray:
+        """
+        The pressure residual [Pa] an inversion counts as round-off, per row and segment.
 
-    def _element_pieces(self, segment: NDArray[np.intp],
-                        piece: NDArray[np.intp]) -> tuple[FloatArray, ...]:
-        """Per element: its piece's v_lo, v_hi, p_at_lo, p_at_hi, direction, round-off floor."""
-        flat = self._piece_table[:, segment, piece] if segment.size else np.empty((6, 0))
-        return tuple(flat)
+        ``piece_index`` (m, N): each row's piece per segment (:meth:`piece_indices`).
+        """
+        floors = self._piece_table[5]
+        return np.stack([floors[i][piece_index[:, i]] for i in range(piece_index.shape[1])],
+                        axis=1)
+
 
     def inverse(self, index: int, piece: Piece) -> PieceInverse:
         """The inversion of segment ``index`` on ``piece`` (built once, then reused)."""

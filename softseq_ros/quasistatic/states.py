@@ -11,9 +11,10 @@ from bisect import bisect_right
 from typing import NamedTuple, overload
 
 import numpy as np
+from numpy.typing import NDArray
 
-from softseq_ros.quasistatic.branches import Branch
-from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics
+from softseq_ros.quasistatic.branches import Branch, hermite, sample_slopes
+from softseq_ros.quasistatic.numerics import EPS, FloatArray, SegmentNumerics
 
 
 class StatePoint(NamedTuple):
@@ -61,6 +62,92 @@ class StateReader:
         rows = self.rows(index, total)
         return StateRows(rows[:, :n], rows[:, n], rows[:, n + 1:])
 
+    def rows_many(self, index: NDArray[np.intp], total: FloatArray) -> FloatArray:
+        """
+        States on many branches at once: row r on branch ``index[r]`` at ``total[r]``.
+
+        The numbers :meth:`rows` gives branch by branch (every step is elementwise), with each
+        kind of work done once for all the branches: the cubics of the intervals read, and
+        the exact states next to folds.
+        """
+        index = np.asarray(index, dtype=np.intp)
+        total = np.asarray(total, dtype=float).copy()
+        count = index.size
+        interval = np.empty(count, dtype=np.intp)
+        rough = np.zeros(count, dtype=bool)
+        for b in np.unique(index).tolist():
+            rows = np.flatnonzero(index == b)
+            branch = self.branches[b]
+            total[rows] = np.clip(total[rows], branch.lo, branch.hi)
+            interval[rows] = np.clip(np.searchsorted(branch.total, total[rows], side='right')
+                                     - 1, 0, branch.total.size - 2)
+            if self.polish and branch.any_rough:
+                rough[rows] = branch.rough[interval[rows]]
+        values = self._cubics_at(index, interval, total)
+        if rough.any():
+            rows = np.flatnonzero(rough)
+            values[rows] = self._polish_many(index[rows], interval[rows], total[rows])
+        return values
+
+    def _cubics_at(self, index: NDArray[np.intp], interval: NDArray[np.intp],
+                   total: FloatArray) -> FloatArray:
+        """The branches' cubics at ``total``: :func:`interval_cubics` and PPoly's arithmetic."""
+        numerics, n = self.numerics, self._n
+        a = np.empty((index.size, n))
+        b = np.empty_like(a)
+        pressure = np.empty((index.size, 2))
+        knots = np.empty((index.size, 2))
+        flat = np.zeros(index.size, dtype=bool)
+        chord = np.zeros(index.size, dtype=bool)
+        pieces = np.empty((index.size, n), dtype=np.intp)
+        for branch_index in np.unique(index).tolist():
+            rows = np.flatnonzero(index == branch_index)
+            branch, at = self.branches[branch_index], interval[rows]
+            a[rows], b[rows] = branch.volumes[at], branch.volumes[at + 1]
+            pressure[rows] = np.stack([branch.pressure[at], branch.pressure[at + 1]], axis=1)
+            knots[rows] = np.stack([branch.total[at], branch.total[at + 1]], axis=1)
+            flat[rows], chord[rows] = branch.flat, branch.rough[at]
+            pieces[rows] = numerics.piece_indices(branch.pieces)
+        segment = np.tile(np.arange(n), 2 * index.size)
+        volumes = np.concatenate([a, b])
+        stiffness = numerics.element_stiffness(
+            segment, np.concatenate([pieces, pieces]).ravel(),
+            volumes.ravel()).reshape(volumes.shape)
+        slopes = np.empty((volumes.shape[0], 2 * n + 1))
+        twice = np.concatenate([flat, flat])
+        for is_flat in (False, True):
+            rows = np.flatnonzero(twice == is_flat)
+            if rows.size:
+                slopes[rows] = sample_slopes(numerics, stiffness[rows], volumes[rows], is_flat)
+        values = np.concatenate([volumes, pressure.T.reshape(-1, 1),
+                                 numerics.curvatures(volumes)], axis=1)
+        m = index.size
+        h = (knots[:, 1] - knots[:, 0])[:, None]
+        y0, y1 = values[:m], values[m:]
+        zero = np.zeros_like(y0)
+        cubic = np.where(chord[None, :, None], np.stack([zero, zero, y1 - y0, y0]),
+                         hermite(y0, y1, slopes[:m], slopes[m:], h))
+        c = cubic / h[None, :, :] ** np.arange(3, -1, -1)[:, None, None]
+        offset = (total - knots[:, 0])[:, None]
+        power = offset * offset
+        return c[3] + c[2] * offset + c[1] * power + c[0] * (power * offset)
+
+    def _polish_many(self, index: NDArray[np.intp], interval: NDArray[np.intp],
+                     total: FloatArray) -> FloatArray:
+        """:meth:`_polish` of rows on many branches: one Newton for all of them."""
+        numerics, n = self.numerics, self._n
+        below = np.empty(index.size)
+        above = np.empty(index.size)
+        t0, t1 = np.empty(index.size), np.empty(index.size)
+        pieces = np.empty((index.size, n), dtype=np.intp)
+        for branch_index in np.unique(index).tolist():
+            rows = np.flatnonzero(index == branch_index)
+            branch, at = self.branches[branch_index], interval[rows]
+            below[rows], above[rows] = branch.pressure[at], branch.pressure[at + 1]
+            t0[rows], t1[rows] = branch.total[at], branch.total[at + 1]
+            pieces[rows] = numerics.piece_indices(branch.pieces)
+        return self._polish_rows(pieces, total, below, above, t0, t1)
+
     def rows(self, index: int, total: FloatArray) -> FloatArray:
         """
         States on branch ``index`` at total volumes ``total``: rows (v_1..v_N, p, k_1..k_N).
@@ -103,35 +190,44 @@ class StateReader:
         """
         i = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
                     branch.total.size - 2)
-        # 'below' and 'above' are the pressures whose totals are below and above the target.
-        below, above = branch.pressure[i].copy(), branch.pressure[i + 1].copy()
-        t0, t1 = branch.total[i], branch.total[i + 1]
+        pieces = np.tile(self.numerics.piece_indices(branch.pieces), (total.size, 1))
+        return self._polish_rows(pieces, total, branch.pressure[i].copy(),
+                                 branch.pressure[i + 1].copy(), branch.total[i],
+                                 branch.total[i + 1])
+
+    def _polish_rows(self, pieces: NDArray[np.intp], total: FloatArray, below: FloatArray,
+                     above: FloatArray, t0: FloatArray, t1: FloatArray) -> FloatArray:
+        """
+        The Newton of :meth:`_polish`, each row on its own pieces (``pieces``: (m, N)).
+
+        'below' and 'above' are the pressures whose totals are below and above the target.
+        """
+        numerics = self.numerics
         pressure = below + (above - below) * (total - t0) / (t1 - t0)
-        tolerances = self.numerics.tolerances
+        tolerances = numerics.tolerances
         ulps = tolerances.round_off_ulps
         converged = False
         for _ in range(tolerances.polish_steps):
-            volumes = self.numerics.volumes_at(branch.pieces, pressure)
+            volumes, _ = numerics.states_at(pieces, pressure, stiffness=False)
             excess = volumes.sum(axis=1) - total
             short = excess < 0.0
             below = np.where(short, pressure, below)
             above = np.where(short, above, pressure)
-            done = (np.abs(excess) <= ulps * np.finfo(float).eps * self.numerics.v_scale) | (
+            done = (np.abs(excess) <= ulps * EPS * numerics.v_scale) | (
                 np.abs(above - below) <= ulps * np.spacing(np.abs(above)))
             if np.all(done):
                 converged = True
                 break
-            k = np.stack([s.stiffness(volumes[:, j])
-                          for j, s in enumerate(self.numerics.segments)], axis=1)
+            k = numerics.model_stiffnesses(volumes)
             with np.errstate(divide='ignore', invalid='ignore'):
                 step = pressure - excess / np.sum(1.0 / k, axis=1)
             inside = (np.isfinite(step) & (step > np.minimum(below, above))
                       & (step < np.maximum(below, above)))
             pressure = np.where(done, pressure, np.where(inside, step, 0.5 * (below + above)))
-        self.numerics.convergence.record('polish', converged)
-        volumes = self.numerics.volumes_at(branch.pieces, pressure)
+        numerics.convergence.record('polish', converged)
+        volumes, _ = numerics.states_at(pieces, pressure, stiffness=False)
         # The bisection leaves the volume balance off by round-off; the largest volume takes it.
         largest = np.argmax(volumes, axis=1)
         volumes[np.arange(volumes.shape[0]), largest] += total - volumes.sum(axis=1)
-        return np.concatenate([volumes, pressure[:, None], self.numerics.curvatures(volumes)],
+        return np.concatenate([volumes, pressure[:, None], numerics.curvatures(volumes)],
                               axis=1)
