@@ -1,26 +1,32 @@
 """
-How long the equilibrium map and the transition graph of N peaked segments take, old and new.
+How long the equilibrium map and the transition graph of N peaked segments take, new and former.
 
-    python bench/bench_graph.py [--quick] [--max-n N] [--baseline-max-n N] [--out FILE]
+    python bench/bench_graph.py [--quick] [--max-n N] [--repeats R] [--former-max-n N]
+                                [--original-max-n N] [--out FILE]
 
 N = 2 to 8 Gent balloons (shear modulus 60 kPa, radius 6 mm), each with a peak and a valley,
 base to tip with decreasing Gent limits, wall thicknesses and stretch ranges (the nested-loop
 scene of test/test_graph.py, spread over N): once as 600-row tables sampled from the law
 (uniform in stretch), once as the closed-form law. Each case is built in a fresh process:
 ``EquilibriumMap`` (resolution 2000) and ``transition_graph``, timed from inside (wall and
-CPU). The baseline is the same code at commit ``BASELINE`` (before the enumeration and the
-snap landings were sped up), exported with ``git archive`` into a temporary folder and
-imported from there in its own process; it is run up to ``--baseline-max-n`` segments (it
-takes minutes beyond). The table gives the configurations of monotone pieces the assembly
-examined against the brute-force count (the product of every segment's piece count), the
-branches and snaps, and whether old and new give the same branches and branch ends.
+CPU); the new code ``--repeats`` times, best of them.
 
-``--quick``: N = 2 and 3, tables only, baseline for N = 2; prints its table, writes nothing.
-The full mode writes ``bench/graph_results.md``. Timings on a shared machine vary with its
-load: the CPU column and the ratio within one run say more than the wall times.
+Baselines, each exported with ``git archive`` into a temporary folder and imported from there
+in its own process: ``FORMER`` (the code before the map was built side by side, up to
+``--former-max-n``) and ``ORIGINAL`` (the transition graph as it first landed, before any
+speed-up, up to ``--original-max-n``). Each baseline case runs once: it takes minutes at
+N = 8. "same result" compares every branch's samples, rough intervals and ends, every snap's
+landing state and every transition's fluid and energy with the former code's: "bit-identical"
+when all of them are equal to the bit, else the largest deviation of a branch end.
+
+``--quick``: N = 2 and 3, tables only, former baseline for N = 2, no original; prints its
+table, writes nothing. The full mode writes ``bench/graph_results.md``. Timings on a shared
+machine vary with its load (the results file gives the load average before and after): the
+ratios of CPU times within one run say more than the wall times.
 """
 
 import argparse
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -30,7 +36,8 @@ import tempfile
 import time
 
 REPO = Path(__file__).resolve().parents[1]
-BASELINE = 'd39ee5f'   # the transition graph as it landed, before this speed-up
+FORMER = '9885cc0'     # the map before it was built side by side (main before this change)
+ORIGINAL = 'd39ee5f'   # the transition graph as it landed, before any speed-up
 RESULTS = REPO / 'bench' / 'graph_results.md'
 ROWS = 600
 
@@ -57,6 +64,25 @@ def segments(count: int, law: str) -> list:
     return built
 
 
+def digest(emap: object, graph: object) -> str:
+    """SHA-256 of every branch's samples, rough flags and ends, and every transition."""
+    import numpy as np
+
+    hasher = hashlib.sha256()
+    for branch in emap.branches:
+        for array in (branch.total, branch.volumes, branch.pressure, branch.rough):
+            hasher.update(np.ascontiguousarray(array).tobytes())
+        for end in (branch.lower, branch.upper):
+            hasher.update(f'{end.kind} {end.target}'.encode())
+            if end.target_volumes is not None:
+                hasher.update(np.ascontiguousarray(end.target_volumes).tobytes())
+    for transition in graph.transitions:
+        hasher.update(repr((transition.source, transition.direction, transition.kind,
+                            transition.target, transition.fluid_moved,
+                            transition.energy_released)).encode())
+    return hasher.hexdigest()
+
+
 def child(count: int, law: str) -> None:
     """Build one case with the ``softseq_ros`` on sys.path; print its numbers as JSON."""
     from softseq_ros.quasistatic.equilibrium import EquilibriumMap
@@ -75,7 +101,8 @@ def child(count: int, law: str) -> None:
         'snaps': sum(t.kind == 'snap' for t in graph.transitions),
         'tried': getattr(emap, 'configurations_tried', None),
         'possible': getattr(emap, 'configurations_possible', None),
-        'ends': ends, 'lo': [b.lo for b in emap.branches], 'hi': [b.hi for b in emap.branches]}))
+        'ends': ends, 'lo': [b.lo for b in emap.branches], 'hi': [b.hi for b in emap.branches],
+        'digest': digest(emap, graph)}))
 
 
 def run(tree: Path, count: int, law: str) -> dict:
@@ -90,33 +117,50 @@ def run(tree: Path, count: int, law: str) -> dict:
 
 
 def same(new: dict, old: dict) -> str:
-    """Whether old and new give the same branches (ends and volume intervals to 1e-12)."""
+    """Whether old and new give the same map and graph: to the bit, or how close."""
+    if new['digest'] == old['digest']:
+        return 'bit-identical'
     if new['ends'] != old['ends']:
-        return 'no'
+        return 'no (other ends)'
     scale = max(max(map(abs, new['hi'])), 1e-300)
     worst = max(abs(a - b) for a, b in zip(new['lo'] + new['hi'], old['lo'] + old['hi']))
-    return 'yes' if worst <= 1e-12 * scale else f'no ({worst / scale:.1e})'
+    return f'same ends, intervals to {worst / scale:.1e}'
 
 
-def table(cases: list[tuple[int, str]], baseline_max: int, old_tree: Path | None) -> list[str]:
+def export(commit: str, folder: Path) -> Path:
+    """The package at ``commit`` in ``folder``."""
+    folder.mkdir()
+    archive = subprocess.run(['git', 'archive', commit, 'softseq_ros'], cwd=REPO,
+                             capture_output=True, check=True).stdout
+    subprocess.run(['tar', '-x', '-C', str(folder)], input=archive, check=True)
+    return folder
+
+
+def table(cases: list[tuple[int, str]], repeats: int, former: tuple[Path, int],
+          original: tuple[Path | None, int]) -> list[str]:
     """The table's lines, each case printed as it is done."""
     lines = ['| N | law | configurations tried / brute force | branches | snaps | '
-             'map + graph [s] | CPU [s] | old [s] | old CPU [s] | new / old (CPU) | '
-             'same result |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
+             'map + graph [s] | CPU [s] | former [s] | former CPU [s] | speed-up (CPU) | '
+             'same result as former | original CPU [s] | speed-up (CPU) |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     print('\n'.join(lines), flush=True)
     for count, law in cases:
-        new = run(REPO, count, law)
-        old = run(old_tree, count, law) if old_tree is not None and count <= baseline_max \
-            else None
+        runs = [run(REPO, count, law) for _ in range(repeats)]
+        new = min(runs, key=lambda r: r['cpu'])
+        wall = min(r['wall'] for r in runs)
         line = (f'| {count} | {law} | {new["tried"]} / {new["possible"]} | {new["branches"]} | '
-                f'{new["snaps"]} | {new["wall"]:.2f} | {new["cpu"]:.2f} | ')
-        if old is None:
-            line += '- | - | - | - |'
-        else:
+                f'{new["snaps"]} | {wall:.2f} | {new["cpu"]:.2f} | ')
+        if count <= former[1]:
+            old = run(former[0], count, law)
             line += (f'{old["wall"]:.2f} | {old["cpu"]:.2f} | '
-                     f'{new["cpu"] / old["cpu"]:.3f} ({old["cpu"] / new["cpu"]:.1f}x) | '
-                     f'{same(new, old)} |')
+                     f'{old["cpu"] / new["cpu"]:.1f}x | {same(new, old)} | ')
+        else:
+            line += '- | - | - | - | '
+        if original[0] is not None and count <= original[1]:
+            first = run(original[0], count, law)
+            line += f'{first["cpu"]:.2f} | {first["cpu"] / new["cpu"]:.1f}x |'
+        else:
+            line += '- | - |'
         lines.append(line)
         print(line, flush=True)
     return lines
@@ -131,34 +175,40 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='N = 2, 3 (tables), print only')
     parser.add_argument('--max-n', type=int, default=8, help='largest N (full mode)')
-    parser.add_argument('--baseline-max-n', type=int, default=4,
-                        help='largest N the baseline runs for')
+    parser.add_argument('--repeats', type=int, default=3, help='runs of the new code per case')
+    parser.add_argument('--former-max-n', type=int, default=8,
+                        help=f'largest N the former code ({FORMER}) runs for')
+    parser.add_argument('--original-max-n', type=int, default=3,
+                        help=f'largest N the original code ({ORIGINAL}) runs for')
     parser.add_argument('--out', type=Path, default=RESULTS)
     args = parser.parse_args()
     if args.quick:
         cases = [(2, 'table'), (3, 'table')]
-        baseline_max = 2
+        repeats, former_max, original_max = 1, 2, 0
     else:
         cases = [(n, law) for n in range(2, args.max_n + 1) for law in ('table', 'closed')]
-        baseline_max = args.baseline_max_n
+        repeats, former_max, original_max = (args.repeats, args.former_max_n,
+                                             args.original_max_n)
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as scratch:
-        old_tree = Path(scratch) / 'baseline'
-        old_tree.mkdir()
-        archive = subprocess.run(['git', 'archive', BASELINE, 'softseq_ros'], cwd=REPO,
-                                 capture_output=True, check=True).stdout
-        subprocess.run(['tar', '-x', '-C', str(old_tree)], input=archive, check=True)
+        former = export(FORMER, Path(scratch) / 'former')
+        original = export(ORIGINAL, Path(scratch) / 'original') if original_max else None
         print(f'# Equilibrium map and transition graph: N peaked segments\n\n'
-              f'Baseline: commit {BASELINE}, up to N = {baseline_max}.\n', flush=True)
-        lines = table(cases, baseline_max, old_tree)
+              f'Former code: commit {FORMER}, up to N = {former_max}; original: commit '
+              f'{ORIGINAL}, up to N = {original_max}.\n', flush=True)
+        lines = table(cases, repeats, (former, former_max), (original, original_max))
+    load_after = os.getloadavg()
     if not args.quick:
         args.out.write_text(
             '# Equilibrium map and transition graph of N peaked segments\n\n'
             'Written by `python bench/bench_graph.py` (see its docstring for the scenes). '
-            f'N = 2 to {cases[-1][0]}. Baseline: commit {BASELINE} (before the speed-up), '
-            f'run up to N = {baseline_max}. Wall and CPU time of `EquilibriumMap` '
-            '(resolution 2000) plus `transition_graph`, each case in a fresh process; the '
-            'machine is shared, so compare CPU times within this run.\n\n'
-            + '\n'.join(lines) + '\n',
+            f'N = 2 to {cases[-1][0]}. Wall and CPU time of `EquilibriumMap` (resolution 2000) '
+            f'plus `transition_graph`, each case in a fresh process, the new code best of '
+            f'{repeats}. Former code: commit {FORMER} (before the map was built side by side), '
+            f'run once per case up to N = {former_max}; original: commit {ORIGINAL} (the '
+            f'graph as it first landed), up to N = {original_max}. 2 cores shared with other '
+            f'work: load average {load_before[0]:.1f} before the run, {load_after[0]:.1f} '
+            'after; compare CPU times within this run.\n\n' + '\n'.join(lines) + '\n',
             encoding='utf-8')
         print(f'\nwrote {args.out.relative_to(REPO)}')
     return 0

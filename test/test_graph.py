@@ -166,37 +166,64 @@ def test_every_reachable_branch_is_reached_by_its_proposed_history(nested):
     assert graph.reachable(1) < graph.reachable(3)
 
 
-def test_every_transition_of_the_nested_scene_is_reproduced_by_the_tracker(nested):
-    _, emap, graph = nested
-    snaps = graph.snaps()
-    assert len(snaps) == 12
-    crossed = 0
-    for snap in snaps:
-        reach = graph.history_across(snap)
-        if reach is None:
-            # Only snaps out of branches no history reaches are left out.
-            assert graph.min_reversals()[snap.source] is None
+def test_every_transition_of_the_nested_scene_is_reproduced_by_softseq_solve(nested, tmp_path,
+                                                                           capsys):
+    # three_nested_loops is the shipped three-segment scene with peaks (three_segments is
+    # monotone: one branch, no transition). For every snap and join a history can cross: the
+    # history the graph gives onto its branch, moving its way, then one command beyond it.
+    # All of them run in one `softseq solve --path` (each history starts at rest: deflating
+    # to 0 injected brings every history back there, the one state at that volume).
+    path, emap, graph = nested
+    crossable, histories = [], []
+    for transition in graph.transitions:
+        if transition.kind == END:
             continue
-        tracker, events = run_history(emap, reach.history)
-        assert tracker.branch == snap.target
-        hits = [e for e in events if abs(e.injected - snap.injected) < 1e-12 * ML]
-        assert len(hits) == 1, (snap, events)
-        np.testing.assert_allclose(hits[0].to_volumes, snap.volumes_after, rtol=0,
-                                   atol=1e-9 * ML)
-        moved = 0.5 * np.sum(np.abs(hits[0].to_volumes - hits[0].from_volumes))
-        assert snap.fluid_moved == pytest.approx(moved, rel=1e-9)
-        assert snap.energy_released > 0.0
-        crossed += 1
-    assert crossed == 12
-    # Joins too: a history across one ends on its target, with no snap at its volume.
-    for join in (t for t in graph.transitions if t.kind == JOIN):
-        reach = graph.history_across(join)
-        if reach is None:
-            assert graph.min_reversals()[join.source] is None
+        reach = graph.history_to(transition.source, transition.direction)
+        if reach.reversals is None:
+            # Only transitions out of branches no history reaches are left out.
+            assert graph.min_reversals()[transition.source] is None
             continue
-        tracker, events = run_history(emap, reach.history)
-        assert tracker.branch == join.target
-        assert not [e for e in events if abs(e.injected - join.injected) < 1e-12 * ML]
+        target = graph.branches[transition.target]
+        far = (target.injected_hi if transition.direction == INFLATION
+               else target.injected_lo)
+        crossable.append(transition)
+        histories.append([*reach.history, transition.injected
+                          + 0.5 * (far - transition.injected)])
+    assert sum(t.kind == SNAP for t in crossable) == len(graph.snaps()) == 12
+    assert sum(t.kind == JOIN for t in crossable) >= 10
+    csv_path = tmp_path / 'histories.csv'
+    csv_path.write_text('injected_m3\n' + ''.join(f'{v!r}\n' for h in histories for v in h),
+                        encoding='utf-8')
+    out = tmp_path / 'solved.csv'
+    assert main(['solve', str(path), '--path', str(csv_path), '--out', str(out)]) == 0
+    assert 'snap-throughs:' in capsys.readouterr().out
+    with open(out, encoding='utf-8') as handle:
+        rows = list(csv.DictReader(row for row in handle if not row.startswith('#')))
+    assert len(rows) == sum(len(h) for h in histories)
+    names = [s.name for s in emap.segments]
+
+    def state(row):
+        return np.array([float(row[f'volume_{n}_m3']) for n in names])
+
+    def on(branch, row):
+        total = float(row['injected_m3']) + emap.total_rest_volume
+        return np.max(np.abs(emap.read(branch, np.array([total])).volumes[0] - state(row)))
+
+    end = 0
+    for transition, history in zip(crossable, histories):
+        end += len(history)
+        before, after = rows[end - 2], rows[end - 1]
+        # Before the last command the state is on the transition's branch; the last command
+        # crosses the transition alone: a snap where the graph has one, none at a join, and
+        # the state lands on the branch the graph says.
+        assert on(transition.source, before) < 1e-12, transition
+        assert on(transition.target, after) < 1e-12, transition
+        assert after['event'] == ('snap' if transition.kind == SNAP else ''), transition
+        if transition.kind == SNAP:
+            assert transition.energy_released > 0.0
+            moved = 0.5 * np.sum(np.abs(np.array(transition.volumes_after)
+                                        - np.array(transition.volumes_before)))
+            assert transition.fluid_moved == pytest.approx(moved, rel=1e-12)
 
 
 def test_softseq_graph_proposes_a_history_that_softseq_solve_lands_on(nested, tmp_path,

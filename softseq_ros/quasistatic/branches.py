@@ -38,6 +38,9 @@ CHUNK_INTERVALS = 1 << 15
 # Up to this many intervals of a branch read at once, their cubics are computed one by one
 # and kept; beyond, all of the branch's at once.
 FEW_INTERVALS = 64
+# Beyond this many volumes read at once, a branch is read through one piecewise polynomial of
+# all its cubics (built once) instead of gathering each volume's coefficients.
+MANY_READS = 4096
 _POWERS = np.arange(3, -1, -1)[:, None, None]
 
 
@@ -145,6 +148,9 @@ class Branch:
         """
         shape = np.shape(total)
         x = np.asarray(total, dtype=float).ravel()
+        if x.size > MANY_READS:
+            # A long history: scipy's PPoly of all the cubics, which evaluates in place.
+            return self.spline(x).reshape(shape + (self.volumes.shape[1] * 2 + 1,))
         i = np.clip(np.searchsorted(self.total, x, side='right') - 1, 0, self.total.size - 2)
         c = self.coefficients(i)
         offset = (x - self.total[i])[:, None]
@@ -224,21 +230,84 @@ class _Regions:
     Sorted by region, then total; ``pending`` flags the interval from a sample to the next one
     of its region as split. A region reaches a few samples beyond its split intervals, so a
     new sample that round-off puts just outside its interval still falls inside the region.
+    As rounds go, a region is cut down to pieces around the intervals still split (its
+    ``origin`` is the region it came from; the pieces' samples join again at the end).
     """
 
     samples: _Ends
     region: NDArray[np.intp]
     pending: NDArray[np.bool_]
-    first: NDArray[np.intp]     # per region: its first sample's index among its branch's
+    owner: NDArray[np.intp]     # per region: its branch
+    first: NDArray[np.intp]     # ... its origin's first sample's index among its branch's
     last: NDArray[np.intp]      # ... and its last's
-    open_lo: NDArray[np.bool_]  # per region: it starts at its branch's first sample
+    open_lo: NDArray[np.bool_]  # ... it starts at its branch's first sample
     open_hi: NDArray[np.bool_]  # ... it ends at its branch's last
+    origin: NDArray[np.intp]    # ... the region of the first round it is part of
 
     def take(self, rows: NDArray[np.intp]) -> '_Regions':
         """The samples ``rows`` (whole regions), regions renumbered in order."""
         kept, region = np.unique(self.region[rows], return_inverse=True)
-        return _Regions(self.samples.take(rows), region, self.pending[rows], self.first[kept],
-                        self.last[kept], self.open_lo[kept], self.open_hi[kept])
+        return _Regions(self.samples.take(rows), region, self.pending[rows],
+                        *(getattr(self, name)[kept] for name in _PER_REGION))
+
+    def cut(self, margin: int) -> tuple['_Regions', '_Regions']:
+        """
+        (pieces around the intervals still split, the other samples).
+
+        A piece holds a split interval's samples and ``margin`` more on each side, overlaps
+        merged, within its region.
+        """
+        size = self.region.size
+        near = np.zeros(size, dtype=bool)
+        at = np.flatnonzero(self.pending)
+        for shift in range(-margin, margin + 2):
+            rows = at + shift
+            rows = rows[(rows >= 0) & (rows < size)]
+            near[rows[self.region[rows] == self.region[rows - shift]]] = True
+        rows = np.flatnonzero(near)
+        if rows.size == 0:
+            return self.take(rows), self
+        # A piece starts where a near sample follows a far one or opens a region.
+        starts = np.ones(rows.size, dtype=bool)
+        starts[1:] = (np.diff(rows) > 1) | (np.diff(self.region[rows]) != 0)
+        piece = np.cumsum(starts) - 1
+        heads, tails = rows[starts], rows[np.append(np.flatnonzero(starts)[1:] - 1,
+                                                   rows.size - 1)]
+        region_heads = np.flatnonzero(np.diff(self.region, prepend=-1))
+        region_tails = np.append(region_heads[1:], size) - 1
+        of = self.region[heads]
+        pieces = _Regions(self.samples.take(rows), piece, self.pending[rows], self.owner[of],
+                          self.first[of], self.last[of],
+                          self.open_lo[of] & (heads == region_heads[of]),
+                          self.open_hi[of] & (tails == region_tails[of]), self.origin[of])
+        return pieces, self.take(np.flatnonzero(~near))
+
+    @staticmethod
+    def join(parts: list['_Regions']) -> '_Regions':
+        """The pieces of all parts as their regions of origin, by branch and place in it."""
+        parts = [p for p in parts if p.region.size]
+        if not parts:
+            return _Regions(_concatenate([]), *(np.empty(0, dtype=dtype) for dtype in (
+                np.intp, bool, np.intp, np.intp, np.intp, bool, bool, np.intp)))
+        origin = np.concatenate([p.origin[p.region] for p in parts])
+        samples = _concatenate([p.samples for p in parts])
+        pending = np.concatenate([p.pending for p in parts])
+        table = {name: np.concatenate([getattr(p, name) for p in parts])
+                 for name in _PER_REGION}
+        kept, first_piece = np.unique(table['origin'], return_index=True)
+        ranks = np.lexsort((table['first'][first_piece], table['owner'][first_piece]))
+        rank = np.empty_like(ranks)
+        rank[ranks] = np.arange(ranks.size)
+        region = rank[np.searchsorted(kept, origin)]
+        rows = np.lexsort((samples.total, region))
+        ordered = first_piece[ranks]
+        return _Regions(samples.take(rows), region[rows], pending[rows],
+                        table['owner'][ordered], table['first'][ordered],
+                        table['last'][ordered], table['open_lo'][ordered],
+                        table['open_hi'][ordered], table['origin'][ordered])
+
+
+_PER_REGION = ('owner', 'first', 'last', 'open_lo', 'open_hi', 'origin')
 
 
 # Samples a region reaches beyond the intervals it splits, on each side.
@@ -269,17 +338,13 @@ class _Fitter:
             if size >= CHUNK_INTERVALS or index == len(self.stretches) - 1:
                 parts.append(self._first_round(chunk, samples))
                 chunk, size = [], 0
-        offsets = np.cumsum([0] + [p.first.size for p in parts])
-        regions = _Regions(_concatenate([p.samples for p in parts]),
-                           np.concatenate([p.region + o for p, o in zip(parts, offsets)]),
-                           np.concatenate([p.pending for p in parts]),
-                           np.concatenate([p.first for p in parts]),
-                           np.concatenate([p.last for p in parts]),
-                           np.concatenate([p.open_lo for p in parts]),
-                           np.concatenate([p.open_hi for p in parts]))
-        regions, alone = self._refine(regions)
+        offset = 0
+        for part in parts:
+            part.origin = part.origin + offset
+            offset += part.origin.size
+        regions, alone = self._refine(_Regions.join(parts))
         starts = np.flatnonzero(np.diff(regions.region, prepend=-1))
-        owner = regions.samples.branch[starts]
+        owner = regions.owner
         branches: list[Branch | None] = []
         for index in range(len(self.stretches)):
             if samples[index] is None:
@@ -354,8 +419,9 @@ class _Fitter:
         split_at[at] = True
         pending = split_at[rows] & (rows < np.repeat(hi, size))
         first = lo - starts[owner[heads]]
-        return _Regions(ends.take(rows), region, pending, first, first + size - 1,
-                        lo == starts[owner[heads]], hi == stops[owner[heads]] - 1)
+        return _Regions(ends.take(rows), region, pending, branch[starts[owner[heads]]], first,
+                        first + size - 1, lo == starts[owner[heads]],
+                        hi == stops[owner[heads]] - 1, np.arange(heads.size))
 
     # ------------------------------------------------------------------ the check
 
@@ -474,7 +540,11 @@ class _Fitter:
         numbers are returned with the regions.
         """
         alone: set[int] = set()
+        settled: list[_Regions] = []
         for _ in range(REFINEMENTS):
+            # Only the samples around intervals still to split take part in the round.
+            regions, done = regions.cut(REGION_MARGIN)
+            settled.append(done)
             rows = np.flatnonzero(regions.pending)
             if rows.size == 0:
                 break
@@ -516,8 +586,12 @@ class _Fitter:
             checked = np.flatnonzero(~split)
             split[checked] = self._misses(halves[0].take(checked), halves[1].take(checked))
             pending[fresh] = split
-            regions = _Regions(merged, region, pending, regions.first, regions.last,
-                               regions.open_lo, regions.open_hi)
+            regions = _Regions(merged, region, pending,
+                               *(getattr(regions, name) for name in _PER_REGION))
+        regions = _Regions.join([*settled, regions])
+        if alone:
+            regions = regions.take(np.flatnonzero(~np.isin(regions.owner[regions.region],
+                                                           list(alone))))
         return regions, alone
 
     def _branch(self, index: int, samples: tuple[FloatArray, FloatArray, FloatArray],
@@ -606,6 +680,9 @@ class _Fitter:
 
 def _concatenate(parts: list[_Ends]) -> _Ends:
     """Rows of several :class:`_Ends` one after the other."""
+    if not parts:
+        return _Ends(np.empty(0, dtype=np.intp), np.empty(0), np.empty(0), np.empty((0, 0)),
+                     np.empty((0, 0)), np.empty((0, 0)), np.empty(0, dtype=bool))
     return _Ends(*(np.concatenate([getattr(p, name) for p in parts])
                    for name in ('branch', 'total', 'pressure', 'volumes', 'stiffness', 'slopes',
                                 'finite')))

@@ -92,8 +92,9 @@ def _pressure_integrals(segment: Segment, ends: FloatArray) -> list[float]:
     The integrals of ``segment``'s pressure from its rest volume to each of ``ends``.
 
     Per integral: composite Gauss-Legendre on 64 equal sub-intervals, further split at the
-    model's knots inside (np.unique of both, as one integral alone builds them), summed by
-    np.sum over its (sub-intervals, nodes) block.
+    model's knots inside (the sorted, distinct union of both, as one integral alone builds
+    them), summed by np.sum over its (sub-intervals, nodes) block. A sub-interval from one
+    knot to the next is the same in every integral: its terms are computed once.
     """
     rest = segment.rest_volume
     lo, hi = np.minimum(rest, ends), np.maximum(rest, ends)
@@ -102,23 +103,42 @@ def _pressure_integrals(segment: Segment, ends: FloatArray) -> list[float]:
     knots = segment.knots()
     first = np.searchsorted(knots, lo, side='right')
     count = np.searchsorted(knots, hi, side='left') - first
-    inside = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
-    row = np.concatenate([np.repeat(np.arange(ends.size), _MIN_SUBINTERVALS + 1),
-                          np.repeat(np.arange(ends.size), count)])
-    value = np.concatenate([even.ravel(), knots[inside]])
-    order = np.lexsort((value, row))
-    row, value = row[order], value[order]
-    keep = np.ones(value.size, dtype=bool)
-    keep[1:] = (row[1:] != row[:-1]) | (value[1:] != value[:-1])
-    row, edges = row[keep], value[keep]
+    # Each integral's edges in a row, sorted, padded with inf; a repeated edge is dropped.
+    table = np.full((ends.size, even.shape[1] + int(count.max(initial=0))), np.inf)
+    table[:, :even.shape[1]] = even
+    column = np.arange(table.shape[1] - even.shape[1])
+    within = column[None, :] < count[:, None]
+    table[:, even.shape[1]:][within] = knots[(first[:, None] + column[None, :])[within]]
+    table.sort(axis=1, kind='stable')
+    keep = np.isfinite(table)
+    keep[:, 1:] &= table[:, 1:] != table[:, :-1]
+    row, place = np.nonzero(keep)
+    edges = table[row, place]
     inner = np.flatnonzero(row[:-1] == row[1:])
-    left, width = edges[inner][:, None], (edges[inner + 1] - edges[inner])[:, None]
-    points = left + 0.5 * width * (_GAUSS_X[None, :] + 1.0)
-    weighted = 0.5 * width * _GAUSS_W[None, :] * np.asarray(
-        segment.pressure(points.ravel()), dtype=float).reshape(points.shape)
+    left, right = edges[inner], edges[inner + 1]
+    weighted = np.empty((inner.size, _GAUSS_NODES))
+    # Sub-intervals between neighbouring knots: their terms once per knot interval.
+    at = np.minimum(np.searchsorted(knots, left), max(knots.size - 2, 0))
+    whole = ((knots.size > 1) & (knots[at] == left) & (knots[np.minimum(at + 1, knots.size - 1)]
+                                                        == right)) if knots.size else \
+        np.zeros(inner.size, dtype=bool)
+    used = np.unique(at[whole])
+    if used.size:
+        weighted[whole] = _weighted_terms(segment, knots[used], knots[used + 1])[
+            np.searchsorted(used, at[whole])]
+    rest_rows = np.flatnonzero(~whole)
+    weighted[rest_rows] = _weighted_terms(segment, left[rest_rows], right[rest_rows])
     stops = np.cumsum(np.bincount(row[inner], minlength=ends.size))
     return [s * float(np.sum(weighted[a:b])) for s, a, b in
             zip(sign.tolist(), np.concatenate([[0], stops[:-1]]).tolist(), stops.tolist())]
+
+
+def _weighted_terms(segment: Segment, left: FloatArray, right: FloatArray) -> FloatArray:
+    """Gauss-Legendre terms w_k (b - a) / 2 p(x_k) of sub-intervals [a, b]: (m, nodes)."""
+    left, width = left[:, None], (right - left)[:, None]
+    points = left + 0.5 * width * (_GAUSS_X[None, :] + 1.0)
+    return 0.5 * width * _GAUSS_W[None, :] * np.asarray(
+        segment.pressure(points.ravel()), dtype=float).reshape(points.shape)
 
 
 @dataclass(frozen=True)

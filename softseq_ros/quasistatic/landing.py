@@ -58,38 +58,45 @@ class Landing:
     volumes: FloatArray    # that branch's state at the fold's total, or where the flow stopped
 
 
-def certified_radius(numerics: SegmentNumerics, centre: FloatArray) -> float:
+def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArray:
     """
-    The largest radius of :data:`RADII` around ``centre`` on whose box the energy is convex.
+    Per centre (rows of ``centres``), the largest radius of :data:`RADII` certified convex.
 
+    The largest radius around the centre on whose box the energy is convex, 0 when none is.
     On sum v = V the energy's Hessian is diag(k_i(v_i)) restricted to sum dv = 0; it is
     positive definite on a box of volumes when it is at each segment's smallest stiffness over
     the box (the quadratic form grows with every k_i). The smallest stiffness over a box's side
-    is sampled: evenly spaced volumes and a table's rows inside it. 0 when no radius passes.
+    is sampled: evenly spaced volumes and a table's rows inside it. Every centre and radius at
+    once: one stiffness call per segment.
     """
-    room = float(np.min(np.minimum(centre - numerics.rest_volumes,
-                                   numerics.max_volumes - centre)))
+    centres = np.atleast_2d(np.asarray(centres, dtype=float))
+    count, n = centres.shape
     radii = np.array([share * numerics.v_scale for share in RADII])
-    radii = radii[radii < room]
-    if radii.size == 0:
-        return 0.0
+    room = np.min(np.minimum(centres - numerics.rest_volumes, numerics.max_volumes - centres),
+                  axis=1)
     offsets = np.linspace(-1.0, 1.0, PROBES)
-    smallest = np.empty((radii.size, centre.size))
-    for i, (segment, c) in enumerate(zip(numerics.segments, centre.tolist())):
+    smallest = np.empty((count, radii.size, n))
+    for i, segment in enumerate(numerics.segments):
+        c = centres[:, i]
+        probes = (c[:, None, None] + radii[None, :, None] * offsets).ravel()
+        smallest[:, :, i] = np.min(segment.stiffness(probes).reshape(count, radii.size, -1),
+                                   axis=2)
         knots = segment.knots()
-        knots = knots[(knots > c - radii[0]) & (knots < c + radii[0])]
-        even = segment.stiffness((c + radii[:, None] * offsets).ravel()).reshape(radii.size, -1)
-        smallest[:, i] = np.min(even, axis=1)
         if knots.size:
             at_knots = segment.stiffness(knots)
-            for r, radius in enumerate(radii.tolist()):
-                inside = (knots > c - radius) & (knots < c + radius)
-                if inside.any():
-                    smallest[r, i] = min(smallest[r, i], float(np.min(at_knots[inside])))
+            lo = np.searchsorted(knots, c[:, None] - radii[None, :], side='right')
+            hi = np.searchsorted(knots, c[:, None] + radii[None, :], side='left')
+            some = hi > lo
+            if some.any():
+                bounds = np.stack([lo[some], hi[some]], axis=1).ravel()
+                padded = np.append(at_knots, np.inf)
+                least = np.minimum.reduceat(padded, bounds)[::2]
+                smallest[:, :, i][some] = np.minimum(smallest[:, :, i][some], least)
     k = smallest / numerics.k_scale
-    passes = (np.sum(k < 0.0, axis=1) <= 1) & (cofactor_sum(k)
-                                               > numerics.tolerances.stable_cofactor)
-    return float(radii[np.argmax(passes)]) if passes.any() else 0.0
+    passes = ((np.sum(k < 0.0, axis=2) <= 1)
+              & (cofactor_sum(k) > numerics.tolerances.stable_cofactor)
+              & (radii[None, :] < room[:, None]))
+    return np.where(passes.any(axis=1), radii[np.argmax(passes, axis=1)], 0.0)
 
 
 class FlowLandings:
@@ -163,16 +170,19 @@ class FlowLandings:
             # At rest means balanced pressures at a stable state: a fold is balanced too
             # (so the flow's start is). Looked at once per decade of time.
             due = inside[t[inside] >= next_rest_check[inside]]
-            for index in due.tolist():
-                while next_rest_check[index] <= t[index]:
-                    next_rest_check[index] *= 10.0
-                if results[index] is not None:
-                    continue
-                force, _ = self._forces(y[index][None, :])
-                volumes = y[index] * scale_v
-                if (np.max(np.abs(force)) < tolerances.flow_rest
-                        and self._stable(volumes)):
-                    results[index] = Landing(-1, np.clip(volumes, lo, hi))
+            while True:
+                late = due[next_rest_check[due] <= t[due]]
+                if late.size == 0:
+                    break
+                next_rest_check[late] *= 10.0
+            due = np.array([i for i in due.tolist() if results[i] is None], dtype=np.intp)
+            if due.size:
+                force, k = self._forces(y[due])
+                rest = ((np.max(np.abs(force), axis=1) < tolerances.flow_rest)
+                        & (np.sum(k < 0.0, axis=1) <= 1)
+                        & (cofactor_sum(k) > tolerances.stable_cofactor))
+                for index in due[rest].tolist():
+                    results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
             active = np.array([i for i in active.tolist() if results[i] is None], dtype=np.intp)
         for index in active.tolist():
             results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
@@ -212,13 +222,6 @@ class FlowLandings:
             stages.append(np.einsum('mij,mj->mi', inverse, rhs))
         return y + sum(m * s for m, s in zip(M, stages)), stages[-1]
 
-    def _stable(self, volumes: FloatArray) -> bool:
-        numerics = self.numerics
-        k = np.array([s.stiffness(x) for s, x in zip(numerics.segments, volumes)])
-        k /= numerics.k_scale
-        return bool(np.sum(k < 0.0) <= 1
-                    and cofactor_sum(k) > numerics.tolerances.stable_cofactor)
-
 
 class _Basins:
     """Per fold, the stable states at its total volume and the certified balls around them."""
@@ -255,10 +258,11 @@ class _Basins:
         closest = distance[np.arange(folds.size), nearest]
         branch = self.branch[folds, nearest]
         radius = self.radius[folds, nearest]
-        for row in np.flatnonzero(np.isnan(radius) & (branch >= 0)).tolist():
-            fold, slot = int(folds[row]), int(nearest[row])
-            radius[row] = self.radius[fold, slot] = certified_radius(self.numerics,
-                                                                     self.states[fold, slot])
+        missing = np.flatnonzero(np.isnan(radius) & (branch >= 0))
+        if missing.size:
+            fold, slot = folds[missing], nearest[missing]
+            radius[missing] = self.radius[fold, slot] = certified_radii(
+                self.numerics, self.states[fold, slot])
         return np.where((branch >= 0) & (closest < radius), branch, -1).tolist()
 
     def state(self, fold: int, branch: int) -> FloatArray:

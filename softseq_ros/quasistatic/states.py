@@ -16,6 +16,9 @@ from numpy.typing import NDArray
 from softseq_ros.quasistatic.branches import Branch, hermite, sample_slopes
 from softseq_ros.quasistatic.numerics import EPS, FloatArray, SegmentNumerics
 
+# Rows read by rows_many in one go.
+MANY_ROWS = 1 << 15
+
 
 class StatePoint(NamedTuple):
     """One state as Python floats: volumes [m^3], gauge pressure [Pa], curvatures [1/m]."""
@@ -73,6 +76,11 @@ class StateReader:
         index = np.asarray(index, dtype=np.intp)
         total = np.asarray(total, dtype=float).copy()
         count = index.size
+        if count > MANY_ROWS:
+            # In parts: the cubics of each row are gathered, (4, rows, 2N + 1) at a time.
+            return np.concatenate([self.rows_many(index[i:i + MANY_ROWS],
+                                                  total[i:i + MANY_ROWS])
+                                   for i in range(0, count, MANY_ROWS)])
         interval = np.empty(count, dtype=np.intp)
         rough = np.zeros(count, dtype=bool)
         for b in np.unique(index).tolist():
