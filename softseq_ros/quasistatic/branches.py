@@ -321,6 +321,9 @@ class _Fitter:
         self.numerics = numerics
         self.stretches = stretches
         self.n = len(numerics.segments)
+        # The middles of intervals found to miss, inverted exactly: (branch, left and right
+        # totals) -> volumes; the next round's new samples.
+        self._middles: dict[tuple[int, float, float], FloatArray] = {}
         # Per stretch, the index of each segment's piece: rows are grouped by it.
         self.piece_index = np.array([numerics.piece_indices(s.pieces) for s in stretches],
                                     dtype=np.intp).reshape(-1, self.n)
@@ -471,6 +474,11 @@ class _Fitter:
                                                           + b.pressure[exact])).volumes
             miss[exact] = self._verdict(cubic[:, exact], volumes, a.total[exact],
                                         h[exact])[0]
+            # An interval that misses is split at this very middle next round.
+            for row in np.flatnonzero(miss[exact]).tolist():
+                key = (int(a.branch[exact[row]]), float(a.total[exact[row]]),
+                       float(b.total[exact[row]]))
+                self._middles[key] = volumes[row]
         return miss
 
     def _verdict(self, cubic: FloatArray, middle: FloatArray, start: FloatArray,
@@ -519,12 +527,35 @@ class _Fitter:
                          0.5 * (lo + hi))
         return numerics.invert_rows(self.piece_index[a.branch], target, (lo, hi, start))
 
-    def _exact(self, branch: NDArray[np.intp], pressure: FloatArray) -> _Ends:
-        """Samples at new pressures, inverted exactly as the sampling does (the same numbers)."""
-        volumes, stiffness = self.numerics.states_at(self.piece_index[branch], pressure)
+    def _exact(self, branch: NDArray[np.intp], pressure: FloatArray,
+               volumes: FloatArray | None = None) -> _Ends:
+        """
+        Samples at new pressures, inverted exactly as the sampling does (the same numbers).
+
+        ``volumes``: those inversions, when already done.
+        """
+        pieces = self.piece_index[branch]
+        if volumes is None:
+            volumes, stiffness = self.numerics.states_at(pieces, pressure)
+        else:
+            stiffness = self.numerics.stiffness_at(pieces, volumes)
         full = sample_slopes(self.numerics, stiffness, volumes, False)
         return _Ends(branch, volumes.sum(axis=1), pressure, volumes, stiffness,
                      full[:, :self.n], np.all(np.isfinite(full), axis=1))
+
+    def _new_samples(self, a: _Ends, b: _Ends) -> _Ends:
+        """The samples halfway in pressure of intervals that split; inversions done are reused."""
+        pressure = 0.5 * (a.pressure + b.pressure)
+        known = [self._middles.pop((branch, left, right), None) for branch, left, right in
+                 zip(a.branch.tolist(), a.total.tolist(), b.total.tolist())]
+        volumes = np.empty((pressure.size, self.n))
+        missing = np.array([v is None for v in known], dtype=bool)
+        if missing.any():
+            volumes[missing] = self.numerics.invert_rows(self.piece_index[a.branch[missing]],
+                                                         pressure[missing])
+        if not missing.all():
+            volumes[~missing] = np.array([v for v in known if v is not None])
+        return self._exact(a.branch, pressure, volumes)
 
     # ------------------------------------------------------------------ the splits
 
@@ -549,7 +580,7 @@ class _Fitter:
             if rows.size == 0:
                 break
             a, b = regions.samples.take(rows), regions.samples.take(rows + 1)
-            middle = self._exact(a.branch, 0.5 * (a.pressure + b.pressure))
+            middle = self._new_samples(a, b)
             owner = regions.region[rows]
             heads = np.flatnonzero(np.diff(regions.region, prepend=-1))
             tails = np.append(heads[1:], regions.region.size) - 1

@@ -260,8 +260,12 @@ class SegmentNumerics:
         volumes = self.invert_rows(piece_index, p)
         if not stiffness:
             return volumes, None
-        return volumes, np.stack([self._element_stiffness(i, piece_index[:, i], volumes[:, i])
-                                  for i in range(volumes.shape[1])], axis=1)
+        return volumes, self.stiffness_at(piece_index, volumes)
+
+    def stiffness_at(self, piece_index: NDArray[np.intp], volumes: FloatArray) -> FloatArray:
+        """Scaled stiffnesses (m, N) at volumes (m, N), each row on its own pieces."""
+        return np.stack([self._element_stiffness(i, piece_index[:, i], volumes[:, i])
+                         for i in range(volumes.shape[1])], axis=1)
 
     def invert_rows(self, piece_index: NDArray[np.intp], p: FloatArray,
                     bracket: tuple[FloatArray, FloatArray, FloatArray] | None = None
