@@ -332,15 +332,15 @@ class _Fitter:
         """The branches (None for a stretch with fewer than two distinct totals)."""
         samples: list[tuple[FloatArray, FloatArray, FloatArray] | None] = [None] * len(
             self.stretches)
-        parts: list[_Regions] = []
-        chunk: list[int] = []
+        chunks: list[list[int]] = [[]]
         size = 0
         for index, stretch in enumerate(self.stretches):
-            chunk.append(index)
+            chunks[-1].append(index)
             size += stretch.pressure.size
-            if size >= CHUNK_INTERVALS or index == len(self.stretches) - 1:
-                parts.append(self._first_round(chunk, samples))
-                chunk, size = [], 0
+            if size >= CHUNK_INTERVALS and index < len(self.stretches) - 1:
+                chunks.append([])
+                size = 0
+        parts = [self._first_round(chunk, samples) for chunk in chunks]
         offset = 0
         for part in parts:
             part.origin = part.origin + offset

@@ -18,7 +18,6 @@ from softseq_ros.segments.models import (
     Piece,
     Segment,
     at_piece_ends,
-    evaluate_cubics,
     newton_start,
 )
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
@@ -66,11 +65,11 @@ class PieceInverse:
     """
     Volumes on one monotone piece of one segment where the pressure equals given values.
 
-    :meth:`Segment.invert`'s safeguarded Newton iteration, step for step. For a table, the
-    PCHIP cubics are evaluated here with array arithmetic (:func:`evaluate_cubics`: the same
-    numbers as the model's own calls, to the bit) instead of through two interpolator calls
-    per step, which cost several times the arithmetic on the thousands of pressures an
-    assembly inverts at once.
+    :meth:`Segment.invert`'s safeguarded Newton iteration, step for step, iterating only the
+    pressures not converged yet. For a table, a few pressures at a time are inverted on Python
+    floats with its cubics' coefficients (:func:`evaluate_cubics`' operations: the numbers of
+    the model's own calls, to the bit), where an array call would cost more than the
+    arithmetic.
     """
 
     def __init__(self, segment: Segment, piece: Piece, tolerances: Tolerances,
@@ -124,16 +123,9 @@ class PieceInverse:
         sign = float(piece.direction)
         ulps = tolerances.round_off_ulps
         floor = ulps * EPS * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
-        if self.cubics is not None:
-            breaks, pressure_c, stiffness_c = self.cubics
-
-            def pressure(v: FloatArray) -> FloatArray:
-                return evaluate_cubics(breaks, pressure_c, v)
-
-            def stiffness(v: FloatArray) -> FloatArray:
-                return evaluate_cubics(breaks, stiffness_c, v)
-        else:
-            pressure, stiffness = self.segment.pressure, self.segment.stiffness
+        # A table's pressure and stiffness through its own PPoly calls: the numbers of
+        # evaluate_cubics, faster for arrays.
+        pressure, stiffness = self.segment.pressure, self.segment.stiffness
         converged = False
         active = np.arange(x.size)
         for _ in range(tolerances.inversion_steps):
