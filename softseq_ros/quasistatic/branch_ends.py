@@ -5,7 +5,8 @@ A branch ends where it joins another stable branch (a segment passes a peak or v
 walk continues), at a fold (D = 0: the state snaps through to the stable state that the fluid
 exchange between the segments reaches at that volume), or where a segment leaves its table
 (the end of the domain). The snap's landing state comes from the redistribution flow of the
-stored energy, integrated until it comes to rest.
+stored energy, the flows of all folds integrated together until each one's basin is certain
+(softseq_ros.quasistatic.landing).
 """
 
 import math

@@ -676,8 +676,7 @@ class _Fitter:
             if not split.any():
                 break
             where = np.flatnonzero(split)
-            middle = self._exact(ends.branch[where], 0.5 * (ends.pressure[where]
-                                                          + ends.pressure[where + 1]))
+            middle = self._new_samples(ends.take(where), ends.take(where + 1))
             count = ends.total.size
             merged = _concatenate([ends, middle])
             order = np.argsort(merged.total, kind='stable')

@@ -5,10 +5,11 @@ Segments share one fluid supply, so at quasi-static equilibrium all pressures ar
 volumes add up to the total V. Each segment's PV curve splits into monotone pieces; choosing one
 piece per segment (a *configuration*) makes every volume a function of the common pressure p, so
 the equilibrium set is a union of curves parametrised by p. This is the paper's "assembling
-algorithm", done once per scene in :class:`EquilibriumMap` from three stages: assembly of the
-stable branches (softseq_ros.quasistatic.assembly), how each branch ends and where a snap lands
-(softseq_ros.quasistatic.branch_ends), and reading states off the branches
-(softseq_ros.quasistatic.states).
+algorithm", done once per scene in :class:`EquilibriumMap` from these stages: the stable
+stretches of every configuration (softseq_ros.quasistatic.assembly), fitted as branches
+(softseq_ros.quasistatic.branches), how each branch ends and where a snap lands
+(softseq_ros.quasistatic.branch_ends, softseq_ros.quasistatic.landing), and reading states off
+the branches (softseq_ros.quasistatic.states).
 
 Stability is the positive definiteness of the Hessian of the stored energy, diag(dp_i/dv_i),
 restricted to sum(dv_i) = 0. With k_i = dp_i/dv_i it holds exactly when at most one k_i is negative

@@ -1,0 +1,100 @@
+"""
+The equilibrium map's batched work gives the numbers of one piece, one branch, one ball at a time.
+
+The map inverts every piece for all configurations at once, reads many branches in one call and
+certifies the landing balls of many folds together; each of these is claimed elementwise, so
+the numbers must equal those of the plain per-piece, per-branch and per-centre computations, to
+the bit. The references here are those plain computations, written out again.
+"""
+
+import numpy as np
+import pytest
+
+from softseq_ros.quasistatic.landing import PROBES, RADII, certified_radii
+from softseq_ros.quasistatic.numerics import SegmentNumerics, cofactor_sum
+from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.segments.materials import Gent
+from softseq_ros.segments.models import BalloonSegment, TabulatedSegment
+
+
+def gent_segments(table: bool) -> list:
+    """Three peaked Gent balloons, as closed-form laws or as 300-row tables of them."""
+    built = []
+    for i, (jm, thickness) in enumerate(((40.0, 0.600e-3), (35.0, 0.582e-3), (30.0, 0.564e-3))):
+        balloon = BalloonSegment(f's{i}', 0.074, Gent(60.0e3, jm), 0.006, thickness, 3.6)
+        if table:
+            stretch = np.linspace(1.0, 3.6, 300)
+            volume = balloon.rest_volume * stretch**3
+            balloon = TabulatedSegment(balloon.name, 0.074, volume, balloon.pressure(volume),
+                                       np.zeros(300))
+        built.append(balloon)
+    return built
+
+
+@pytest.mark.parametrize('table', [True, False], ids=['tables', 'closed-form'])
+def test_inverting_all_pieces_at_once_gives_each_piece_s_numbers(table):
+    numerics = SegmentNumerics(gent_segments(table))
+    rng = np.random.default_rng(5)
+    rows = 300
+    pieces = np.stack([rng.integers(0, len(p), rows) for p in numerics.pieces], axis=1)
+    # Pressures inside, at the ends of and outside the pieces' ranges.
+    pressure = rng.uniform(-500.0, 9000.0, rows)
+    pressure[:6] = [numerics.pieces[0][pieces[r, 0]].p_at_lo for r in range(3)] + \
+        [numerics.pieces[1][pieces[r, 1]].p_at_hi for r in range(3, 6)]
+    volumes, stiffness = numerics.states_at(pieces, pressure)
+    for i, segment_pieces in enumerate(numerics.pieces):
+        for a, piece in enumerate(segment_pieces):
+            at = np.flatnonzero(pieces[:, i] == a)
+            alone = numerics.inverse(i, piece)(pressure[at])
+            assert volumes[at, i].tolist() == alone.tolist()
+            assert stiffness[at, i].tolist() == numerics.piece_stiffness(
+                i, piece, alone).tolist()
+
+
+def test_reading_many_branches_at_once_gives_each_branch_s_numbers():
+    emap = build_map(load_scene('fig1_asymmetric').segments)
+    index, total = [], []
+    for b, branch in enumerate(emap.branches):
+        # Across the branch, and next to its ends, where the states are solved exactly.
+        inside = np.linspace(branch.lo, branch.hi, 25)
+        near = [branch.lo + 1e-7 * (branch.hi - branch.lo),
+                branch.hi - 1e-7 * (branch.hi - branch.lo)]
+        for t in [*inside, *near]:
+            index.append(b)
+            total.append(t)
+    many = emap.reader.rows_many(np.array(index), np.array(total))
+    assert any(branch.any_rough for branch in emap.branches)
+    for b in range(len(emap.branches)):
+        rows = np.flatnonzero(np.array(index) == b)
+        one = emap.reader.rows(b, np.array(total)[rows])
+        assert many[rows].tolist() == one.tolist()
+
+
+def test_certifying_many_balls_at_once_gives_each_ball_s_radius():
+    numerics = SegmentNumerics(gent_segments(table=True))
+    rng = np.random.default_rng(11)
+    centres = rng.uniform(numerics.rest_volumes, numerics.max_volumes, (120, 3))
+    offsets = np.linspace(-1.0, 1.0, PROBES)
+
+    def radius(centre):
+        room = np.min(np.minimum(centre - numerics.rest_volumes,
+                                 numerics.max_volumes - centre))
+        for share in RADII:
+            r = share * numerics.v_scale
+            if r >= room:
+                continue
+            k = []
+            for segment, c in zip(numerics.segments, centre):
+                knots = segment.knots()
+                inside = knots[(knots > c - r) & (knots < c + r)]
+                probes = np.concatenate([c + r * offsets, inside])
+                k.append(np.min(segment.stiffness(probes)))
+            k = np.array(k) / numerics.k_scale
+            if np.sum(k < 0.0) <= 1 and cofactor_sum(k) > numerics.tolerances.stable_cofactor:
+                return r
+        return 0.0
+
+    expected = [radius(c) for c in centres]
+    assert 0 < sum(r > 0 for r in expected) < len(expected)
+    assert certified_radii(numerics, centres).tolist() == expected
