@@ -24,6 +24,21 @@ from softseq_ros.quasistatic.numerics import (
 )
 from softseq_ros.quasistatic.states import StateReader
 
+# The flow's drifts on the two sides of a branch end cancel to this share of the larger: a
+# pitchfork (mirror images up to round-off, or both zero), not a fold.
+PITCHFORK = 1e-6
+
+
+def base_first(direction: FloatArray) -> float:
+    """
+    The sign that gives the segment nearest the base the larger share along ``direction``.
+
+    The tie-break wherever the physics leaves two mirror continuations (identical segments at
+    the same state): the same rule as a join's.
+    """
+    base = int(np.argmax(np.abs(direction) > PITCHFORK))
+    return math.copysign(1.0, direction[base])
+
 
 class BranchEnds:
     """Sets every branch's ``upper`` and ``lower`` end; ``reader`` reads states on branches."""
@@ -114,6 +129,15 @@ class BranchEnds:
             if landing.branch >= 0:
                 found.append(BranchEnd('snap', landing.branch, landing.volumes))
                 continue
+            if landing.why in ('rest', 'horizon'):
+                # At rest where no ball is certain: next to a flat piece, or on a plateau
+                # (flat pieces at one pressure: a neutral set, where a flow stays wherever it
+                # arrives). The flow's own end says where; integrating it again with looser
+                # error control would only move it along the set.
+                target = self._nearest_branch(total, landing.volumes, exclude=index)
+                found.append(BranchEnd('snap', target,
+                                       self.reader.read(target, np.array([total])).volumes[0]))
+                continue
             landed = self._flow(start)
             if self._at_edge(landed):
                 found.append(BranchEnd('limit'))
@@ -124,7 +148,15 @@ class BranchEnds:
         return found
 
     def _flow_start(self, branch: Branch, v_fold: FloatArray) -> FloatArray:
-        """A small step off the fold along its soft direction, the way the flow points."""
+        """
+        A small step off the fold along its soft direction, the way the flow points.
+
+        At a fold the flow points the same way on both sides (the energy along the soft
+        direction is a cubic there). Where it points away on both sides alike, or nowhere
+        (on flat pieces), the end is a pitchfork: identical segments at the same state, as
+        on the flat rows of two identical quantised tables, where either may take the fluid.
+        The tie is broken as at a join (:func:`base_first`).
+        """
         k = self.numerics.stiffness(branch.pieces, v_fold[None, :])[0]
         null = soft_direction(k)
         eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
@@ -133,7 +165,11 @@ class BranchEnds:
             p = np.array([s.pressure(x) for s, x in zip(self.numerics.segments, v)])
             return float(-np.dot(p - p.mean(), null))
 
-        direction = math.copysign(1.0, drift(v_fold + eps * null) + drift(v_fold - eps * null))
+        ahead, behind = drift(v_fold + eps * null), drift(v_fold - eps * null)
+        if abs(ahead + behind) <= PITCHFORK * max(abs(ahead), abs(behind)):
+            direction = base_first(null)
+        else:
+            direction = math.copysign(1.0, ahead + behind)
         return v_fold + direction * eps * null
 
     def _flow(self, start: FloatArray) -> FloatArray:
@@ -170,9 +206,10 @@ class BranchEnds:
         y = start / scale_v
         t = 0.0
         for horizon in np.logspace(2, 14, 13):
-            sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian,
-                            rtol=tolerances.flow_rtol, atol=tolerances.flow_atol,
-                            events=leaves_range)
+            with np.errstate(divide='ignore'):   # a step of zero error (on flat pieces)
+                sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian,
+                                rtol=tolerances.flow_rtol, atol=tolerances.flow_atol,
+                                events=leaves_range)
             y, t = sol.y[:, -1], horizon
             if sol.status == 1:
                 break
@@ -189,16 +226,38 @@ class BranchEnds:
                     and cofactor_sum(k) > numerics.tolerances.stable_cofactor)
 
     def _nearest_branch(self, total: float, volumes: FloatArray, exclude: int) -> int:
+        """
+        The branch whose state at ``total`` is where the flow came to rest (``volumes``).
+
+        On a plateau (segments on flat pieces at one pressure) every split of the flat
+        segments' fluid is an equilibrium of the same energy; the map keeps one of them per
+        total (they fill base first), and a flow comes to rest anywhere in the set, or creeps
+        towards a flat's end, where the curve's slope goes to zero. So a flat segment's
+        volume counts as the branch's when it lies on the branch's flat piece or within the
+        landing distance of it at the flat's pressure (to ``plateau_pressure`` of the
+        pressure scale): two identical tables with quantised pressures (flat rows at the same
+        pressures in both) snap onto such sets.
+        """
+        tolerances = self.numerics.tolerances
+        landing = tolerances.landing_distance * self.numerics.v_scale
+        on_flat = tolerances.plateau_pressure * self.numerics.p_scale
         best, best_distance = -1, math.inf
         for j, other in enumerate(self.branches):
             tol = self.numerics.tol_v
             if j == exclude or not other.lo - tol <= total <= other.hi + tol:
                 continue
             state = self.reader.read(j, np.array([min(max(total, other.lo), other.hi)])).volumes[0]
-            distance = float(np.max(np.abs(state - volumes)))
+            gap = np.abs(state - volumes)
+            if other.flat:
+                for i, piece in enumerate(other.pieces):
+                    if (piece.direction == 0
+                            and piece.v_lo - landing <= volumes[i] <= piece.v_hi + landing
+                            and abs(float(self.numerics.segments[i].pressure(volumes[i]))
+                                    - piece.p_at_lo) <= on_flat):
+                        gap[i] = 0.0
+            distance = float(np.max(gap))
             if distance < best_distance:
                 best, best_distance = j, distance
-        landing = self.numerics.tolerances.landing_distance * self.numerics.v_scale
         if best < 0 or best_distance > landing:
             raise RuntimeError(f'snap-through at total volume {total:.9g} m^3 found no stable '
                                f'state to land on (nearest {best_distance:.3g} m^3 away)')

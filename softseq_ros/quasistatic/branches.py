@@ -160,15 +160,21 @@ class Branch:
 
 
 def sample_slopes(numerics: SegmentNumerics, stiffness: FloatArray, volumes: FloatArray,
-                  flat: bool, curvature_slope: FloatArray | None = None) -> FloatArray:
+                  flat: bool, curvature_slope: FloatArray | None = None,
+                  plateau: FloatArray | None = None) -> FloatArray:
     """
     d(v_1..v_N, p, k_1..k_N)/dV at samples (n, 2N + 1): inf or NaN at a fold (D = 0).
 
-    dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D; the curvatures ride along.
+    dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D; the curvatures ride along. On a
+    plateau with several flat segments D is 0 too: there ``plateau`` (its :func:`plateau_slopes`,
+    one row per sample) gives dv_i/dV, the filling segment taking it all.
     """
     n = volumes.shape[1]
     weights = cofactors(stiffness)
     d = np.sum(weights, axis=-1)     # cofactor_sum, its cofactors computed once
+    if flat and plateau is not None and np.any(d == 0.0):
+        weights = np.where((d == 0.0)[:, None], plateau, weights)
+        d = np.where(d == 0.0, 1.0, d)
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         slopes = np.concatenate([weights, np.prod(stiffness, axis=1, keepdims=True)
                                  * numerics.k_scale], axis=1) / d[:, None]
@@ -176,6 +182,16 @@ def sample_slopes(numerics: SegmentNumerics, stiffness: FloatArray, volumes: Flo
             curvature_slope = numerics.curvature_slopes(volumes)
         slopes = np.concatenate([slopes, curvature_slope * slopes[:, :n]], axis=1)
     return np.nan_to_num(slopes) if flat else slopes
+
+
+def plateau_slopes(branch: Branch) -> FloatArray:
+    """
+    dv_i/dV on a plateau stretch (flat pieces at one pressure): exactly linear in V.
+
+    One flat segment fills (base first) while the others stay where they are, so the slopes
+    are those of the chord from the stretch's first sample to its last.
+    """
+    return (branch.volumes[-1] - branch.volumes[0]) / (branch.total[-1] - branch.total[0])
 
 
 def hermite(y0: FloatArray, y1: FloatArray, s0: FloatArray, s1: FloatArray,
@@ -193,7 +209,9 @@ def interval_cubics(branch: Branch, intervals: NDArray[np.intp]) -> FloatArray:
     left, right = where[:intervals.size], where[intervals.size:]
     volumes = branch.volumes[rows]
     slopes = sample_slopes(numerics, numerics.stiffness(branch.pieces, volumes), volumes,
-                           branch.flat)
+                           branch.flat, plateau=(np.broadcast_to(plateau_slopes(branch),
+                                                                 volumes.shape)
+                                                 if branch.flat else None))
     values = np.concatenate([volumes, branch.pressure[rows][:, None],
                              numerics.curvatures(volumes)], axis=1)
     h = (branch.total[intervals + 1] - branch.total[intervals])[:, None]

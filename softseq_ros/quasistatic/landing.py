@@ -56,6 +56,7 @@ class Landing:
 
     branch: int
     volumes: FloatArray    # that branch's state at the fold's total, or where the flow stopped
+    why: str = 'basin'     # or why none is certain: 'range', 'rest', 'stalled', 'horizon', 'steps'
 
 
 def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArray:
@@ -155,14 +156,15 @@ class FlowLandings:
             y[moved] = y_new[accept]
             h[active] *= factor
             stalled = active[h[active] <= 1e-14 * np.maximum(t[active], 1.0)]
-            finished = np.concatenate([stalled, moved[t[moved] >= HORIZON]])
-            for index in finished.tolist():
-                results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
+            for index in stalled.tolist():
+                results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'stalled')
+            for index in moved[t[moved] >= HORIZON].tolist():
+                results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'horizon')
             v = y[moved] * scale_v
             # A segment out of its model's range: the domain ends there.
             out = np.any((v <= lo) | (v >= hi), axis=1)
             for index, volumes in zip(moved[out].tolist(), v[out]):
-                results[index] = Landing(-1, np.clip(volumes, lo, hi))
+                results[index] = Landing(-1, np.clip(volumes, lo, hi), 'range')
             inside = moved[~out]
             for index, branch in zip(inside.tolist(), basins.holding(inside, v[~out])):
                 if branch >= 0 and results[index] is None:
@@ -182,10 +184,10 @@ class FlowLandings:
                         & (np.sum(k < 0.0, axis=1) <= 1)
                         & (cofactor_sum(k) > tolerances.stable_cofactor))
                 for index in due[rest].tolist():
-                    results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
+                    results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'rest')
             active = np.array([i for i in active.tolist() if results[i] is None], dtype=np.intp)
         for index in active.tolist():
-            results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi))
+            results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'steps')
         return [r for r in results if r is not None]
 
     def _forces(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
