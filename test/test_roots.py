@@ -18,7 +18,8 @@ def family(seed: int, count: int):
 
     def f(i, x):
         s = x - r[i]
-        return (np.sign(s) * np.abs(s) ** power[i] * (c[i, 0] ** 2 + 0.1 + 0.1 * abs(c[i, 1]) * x * x)
+        scale = c[i, 0] ** 2 + 0.1 + 0.1 * abs(c[i, 1]) * x * x
+        return (np.sign(s) * np.abs(s) ** power[i] * scale
                 + c[i, 2] * 1e-6 * np.sin(7.0 * x) * s + c[i, 3] * 1e-9 * s)
 
     return f
