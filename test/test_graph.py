@@ -139,10 +139,11 @@ def quantised_gent_table(name: str, rows: int) -> TabulatedSegment:
                             np.zeros(rows))
 
 
-def assert_snaps_land_on_balanced_stable_states(segments, graph):
+def assert_snaps_land_on_balanced_stable_states(segments, graph, base_takes_more=True):
     """
     Every snap lands where the pressures balance, on a stable or neutral state, releasing
-    energy; where identical segments shared the fluid alike, the one nearer the base takes more.
+    energy; where identical segments shared the fluid alike, the one nearer the base takes
+    more (``base_takes_more``).
     """
     snaps = graph.snaps()
     assert snaps
@@ -156,7 +157,7 @@ def assert_snaps_land_on_balanced_stable_states(segments, graph):
         assert np.sum(k < -1e-9) <= 1
         assert sum(np.prod(np.delete(k, i)) for i in range(k.size)) >= -1e-9
         assert snap.energy_released >= -1e-12 * abs(snap.pressure_before) * after.sum()
-        for i in range(len(segments)):
+        for i in range(len(segments) if base_takes_more else 0):
             for j in range(i + 1, len(segments)):
                 if before[i] == before[j] and after[i] != after[j]:
                     assert after[i] > after[j]
@@ -179,6 +180,22 @@ def test_two_identical_tables_in_one_millibar_steps_snap_onto_stable_states():
         pressures = np.stack([s.pressure(path.volumes[:, i]) for i, s in enumerate(segments)])
         assert np.max(np.ptp(pressures, axis=0)) < 1e-6 * 100.0
     assert path.injected[-1] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_three_identical_tables_in_one_millibar_steps_get_past_symmetric_saddles():
+    # Two of them past their peak together stay equal along a flow (the same equations to the
+    # bit): it comes to rest on a saddle (balanced on two falling pieces) and has to go on
+    # from there. At 100 rows the peak and the valley are runs of rows at one pressure. (A
+    # flow that passes near such a saddle may leave it either way, by round-off: the mirror
+    # states it lands on are equally stable, so which of two equal segments takes more is
+    # not asserted here.)
+    segments = [quantised_gent_table(name, 100) for name in ('base', 'middle', 'tip')]
+    pieces = segments[0].monotone_pieces()
+    falling = [i for i, pc in enumerate(pieces) if pc.direction < 0]
+    assert pieces[falling[0] - 1].direction == 0 and pieces[falling[-1] + 1].direction == 0
+    emap = EquilibriumMap(segments)
+    assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),
+                                                base_takes_more=False)
 
 
 # --------------------------------------------------------------------------- three segments

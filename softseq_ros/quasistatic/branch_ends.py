@@ -29,13 +29,21 @@ from softseq_ros.quasistatic.states import StateReader
 PITCHFORK = 1e-6
 
 
-def base_first(direction: FloatArray) -> float:
+def base_first(direction: FloatArray, volumes: FloatArray, tol: float) -> float:
     """
-    The sign that gives the segment nearest the base the larger share along ``direction``.
+    The sign of ``direction`` that gives the segment nearer the base the larger share.
 
-    The tie-break wherever the physics leaves two mirror continuations (identical segments at
-    the same state): the same rule as a join's.
+    The tie-break wherever the physics leaves mirror continuations (identical segments at the
+    same state), the same rule as a join's: of the first two segments at the same volume
+    (to ``tol``) that ``direction`` moves apart, the one nearer the base gains; else the first
+    segment it moves at all.
     """
+    n = direction.size
+    for i in range(n):
+        for j in range(i + 1, n):
+            apart = direction[i] - direction[j]
+            if abs(volumes[i] - volumes[j]) <= tol and abs(apart) > PITCHFORK:
+                return math.copysign(1.0, apart)
     base = int(np.argmax(np.abs(direction) > PITCHFORK))
     return math.copysign(1.0, direction[base])
 
@@ -129,7 +137,7 @@ class BranchEnds:
             if landing.branch >= 0:
                 found.append(BranchEnd('snap', landing.branch, landing.volumes))
                 continue
-            if landing.why in ('rest', 'horizon'):
+            if landing.why in ('rest', 'horizon') and not self._is_saddle(landing.volumes):
                 # At rest where no ball is certain: next to a flat piece, or on a plateau
                 # (flat pieces at one pressure: a neutral set, where a flow stays wherever it
                 # arrives). The flow's own end says where; integrating it again with looser
@@ -167,12 +175,49 @@ class BranchEnds:
 
         ahead, behind = drift(v_fold + eps * null), drift(v_fold - eps * null)
         if abs(ahead + behind) <= PITCHFORK * max(abs(ahead), abs(behind)):
-            direction = base_first(null)
+            direction = base_first(null, v_fold, self.numerics.tol_v)
         else:
             direction = math.copysign(1.0, ahead + behind)
         return v_fold + direction * eps * null
 
+    def _is_saddle(self, volumes: FloatArray) -> bool:
+        """
+        Balanced pressures at a clearly unstable state: two falling pieces, or D < 0.
+
+        Asked only where a flow has run to its horizon, long past the fold it started next to
+        (near a fold D is about 0 and the pressures balance too).
+        """
+        numerics = self.numerics
+        p = numerics.model_pressures(volumes[None, :])[0] / numerics.p_scale
+        k = numerics.model_stiffnesses(volumes[None, :])[0] / numerics.k_scale
+        return bool(np.max(np.abs(p - p.mean())) < numerics.tolerances.flow_rest
+                    and (np.sum(k < 0.0) >= 2
+                         or cofactor_sum(k) < -numerics.tolerances.stable_cofactor))
+
     def _flow(self, start: FloatArray) -> FloatArray:
+        """
+        The redistribution flow from ``start`` to rest, past any saddle it stops on.
+
+        Identical segments at the same state stay identical along the flow (their equations
+        are the same to the bit), so a flow from a fold where they share the fluid alike can
+        only reach states where they still do: on three identical stepped tables, two of them
+        past their peak together, balanced on two falling pieces (a saddle). Any real
+        actuator leaves it: the flow goes on from a small step along the saddle's unstable
+        direction, the tie broken as at a join (:func:`base_first`). Each saddle passed
+        lowers the stored energy; at most one per segment.
+        """
+        eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
+        landed = self._integrate(start)
+        for _ in range(len(self.numerics.segments)):
+            if not self._is_saddle(landed):
+                break
+            k = self.numerics.model_stiffnesses(landed[None, :])[0] / self.numerics.k_scale
+            null = soft_direction(k)
+            landed = self._integrate(
+                landed + base_first(null, landed, self.numerics.tol_v) * eps * null)
+        return landed
+
+    def _integrate(self, start: FloatArray) -> FloatArray:
         """
         Integrate the redistribution flow from ``start`` until it comes to rest.
 
