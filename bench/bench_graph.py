@@ -210,7 +210,8 @@ def main() -> int:
             f'work: load average {load_before[0]:.1f} before the run, {load_after[0]:.1f} '
             'after; compare CPU times within this run.\n\n' + '\n'.join(lines) + '\n',
             encoding='utf-8')
-        print(f'\nwrote {args.out.relative_to(REPO)}')
+        shown = args.out.resolve()
+        print(f'\nwrote {shown.relative_to(REPO) if shown.is_relative_to(REPO) else shown}')
     return 0
 
 
