@@ -193,7 +193,8 @@ class FlowLandings:
     def _forces(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
         """dy/dt (the flow, scaled) and the scaled stiffnesses at scaled volumes ``y`` (m, N)."""
         numerics = self.numerics
-        v = np.clip(y * numerics.v_scale, numerics.rest_volumes, numerics.max_volumes)
+        v = np.minimum(np.maximum(y * numerics.v_scale, numerics.rest_volumes),
+                       numerics.max_volumes)     # np.clip's numbers, without its dispatch
         p = numerics.model_pressures(v) / numerics.p_scale
         return (np.mean(p, axis=1, keepdims=True) - p,
                 numerics.model_stiffnesses(v) / numerics.k_scale)
@@ -201,7 +202,8 @@ class FlowLandings:
     def _flow(self, y: FloatArray) -> FloatArray:
         """dy/dt alone (no stiffness): the stages' evaluations."""
         numerics = self.numerics
-        v = np.clip(y * numerics.v_scale, numerics.rest_volumes, numerics.max_volumes)
+        v = np.minimum(np.maximum(y * numerics.v_scale, numerics.rest_volumes),
+                       numerics.max_volumes)     # np.clip's numbers, without its dispatch
         p = numerics.model_pressures(v) / numerics.p_scale
         return np.mean(p, axis=1, keepdims=True) - p
 

@@ -139,13 +139,14 @@ class PieceInverse:
             if np.all(done):
                 converged = True
                 break
-            slope = sign * stiffness(xa)
-            with np.errstate(divide='ignore', invalid='ignore'):
-                step = xa - residual / slope
-            inside = np.isfinite(step) & (step > la) & (step < ha)
+            # Only the pressures still going take a step (and need a stiffness).
             going = ~done
             active, xa, la, ha = active[going], xa[going], la[going], ha[going]
-            x[active] = np.where(inside[going], step[going], 0.5 * (la + ha))
+            slope = sign * stiffness(xa)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                step = xa - residual[going] / slope
+            inside = np.isfinite(step) & (step > la) & (step < ha)
+            x[active] = np.where(inside, step, 0.5 * (la + ha))
             lo[active], hi[active] = la, ha
         self.log.record('inversion', converged)
         return x
