@@ -48,7 +48,14 @@ def _as_stretch(stretch: ArrayLike) -> float | NDArray[np.float64]:
 
 def _invariants(stretch: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     lam = _as_stretch(stretch)
-    return 2.0 * lam**2 + lam**-4, lam**4 + 2.0 * lam**-2
+    return _first_invariant(lam), lam**4 + 2.0 * lam**-2
+
+
+# The laws that need I1 alone skip I2: its two powers cost as much as I1 and the laws are
+# evaluated millions of times per equilibrium map.
+def _first_invariant(stretch: ArrayLike) -> NDArray[np.float64]:
+    lam = _as_stretch(stretch)
+    return 2.0 * lam**2 + lam**-4
 
 
 def _di1(stretch: ArrayLike) -> NDArray[np.float64]:
@@ -69,7 +76,7 @@ class NeoHookean:
 
     def energy(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """Strain energy per reference volume, in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         return 0.5 * self.mu * (i1 - 3.0)
 
     def energy_derivative(self, stretch: ArrayLike) -> NDArray[np.float64]:
@@ -123,12 +130,12 @@ class Gent:
 
     def energy(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """Strain energy per reference volume, in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         return -0.5 * self.mu * self.jm * np.log1p(-(i1 - 3.0) / self.jm)
 
     def energy_derivative(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """D(energy)/d(stretch), in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         return 0.5 * self.mu * _di1(stretch) / (1.0 - (i1 - 3.0) / self.jm)
 
     @property
@@ -198,12 +205,12 @@ class ArrudaBoyce:
 
     def energy(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """Strain energy per reference volume, in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         return self.mu * sum(c * (i1**i - 3.0**i) for i, c in self._terms())
 
     def energy_derivative(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """D(energy)/d(stretch), in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         dw_di1 = self.mu * sum(i * c * i1 ** (i - 1) for i, c in self._terms())
         return dw_di1 * _di1(stretch)
 
@@ -228,13 +235,13 @@ class Yeoh:
 
     def energy(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """Strain energy per reference volume, in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         x = i1 - 3.0
         return self.c1 * x + self.c2 * x**2 + self.c3 * x**3
 
     def energy_derivative(self, stretch: ArrayLike) -> NDArray[np.float64]:
         """D(energy)/d(stretch), in Pa."""
-        i1, _ = _invariants(stretch)
+        i1 = _first_invariant(stretch)
         x = i1 - 3.0
         return (self.c1 + 2.0 * self.c2 * x + 3.0 * self.c3 * x**2) * _di1(stretch)
 
