@@ -20,7 +20,12 @@ What a test of a node needs besides the node itself, and what is easy to get sub
   node that is being spun.
 
 Give each test process its own ``ROS_DOMAIN_ID`` and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``
-(before rclpy creates its first participant), so parallel runs never see each other.
+(before rclpy creates its first participant), so parallel runs never see each other. Tests that
+kill a node with SIGKILL and start it again need Fast DDS without its shared-memory transport
+(the restarted node can take over the dead one's port and hear nothing): our own tests run on
+UDP over the loopback interface alone, from the profile ``test/fastdds_udp_localhost.xml``
+(``FASTRTPS_DEFAULT_PROFILES_FILE``, with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``, as
+``test/conftest.py`` sets them).
 
 Example (the README's, which a test runs)::
 

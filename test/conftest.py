@@ -17,7 +17,15 @@ ROS_DOMAIN_ID = 1 + ((os.getppid() + int(_WORKER[2:])) if _WORKER.startswith('gw
                      else os.getpid()) % 101
 
 os.environ['ROS_DOMAIN_ID'] = str(ROS_DOMAIN_ID)
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+# Limited to this host by the Fast DDS profile below (UDP on the loopback interface alone), not
+# by ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: with that range rmw_fastrtps adds its shared-memory
+# transport, and a participant killed with SIGKILL (as several tests do) leaves its port behind;
+# the next participant of this domain that takes the same port (a restarted node) can then hear
+# nothing at all. SYSTEM_DEFAULT leaves the transports to the profile.
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'SYSTEM_DEFAULT'
+os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = os.path.join(os.path.dirname(__file__),
+                                                            'fastdds_udp_localhost.xml')
+os.environ.pop('FASTDDS_BUILTIN_TRANSPORTS', None)
 # Deprecated in Jazzy and overridden by the variable above; dropped so it cannot confuse a run.
 os.environ.pop('ROS_LOCALHOST_ONLY', None)
 

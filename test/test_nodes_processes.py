@@ -58,6 +58,12 @@ def node_processes(env, log_dir: Path):
 
     try:
         yield start
+    except BaseException:
+        # What the nodes said is the first thing a failure needs; their logs go with the tmp dir.
+        for log in sorted(log_dir.glob('*.log')):
+            lines = log.read_text(encoding='utf-8', errors='replace').splitlines()
+            print(f'--- {log.name} (last 40 lines) ---', *lines[-40:], sep='\n')
+        raise
     finally:
         for process in started:
             if process.poll() is None:

@@ -81,7 +81,6 @@ def _wait_for(condition, what: str) -> None:
 @pytest.mark.parametrize('stop', ['SIGTERM', 'SIGINT'])
 def test_a_stop_signal_leaves_a_complete_bag(tmp_path, monkeypatch, stop):
     monkeypatch.setenv('ROS_DOMAIN_ID', _domain_id())
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env = dict(os.environ)
     env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(REPO), env.get('PYTHONPATH')]))
     output = tmp_path / 'rig_bag'
