@@ -15,7 +15,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from softseq_ros.quasistatic.branches import Branch, BranchEnd
-from softseq_ros.quasistatic.landing import FlowLandings
+from softseq_ros.quasistatic.landing import FlowLandings, Landing
 from softseq_ros.quasistatic.numerics import (
     FloatArray,
     SegmentNumerics,
@@ -133,27 +133,87 @@ class BranchEnds:
         landings = FlowLandings(self.numerics, self.branches, self.reader).land(
             [index for index, _ in ends], np.array(totals), np.array(folds), np.array(starts))
         found = []
-        for (index, _), total, start, landing in zip(ends, totals, starts, landings):
+        for (index, upward), total, start, landing in zip(ends, totals, starts, landings):
             if landing.branch >= 0:
                 found.append(BranchEnd('snap', landing.branch, landing.volumes))
                 continue
-            if landing.why in ('rest', 'horizon') and not self._is_saddle(landing.volumes):
-                # At rest where no ball is certain: next to a flat piece, or on a plateau
-                # (flat pieces at one pressure: a neutral set, where a flow stays wherever it
-                # arrives). The flow's own end says where; integrating it again with looser
-                # error control would only move it along the set.
-                target = self._nearest_branch(total, landing.volumes, exclude=index)
-                found.append(BranchEnd('snap', target,
-                                       self.reader.read(target, np.array([total])).volumes[0]))
-                continue
+            try:
+                found.append(self._land_alone(index, total, start, landing))
+            except RuntimeError:
+                # Back where it started: the end is a corner of a plateau (see
+                # _corner_starts); the flow goes on from the steps that leave the corner.
+                end = self._leave_corner(index, upward, total)
+                if end is None:
+                    raise
+                found.append(end)
+        return found
+
+    def _land_alone(self, index: int, total: float, start: FloatArray,
+                    landing: Landing) -> BranchEnd:
+        """Where a flow that no certain basin took lands: its own end, or its integration."""
+        if landing.why in ('rest', 'horizon') and not self._is_saddle(landing.volumes):
+            # At rest where no ball is certain: next to a flat piece, or on a plateau (flat
+            # pieces at one pressure: a neutral set, where a flow stays wherever it arrives).
+            # The flow's own end says where; integrating it again with looser error control
+            # would only move it along the set.
+            landed = landing.volumes
+        else:
             landed = self._flow(start)
             if self._at_edge(landed):
-                found.append(BranchEnd('limit'))
+                return BranchEnd('limit')
+        target = self._nearest_branch(total, landed, exclude=index)
+        return BranchEnd('snap', target, self.reader.read(target, np.array([total])).volumes[0])
+
+    def _leave_corner(self, index: int, upward: bool, total: float) -> BranchEnd | None:
+        """The first landing from the corner's steps (None: the end is no such corner)."""
+        branch = self.branches[index]
+        fold = branch.volumes[-1 if upward else 0]
+        for start in self._corner_starts(branch, fold, upward):
+            landed = self._flow(start)
+            if self._at_edge(landed):
+                return BranchEnd('limit')
+            try:
+                target = self._nearest_branch(total, landed, exclude=index)
+            except RuntimeError:
                 continue
-            target = self._nearest_branch(total, landed, exclude=index)
-            found.append(BranchEnd('snap', target,
-                                   self.reader.read(target, np.array([total])).volumes[0]))
-        return found
+            return BranchEnd('snap', target,
+                             self.reader.read(target, np.array([total])).volumes[0])
+        return None
+
+    def _corner_starts(self, branch: Branch, fold: FloatArray, upward: bool) -> list[FloatArray]:
+        """
+        Steps off a branch end where a flat segment reaches the end of its flat.
+
+        A branch on a plateau (flat pieces at one pressure) can end at a corner of the
+        neutral set rather than at a fold: every direction along the flats is as soft as any
+        (stiffness 0), and the step along the soft direction may only slide the state back
+        onto the set, to rest where it started. What makes the end unstable is the piece
+        beyond each flat's end, the way the sweep goes (a segment that would go on down a
+        falling piece runs away). Two steps push into it: along the soft direction of the
+        stiffnesses with each such flat counted as the piece after it (its secant slope),
+        the way the flow points; and the sweep's own, a little more fluid (or less) in every
+        segment alike.
+        """
+        numerics = self.numerics
+        k = numerics.stiffness(branch.pieces, fold[None, :])[0]
+        at_end = False
+        for i, (piece, a) in enumerate(zip(branch.pieces, numerics.piece_indices(branch.pieces))):
+            edge = piece.v_hi if upward else piece.v_lo
+            if piece.direction != 0 or abs(fold[i] - edge) > numerics.tol_v:
+                continue
+            pieces = numerics.pieces[i]
+            beyond = a + (1 if upward else -1)
+            if 0 <= beyond < len(pieces):
+                at_end = True
+                after = pieces[beyond]
+                k[i] = (after.p_at_hi - after.p_at_lo) / (after.v_hi - after.v_lo) / \
+                    numerics.k_scale
+        if not at_end:
+            return []
+        eps = numerics.tolerances.fold_offset * numerics.v_scale
+        null = soft_direction(k)
+        return [fold + self._drift_sign(fold, null, eps) * eps * null,
+                fold + (eps if upward else -eps) / len(numerics.segments)]
 
     def _flow_start(self, branch: Branch, v_fold: FloatArray) -> FloatArray:
         """
@@ -169,16 +229,19 @@ class BranchEnds:
         null = soft_direction(k)
         eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
 
+        return v_fold + self._drift_sign(v_fold, null, eps) * eps * null
+
+    def _drift_sign(self, v_fold: FloatArray, null: FloatArray, eps: float) -> float:
+        """The way the flow points along ``null`` on both sides of ``v_fold`` (ties as joins)."""
+
         def drift(v: FloatArray) -> float:
             p = np.array([s.pressure(x) for s, x in zip(self.numerics.segments, v)])
             return float(-np.dot(p - p.mean(), null))
 
         ahead, behind = drift(v_fold + eps * null), drift(v_fold - eps * null)
         if abs(ahead + behind) <= PITCHFORK * max(abs(ahead), abs(behind)):
-            direction = base_first(null, v_fold, self.numerics.tol_v)
-        else:
-            direction = math.copysign(1.0, ahead + behind)
-        return v_fold + direction * eps * null
+            return base_first(null, v_fold, self.numerics.tol_v)
+        return math.copysign(1.0, ahead + behind)
 
     def _is_saddle(self, volumes: FloatArray) -> bool:
         """
