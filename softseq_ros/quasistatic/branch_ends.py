@@ -140,8 +140,8 @@ class BranchEnds:
             try:
                 found.append(self._land_alone(index, total, start, landing))
             except RuntimeError:
-                # Back where it started: the end is a corner of a plateau (see
-                # _corner_starts); the flow goes on from the steps that leave the corner.
+                # No other branch holds where the flow stopped: where the end is a corner of
+                # a plateau (_corner_starts), it goes on from the steps that leave it.
                 end = self._leave_corner(index, upward, total)
                 if end is None:
                     raise
@@ -228,7 +228,6 @@ class BranchEnds:
         k = self.numerics.stiffness(branch.pieces, v_fold[None, :])[0]
         null = soft_direction(k)
         eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
-
         return v_fold + self._drift_sign(v_fold, null, eps) * eps * null
 
     def _drift_sign(self, v_fold: FloatArray, null: FloatArray, eps: float) -> float:
