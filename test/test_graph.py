@@ -22,6 +22,7 @@ from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import recording_metrics, summary_text
 from softseq_ros.batch import BatchRun
 from softseq_ros.cli import main
+from softseq_ros.quasistatic.branch_ends import BranchEnds
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, inflate_and_deflate
 from softseq_ros.quasistatic.graph import (
     DEFLATION,
@@ -33,6 +34,7 @@ from softseq_ros.quasistatic.graph import (
     stored_energy,
     transition_graph,
 )
+from softseq_ros.quasistatic.landing import FlowLandings
 from softseq_ros.quasistatic.solve import build_map
 from softseq_ros.scene.loader import load_scene, scene_from_dict
 from softseq_ros.segments.materials import NeoHookean
@@ -123,18 +125,22 @@ def test_two_identical_balloons_make_a_pitchfork_at_their_common_peak():
     assert graph.min_reversals() == {symmetric.index: 0, up.target: 0, other.index: None}
 
 
-def quantised_gent_table(name: str, rows: int) -> TabulatedSegment:
+def quantised_gent_table(name: str, rows: int, shear_modulus: float = 60e3,
+                         gent_limit: float = 30.0, wall: float = 0.6e-3,
+                         max_stretch: float = 4.0) -> TabulatedSegment:
     """
-    A peaked Gent balloon (60 kPa, Jm 30, 0.6 mm wall) as a table with its pressures in 1 mbar.
+    A peaked Gent balloon (by default 60 kPa, Jm 30, 0.6 mm wall, stretched to 4) as a table
+    with its pressures in 1 mbar.
 
     The thin-walled sphere's closed form, p = 2 mu H / R (1/l - 1/l^7) / (1 - (2 l^2 + l^-4 - 3)
-    / Jm), at ``rows`` stretches l from 1 to 4, each pressure rounded to 100 Pa as a logger of
-    1 mbar resolution writes it: near the peak and the valley several rows in a row read the
-    same pressure, so the curve has flat pieces, at the same pressures in identical tables.
+    / Jm), at ``rows`` stretches l from 1 to ``max_stretch``, each pressure rounded to 100 Pa
+    as a logger of 1 mbar resolution writes it: near the peak and the valley several rows in a
+    row read the same pressure, so the curve has flat pieces, at the same pressures in
+    identical tables.
     """
-    stretch = np.linspace(1.0, 4.0, rows)
-    pressure = (2 * 60e3 * 0.6e-3 / R * (1 / stretch - stretch**-7)
-                / (1 - (2 * stretch**2 + stretch**-4 - 3) / 30.0))
+    stretch = np.linspace(1.0, max_stretch, rows)
+    pressure = (2 * shear_modulus * wall / R * (1 / stretch - stretch**-7)
+                / (1 - (2 * stretch**2 + stretch**-4 - 3) / gent_limit))
     return TabulatedSegment(name, 0.074, V0 * stretch**3, np.round(pressure / 100.0) * 100.0,
                             np.zeros(rows))
 
@@ -197,6 +203,36 @@ def test_three_identical_tables_in_one_millibar_steps_get_past_symmetric_saddles
     falling = [i for i, pc in enumerate(pieces) if pc.direction < 0]
     assert pieces[falling[0] - 1].direction == 0 and pieces[falling[-1] + 1].direction == 0
     emap = EquilibriumMap(segments)
+    assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),
+                                                base_takes_more=False)
+
+
+def test_flows_onto_plateaus_of_different_stepped_tables_come_to_rest(monkeypatch):
+    # Three different balloons logged in 1 mbar steps: some snaps end on a plateau (two
+    # segments on flat rows at one pressure, the third stiffening), balanced but with a
+    # stiffness sum of 0. Such a flow is at rest; before, it was stepped on to the step limit
+    # and then integrated alone to ever longer horizons while round-off walked it along the
+    # plateau (more than minutes for this map). Every flow here now ends together with the
+    # others, none alone.
+    segments = [
+        quantised_gent_table('base', 529, 76.7e3, 20.8, 0.611e-3, 3.56),
+        quantised_gent_table('middle', 297, 65.7e3, 37.1, 0.637e-3, 3.76),
+        quantised_gent_table('tip', 590, 73.6e3, 30.2, 0.604e-3, 3.65)]
+    ends = []
+    land = FlowLandings.land
+
+    def recording(self, *args, **kwargs):
+        found = land(self, *args, **kwargs)
+        ends.extend(landing.why for landing in found if landing.branch < 0)
+        return found
+
+    def alone(self, start):
+        raise AssertionError(f'a flow from {start} was integrated alone')
+
+    monkeypatch.setattr(FlowLandings, 'land', recording)
+    monkeypatch.setattr(BranchEnds, '_integrate', alone)
+    emap = EquilibriumMap(segments)
+    assert 'rest' in ends and 'steps' not in ends
     assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),
                                                 base_takes_more=False)
 

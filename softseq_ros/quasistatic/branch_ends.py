@@ -320,8 +320,10 @@ class BranchEnds:
             y, t = sol.y[:, -1], horizon
             if sol.status == 1:
                 break
-            # At rest means balanced pressures at a stable state: a fold is balanced too.
-            if np.max(np.abs(rhs(t, y))) < tolerances.flow_rest and self._is_stable(y * scale_v):
+            # At rest means balanced pressures at a stable state (a fold is balanced too), or
+            # on a plateau, where the flow has nowhere to go.
+            if np.max(np.abs(rhs(t, y))) < tolerances.flow_rest and (
+                    self._is_stable(y * scale_v) or self._on_plateau(y * scale_v)):
                 break
         return np.clip(y * scale_v, lo, hi)
 
@@ -331,6 +333,17 @@ class BranchEnds:
         k /= numerics.k_scale
         return bool(np.sum(k < 0.0) <= 1
                     and cofactor_sum(k) > numerics.tolerances.stable_cofactor)
+
+    def _on_plateau(self, volumes: FloatArray) -> bool:
+        """
+        A neutral state (:meth:`SegmentNumerics.neutral`), where a balanced flow stays.
+
+        Integrating on towards ever longer horizons there only lets round-off walk the state
+        along the plateau, at a cost that grows tenfold per decade of time.
+        """
+        numerics = self.numerics
+        k = numerics.model_stiffnesses(volumes[None, :]) / numerics.k_scale
+        return bool(numerics.neutral(volumes[None, :], k)[0])
 
     def _nearest_branch(self, total: float, volumes: FloatArray, exclude: int) -> int:
         """

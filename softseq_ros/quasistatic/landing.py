@@ -180,9 +180,12 @@ class FlowLandings:
             due = np.array([i for i in due.tolist() if results[i] is None], dtype=np.intp)
             if due.size:
                 force, k = self._forces(y[due])
+                # Or balanced on a plateau (flat pieces), where the flow has nowhere to go:
+                # stepping on only walks it along the plateau by round-off.
                 rest = ((np.max(np.abs(force), axis=1) < tolerances.flow_rest)
-                        & (np.sum(k < 0.0, axis=1) <= 1)
-                        & (cofactor_sum(k) > tolerances.stable_cofactor))
+                        & (((np.sum(k < 0.0, axis=1) <= 1)
+                            & (cofactor_sum(k) > tolerances.stable_cofactor))
+                           | numerics.neutral(y[due] * scale_v, k)))
                 for index in due[rest].tolist():
                     results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'rest')
             active = np.array([i for i in active.tolist() if results[i] is None], dtype=np.intp)

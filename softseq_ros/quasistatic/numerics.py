@@ -421,6 +421,29 @@ class SegmentNumerics:
             return np.minimum(k, 0.0)
         return np.zeros_like(k)
 
+    def on_flat_pieces(self, volumes: FloatArray) -> NDArray[np.bool_]:
+        """Whether each segment's volume (m, N) lies on one of its flat pieces (to tol_v)."""
+        flat = np.zeros(volumes.shape, dtype=bool)
+        for i, pieces in enumerate(self.pieces):
+            for piece in pieces:
+                if piece.direction == 0:
+                    flat[:, i] |= ((volumes[:, i] >= piece.v_lo - self.tol_v)
+                                   & (volumes[:, i] <= piece.v_hi + self.tol_v))
+        return flat
+
+    def neutral(self, volumes: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
+        """
+        Per row (m, N): some segments on flat pieces, every other one clearly stiffening.
+
+        ``k``: the scaled stiffnesses at ``volumes``. Fluid moved between flat segments
+        changes no pressure, and fluid moved into a stiffening one raises its pressure, so a
+        balanced state there is at rest, though its stiffness sum is 0 (a flat segment's
+        stiffness is) and it is not stable in the strict sense.
+        """
+        flat = self.on_flat_pieces(volumes)
+        return np.any(flat, axis=1) & np.all(flat | (k > self.tolerances.stable_cofactor),
+                                             axis=1)
+
     def model_pressures(self, volumes: FloatArray) -> FloatArray:
         """Each segment's gauge pressure at volumes (m, N) inside its range [Pa]."""
         return np.stack([self._curve[i][0](volumes[:, i]) for i in range(volumes.shape[1])],
