@@ -207,6 +207,18 @@ def test_three_identical_tables_in_one_millibar_steps_get_past_symmetric_saddles
                                                 base_takes_more=False)
 
 
+def test_a_landing_is_certified_past_a_steep_step_between_flat_rows():
+    # A coarse table in 1 mbar steps climbs from one flat run of rows to the next within one
+    # interval: its stiffness is 0 at both rows and steep in between. A ball around a state
+    # was certified convex from the stiffness at evenly spaced volumes and at the rows, which
+    # miss that interval, so a flow was taken to land on a state that stores more energy than
+    # where it started. Each interval's least stiffness now bounds the ball's.
+    segments = [quantised_gent_table('base', 55, 54298.43, 38.897918, 0.72497884e-3, 3.6973943),
+                quantised_gent_table('tip', 589, 59086.779, 27.716980, 0.64555800e-3, 3.7502197)]
+    graph = transition_graph(EquilibriumMap(segments))
+    assert_snaps_land_on_balanced_stable_states(segments, graph, base_takes_more=False)
+
+
 def test_flows_onto_plateaus_of_different_stepped_tables_come_to_rest(monkeypatch):
     # Three different balloons logged in 1 mbar steps: some snaps end on a plateau (two
     # segments on flat rows at one pressure, the third stiffening), balanced but with a

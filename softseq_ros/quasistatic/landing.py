@@ -67,8 +67,10 @@ def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArra
     On sum v = V the energy's Hessian is diag(k_i(v_i)) restricted to sum dv = 0; it is
     positive definite on a box of volumes when it is at each segment's smallest stiffness over
     the box (the quadratic form grows with every k_i). The smallest stiffness over a box's side
-    is sampled: evenly spaced volumes and a table's rows inside it. Every centre and radius at
-    once: one stiffness call per segment.
+    is sampled at evenly spaced volumes and, for a table, bounded by the exact least stiffness
+    of every interval between rows that the side reaches (a steep step between two flat rows
+    falls inside one interval, where samples can miss it). Every centre and radius at once:
+    one stiffness call per segment.
     """
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
     count, n = centres.shape
@@ -83,7 +85,18 @@ def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArra
         smallest[:, :, i] = np.min(segment.stiffness(probes).reshape(count, radii.size, -1),
                                    axis=2)
         knots = segment.knots()
-        if knots.size:
+        per_interval = numerics.least_stiffness_per_interval(i)
+        if per_interval is not None:
+            # The intervals the side [c - r, c + r] reaches, first to last.
+            last = per_interval.size - 1
+            lo = np.clip(np.searchsorted(knots, c[:, None] - radii[None, :], side='right') - 1,
+                         0, last)
+            hi = np.clip(np.searchsorted(knots, c[:, None] + radii[None, :], side='left'),
+                         lo + 1, last + 1)
+            bounds = np.stack([lo.ravel(), hi.ravel()], axis=1).ravel()
+            least = np.minimum.reduceat(np.append(per_interval, np.inf), bounds)[::2]
+            smallest[:, :, i] = np.minimum(smallest[:, :, i], least.reshape(lo.shape))
+        elif knots.size:
             at_knots = segment.stiffness(knots)
             lo = np.searchsorted(knots, c[:, None] - radii[None, :], side='right')
             hi = np.searchsorted(knots, c[:, None] + radii[None, :], side='left')

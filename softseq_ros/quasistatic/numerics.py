@@ -221,6 +221,7 @@ class SegmentNumerics:
         self.k_scale = self.p_scale / self.v_scale
         self.tol_v = tolerances.same_volume * self.v_scale
         self._inverses: dict[tuple[int, Piece], PieceInverse] = {}
+        self._least_stiffness: dict[int, FloatArray | None] = {}
         self._piece_ids = [{piece: a for a, piece in enumerate(pieces)} for pieces in self.pieces]
         # Every piece's numbers in one array (6, N, most pieces), for per-element lookups.
         most = max(len(pieces) for pieces in self.pieces)
@@ -420,6 +421,28 @@ class SegmentNumerics:
         if piece.direction < 0:
             return np.minimum(k, 0.0)
         return np.zeros_like(k)
+
+    def least_stiffness_per_interval(self, index: int) -> FloatArray | None:
+        """
+        The exact least dp/dv [Pa/m^3] of a table's cubic on each interval between its rows.
+
+        Its derivative is a quadratic on each interval: the least value is at an end or at
+        the quadratic's vertex. None for a closed-form model. Computed once per segment.
+        """
+        if index not in self._least_stiffness:
+            cubics = self.segments[index].pressure_cubics()
+            least = None
+            if cubics is not None:
+                breaks, _, slope = cubics
+                width = np.diff(breaks)
+                a, b, c = slope[-3], slope[-2], slope[-1]   # a s^2 + b s + c, s in [0, width]
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    vertex = np.where(a > 0.0, -b / (2.0 * a), -1.0)
+                inside = (vertex > 0.0) & (vertex < width)
+                at_vertex = np.where(inside, (a * vertex + b) * vertex + c, np.inf)
+                least = np.minimum(np.minimum(c, (a * width + b) * width + c), at_vertex)
+            self._least_stiffness[index] = least
+        return self._least_stiffness[index]
 
     def on_flat_pieces(self, volumes: FloatArray) -> NDArray[np.bool_]:
         """Whether each segment's volume (m, N) lies on one of its flat pieces (to tol_v)."""
