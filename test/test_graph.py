@@ -219,6 +219,19 @@ def test_a_landing_is_certified_past_a_steep_step_between_flat_rows():
     assert_snaps_land_on_balanced_stable_states(segments, graph, base_takes_more=False)
 
 
+def test_a_flow_resting_short_of_a_plateau_corner_goes_on():
+    # Three different tables in 1 mbar steps: the flow from one snap balances to the rest
+    # tolerance 2e-11 m^3 short of a plateau's corner, one segment 7e-5 Pa below the plateau
+    # on a piece whose slope is nearly 0 there, where no equilibrium is; the map stopped
+    # ("found no stable state to land on"). The flow now goes on to a balance at round-off.
+    segments = [
+        quantised_gent_table('base', 448, 76640.611, 38.388274, 0.59286988e-3, 4.1591353),
+        quantised_gent_table('middle', 292, 61786.709, 26.205711, 0.58140537e-3, 4.0526822),
+        quantised_gent_table('tip', 444, 65296.255, 29.741466, 0.78119106e-3, 4.2764615)]
+    graph = transition_graph(EquilibriumMap(segments))
+    assert_snaps_land_on_balanced_stable_states(segments, graph, base_takes_more=False)
+
+
 def test_flows_onto_plateaus_of_different_stepped_tables_come_to_rest(monkeypatch):
     # Three different balloons logged in 1 mbar steps: some snaps end on a plateau (two
     # segments on flat rows at one pressure, the third stiffening), balanced but with a

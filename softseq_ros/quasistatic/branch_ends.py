@@ -27,6 +27,8 @@ from softseq_ros.quasistatic.states import StateReader
 # The flow's drifts on the two sides of a branch end cancel to this share of the larger: a
 # pitchfork (mirror images up to round-off, or both zero), not a fold.
 PITCHFORK = 1e-6
+# The balance (of the pressure scale) a flow that rested where no branch is goes on to.
+ROUND_OFF_REST = 1e-13
 
 
 def base_first(direction: FloatArray, volumes: FloatArray, tol: float) -> float:
@@ -144,6 +146,8 @@ class BranchEnds:
                 # a plateau (_corner_starts), it goes on from the steps that leave it.
                 end = self._leave_corner(index, upward, total)
                 if end is None:
+                    end = self._go_on_from_rest(index, total, landing)
+                if end is None:
                     raise
                 found.append(end)
         return found
@@ -179,6 +183,24 @@ class BranchEnds:
             return BranchEnd('snap', target,
                              self.reader.read(target, np.array([total])).volumes[0])
         return None
+
+    def _go_on_from_rest(self, index: int, total: float, landing: Landing) -> BranchEnd | None:
+        """
+        The landing of a flow that rested where no branch is, integrated on to a tighter rest.
+
+        A balance to ``flow_rest`` counts as rest; next to a segment whose slope is nearly 0
+        (a plateau's corner, in a table in steps) the flow can still be on its way there,
+        slowly, with no equilibrium where it stopped. It goes on until the pressures balance
+        to round-off (None: it cannot be placed then either).
+        """
+        landed = self._integrate(landing.volumes, rest=ROUND_OFF_REST)
+        if self._at_edge(landed):
+            return BranchEnd('limit')
+        try:
+            target = self._nearest_branch(total, landed, exclude=index)
+        except RuntimeError:
+            return None
+        return BranchEnd('snap', target, self.reader.read(target, np.array([total])).volumes[0])
 
     def _corner_starts(self, branch: Branch, fold: FloatArray, upward: bool) -> list[FloatArray]:
         """
@@ -279,7 +301,7 @@ class BranchEnds:
                 landed + base_first(null, landed, self.numerics.tol_v) * eps * null)
         return landed
 
-    def _integrate(self, start: FloatArray) -> FloatArray:
+    def _integrate(self, start: FloatArray, rest: float | None = None) -> FloatArray:
         """
         Integrate the redistribution flow from ``start`` until it comes to rest.
 
@@ -322,7 +344,7 @@ class BranchEnds:
                 break
             # At rest means balanced pressures at a stable state (a fold is balanced too), or
             # on a plateau, where the flow has nowhere to go.
-            if np.max(np.abs(rhs(t, y))) < tolerances.flow_rest and (
+            if np.max(np.abs(rhs(t, y))) < (tolerances.flow_rest if rest is None else rest) and (
                     self._is_stable(y * scale_v) or self._on_plateau(y * scale_v)):
                 break
         return np.clip(y * scale_v, lo, hi)
