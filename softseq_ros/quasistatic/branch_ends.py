@@ -165,23 +165,30 @@ class BranchEnds:
             landed = self._flow(start)
             if self._at_edge(landed):
                 return BranchEnd('limit')
+        return self._snap_to(index, total, landed)
+
+    def _snap_to(self, index: int, total: float, landed: FloatArray) -> BranchEnd:
+        """The snap onto the branch holding ``landed`` at ``total`` (RuntimeError: none does)."""
         target = self._nearest_branch(total, landed, exclude=index)
         return BranchEnd('snap', target, self.reader.read(target, np.array([total])).volumes[0])
+
+    def _placed(self, index: int, total: float, landed: FloatArray) -> BranchEnd | None:
+        """The domain's end where ``landed`` is at a range's edge, else its snap (None: none)."""
+        if self._at_edge(landed):
+            return BranchEnd('limit')
+        try:
+            return self._snap_to(index, total, landed)
+        except RuntimeError:
+            return None
 
     def _leave_corner(self, index: int, upward: bool, total: float) -> BranchEnd | None:
         """The first landing from the corner's steps (None: the end is no such corner)."""
         branch = self.branches[index]
         fold = branch.volumes[-1 if upward else 0]
         for start in self._corner_starts(branch, fold, upward):
-            landed = self._flow(start)
-            if self._at_edge(landed):
-                return BranchEnd('limit')
-            try:
-                target = self._nearest_branch(total, landed, exclude=index)
-            except RuntimeError:
-                continue
-            return BranchEnd('snap', target,
-                             self.reader.read(target, np.array([total])).volumes[0])
+            end = self._placed(index, total, self._flow(start))
+            if end is not None:
+                return end
         return None
 
     def _go_on_from_rest(self, index: int, total: float, landing: Landing) -> BranchEnd | None:
@@ -193,14 +200,7 @@ class BranchEnds:
         slowly, with no equilibrium where it stopped. It goes on until the pressures balance
         to round-off (None: it cannot be placed then either).
         """
-        landed = self._integrate(landing.volumes, rest=ROUND_OFF_REST)
-        if self._at_edge(landed):
-            return BranchEnd('limit')
-        try:
-            target = self._nearest_branch(total, landed, exclude=index)
-        except RuntimeError:
-            return None
-        return BranchEnd('snap', target, self.reader.read(target, np.array([total])).volumes[0])
+        return self._placed(index, total, self._integrate(landing.volumes, rest=ROUND_OFF_REST))
 
     def _corner_starts(self, branch: Branch, fold: FloatArray, upward: bool) -> list[FloatArray]:
         """
