@@ -17,7 +17,8 @@ in its own process: ``FORMER`` (the code before the map was built side by side, 
 speed-up, up to ``--original-max-n``). Each baseline case runs once: it takes minutes at
 N = 8. "same result" compares every branch's samples, rough intervals and ends, every snap's
 landing state and every transition's fluid and energy with the former code's: "bit-identical"
-when all of them are equal to the bit, else the largest deviation of a branch end.
+when all of them are equal to the bit; else, when every branch ends as before and every
+transition lands where it did, the largest deviation of a branch end (a share of the range).
 
 ``--quick``: N = 2 and 3, tables only, former baseline for N = 2, no original; prints its
 table, writes nothing. The full mode writes ``bench/graph_results.md``. Timings on a shared
@@ -102,6 +103,7 @@ def child(count: int, law: str) -> None:
         'tried': getattr(emap, 'configurations_tried', None),
         'possible': getattr(emap, 'configurations_possible', None),
         'ends': ends, 'lo': [b.lo for b in emap.branches], 'hi': [b.hi for b in emap.branches],
+        'landings': [[t.source, t.direction, t.kind, t.target] for t in graph.transitions],
         'digest': digest(emap, graph)}))
 
 
@@ -122,9 +124,11 @@ def same(new: dict, old: dict) -> str:
         return 'bit-identical'
     if new['ends'] != old['ends']:
         return 'no (other ends)'
+    if old.get('landings', new['landings']) != new['landings']:
+        return 'no (other landings)'
     scale = max(max(map(abs, new['hi'])), 1e-300)
     worst = max(abs(a - b) for a, b in zip(new['lo'] + new['hi'], old['lo'] + old['hi']))
-    return f'same ends, intervals to {worst / scale:.1e}'
+    return f'same ends and landings, intervals to {worst / scale:.0e}'
 
 
 def export(commit: str, folder: Path) -> Path:

@@ -89,7 +89,8 @@ QUICK = {
         ['# Equilibrium map and transition graph: N peaked segments',
          '| N | law | configurations tried / brute force | branches | snaps | map + graph [s] |'],
         [r'\| 2 \| table \| 8 / 9 \| 9 \| 4 \| \d+\.\d\d \| \d+\.\d\d \| \d+\.\d\d \| '
-         r'\d+\.\d\d \| \d+\.\dx \| bit-identical \| - \| - \|',
+         r'\d+\.\d\d \| \d+\.\dx \| (bit-identical|same ends and landings, intervals to '
+         r'\de-1[3-9]) \| - \| - \|',
          r'\| 3 \| table \| 20 / 27 \| 21 \| 12 \| \d+\.\d\d \| \d+\.\d\d \| - \|'],
         ['bench/graph_results.md']),
     'bench_fem.py': (

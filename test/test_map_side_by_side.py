@@ -32,9 +32,23 @@ def gent_segments(table: bool) -> list:
     return built
 
 
+def remember_own_samples(numerics: SegmentNumerics, count: int) -> None:
+    """Each piece's pressures at ``count`` volumes along it, as the map's sampling leaves them."""
+    for i, segment in enumerate(numerics.segments):
+        for piece in numerics.pieces[i]:
+            if piece.direction != 0:
+                volumes = np.linspace(piece.v_lo, piece.v_hi, count)
+                pressure = segment.pressure(volumes)
+                order = np.argsort(pressure, kind='stable')
+                numerics.remember_inversions(i, piece, pressure[order], volumes[order])
+
+
+@pytest.mark.parametrize('remembered', [False, True], ids=['piece-wide', 'from-samples'])
 @pytest.mark.parametrize('table', [True, False], ids=['tables', 'closed-form'])
-def test_inverting_all_pieces_at_once_gives_each_piece_s_numbers(table):
+def test_inverting_all_pieces_at_once_gives_each_piece_s_numbers(table, remembered):
     numerics = SegmentNumerics(gent_segments(table))
+    if remembered:
+        remember_own_samples(numerics, 57)
     rng = np.random.default_rng(5)
     rows = 300
     pieces = np.stack([rng.integers(0, len(p), rows) for p in numerics.pieces], axis=1)
@@ -46,10 +60,54 @@ def test_inverting_all_pieces_at_once_gives_each_piece_s_numbers(table):
     for i, segment_pieces in enumerate(numerics.pieces):
         for a, piece in enumerate(segment_pieces):
             at = np.flatnonzero(pieces[:, i] == a)
-            alone = numerics.inverse(i, piece)(pressure[at])
+            alone = numerics.invert_piece(i, piece, pressure[at])
             assert volumes[at, i].tolist() == alone.tolist()
             assert stiffness[at, i].tolist() == numerics.piece_stiffness(
                 i, piece, alone).tolist()
+
+
+@pytest.mark.parametrize('table', [True, False], ids=['tables', 'closed-form'])
+def test_an_inversion_started_between_known_samples_lands_on_the_same_volume(table):
+    """Started between two sampled volumes or across the whole piece: one volume, to round-off."""
+    plain = SegmentNumerics(gent_segments(table))
+    sampled = SegmentNumerics(gent_segments(table))
+    remember_own_samples(sampled, 41)
+    rng = np.random.default_rng(11)
+    for i, segment in enumerate(plain.segments):
+        for piece in plain.pieces[i]:
+            if piece.direction == 0:
+                continue
+            # Inside the piece, at its ends, and beyond them (the nearer end).
+            pressure = np.concatenate([rng.uniform(piece.p_min, piece.p_max, 200),
+                                       [piece.p_min, piece.p_max, piece.p_min - 1.0,
+                                        piece.p_max + 1.0]])
+            far = plain.invert_piece(i, piece, pressure)
+            near = sampled.invert_piece(i, piece, pressure)
+            assert plain.convergence.converged and sampled.convergence.converged
+            assert np.all((near >= piece.v_lo) & (near <= piece.v_hi))
+            assert np.max(np.abs(near - far)) <= 1e-12 * (piece.v_hi - piece.v_lo)
+            inside = slice(0, 200)
+            assert np.max(np.abs(segment.pressure(near[inside]) - pressure[inside])) <= (
+                1e-9 * max(abs(piece.p_min), abs(piece.p_max)))
+            assert near[-4:].tolist() == [piece.v_lo if piece.direction > 0 else piece.v_hi,
+                                          piece.v_hi if piece.direction > 0 else piece.v_lo] * 2
+
+
+def test_every_table_evaluated_side_by_side_gives_each_table_s_numbers():
+    """The landings' one evaluation of all tables equals each table's own calls, to the bit."""
+    segments = gent_segments(True)
+    segments[1] = gent_segments(False)[1]     # a closed form among the tables is called as is
+    numerics = SegmentNumerics(segments)
+    rng = np.random.default_rng(3)
+    # Random volumes, a table's rows (where its cubics meet) and the ends of its range.
+    volumes = np.stack([np.concatenate([
+        rng.uniform(s.rest_volume, s.max_volume, 500),
+        s.knots()[:50] if s.knots().size else np.linspace(s.rest_volume, s.max_volume, 50),
+        [s.rest_volume, s.max_volume]]) for s in segments], axis=1)
+    pressure, stiffness = numerics.model_pressures(volumes), numerics.model_stiffnesses(volumes)
+    for i, segment in enumerate(segments):
+        assert pressure[:, i].tolist() == segment.pressure(volumes[:, i]).tolist()
+        assert stiffness[:, i].tolist() == segment.stiffness(volumes[:, i]).tolist()
 
 
 def test_reading_many_branches_at_once_gives_each_branch_s_numbers():

@@ -66,7 +66,8 @@ class SharedGrid:
             index, piece = key
             lo = int(np.searchsorted(self.p, piece.p_min, side='left'))
             hi = int(np.searchsorted(self.p, piece.p_max, side='right'))
-            volumes = numerics.inverse(index, piece)(self.p[lo:hi])
+            volumes = numerics.invert_piece(index, piece, self.p[lo:hi])
+            numerics.remember_inversions(index, piece, self.p[lo:hi], volumes)
             self.start[key] = lo
             self.volumes[key] = volumes
             self.stiffness[key] = numerics.piece_stiffness(index, piece, volumes)
@@ -254,8 +255,12 @@ class Assembly:
             count = max(32, int(math.ceil(self.resolution * seg.arclength_share(piece))))
             knots = seg.knots()
             knots = knots[(knots > piece.v_lo) & (knots < piece.v_hi)]
-            self._samples[key] = seg.pressure(np.concatenate([seg.arclength_samples(piece, count),
-                                                              knots]))
+            volumes = np.concatenate([seg.arclength_samples(piece, count), knots])
+            self._samples[key] = seg.pressure(volumes)
+            # Each sample is a volume and its pressure: a bracket for every later inversion.
+            order = np.argsort(self._samples[key], kind='stable')
+            self.numerics.remember_inversions(index, piece, self._samples[key][order],
+                                              volumes[order])
         return self._samples[key]
 
     def _assemble_plateau(self, config: tuple[Piece, ...], flats: list[int],

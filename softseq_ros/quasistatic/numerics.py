@@ -2,29 +2,22 @@
 The numbers every stage of the equilibrium map shares: pieces, scales, inversions, stiffnesses.
 
 A segment's volume on one monotone piece of its curve at a given pressure (the inversion) is the
-map's innermost operation. :class:`PieceInverse` does it by a safeguarded Newton iteration, for
-many pressures at once and elementwise: a volume does not depend on which other pressures were
-inverted with it, so stages that batch their inversions differently get the same numbers.
+map's innermost operation. :meth:`SegmentNumerics.invert_rows` does it by a safeguarded Newton
+iteration, for many pressures at once and elementwise: a volume does not depend on which other
+pressures were inverted with it, so stages that batch their inversions differently get the same
+numbers. Once a piece has been sampled, every later inversion on it starts between the two known
+volumes around its pressure (:meth:`SegmentNumerics.remember_inversions`).
 """
 
-from bisect import bisect_right
-import math
 from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.segments.models import (
-    Piece,
-    Segment,
-    at_piece_ends,
-    newton_start,
-)
+from softseq_ros.segments.models import Piece, Segment
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
 
 FloatArray = NDArray[np.float64]
-# Up to this many pressures, a table's piece is inverted on Python floats, one at a time.
-SCALAR_INVERSIONS = 16
 EPS = float(np.finfo(float).eps)
 
 
@@ -61,146 +54,6 @@ def soft_direction(k: FloatArray) -> FloatArray:
     return direction / np.linalg.norm(direction)
 
 
-class PieceInverse:
-    """
-    Volumes on one monotone piece of one segment where the pressure equals given values.
-
-    :meth:`Segment.invert`'s safeguarded Newton iteration, step for step, iterating only the
-    pressures not converged yet. For a table, a few pressures at a time are inverted on Python
-    floats with its cubics' coefficients (:func:`evaluate_cubics`' operations: the numbers of
-    the model's own calls, to the bit), where an array call would cost more than the
-    arithmetic.
-    """
-
-    def __init__(self, segment: Segment, piece: Piece, tolerances: Tolerances,
-                 log: ConvergenceLog) -> None:
-        """``log`` records whether each inversion converged."""
-        self.segment, self.piece = segment, piece
-        self.tolerances, self.log = tolerances, log
-        self.cubics = segment.pressure_cubics() if piece.direction != 0 else None
-        if self.cubics is not None:
-            breaks, pressure, stiffness = self.cubics
-            # The same cubics as Python floats, for a few pressures at a time.
-            self.breaks_list = breaks.tolist()
-            self.pressure_rows = pressure.T.tolist()
-            self.stiffness_rows = stiffness.T.tolist()
-
-    def __call__(self, p: FloatArray) -> FloatArray:
-        """The volumes at pressures ``p`` (those outside the piece's range: its nearer end)."""
-        if self.cubics is None:
-            return self.segment.invert(self.piece, p, self.tolerances, self.log)
-        target = np.asarray(p, dtype=float)
-        if target.size <= SCALAR_INVERSIONS:
-            volumes, converged = [], True
-            for value in target.ravel().tolist():
-                volume, done = self._one(value)
-                volumes.append(volume)
-                converged &= done
-            self.log.record('inversion', converged)
-            return np.array(volumes).reshape(target.shape)
-        lo, hi, x, _ = newton_start(self.piece, target, self.tolerances.round_off_ulps)
-        x = self._newton(target.ravel(), lo.ravel(), hi.ravel(), x.ravel().copy())
-        return at_piece_ends(self.piece, target, x.reshape(target.shape))
-
-    def bracketed(self, p: FloatArray, lo: FloatArray, hi: FloatArray,
-                  start: FloatArray) -> FloatArray:
-        """
-        The volumes at pressures ``p``, each known to lie in [``lo``, ``hi``] on this piece.
-
-        The same iteration and stopping rule as a call, from ``start`` (inside the bracket)
-        instead of the piece-wide guess: from a good start it stops after one or two steps,
-        at round-off of the same volume (not the same bits as a call, whose steps differ).
-        """
-        target = np.asarray(p, dtype=float).ravel()
-        x = self._newton(target, np.array(lo, dtype=float).ravel(),
-                         np.array(hi, dtype=float).ravel(), np.array(start, dtype=float).ravel())
-        return at_piece_ends(self.piece, target, x)
-
-    def _newton(self, goal: FloatArray, lo: FloatArray, hi: FloatArray,
-                x: FloatArray) -> FloatArray:
-        """Safeguarded Newton on the pressures not converged yet (a converged one stays)."""
-        piece, tolerances = self.piece, self.tolerances
-        sign = float(piece.direction)
-        ulps = tolerances.round_off_ulps
-        floor = ulps * EPS * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
-        # A table's pressure and stiffness through its own PPoly calls: the numbers of
-        # evaluate_cubics, faster for arrays.
-        pressure, stiffness = self.segment.pressure, self.segment.stiffness
-        converged = False
-        active = np.arange(x.size)
-        for _ in range(tolerances.inversion_steps):
-            xa, ta = x[active], goal[active]
-            residual = sign * (pressure(xa) - ta)
-            above = residual > 0.0
-            ha = np.where(above, xa, hi[active])
-            la = np.where(above, lo[active], xa)
-            done = (np.abs(residual) <= floor) | (
-                ha - la <= ulps * np.spacing(np.maximum(np.abs(ha), 1e-300)))
-            if np.all(done):
-                converged = True
-                break
-            # Only the pressures still going take a step (and need a stiffness).
-            going = ~done
-            active, xa, la, ha = active[going], xa[going], la[going], ha[going]
-            slope = sign * stiffness(xa)
-            with np.errstate(divide='ignore', invalid='ignore'):
-                step = xa - residual[going] / slope
-            inside = np.isfinite(step) & (step > la) & (step < ha)
-            x[active] = np.where(inside, step, 0.5 * (la + ha))
-            lo[active], hi[active] = la, ha
-        self.log.record('inversion', converged)
-        return x
-
-    def _cubic(self, rows: list[list[float]], v: float) -> float:
-        """One cubic at one volume: :func:`evaluate_cubics`' operations on Python floats."""
-        breaks = self.breaks_list
-        i = min(max(bisect_right(breaks, v) - 1, 0), len(breaks) - 2)
-        offset = v - breaks[i]
-        row = rows[i]
-        value = row[-1]
-        power = offset
-        value = value + row[-2] * power
-        for coefficient in row[-3::-1]:
-            power = power * offset
-            value = value + coefficient * power
-        return value
-
-    def _one(self, target: float) -> tuple[float, bool]:
-        """
-        One pressure's volume and whether it converged: the array iteration's steps on floats.
-
-        IEEE arithmetic on Python floats and on numpy's elements gives the same numbers, and
-        an element of the array iteration stops moving once it is done, so the volume is the
-        one the arrays give; a few pressures at a time cost a fraction of the array calls.
-        """
-        piece = self.piece
-        sign = float(piece.direction)
-        lo, hi = piece.v_lo, piece.v_hi
-        span = piece.p_at_hi - piece.p_at_lo
-        x = (piece.v_lo + (piece.v_hi - piece.v_lo)
-             * min(max((target - piece.p_at_lo) / span, 0.0), 1.0)) if span else 0.5 * (lo + hi)
-        ulps = self.tolerances.round_off_ulps
-        floor = ulps * EPS * max(abs(piece.p_at_lo), abs(piece.p_at_hi), 1e-300)
-        converged = False
-        for _ in range(self.tolerances.inversion_steps):
-            residual = sign * (self._cubic(self.pressure_rows, x) - target)
-            if residual > 0.0:
-                hi = x
-            else:
-                lo = x
-            if abs(residual) <= floor or hi - lo <= ulps * math.ulp(max(abs(hi), 1e-300)):
-                converged = True
-                break
-            slope = sign * self._cubic(self.stiffness_rows, x)
-            step = x - residual / slope if slope != 0.0 else math.nan
-            x = step if (math.isfinite(step) and lo < step < hi) else 0.5 * (lo + hi)
-        if target == piece.p_at_lo:
-            x = piece.v_lo
-        if target == piece.p_at_hi:
-            x = piece.v_hi
-        return x, converged
-
-
 class SegmentNumerics:
     """The numbers every stage shares: segments, their pieces, scales and tolerances."""
 
@@ -220,7 +73,7 @@ class SegmentNumerics:
         self.p_scale = p_extent if p_extent > 0.0 else 1.0
         self.k_scale = self.p_scale / self.v_scale
         self.tol_v = tolerances.same_volume * self.v_scale
-        self._inverses: dict[tuple[int, Piece], PieceInverse] = {}
+        self._inverted: dict[tuple[int, int], tuple[FloatArray, FloatArray]] = {}
         self._least_stiffness: dict[int, FloatArray | None] = {}
         self._piece_ids = [{piece: a for a, piece in enumerate(pieces)} for pieces in self.pieces]
         # Every piece's numbers in one array (6, N, most pieces), for per-element lookups.
@@ -235,10 +88,8 @@ class SegmentNumerics:
         # Pressure and stiffness of each segment for arrays of volumes inside its range: for a
         # table, scipy's PPoly calls (the numbers of evaluate_cubics, and faster for arrays).
         self._curve = [(seg.pressure, seg.stiffness) for seg in self.segments]
+        self._side_by_side = _SideBySideCubics(self.segments)
 
-    def volumes_at(self, config: tuple[Piece, ...], p: FloatArray) -> FloatArray:
-        """Each segment's volume on its piece of ``config`` at the pressures ``p``."""
-        return np.stack([self.inverse(i, piece)(p) for i, piece in enumerate(config)], axis=-1)
 
     def piece_indices(self, config: tuple[Piece, ...]) -> list[int]:
         """The index of each segment's piece of ``config`` among the segment's pieces."""
@@ -285,6 +136,8 @@ class SegmentNumerics:
         """:meth:`invert` for elements of one segment; whether all converged."""
         v_lo, v_hi, p_lo, p_hi, sign, floor = self._piece_table[:, index][:, piece]
         if bracket is None:
+            bracket = self._sampled_bracket(index, piece, goal)
+        if bracket is None:
             span = p_hi - p_lo
             with np.errstate(divide='ignore', invalid='ignore'):
                 guess = v_lo + (v_hi - v_lo) * np.clip((goal - p_lo) / span, 0.0, 1.0)
@@ -322,6 +175,55 @@ class SegmentNumerics:
         x = np.where(goal == p_lo, v_lo, x)
         return np.where(goal == p_hi, v_hi, x), active.size == 0
 
+    def invert_piece(self, index: int, piece: Piece, p: FloatArray) -> FloatArray:
+        """Volumes of segment ``index`` on ``piece`` at pressures ``p`` (:meth:`invert_rows`)."""
+        indices = np.full(np.shape(p), self._piece_ids[index][piece], dtype=np.intp)
+        volumes, converged = self._invert_segment(index, indices, np.asarray(p, dtype=float),
+                                                  None)
+        self.convergence.record('inversion', converged)
+        return volumes
+
+    def remember_inversions(self, index: int, piece: Piece, p: FloatArray,
+                            volumes: FloatArray) -> None:
+        """
+        Volumes of segment ``index`` on ``piece`` already inverted at sorted pressures ``p``.
+
+        Later inversions on that piece start from the two of them around their pressure: the
+        volume lies between theirs (the piece is monotone), so the safeguarded Newton stops
+        after two or three steps instead of narrowing the whole piece first.
+        """
+        if p.size >= 2:
+            self._inverted[(index, self._piece_ids[index][piece])] = (p, volumes)
+
+    def _sampled_bracket(self, index: int, piece: NDArray[np.intp], goal: FloatArray
+                         ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """(lo, hi, start) per element from :meth:`remember_inversions`; None: none known."""
+        found = [(a, self._inverted.get((index, a)))
+                 for a in np.flatnonzero(np.bincount(piece)).tolist()]
+        if not any(known is not None for _, known in found):
+            return None
+        v_lo, v_hi, p_lo, p_hi, _, _ = self._piece_table[:, index][:, piece]
+        span = p_hi - p_lo
+        with np.errstate(divide='ignore', invalid='ignore'):
+            start = v_lo + (v_hi - v_lo) * np.clip((goal - p_lo) / span, 0.0, 1.0)
+        start = np.where(span != 0.0, start, 0.5 * (v_lo + v_hi))
+        lo, hi = v_lo.copy(), v_hi.copy()
+        for a, known in found:
+            if known is None:
+                continue
+            p, volumes = known
+            rows = np.flatnonzero(piece == a) if len(found) > 1 else slice(None)
+            target = goal[rows]
+            k = np.clip(np.searchsorted(p, target, side='right') - 1, 0, p.size - 2)
+            below, above = volumes[k], volumes[k + 1]
+            rise = p[k + 1] - p[k]
+            with np.errstate(divide='ignore', invalid='ignore'):
+                share = np.where(rise > 0.0, np.clip((target - p[k]) / rise, 0.0, 1.0), 0.0)
+            start[rows] = below + (above - below) * share
+            lo[rows] = np.minimum(below, above)
+            hi[rows] = np.maximum(below, above)
+        return lo, hi, start
+
     def _curve_within(self, index: int, lo: FloatArray, hi: FloatArray) -> tuple:
         """
         Pressure and stiffness of segment ``index`` for volumes known to stay in [lo, hi].
@@ -337,22 +239,29 @@ class SegmentNumerics:
         breaks, pressure_c, stiffness_c = cubics
         interval = np.clip(np.searchsorted(breaks, lo, side='right') - 1, 0, breaks.size - 2)
         across = ~(hi <= breaks[interval + 1])
+        some_across = bool(across.any())
+        left = breaks[interval]
         pressure, stiffness = self._curve[index]
 
         def on_interval(coefficients: FloatArray, model: Callable[[FloatArray], FloatArray]
                         ) -> Callable[[FloatArray, NDArray[np.intp]], FloatArray]:
+            # Each element's cubic gathered once; the iteration narrows to fewer rows.
+            own = coefficients[:, interval]
+
             def evaluate(v: FloatArray, rows: NDArray[np.intp]) -> FloatArray:
-                i = interval[rows]
-                offset = v - breaks[i]
-                value = coefficients[-1, i]
+                every = rows.size == interval.size
+                c = own if every else own[:, rows]
+                offset = v - (left if every else left[rows])
+                value = c[-1]
                 power = offset
-                value = value + coefficients[-2, i] * power
-                for m in range(coefficients.shape[0] - 3, -1, -1):
+                value = value + c[-2] * power
+                for m in range(c.shape[0] - 3, -1, -1):
                     power = power * offset
-                    value = value + coefficients[m, i] * power
-                other = np.flatnonzero(across[rows])
-                if other.size:
-                    value[other] = model(v[other])
+                    value = value + c[m] * power
+                if some_across:
+                    other = np.flatnonzero(across[rows])
+                    if other.size:
+                        value[other] = model(v[other])
                 return value
             return evaluate
 
@@ -389,15 +298,6 @@ class SegmentNumerics:
         return np.stack([floors[i][piece_index[:, i]] for i in range(piece_index.shape[1])],
                         axis=1)
 
-
-    def inverse(self, index: int, piece: Piece) -> PieceInverse:
-        """The inversion of segment ``index`` on ``piece`` (built once, then reused)."""
-        key = (index, piece)
-        found = self._inverses.get(key)
-        if found is None:
-            found = self._inverses[key] = PieceInverse(self.segments[index], piece,
-                                                       self.tolerances, self.convergence)
-        return found
 
     def stiffness(self, config: tuple[Piece, ...], volumes: FloatArray) -> FloatArray:
         """Scaled dp/dv, clipped to the sign its piece promises (exactly 0 on a flat piece)."""
@@ -469,13 +369,11 @@ class SegmentNumerics:
 
     def model_pressures(self, volumes: FloatArray) -> FloatArray:
         """Each segment's gauge pressure at volumes (m, N) inside its range [Pa]."""
-        return np.stack([self._curve[i][0](volumes[:, i]) for i in range(volumes.shape[1])],
-                        axis=1)
+        return self._side_by_side.evaluate(volumes, 0, [c[0] for c in self._curve])
 
     def model_stiffnesses(self, volumes: FloatArray) -> FloatArray:
         """Each segment's dp/dv at volumes (m, N) inside its range [Pa/m^3], unclipped."""
-        return np.stack([self._curve[i][1](volumes[:, i]) for i in range(volumes.shape[1])],
-                        axis=1)
+        return self._side_by_side.evaluate(volumes, 1, [c[1] for c in self._curve])
 
     def curvatures(self, volumes: FloatArray) -> FloatArray:
         """Per-segment curvature for volumes (n, N), in 1/m."""
@@ -486,3 +384,68 @@ class SegmentNumerics:
         """Per-segment d(curvature)/dv for volumes (n, N), in 1/m per m^3."""
         return np.stack([s.curvature_slope(volumes[:, j]) for j, s in enumerate(self.segments)],
                         axis=1)
+
+
+class _SideBySideCubics:
+    """
+    Every table's pressure (or stiffness) cubics in one array, to evaluate all at once.
+
+    A flow's state is one volume per segment, and the landings evaluate every segment at a
+    few dozen states at a time, thousands of times: one PPoly call per segment costs more than
+    the arithmetic. Here each table only looks up its intervals, and one set of array
+    operations (:func:`evaluate_cubics`', so PPoly's numbers to the bit) evaluates them all.
+    A closed-form segment is called as it is.
+    """
+
+    def __init__(self, segments: Sequence[Segment]) -> None:
+        self.tables: list[int] = []
+        self.breaks: list[FloatArray] = []
+        first: list[int] = []
+        left_ends: list[FloatArray] = []
+        coefficients: tuple[list[FloatArray], list[FloatArray]] = ([], [])
+        count = 0
+        for i, segment in enumerate(segments):
+            cubics = segment.pressure_cubics()
+            if cubics is None:
+                continue
+            breaks, pressure, stiffness = cubics
+            self.tables.append(i)
+            self.breaks.append(breaks)
+            first.append(count)
+            count += breaks.size - 1
+            left_ends.append(breaks[:-1])
+            coefficients[0].append(pressure)
+            coefficients[1].append(stiffness)
+        self.others = [i for i in range(len(segments)) if i not in self.tables]
+        self.first = np.array(first, dtype=np.intp)
+        self.lows = np.array([segments[i].rest_volume for i in self.tables])
+        self.highs = np.array([segments[i].max_volume for i in self.tables])
+        if self.tables:
+            self.left_ends = np.concatenate(left_ends)
+            self.coefficients = tuple(np.concatenate(c, axis=1) for c in coefficients)
+
+    def evaluate(self, volumes: FloatArray, which: int,
+                 models: list[Callable[[FloatArray], FloatArray]]) -> FloatArray:
+        """Pressures (``which`` 0) or stiffnesses (1) at volumes (m, N); ``models``: the calls."""
+        values = np.empty(volumes.shape)
+        for i in self.others:
+            values[:, i] = models[i](volumes[:, i])
+        if not self.tables:
+            return values
+        v = np.minimum(np.maximum(volumes[:, self.tables], self.lows), self.highs)
+        interval = np.empty(v.shape, dtype=np.intp)
+        for column, breaks in enumerate(self.breaks):
+            interval[:, column] = np.searchsorted(breaks, v[:, column], side='right')
+        interval = self.first + np.minimum(np.maximum(interval - 1, 0),
+                                           np.array([b.size - 2 for b in self.breaks]))
+        offset = v - self.left_ends[interval]
+        c = self.coefficients[which]
+        order = c.shape[0]
+        value = c[order - 1][interval]
+        power = offset
+        value = value + c[order - 2][interval] * power
+        for m in range(order - 3, -1, -1):
+            power = power * offset
+            value = value + c[m][interval] * power
+        values[:, self.tables] = value
+        return values
