@@ -468,6 +468,23 @@ def test_snap_energy_and_fluid_agree_with_the_closed_form(asymmetric):
     assert largest.fluid_moved == pytest.approx(23.6 * ML, abs=0.1 * ML)
 
 
+def test_a_table_s_stored_energy_is_the_integral_of_its_pressure():
+    """A table's energy (its cubics' antiderivative) against adaptive quadrature of its curve."""
+    from scipy.integrate import quad
+
+    balloon = BalloonSegment('b', 0.074, NeoHookean(60.0e3), 0.006, 0.6e-3, 3.0)
+    rows = balloon.rest_volume * np.linspace(1.0, 3.0, 37) ** 3
+    pressure = balloon.pressure(rows) + 200.0 * np.sin(np.arange(rows.size))   # kinks
+    table = TabulatedSegment('t', 0.074, rows, pressure, np.zeros(rows.size))
+    ends = np.array([rows[0], rows[3], 0.5 * (rows[10] + rows[11]), rows[-1]])
+    for end in ends:
+        inside = rows[(rows > rows[0]) & (rows < end)]
+        expected = quad(table.pressure, rows[0], end, points=inside, limit=200,
+                        epsabs=0.0, epsrel=1e-13)[0] if end > rows[0] else 0.0
+        got = stored_energy([table, balloon], np.array([end, balloon.rest_volume]))
+        assert got == pytest.approx(expected, rel=1e-11, abs=1e-18)
+
+
 def test_softseq_graph_writes_si_json_and_the_figure(tmp_path, capsys, monkeypatch):
     from softseq_ros.analysis import graph_figure
 
