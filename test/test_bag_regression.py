@@ -3,9 +3,11 @@ Batch bags stay the same, topic by topic: the paper scene and the Fig. 1 asymmet
 
 The fingerprints in ``data/bag_digests.json`` were taken from bags that main wrote (commit
 6b18066) before the physics was split into segments / scene / quasistatic and the actuator got
-its model seam. A restructuring must not change what the rig records: per topic, the message
-count, the log and publish times, every integer, string and name, and the structure of every
-message must be exactly as recorded; the floating-point values must agree to 1e-9 of their
+its model seam, and re-recorded once since: when the camera's triggers stopped depending on the
+last bits of the volumes' sum (a snapshot moved by one command in the scenes whose pump steps
+exactly onto a trigger). A restructuring must not change what the rig records: per topic, the
+message count, the log and publish times, every integer, string and name, and the structure of
+every message must be exactly as recorded; the floating-point values must agree to 1e-9 of their
 magnitude. Floats are not compared bit for bit because numpy's vectorised ``log`` and ``exp``
 (the Gent balloons) may differ in the last bit between CPUs; on one machine the bags are
 byte-identical, and a change that moves a value by more than round-off fails here.

@@ -9,6 +9,7 @@ import json
 import math
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -365,6 +366,44 @@ def test_camera_snapshots_say_their_step_and_noise_is_seeded(tmp_path):
     # Snapshot at 10 mL: the state at the first command past the trigger (row 20, 10.2 mL).
     misfit = np.mean((clean - snapshots[0].poses[None, :, [0, 2]]) ** 2, axis=(1, 2))
     assert int(np.argmin(misfit)) == 20
+
+
+@pytest.mark.parametrize('ulps', [-4, 4])
+def test_camera_snapshots_a_state_that_lands_on_its_trigger_whatever_its_round_off(tmp_path,
+                                                                                    ulps):
+    """
+    A pump stepping exactly onto a trigger: the snapshot is at that step on the way up, and at
+    the step after it on the way down, whether the segments' volumes sum to a few ulps above
+    or below the trigger.
+    """
+    scene = load_scene(write_scene(tmp_path))
+    emap = EquilibriumMap(scene.segments)
+    up = np.linspace(0.0, 3.0e-5, 31)
+    up[10], up[25] = 1.0e-5, 2.5e-5          # the scene's triggers, exactly
+    commanded = np.concatenate([up, up[::-1]])
+    path = Tracker(emap).sweep(commanded)
+    volumes = path.volumes.copy()
+    rest = sum(s.rest_volume for s in scene.segments)
+    for row in np.flatnonzero(np.isin(commanded, [1.0e-5, 2.5e-5])):
+        # The sum of the volumes this many ulps off the trigger, the first segment taking it.
+        target = commanded[row] + rest
+        while (volumes[row].sum() - target) * np.sign(ulps) < 4 * abs(ulps) * np.spacing(target):
+            volumes[row, 0] = np.nextafter(volumes[row, 0], np.sign(ulps) * np.inf)
+        while (volumes[row].sum() - target) * np.sign(ulps) > 4 * abs(ulps) * np.spacing(target):
+            volumes[row, 0] = np.nextafter(volumes[row, 0], -np.sign(ulps) * np.inf)
+        assert 0.0 < (volumes[row].sum() - target) * np.sign(ulps) < 1e-12 * target
+    nudged = SimpleNamespace(injected=path.injected, volumes=volumes, pressure=path.pressure,
+                             curvatures=path.curvatures)
+    steps = topic_values(_feed_camera(camera_core(scene, outputs=frozenset({'poses'})), nudged),
+                         SnapshotStep)
+    # On the way up, the row the pump puts on the trigger; on the way down, the next one.
+    expected = [int(np.flatnonzero(commanded == 1.0e-5)[0]),
+                int(np.flatnonzero(commanded == 2.5e-5)[0]),
+                int(np.flatnonzero(commanded == 2.5e-5)[1]) + 1,
+                int(np.flatnonzero(commanded == 1.0e-5)[1]) + 1]
+    assert [(s.step, s.direction) for s in steps] == [
+        (1, 'inflation'), (2, 'inflation'), (2, 'deflation'), (1, 'deflation')]
+    assert [s.stamp_ns // 10**8 - 1 for s in steps] == expected
 
 
 def test_state_triggered_camera_draws_each_state_at_most_at_its_rate(tmp_path):

@@ -24,6 +24,9 @@ Each time it crosses a value of ``triggers`` (either direction), the backbone of
 the first command past the trigger is a :class:`Snapshot`, followed by a :class:`SnapshotStep`
 saying which trigger (1-based step), in which direction. The actuator stamps volumes and
 curvatures of one command alike, so the snapshot waits for the curvatures carrying that stamp.
+A trigger counts as reached within :data:`TRIGGER_SLACK` of the volume held (rest plus the
+largest trigger): the sum of the volumes carries their round-off, and a pump stepping exactly
+onto a trigger must have its snapshot at that step, whatever the last bits of the sum.
 """
 
 from bisect import bisect_right
@@ -50,6 +53,8 @@ from softseq_ros.rig.values import (
 from softseq_ros.segments.kinematics import PoseSampler, segment_end_indices
 
 CAMERA_OUTPUTS = ('poses', 'markers', 'image')
+# A trigger within this share of the volume held counts as reached (see the module's text).
+TRIGGER_SLACK = 1e-9
 FRAME_TRIGGERS = ('timer', 'state')
 
 
@@ -105,6 +110,8 @@ class CameraCore:
         self._last_frame_ns: int | None = None
         self._watch_triggers = bool(self.triggers) and 'poses' in self.outputs
         self._triggers_below: int | None = None
+        self._trigger_slack = TRIGGER_SLACK * (self.rest_total + max(map(abs, self.triggers),
+                                                                     default=0.0))
         self._pending_stamp: int | None = None
         self._pending: list[tuple[int, str]] = []   # (0-based trigger, direction)
         self._pending_injected = 0.0
@@ -169,7 +176,7 @@ class CameraCore:
             return self._refuse('volumes', f'ignoring volumes: {fault}')
         injected = sum(volumes) - self.rest_total
         # Triggers at or below the injected volume: a crossing changes this count.
-        below = bisect_right(self.triggers, injected)
+        below = bisect_right(self.triggers, injected + self._trigger_slack)
         previous, self._triggers_below = self._triggers_below, below
         if previous is None or below == previous:
             return []
