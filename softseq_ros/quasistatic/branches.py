@@ -450,81 +450,22 @@ class _Fitter:
         """
         Intervals whose volume cubic misses the exact state at their middle (in pressure).
 
-        The middle's volumes come from Newton started close by (:meth:`_middle_volumes`),
-        which stops within a bound of where the sampling's own inversion stops; where that
-        bound could move the verdict (next to a fold, where an interval's width in V is
-        round-off), the middle is inverted as the sampling does, so the verdict is the one
-        those volumes give.
+        The middle's volumes come from Newton started close by (:meth:`_middle_volumes`); an
+        interval that misses is split at this very middle next round.
         """
         if a.total.size == 0:
             return np.zeros(0, dtype=bool)
         h = (b.total - a.total)[:, None]
         cubic = hermite(a.volumes, b.volumes, a.slopes, b.slopes, h)
-        tolerance = CUBIC_TOLERANCE * self.numerics.v_scale
-        miss = np.zeros(h.size, dtype=bool)
-        if self.numerics.convergence.converged:
-            bound = self._bound(a, b)
-            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-                c0, c1, c2, _ = np.abs(cubic)
-                spread = np.sum(bound, axis=1, keepdims=True) / h
-                # With t in [0, 1], how far the verdict's distance may move at most.
-                most = np.max(bound + (c2 + 2.0 * c1 + 3.0 * c0) * spread, axis=1)
-            near = np.flatnonzero(most < 0.125 * tolerance)
-            if near.size == h.size:
-                middle = self._middle_volumes(a, b)
-            else:
-                middle = self._middle_volumes(a.take(near), b.take(near))
-            miss[near], distance, t = self._verdict(cubic[:, near], middle, a.total[near],
-                                                    h[near])
-            with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-                steepness = c2[near] + 2.0 * c1[near] * np.abs(t) + 3.0 * c0[near] * t * t
-                shift = np.max(bound[near] + steepness * spread[near], axis=1)
-            unsure = np.ones(h.size, dtype=bool)
-            unsure[near[np.abs(distance - tolerance) > 4.0 * shift]] = False
-            exact = np.flatnonzero(unsure)
-        else:
-            # An inversion ran out of its budget (a curve the models did not foresee, or a
-            # budget set too low): the bound needs converged inversions, so every middle is
-            # inverted as the sampling does.
-            exact = np.arange(h.size)
-        if exact.size:
-            volumes = self._exact(a.branch[exact], 0.5 * (a.pressure[exact]
-                                                          + b.pressure[exact])).volumes
-            miss[exact] = self._verdict(cubic[:, exact], volumes, a.total[exact],
-                                        h[exact])[0]
-            # An interval that misses is split at this very middle next round.
-            for row in np.flatnonzero(miss[exact]).tolist():
-                key = (int(a.branch[exact[row]]), float(a.total[exact[row]]),
-                       float(b.total[exact[row]]))
-                self._middles[key] = volumes[row]
-        return miss
-
-    def _verdict(self, cubic: FloatArray, middle: FloatArray, start: FloatArray,
-                 h: FloatArray) -> tuple[NDArray[np.bool_], FloatArray, FloatArray]:
-        """Whether the cubic misses the middle's state; the distance and where it was read."""
+        middle = self._middle_volumes(a, b)
         c0, c1, c2, c3 = cubic
-        t = ((middle.sum(axis=1) - start) / h[:, 0])[:, None]
-        guess = ((c0 * t + c1) * t + c2) * t + c3
-        distance = np.max(np.abs(guess - middle), axis=1)
-        return ~(distance <= CUBIC_TOLERANCE * self.numerics.v_scale), distance, t
-
-    def _bound(self, a: _Ends, b: _Ends) -> FloatArray:
-        """
-        How far the middle's volumes from :meth:`_middle_volumes` may be from the sampling's.
-
-        Both inversions stop where the pressure is within round-off of the target or the
-        bracket within a few ulps: twice that pressure round-off over the smaller stiffness
-        (halved, for how it may vary in between), plus the ulps.
-        """
-        numerics = self.numerics
-        ulps = numerics.tolerances.round_off_ulps
-        floor = numerics.round_off_floor(self.piece_index[a.branch])
-        with np.errstate(divide='ignore', invalid='ignore'):
-            softest = 0.25 * numerics.k_scale * np.minimum(np.abs(a.stiffness),
-                                                           np.abs(b.stiffness))
-            bound = 2.0 * (floor / softest + 2.0 * ulps * np.spacing(
-                np.maximum(np.abs(a.volumes), np.abs(b.volumes))))
-        return np.where(np.isnan(bound), np.inf, bound)
+        t = ((middle.sum(axis=1) - a.total) / h[:, 0])[:, None]
+        distance = np.max(np.abs(((c0 * t + c1) * t + c2) * t + c3 - middle), axis=1)
+        miss = ~(distance <= CUBIC_TOLERANCE * self.numerics.v_scale)
+        for row in np.flatnonzero(miss).tolist():
+            key = (int(a.branch[row]), float(a.total[row]), float(b.total[row]))
+            self._middles[key] = middle[row]
+        return miss
 
     def _middle_volumes(self, a: _Ends, b: _Ends) -> FloatArray:
         """
@@ -546,17 +487,9 @@ class _Fitter:
         return numerics.invert_rows(self.piece_index[a.branch], target, (lo, hi, start))
 
     def _exact(self, branch: NDArray[np.intp], pressure: FloatArray,
-               volumes: FloatArray | None = None) -> _Ends:
-        """
-        Samples at new pressures, inverted exactly as the sampling does (the same numbers).
-
-        ``volumes``: those inversions, when already done.
-        """
-        pieces = self.piece_index[branch]
-        if volumes is None:
-            volumes, stiffness = self.numerics.states_at(pieces, pressure)
-        else:
-            stiffness = self.numerics.stiffness_at(pieces, volumes)
+               volumes: FloatArray) -> _Ends:
+        """Samples at new pressures, from their volumes there (inverted to round-off)."""
+        stiffness = self.numerics.stiffness_at(self.piece_index[branch], volumes)
         full = sample_slopes(self.numerics, stiffness, volumes, False)
         return _Ends(branch, volumes.sum(axis=1), pressure, volumes, stiffness,
                      full[:, :self.n], np.all(np.isfinite(full), axis=1))

@@ -288,17 +288,6 @@ class SegmentNumerics:
         k = np.where(turning, 0.0, k)
         return np.where(sign > 0, np.maximum(k, 0.0), np.where(sign < 0, np.minimum(k, 0.0), 0.0))
 
-    def round_off_floor(self, piece_index: NDArray[np.intp]) -> FloatArray:
-        """
-        The pressure residual [Pa] an inversion counts as round-off, per row and segment.
-
-        ``piece_index`` (m, N): each row's piece per segment (:meth:`piece_indices`).
-        """
-        floors = self._piece_table[5]
-        return np.stack([floors[i][piece_index[:, i]] for i in range(piece_index.shape[1])],
-                        axis=1)
-
-
     def stiffness(self, config: tuple[Piece, ...], volumes: FloatArray) -> FloatArray:
         """Scaled dp/dv, clipped to the sign its piece promises (exactly 0 on a flat piece)."""
         return np.stack([self.piece_stiffness(i, piece, volumes[..., i])
