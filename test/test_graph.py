@@ -207,6 +207,24 @@ def test_three_identical_tables_in_one_millibar_steps_get_past_symmetric_saddles
                                                 base_takes_more=False)
 
 
+def test_a_snap_from_a_sliver_of_branch_next_to_a_common_valley_lands():
+    # Two identical 199-row tables (not quantised) from a random sweep: next to their common
+    # valley two mirror branches (one segment falling, one rising) are 3.2e-10 m^3 long, a
+    # few times the step off a fold. The way the flow points at their folds is then decided
+    # by round-off, and the flow from one of them went back onto the branch it leaves: the
+    # map stopped with "found no stable state to land on". Such a flow now starts again from
+    # the step on the fold's other side.
+    p0 = (45512.91103394532, 39.67499858546575, 0.00040109885904106567, 3.5584224496238015)
+    stretch = np.linspace(1.0, p0[3], 199)
+    pressure = (2.0 * p0[0] * p0[2] / R * (1.0 / stretch - stretch**-7)
+                / (1.0 - (2.0 * stretch**2 + stretch**-4 - 3.0) / p0[1]))
+    segments = [TabulatedSegment(name, 0.074, V0 * stretch**3, pressure, np.zeros(199))
+                for name in ('base', 'tip')]
+    graph = transition_graph(EquilibriumMap(segments))
+    assert graph.snaps()
+    assert_snaps_land_on_balanced_stable_states(segments, graph, base_takes_more=False)
+
+
 def test_a_landing_is_certified_past_a_steep_step_between_flat_rows():
     # A coarse table in 1 mbar steps climbs from one flat run of rows to the next within one
     # interval: its stiffness is 0 at both rows and steep in between. A ball around a state
