@@ -14,7 +14,7 @@ from typing import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.segments.models import Piece, Segment
+from softseq_ros.segments.models import Piece, Segment, polynomial_at
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
 
 FloatArray = NDArray[np.float64]
@@ -86,7 +86,7 @@ class SegmentNumerics:
                     pc.v_lo, pc.v_hi, pc.p_at_lo, pc.p_at_hi, float(pc.direction),
                     ulps * EPS * max(abs(pc.p_at_lo), abs(pc.p_at_hi), 1e-300))
         # Pressure and stiffness of each segment for arrays of volumes inside its range: for a
-        # table, scipy's PPoly calls (the numbers of evaluate_cubics, and faster for arrays).
+        # table, scipy's PPoly calls (the numbers of polynomial_at, and faster for arrays).
         self._curve = [(seg.pressure, seg.stiffness) for seg in self.segments]
         self._side_by_side = _SideBySideCubics(self.segments)
 
@@ -229,8 +229,9 @@ class SegmentNumerics:
         Pressure and stiffness of segment ``index`` for volumes known to stay in [lo, hi].
 
         For a table, each bracket inside one interval of its rows has its cubic evaluated
-        there directly (:func:`evaluate_cubics`' operations without a search per call); a
-        bracket across a row (by round-off, its end at a row) goes through the model's calls.
+        there directly (:func:`~softseq_ros.segments.models.polynomial_at`, without a search
+        per call); a bracket across a row (by round-off, its end at a row) goes through the
+        model's calls.
         """
         cubics = self.segments[index].pressure_cubics()
         if cubics is None or lo.size == 0:
@@ -250,14 +251,8 @@ class SegmentNumerics:
 
             def evaluate(v: FloatArray, rows: NDArray[np.intp]) -> FloatArray:
                 every = rows.size == interval.size
-                c = own if every else own[:, rows]
-                offset = v - (left if every else left[rows])
-                value = c[-1]
-                power = offset
-                value = value + c[-2] * power
-                for m in range(c.shape[0] - 3, -1, -1):
-                    power = power * offset
-                    value = value + c[m] * power
+                value = polynomial_at(own if every else own[:, rows],
+                                      v - (left if every else left[rows]))
                 if some_across:
                     other = np.flatnonzero(across[rows])
                     if other.size:
@@ -382,7 +377,8 @@ class _SideBySideCubics:
     A flow's state is one volume per segment, and the landings evaluate every segment at a
     few dozen states at a time, thousands of times: one PPoly call per segment costs more than
     the arithmetic. Here each table only looks up its intervals, and one set of array
-    operations (:func:`evaluate_cubics`', so PPoly's numbers to the bit) evaluates them all.
+    operations (:func:`~softseq_ros.segments.models.polynomial_at`: PPoly's numbers to the bit)
+    evaluates them all.
     A closed-form segment is called as it is.
     """
 
@@ -427,14 +423,6 @@ class _SideBySideCubics:
             interval[:, column] = np.searchsorted(breaks, v[:, column], side='right')
         interval = self.first + np.minimum(np.maximum(interval - 1, 0),
                                            np.array([b.size - 2 for b in self.breaks]))
-        offset = v - self.left_ends[interval]
-        c = self.coefficients[which]
-        order = c.shape[0]
-        value = c[order - 1][interval]
-        power = offset
-        value = value + c[order - 2][interval] * power
-        for m in range(order - 3, -1, -1):
-            power = power * offset
-            value = value + c[m][interval] * power
-        values[:, self.tables] = value
+        values[:, self.tables] = polynomial_at(self.coefficients[which][:, interval],
+                                               v - self.left_ends[interval])
         return values

@@ -133,7 +133,7 @@ class Segment(ABC):
 
         Breaks (m + 1,), coefficients of the pressure (k, m) and of the stiffness (k - 1, m).
         Coefficients in scipy's PPoly layout (highest power of v - breaks[i] first), so a
-        solver can evaluate many volumes with array arithmetic alone (:func:`evaluate_cubics`
+        solver can evaluate many volumes with array arithmetic alone (:func:`polynomial_at`
         gives the numbers :meth:`pressure` and :meth:`stiffness` give).
         """
         return None
@@ -380,22 +380,23 @@ class TabulatedSegment(Segment):
         return turns, flats
 
 
-def evaluate_cubics(breaks: FloatArray, coefficients: FloatArray, v: FloatArray) -> FloatArray:
+def polynomial_at(coefficients: FloatArray, offset: FloatArray) -> FloatArray:
     """
-    A piecewise polynomial (scipy's PPoly layout) at volumes ``v`` inside its breaks.
+    One piece of a piecewise polynomial (scipy's PPoly layout) at ``offset`` from its break.
 
-    The same interval and the same floating-point operations in the same order as scipy's
-    PPoly (powers of v - breaks[i] built up by products, terms added from the constant up),
-    so the same numbers to the bit, without the call's checks and array handling.
+    sum_m coefficients[m] offset^(k - 1 - m), highest power first, each element with its own
+    coefficients (k rows, each shaped like ``offset``). The same floating-point operations in
+    the same order as scipy's PPoly (powers of the offset built up by products, terms added
+    from the constant up), so the same numbers to the bit, without the call's interval search,
+    checks and array handling.
     """
-    i = np.clip(np.searchsorted(breaks, v, side='right') - 1, 0, breaks.size - 2)
-    offset = v - breaks[i]
-    order = coefficients.shape[0]
-    value = coefficients[order - 1, i]
-    power = None
-    for m in range(order - 2, -1, -1):
-        power = offset if power is None else power * offset
-        value = value + coefficients[m, i] * power
+    order = len(coefficients)
+    value = coefficients[order - 1]
+    power = offset
+    value = value + coefficients[order - 2] * power
+    for m in range(order - 3, -1, -1):
+        power = power * offset
+        value = value + coefficients[m] * power
     return value
 
 
