@@ -76,6 +76,7 @@ class CommandIntake:
         self._interval_ns: float | None = None   # the pump's pace: ns between two commands
         self._reported = Skipped()
         self._reported_taken = 0
+        self._reported_behind = False   # the last report said 'still behind'
 
     def take(self, command: Any, sequence: int | None, arrival_ns: int | None,
              now_ns: int) -> Any:
@@ -130,15 +131,22 @@ class CommandIntake:
         return steps
 
     def report(self, role: str = contract.ACTUATOR) -> list[Notice]:
-        """A warning when commands were skipped since the last report, with the totals."""
+        """
+        A warning when commands were skipped since the last report, with the totals.
+
+        Once more when the last one said 'still behind' and the waiting command is answered
+        now, so that the last report's totals account for every command.
+        """
         skipped, before = self.skipped, self._reported
         new_passed = skipped.passed_over - before.passed_over
         new_dropped = skipped.dropped - before.dropped
-        if not new_passed and not new_dropped:
+        if not new_passed and not new_dropped and not (self._reported_behind
+                                                       and self.pending is None):
             return []
         taken = self.taken - self._reported_taken
         self._reported = Skipped(skipped.passed_over, skipped.dropped)
         self._reported_taken = self.taken
+        self._reported_behind = self.pending is not None
         state = 'still behind' if self.pending is not None else 'caught up'
         return [Notice(role, WARNING,
                        f'commands come faster than the actuator answers: '
