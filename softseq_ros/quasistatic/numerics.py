@@ -90,7 +90,6 @@ class SegmentNumerics:
         self._curve = [(seg.pressure, seg.stiffness) for seg in self.segments]
         self._side_by_side = _SideBySideCubics(self.segments)
 
-
     def piece_indices(self, config: tuple[Piece, ...]) -> list[int]:
         """The index of each segment's piece of ``config`` among the segment's pieces."""
         return [self._piece_ids[i][piece] for i, piece in enumerate(config)]
@@ -138,11 +137,7 @@ class SegmentNumerics:
         if bracket is None:
             bracket = self._sampled_bracket(index, piece, goal)
         if bracket is None:
-            span = p_hi - p_lo
-            with np.errstate(divide='ignore', invalid='ignore'):
-                guess = v_lo + (v_hi - v_lo) * np.clip((goal - p_lo) / span, 0.0, 1.0)
-            x = np.where(span != 0.0, guess, 0.5 * (v_lo + v_hi))
-            lo, hi = v_lo.copy(), v_hi.copy()
+            lo, hi, x = self._piece_wide(index, piece, goal)
             pressure, stiffness = self._curve[index]
             within = None
         else:
@@ -195,6 +190,15 @@ class SegmentNumerics:
         if p.size >= 2:
             self._inverted[(index, self._piece_ids[index][piece])] = (p, volumes)
 
+    def _piece_wide(self, index: int, piece: NDArray[np.intp], goal: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(lo, hi, start) per element: its piece's ends, and linear in pressure between them."""
+        v_lo, v_hi, p_lo, p_hi, _, _ = self._piece_table[:, index][:, piece]
+        span = p_hi - p_lo
+        with np.errstate(divide='ignore', invalid='ignore'):
+            start = v_lo + (v_hi - v_lo) * np.clip((goal - p_lo) / span, 0.0, 1.0)
+        return v_lo, v_hi, np.where(span != 0.0, start, 0.5 * (v_lo + v_hi))
+
     def _sampled_bracket(self, index: int, piece: NDArray[np.intp], goal: FloatArray
                          ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """(lo, hi, start) per element from :meth:`remember_inversions`; None: none known."""
@@ -202,12 +206,7 @@ class SegmentNumerics:
                  for a in np.flatnonzero(np.bincount(piece)).tolist()]
         if not any(known is not None for _, known in found):
             return None
-        v_lo, v_hi, p_lo, p_hi, _, _ = self._piece_table[:, index][:, piece]
-        span = p_hi - p_lo
-        with np.errstate(divide='ignore', invalid='ignore'):
-            start = v_lo + (v_hi - v_lo) * np.clip((goal - p_lo) / span, 0.0, 1.0)
-        start = np.where(span != 0.0, start, 0.5 * (v_lo + v_hi))
-        lo, hi = v_lo.copy(), v_hi.copy()
+        lo, hi, start = self._piece_wide(index, piece, goal)
         for a, known in found:
             if known is None:
                 continue
