@@ -8,9 +8,9 @@ process, so it may write files). The backends:
 - ``'serial'``: one after the other in this process; also what one job or one worker gets.
 - ``'processes'``: worker processes on this machine, at most one per job, started by
   :func:`default_start_method`: ``fork`` (no interpreter to start, nothing to import again)
-  where this process runs a single thread, so no lock can be held by a thread the child would
-  lack; ``spawn`` (a fresh interpreter) otherwise, or where there is no fork. The function must be
-  importable (a module's top-level function) and the jobs picklable.
+  where no other thread of this process runs Python, so no lock can be held by a thread the
+  child would lack; ``spawn`` (a fresh interpreter) otherwise, or where there is no fork. The
+  function must be importable (a module's top-level function) and the jobs picklable.
 - ``'dask'``: a Dask cluster (``distributed``): the scheduler at ``scheduler`` (its workers,
   for studies that outgrow one machine), or else a ``LocalCluster`` of ``workers`` processes
   with one thread each, started for the call and closed after it.
@@ -33,7 +33,7 @@ import contextlib
 import multiprocessing
 import os
 import signal
-import threading
+import sys
 from typing import Any, Callable, Iterable, Sequence
 
 from softseq_ros.errors import UserError
@@ -50,8 +50,14 @@ Namer = Callable[[Any], str]
 
 
 def default_start_method() -> str:
-    """``fork`` where it is available and this process runs one thread; ``spawn`` otherwise."""
-    if 'fork' in multiprocessing.get_all_start_methods() and threading.active_count() == 1:
+    """
+    ``fork`` where it is available and no other thread runs Python here; ``spawn`` otherwise.
+
+    Every thread that runs Python counts, also one started without :mod:`threading` (pytest's
+    xdist workers receive on such a thread), which ``threading.active_count`` misses. Native
+    pools that prepare for a fork themselves (OpenBLAS's) do not count.
+    """
+    if 'fork' in multiprocessing.get_all_start_methods() and len(sys._current_frames()) == 1:
         return 'fork'
     return 'spawn'
 

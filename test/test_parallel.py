@@ -3,6 +3,8 @@
 import multiprocessing
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -198,19 +200,36 @@ def test_the_dask_backend_runs_on_a_local_cluster_of_two_workers():
     assert caught.value.index == 1
 
 
-def test_workers_fork_only_while_this_process_runs_one_thread():
-    import threading
-
+def test_workers_spawn_and_no_figure_worker_forks_beside_another_python_thread():
+    from softseq_ros.analysis.figure_workers import start_workers
     from softseq_ros.parallel import default_start_method
 
-    release = threading.Event()
-    helper = threading.Thread(target=release.wait)
+    release, started = threading.Event(), threading.Event()
+
+    def wait() -> None:
+        started.set()
+        release.wait()
+
+    helper = threading.Thread(target=wait)
     helper.start()
+    started.wait()
     try:
-        # Another thread may hold a lock that a forked child would inherit held: spawn.
+        # Another thread may hold a lock that a forked child would inherit held.
         assert default_start_method() == 'spawn'
+        assert start_workers() is None
     finally:
         release.set()
         helper.join()
-    if threading.active_count() == 1:
-        assert default_start_method() == 'fork'
+
+
+def test_a_process_of_one_thread_forks_its_workers_and_its_figure_worker():
+    probe = ('from softseq_ros.parallel import default_start_method\n'
+             'from softseq_ros.analysis.figure_workers import start_workers, stop_workers\n'
+             'method = default_start_method()\n'
+             'workers = start_workers()\n'
+             'print(method, workers is not None)\n'
+             'stop_workers(workers)\n')
+    done = subprocess.run([sys.executable, '-c', probe], capture_output=True, text=True,
+                          timeout=120, check=True)
+    expected = 'True' if (os.cpu_count() or 1) > 1 else 'False'
+    assert done.stdout.split() == ['fork', expected]

@@ -10,7 +10,7 @@ command can start the worker before anything else.
 
 import os
 
-from softseq_ros.parallel import Workers
+from softseq_ros.parallel import Workers, default_start_method
 
 
 def _warm_up(svg: bool) -> None:
@@ -30,11 +30,11 @@ def start_workers(svg: bool = False) -> Workers | None:
     A forked figure worker that starts importing matplotlib now (SVG's backend too with ``svg``).
 
     It splits itself in two when it draws, so matplotlib is imported once for two cores. None
-    on one core or where fork is not available: the figures are then drawn in the caller.
+    on one core, where fork is not available, or where another thread of this process runs
+    Python (the fork could inherit a lock that thread holds, and a figure worker forked so
+    once died mid-report): the figures are then drawn in the caller.
     """
-    import multiprocessing
-
-    if (os.cpu_count() or 1) <= 1 or 'fork' not in multiprocessing.get_all_start_methods():
+    if (os.cpu_count() or 1) <= 1 or default_start_method() != 'fork':
         return None
     # Fork, not spawn: the worker is to inherit nothing but this module, and to be ready
     # before the caller has imported anything heavy.
