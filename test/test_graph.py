@@ -207,6 +207,24 @@ def test_three_identical_tables_in_one_millibar_steps_get_past_symmetric_saddles
                                                 base_takes_more=False)
 
 
+def test_three_identical_tables_with_a_one_row_peak_land_beside_it_on_a_stretch_samples_miss():
+    # At 80 rows the peak is a single row. One segment just past it and one just before it
+    # balance on stable stretches 0.14 Pa and 0.0014 Pa long (the two cubics beside the peak
+    # row bend differently), shorter than the samples' spacing: the flow from a snap came to
+    # rest where the samples had found no branch, and the map stopped with "found no stable
+    # state to land on". The map is now assembled again with the pressure where the flow came
+    # to rest sampled, which finds them; the walk passes through them.
+    segments = [quantised_gent_table(name, 80) for name in ('base', 'middle', 'tip')]
+    peak = next(pc.p_at_lo for pc in segments[0].monotone_pieces() if pc.direction < 0)
+    emap = EquilibriumMap(segments)
+    graph = transition_graph(emap)
+    assert_snaps_land_on_balanced_stable_states(segments, graph, base_takes_more=False)
+    short = {j for j, b in enumerate(emap.branches)
+             if not b.flat and np.ptp(b.pressure) < 0.01 and abs(b.pressure[0] - peak) < 1.0}
+    assert short
+    assert any(t.target in short for t in graph.transitions)
+
+
 def test_a_snap_from_a_sliver_of_branch_next_to_a_common_valley_lands():
     # Two identical 199-row tables (not quantised) from a random sweep: next to their common
     # valley two mirror branches (one segment falling, one rising) are 3.2e-10 m^3 long, a

@@ -110,10 +110,16 @@ class _Sampled:
 class Assembly:
     """The stable branches and the whole equilibrium set (for plots) of some segments."""
 
-    def __init__(self, numerics: SegmentNumerics, resolution: int) -> None:
-        """Assemble every configuration's branches at ``resolution`` samples per segment."""
+    def __init__(self, numerics: SegmentNumerics, resolution: int,
+                 also_sampled: tuple[float, ...] = ()) -> None:
+        """
+        Assemble every configuration's branches at ``resolution`` samples per segment.
+
+        Every rising or falling piece also samples the pressures ``also_sampled`` in its range.
+        """
         self.numerics = numerics
         self.resolution = int(resolution)
+        self.also_sampled = np.array(also_sampled, dtype=float)
         self.configurations = self._configurations()
         self._samples: dict[tuple[int, Piece], FloatArray] = {}
         # Per configuration, in order: a sampled configuration or a plateau's curves.
@@ -246,8 +252,9 @@ class Assembly:
         """
         The pressures segment ``index`` contributes on ``piece``, computed once.
 
-        They are the same in every configuration: samples evenly spaced along its curve, and
-        the model's own knots, so the cubics never straddle a kink.
+        They are the same in every configuration: samples evenly spaced along its curve, the
+        model's own knots, so the cubics never straddle a kink, and the pressures
+        ``also_sampled`` inside its range.
         """
         key = (index, piece)
         if key not in self._samples:
@@ -256,6 +263,11 @@ class Assembly:
             knots = seg.knots()
             knots = knots[(knots > piece.v_lo) & (knots < piece.v_hi)]
             volumes = np.concatenate([seg.arclength_samples(piece, count), knots])
+            extra = self.also_sampled[(self.also_sampled > piece.p_min)
+                                      & (self.also_sampled < piece.p_max)]
+            if extra.size:
+                volumes = np.concatenate([volumes, self.numerics.invert_piece(index, piece,
+                                                                              extra)])
             self._samples[key] = seg.pressure(volumes)
             # Each sample is a volume and its pressure: a bracket for every later inversion.
             order = np.argsort(self._samples[key], kind='stable')

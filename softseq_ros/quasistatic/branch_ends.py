@@ -31,6 +31,20 @@ PITCHFORK = 1e-6
 ROUND_OFF_REST = 1e-13
 
 
+class UnplacedLandingError(RuntimeError):
+    """
+    A snap's flow came to rest where no branch is: ``pressure`` is the state's (its mean).
+
+    The samples can step over a stable stretch shorter than their spacing (0.0014 Pa long,
+    next to a single-row peak that two identical stepped tables share): the map is then
+    assembled again with that pressure sampled (softseq_ros.quasistatic.equilibrium).
+    """
+
+    def __init__(self, message: str, pressure: float) -> None:
+        super().__init__(message)
+        self.pressure = pressure
+
+
 def base_first(direction: FloatArray, volumes: FloatArray, tol: float) -> float:
     """
     The sign of ``direction`` that gives the segment nearer the base the larger share.
@@ -173,7 +187,7 @@ class BranchEnds:
         return self._snap_to(index, total, landed)
 
     def _snap_to(self, index: int, total: float, landed: FloatArray) -> BranchEnd:
-        """The snap onto the branch holding ``landed`` at ``total`` (RuntimeError: none does)."""
+        """The snap onto the branch holding ``landed`` at ``total`` (else UnplacedLandingError)."""
         target = self._nearest_branch(total, landed, exclude=index)
         return BranchEnd('snap', target, self.reader.read(target, np.array([total])).volumes[0])
 
@@ -406,6 +420,8 @@ class BranchEnds:
             if distance < best_distance:
                 best, best_distance = j, distance
         if best < 0 or best_distance > landing:
-            raise RuntimeError(f'snap-through at total volume {total:.9g} m^3 found no stable '
-                               f'state to land on (nearest {best_distance:.3g} m^3 away)')
+            raise UnplacedLandingError(
+                f'snap-through at total volume {total:.9g} m^3 found no stable state to land '
+                f'on (nearest {best_distance:.3g} m^3 away)',
+                float(np.mean(self.numerics.model_pressures(volumes[None, :]))))
         return best
