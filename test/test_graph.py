@@ -127,10 +127,10 @@ def test_two_identical_balloons_make_a_pitchfork_at_their_common_peak():
 
 def quantised_gent_table(name: str, rows: int, shear_modulus: float = 60e3,
                          gent_limit: float = 30.0, wall: float = 0.6e-3,
-                         max_stretch: float = 4.0) -> TabulatedSegment:
+                         max_stretch: float = 4.0, step: float = 100.0) -> TabulatedSegment:
     """
     A peaked Gent balloon (by default 60 kPa, Jm 30, 0.6 mm wall, stretched to 4) as a table
-    with its pressures in 1 mbar.
+    with its pressures in 1 mbar (or in ``step`` Pa).
 
     The thin-walled sphere's closed form, p = 2 mu H / R (1/l - 1/l^7) / (1 - (2 l^2 + l^-4 - 3)
     / Jm), at ``rows`` stretches l from 1 to ``max_stretch``, each pressure rounded to 100 Pa
@@ -141,7 +141,7 @@ def quantised_gent_table(name: str, rows: int, shear_modulus: float = 60e3,
     stretch = np.linspace(1.0, max_stretch, rows)
     pressure = (2 * shear_modulus * wall / R * (1 / stretch - stretch**-7)
                 / (1 - (2 * stretch**2 + stretch**-4 - 3) / gent_limit))
-    return TabulatedSegment(name, 0.074, V0 * stretch**3, np.round(pressure / 100.0) * 100.0,
+    return TabulatedSegment(name, 0.074, V0 * stretch**3, np.round(pressure / step) * step,
                             np.zeros(rows))
 
 
@@ -232,6 +232,22 @@ def test_three_identical_25_row_tables_leave_a_fold_where_the_state_barely_moves
     # integrated alone from its start lands. Another snap needs a stretch the samples miss.
     segments = [quantised_gent_table(name, 25) for name in ('base', 'middle', 'tip')]
     emap = EquilibriumMap(segments)
+    assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),
+                                                base_takes_more=False)
+
+
+def test_a_flow_resting_on_a_plateau_lands_on_that_plateau_not_on_one_a_step_above():
+    # Two identical Gent tables in 10 Pa steps, run up close to their limit stretch: the
+    # pressure scale is 13 MPa, so "at the flat's pressure" (to 1e-6 of the scale) admits
+    # flats 10 Pa apart. Flows that came to rest on one plateau were taken onto another one a
+    # step away, the first branch within the landing distance, and those snaps released
+    # negative energy (-2e-8 to -4e-7 J). A flat segment's distance from the branch's flat
+    # piece now counts.
+    segments = [quantised_gent_table(name, 540, shear_modulus=74977.6, gent_limit=28.375,
+                                     wall=0.4328e-3, max_stretch=4.1223, step=10.0)
+                for name in ('base', 'tip')]
+    emap = EquilibriumMap(segments)
+    assert emap.p_scale > 1e7
     assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),
                                                 base_takes_more=False)
 

@@ -399,10 +399,12 @@ class BranchEnds:
         segments' fluid is an equilibrium of the same energy; the map keeps one of them per
         total (they fill base first), and a flow comes to rest anywhere in the set, or creeps
         towards a flat's end, where the curve's slope goes to zero. So a flat segment's
-        volume counts as the branch's when it lies on the branch's flat piece or within the
-        landing distance of it at the flat's pressure (to ``plateau_pressure`` of the
-        pressure scale): two identical tables with quantised pressures (flat rows at the same
-        pressures in both) snap onto such sets.
+        volume counts as the branch's when it lies on the branch's flat piece, and is as far
+        from it as from the piece when within the landing distance of it at the flat's
+        pressure (to ``plateau_pressure`` of the pressure scale): two identical tables with
+        quantised pressures (flat rows at the same pressures in both) snap onto such sets.
+        A table run up to its limit stretch can make that tolerance as large as a step of
+        its pressures, and the distance then tells a plateau from the one a step away.
         """
         tolerances = self.numerics.tolerances
         landing = tolerances.landing_distance * self.numerics.v_scale
@@ -420,7 +422,7 @@ class BranchEnds:
                             and piece.v_lo - landing <= volumes[i] <= piece.v_hi + landing
                             and abs(float(self.numerics.segments[i].pressure(volumes[i]))
                                     - piece.p_at_lo) <= on_flat):
-                        gap[i] = 0.0
+                        gap[i] = max(piece.v_lo - volumes[i], volumes[i] - piece.v_hi, 0.0)
             distance = float(np.max(gap))
             if distance < best_distance:
                 best, best_distance = j, distance
