@@ -109,6 +109,12 @@ def test_every_node_reports_its_health_under_its_fully_qualified_name(context, t
             assert status.message.startswith(f'not recording {NS}/unknown_type:')
             assert int(values(status)['bytes_written']) > 0
             assert values(status)['write_failures'] == '0'
+            # Each recorded topic's count, adding up to the whole.
+            per_topic = {key.removeprefix('messages '): int(value)
+                         for key, value in values(status).items()
+                         if key.startswith('messages ')}
+            assert per_topic[f'{NS}/actuator/scene'] >= 1
+            assert sum(per_topic.values()) == int(values(status)['messages_written'])
             camera_status = latest(collector)[f'{NS}/camera']
             assert float(values(camera_status)['rate_hz']) == 10.0
             recorder.close_bag(log=False)

@@ -14,9 +14,11 @@ import signal
 import subprocess
 import sys
 
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from test_nodes import (
     check_against_solver,
     check_poses,
@@ -289,6 +291,15 @@ def test_a_recording_through_an_actuator_restart_is_reported_as_two_runs(context
     bag = tmp_path / 'bag'
     collector = Collector(['actuator/scene', 'actuator/volumes'], context)
     scenes, answers = (collector.received[t] for t in ('/actuator/scene', '/actuator/volumes'))
+    health = collector.add('/diagnostics', DiagnosticArray, QoSProfile(depth=10))
+
+    def recorded(topic: str) -> int:
+        """Messages on ``topic`` the recorder says it wrote (its newest /diagnostics)."""
+        said = [pair.value for array in health for status in array.status
+                if status.name.startswith('/recorder:') for pair in status.values
+                if pair.key == f'messages {topic}']
+        return int(said[-1]) if said else 0
+
     actuator = {'scene': scene_path, 'resume_timeout_s': 0.2}
     with node_processes(ros_env, tmp_path) as start, spinning(context, collector):
         recorder = start('recorder', 'recorder', output=str(bag))
@@ -310,6 +321,15 @@ def test_a_recording_through_an_actuator_restart_is_reported_as_two_runs(context
         start('actuator_again', 'actuator', **actuator)
         wait_for(lambda: len(scenes) >= 2 and len(answers) >= answered + 10,
                  "the restarted actuator's answers", timeout=STARTUP_TIMEOUT_S,
+                 explain=lambda: _log_tails(tmp_path))
+        # The recorder finds the restarted node on its own, later on a loaded machine (once
+        # more than a second after this collector): stopped before, it had recorded none of it.
+        wait_for(lambda: recorded('/actuator/scene') >= 2,
+                 "the restarted actuator's scene in the bag", timeout=STARTUP_TIMEOUT_S,
+                 explain=lambda: _log_tails(tmp_path))
+        recorded_then = recorded('/actuator/volumes')
+        wait_for(lambda: recorded('/actuator/volumes') >= recorded_then + 5,
+                 "the restarted actuator's answers in the bag", timeout=STARTUP_TIMEOUT_S,
                  explain=lambda: _log_tails(tmp_path))
         recorder.send_signal(signal.SIGINT)
         assert recorder.wait(timeout=30) == 0

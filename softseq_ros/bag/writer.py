@@ -226,6 +226,12 @@ class BagWriter:
         return sum(f.message_count for f in self._closed_files) + self._writer.message_count
 
     @property
+    def topic_message_counts(self) -> dict[str, int]:
+        """Messages written so far per registered topic, over every file of a split bag."""
+        return {name: topic.earlier_count + self._writer.channel_message_count(topic.channel_id)
+                for name, topic in self._topics.items()}
+
+    @property
     def topics(self) -> dict[str, str]:
         """Registered topics and their types."""
         return {name: topic.type_name for name, topic in self._topics.items()}
@@ -463,10 +469,10 @@ class BagWriter:
         spans = [(s, s + d) for _, s, d, count in files if count]
         first = min((s for s, _ in spans), default=0)
         last = max((e for _, e in spans), default=0)
+        counts = self.topic_message_counts
         return bag_information(
             file_name=self._final_name, start_ns=first, duration_ns=last - first,
-            topics=[(t.name, t.type_name, t.qos_profiles_yaml, t.type_hash,
-                     t.earlier_count + self._writer.channel_message_count(t.channel_id))
+            topics=[(t.name, t.type_name, t.qos_profiles_yaml, t.type_hash, counts[t.name])
                     for t in self._topics.values()],
             files=files)
 

@@ -300,6 +300,9 @@ class Recorder(ParameterNode):
         """
         The recording's health for /diagnostics: messages and bytes written, failures.
 
+        ``messages <topic>`` counts each recorded topic's messages, so a user (or a test) can
+        see that a node restarted on a topic is being recorded again.
+
         ERROR once the bag cannot be written on (a full disk: the message says what to run),
         WARN while a topic cannot be recorded (its type not installed, say), else OK.
         """
@@ -308,7 +311,9 @@ class Recorder(ParameterNode):
             'output': str(self._output), 'messages_written': bag.message_count,
             'bytes_written': self.bytes_written, 'write_failures': self.write_failures,
             'topics_recorded': len(self._subscriptions_by_topic),
-            'topics_failed': len(self.failed_topics)}
+            'topics_failed': len(self.failed_topics),
+            **{f'messages {topic}': count
+               for topic, count in sorted(bag.topic_message_counts.items())}}
         if bag.failure is not None:
             return Health(ERROR_LEVEL, bag.failure, values)
         if self.failed_topics:
