@@ -255,6 +255,21 @@ def test_a_flow_resting_on_a_plateau_lands_on_that_plateau_not_on_one_a_step_abo
                                                 base_takes_more=False)
 
 
+def test_a_flow_resting_beside_the_fold_it_leaves_is_not_placed_on_a_branch_nearby():
+    # Four identical tables in 10 Pa steps (a random sweep's): the flow from one fold came to
+    # rest 3e-12 m^3 from it, on the branch it leaves, and a plateau branch 1.5e-7 m^3 away
+    # (within the landing distance, 1e-3 of the volume scale) was taken as its landing, a
+    # snap that released -5e-10 J. A flow nearer the branch it leaves than any other has not
+    # left it: the fallbacks take it from there.
+    segments = [quantised_gent_table(name, 67, shear_modulus=70612.41235070789,
+                                     gent_limit=29.903998171980756, wall=0.0007135674243820239,
+                                     max_stretch=3.659971665019998, step=10.0)
+                for name in ('s0', 's1', 's2', 's3')]
+    emap = EquilibriumMap(segments)
+    assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),
+                                                base_takes_more=False)
+
+
 def test_a_snap_from_a_sliver_of_branch_next_to_a_common_valley_lands():
     # Two identical 199-row tables (not quantised) from a random sweep: next to their common
     # valley two mirror branches (one segment falling, one rising) are 3.2e-10 m^3 long, a

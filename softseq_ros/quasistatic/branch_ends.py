@@ -35,14 +35,17 @@ class UnplacedLandingError(RuntimeError):
     """
     A snap's flow came to rest where no branch is: ``pressure`` is the state's (its mean).
 
+    ``came_back``: nearer the branch the flow leaves than any other (it has not left it).
+
     The samples can step over a stable stretch shorter than their spacing (0.0014 Pa long,
     next to a single-row peak that two identical stepped tables share): the map is then
     assembled again with that pressure sampled (softseq_ros.quasistatic.equilibrium).
     """
 
-    def __init__(self, message: str, pressure: float) -> None:
+    def __init__(self, message: str, pressure: float, came_back: bool = False) -> None:
         super().__init__(message)
         self.pressure = pressure
+        self.came_back = came_back
 
 
 def base_first(direction: FloatArray, volumes: FloatArray, tol: float) -> float:
@@ -155,26 +158,44 @@ class BranchEnds:
                 continue
             try:
                 found.append(self._land_alone(index, total, start, landing))
-            except RuntimeError:
-                # No other branch holds where the flow stopped: where the end is a corner of
-                # a plateau (_corner_starts), it goes on from the steps that leave it; else on
-                # to a tighter rest; else integrated alone from its start (the flows run
-                # together can rest beside a fold where the state barely moves: a branch
-                # whose total changes by 3e-11 m^3 over 4 Pa); else from the step on the
-                # fold's other side (on a branch a few fold offsets long, as next to two
-                # identical tables' common valley, the drift's sign is round-off, and the
-                # flow can go back onto the branch it left).
-                end = self._leave_corner(index, upward, total)
-                if end is None:
-                    end = self._go_on_from_rest(index, total, landing)
-                if end is None and landing.why in ('rest', 'horizon'):
-                    end = self._placed(index, total, self._flow(start))
-                if end is None:
-                    end = self._placed(index, total, self._flow(2.0 * folds[len(found)] - start))
+            except RuntimeError as err:
+                came_back = isinstance(err, UnplacedLandingError) and err.came_back
+                end = self._land_stopped(index, upward, total, start, folds[len(found)],
+                                         landing, came_back)
                 if end is None:
                     raise
                 found.append(end)
         return found
+
+    def _land_stopped(self, index: int, upward: bool, total: float, start: FloatArray,
+                      fold: FloatArray, landing: Landing, came_back: bool) -> BranchEnd | None:
+        """
+        The landing of a flow that stopped where no other branch holds it (None: none found).
+
+        In turn: where the end is a corner of a plateau (_corner_starts), the steps that leave
+        it; the flow on to a tighter rest; the flow integrated alone from its start (the
+        flows run together can rest beside a fold where the state barely moves: a branch
+        whose total changes by 3e-11 m^3 over 4 Pa); the step on the fold's other side (on a
+        branch a few fold offsets long, as next to two identical tables' common valley, the
+        drift's sign is round-off, and the flow can go back onto the branch it left). A flow
+        that ``came_back`` to the branch it leaves is integrated alone before it goes on to a
+        tighter rest: beside such a fold it would creep there (72 s on four identical stepped
+        tables, against 4 s in all).
+        """
+        def alone() -> BranchEnd | None:
+            if landing.why not in ('rest', 'horizon'):
+                return None
+            return self._placed(index, total, self._flow(start))
+
+        steps = [lambda: self._leave_corner(index, upward, total),
+                 lambda: self._go_on_from_rest(index, total, landing),
+                 lambda: self._placed(index, total, self._flow(2.0 * fold - start))]
+        steps.insert(1 if came_back else 2, alone)
+        for step in steps:
+            end = step()
+            if end is not None:
+                return end
+        return None
 
     def _land_alone(self, index: int, total: float, start: FloatArray,
                     landing: Landing) -> BranchEnd:
@@ -409,10 +430,10 @@ class BranchEnds:
         tolerances = self.numerics.tolerances
         landing = tolerances.landing_distance * self.numerics.v_scale
         on_flat = tolerances.plateau_pressure * self.numerics.p_scale
-        best, best_distance = -1, math.inf
+        best, best_distance, back = -1, math.inf, math.inf
         for j, other in enumerate(self.branches):
             tol = self.numerics.tol_v
-            if j == exclude or not other.lo - tol <= total <= other.hi + tol:
+            if not other.lo - tol <= total <= other.hi + tol:
                 continue
             state = self.reader.read(j, np.array([min(max(total, other.lo), other.hi)])).volumes[0]
             gap = np.abs(state - volumes)
@@ -424,11 +445,17 @@ class BranchEnds:
                                     - piece.p_at_lo) <= on_flat):
                         gap[i] = max(piece.v_lo - volumes[i], volumes[i] - piece.v_hi, 0.0)
             distance = float(np.max(gap))
-            if distance < best_distance:
+            if j == exclude:
+                back = distance
+            elif distance < best_distance:
                 best, best_distance = j, distance
-        if best < 0 or best_distance > landing:
+        # A flow that rests nearer the branch it leaves than any other has not left it (a
+        # fold so flat that the flow barely moves); another branch within the landing
+        # distance is then no landing.
+        if best < 0 or best_distance > landing or back < best_distance:
             raise UnplacedLandingError(
                 f'snap-through at total volume {total:.9g} m^3 found no stable state to land '
                 f'on (nearest {best_distance:.3g} m^3 away)',
-                float(np.mean(self.numerics.model_pressures(volumes[None, :]))))
+                float(np.mean(self.numerics.model_pressures(volumes[None, :]))),
+                came_back=back < best_distance)
         return best
