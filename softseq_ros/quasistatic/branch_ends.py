@@ -182,15 +182,22 @@ class BranchEnds:
         tighter rest: beside such a fold it would creep there (72 s on four identical stepped
         tables, against 4 s in all).
         """
+        def corner() -> BranchEnd | None:
+            return self._leave_corner(index, upward, total)
+
+        def tighter_rest() -> BranchEnd | None:
+            return self._go_on_from_rest(index, total, landing)
+
         def alone() -> BranchEnd | None:
             if landing.why not in ('rest', 'horizon'):
                 return None
             return self._placed(index, total, self._flow(start))
 
-        steps = [lambda: self._leave_corner(index, upward, total),
-                 lambda: self._go_on_from_rest(index, total, landing),
-                 lambda: self._placed(index, total, self._flow(2.0 * fold - start))]
-        steps.insert(1 if came_back else 2, alone)
+        def other_side() -> BranchEnd | None:
+            return self._placed(index, total, self._flow(2.0 * fold - start))
+
+        steps = ((corner, alone, tighter_rest, other_side) if came_back
+                 else (corner, tighter_rest, alone, other_side))
         for step in steps:
             end = step()
             if end is not None:
