@@ -459,10 +459,11 @@ class BranchEnds:
         # A flow that rests nearer the branch it leaves than any other has not left it (a
         # fold so flat that the flow barely moves); another branch within the landing
         # distance is then no landing.
-        if best < 0 or best_distance > landing or back < best_distance:
+        came_back = back < best_distance
+        if best < 0 or best_distance > landing or came_back:
             raise UnplacedLandingError(
                 f'snap-through at total volume {total:.9g} m^3 found no stable state to land '
                 f'on (nearest {best_distance:.3g} m^3 away)',
                 float(np.mean(self.numerics.model_pressures(volumes[None, :]))),
-                came_back=back < best_distance)
+                came_back=came_back)
         return best
