@@ -1169,9 +1169,9 @@ def _topic_rig(bench: Workbench) -> TopicRig:
 
     from softseq_ros.nodes.core_node import qos_profile
     from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-    from softseq_ros.rig import contract
     from softseq_ros.scene.loader import load_scene
     from softseq_ros.testing import Collector, call_trigger, spinning, wait_for
+    from softseq_ros.wire import contract
     context = bench.ros.context
     folder = bench.folder('topics')
 

@@ -45,7 +45,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from softseq_ros.bag.arrays import JointStateDecoder, open_bag  # noqa: E402
-from softseq_ros.rig import contract  # noqa: E402
+from softseq_ros.wire import contract  # noqa: E402
 
 TOPICS = {contract.PUMP_COMMAND: ('position', 'velocity'),
           contract.VOLUMES: ('position', 'effort'),

@@ -76,12 +76,12 @@ from std_srvs.srv import Trigger  # noqa: E402
 from softseq_ros.bag.reader import read_bag  # noqa: E402
 from softseq_ros.batch import BatchRun  # noqa: E402
 from softseq_ros.nodes.core_node import message_class, qos_profile  # noqa: E402
-from softseq_ros.rig import contract  # noqa: E402
 from softseq_ros.rig.build import actuator_core  # noqa: E402
-from softseq_ros.rig.values import PumpCommand  # noqa: E402
 from softseq_ros.scene.loader import load_scene  # noqa: E402
 from softseq_ros.scene.programme import Leg, PumpProfile  # noqa: E402
 from softseq_ros.segments.kinematics import backbone_batch  # noqa: E402
+from softseq_ros.wire import contract  # noqa: E402
+from softseq_ros.wire.values import PumpCommand  # noqa: E402
 
 RESULTS = ROOT / 'bench' / 'rig_results.md'
 PARTS = ('batch', 'processes', 'latency', 'baseline')

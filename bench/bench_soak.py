@@ -433,7 +433,7 @@ class SoakProbe:
 
     def __init__(self, node, rest_m3: float) -> None:  # noqa: ANN001
         from softseq_ros.nodes.core_node import message_class, qos_profile
-        from softseq_ros.rig import contract
+        from softseq_ros.wire import contract
         self.node = node
         self.rest_m3 = rest_m3
         self.commands: list[tuple[int, int, float]] = []  # received, stamp, injected

@@ -49,10 +49,10 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float]',
     [m^3] and curvatures [1/m], and the snap-throughs on the way (``events``).
     """
     from softseq_ros.quasistatic.equilibrium import Tracker
-    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.quasistatic.solve import equilibrium_map
 
     loaded = load_scene(scene)
-    emap = build_map(loaded.segments, resolution or loaded.solver.resolution)
+    emap = equilibrium_map(loaded.segments, resolution or loaded.solver.resolution)
     return Tracker(emap).sweep(injected)
 
 

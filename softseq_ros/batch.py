@@ -5,7 +5,7 @@ The pump, actuator and camera cores (softseq_ros.rig) are built from the scene a
 build them; this runner ticks every core that has a rate (the pump, the camera, and the
 actuator when its model moves between commands) on a simulated clock, routes every value to
 the cores that consume it (softseq_ros.rig.routing) and writes each one, encoded exactly as the
-nodes publish it (softseq_ros.rig.wire), into the bag. No rclpy and no
+nodes publish it (softseq_ros.wire.payloads), into the bag. No rclpy and no
 DDS: a run is as fast as the machine allows and deterministic (the same scene and start time
 give the same bag, byte for byte). The simulated clock starts at the run's start time (wall
 clock, or ``start_time_ns`` for reproducible bags), so a batch bag is dated like a recording.
@@ -22,12 +22,9 @@ from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
 from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
 from softseq_ros.progress import is_terminal, write_progress
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.model import ActuatorModel
 from softseq_ros.rig.routing import Router
-from softseq_ros.rig.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
-from softseq_ros.rig.wire import ENCODERS
 from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.scene.programme import (
     MAX_RUN_BYTES,
@@ -36,8 +33,11 @@ from softseq_ros.scene.programme import (
     longest_part,
 )
 from softseq_ros.stopping import HeldSignals
+from softseq_ros.wire import contract
+from softseq_ros.wire.contract import NS_PER_S
+from softseq_ros.wire.payloads import ENCODERS
+from softseq_ros.wire.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
 
-NS_PER_S = 1_000_000_000
 PROGRESS_PERIOD_S = 0.25
 # The last instant a bag can carry: its times are int64 nanoseconds (2262-04-11).
 LAST_NS = 2**63 - 1

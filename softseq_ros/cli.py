@@ -19,13 +19,13 @@ USER_ERRORS: tuple[type[BaseException], ...] = (UserError, OSError)
 def _solve(args: argparse.Namespace) -> int:
     from softseq_ros.quasistatic.equilibrium import DomainError, Tracker
     from softseq_ros.quasistatic.reach import beyond_domain, check_scene_reach
-    from softseq_ros.quasistatic.solve import build_map, read_history, write_path
+    from softseq_ros.quasistatic.solve import read_history, scene_map, write_path
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
     if scene.network is not None:
         return _solve_network(args, scene)
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     if args.path is not None:
         history = read_history(args.path)
     else:
@@ -110,11 +110,11 @@ def _classify(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.robustness import robustness_lines, scene_features
     from softseq_ros.quasistatic.equilibrium import classify
     from softseq_ros.quasistatic.reach import check_scene_reach
-    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.quasistatic.solve import scene_map
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     check_scene_reach(scene, emap)
     verdict = classify(emap)
     _warn_unconverged('classify', emap)
@@ -130,14 +130,14 @@ def _classify(args: argparse.Namespace) -> int:
 def _graph(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.graph_figure import plot_graph
     from softseq_ros.quasistatic.graph import transition_graph, write_graph_json
-    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.quasistatic.solve import scene_map
     from softseq_ros.scene.loader import load_scene
 
     if args.reversals is not None and args.reversals < 0:
         raise UserError(f'--reversals must be >= 0, got {args.reversals}')
     style = _figure_style(args)
     scene = load_scene(args.scene)
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     graph = transition_graph(emap)
     out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}'
     out.mkdir(parents=True, exist_ok=True)

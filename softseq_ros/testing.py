@@ -59,7 +59,7 @@ from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 
 from softseq_ros.nodes.core_node import message_class, qos_profile
-from softseq_ros.rig import contract
+from softseq_ros.wire import contract
 
 __all__ = ['COLLECTOR_DEPTH', 'TIMEOUT_S', 'Collector', 'call_trigger', 'ros_context',
            'spinning', 'stamp_ns', 'wait_for']

@@ -17,9 +17,9 @@ from softseq_ros.analysis.report import SceneMismatchError, recording_trace, wri
 from softseq_ros.bag.arrays import BagArrayError, JointStateDecoder, open_bag
 from softseq_ros.batch import run_scene
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.rig import contract
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
+from softseq_ros.wire import contract
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 ML = 1e-6
@@ -641,8 +641,8 @@ def test_an_actuator_restarted_on_other_segments_is_a_warning(asymmetric, tmp_pa
 def _wrong_type_bag(path: Path, namespace: str = '', wrong: str = 'pump/command') -> Path:
     """A bag with the rig's topics, one of them of another type than the contract's."""
     from softseq_ros.bag.writer import BagWriter
-    from softseq_ros.rig.values import PumpCommand, SegmentVolumes
-    from softseq_ros.rig.wire import encode
+    from softseq_ros.wire.payloads import encode
+    from softseq_ros.wire.values import PumpCommand, SegmentVolumes
 
     values = [PumpCommand(1, 0.0, 0.0), SegmentVolumes(1, ('bottom', 'top'), [1e-6, 1e-6], 0.0)]
     with BagWriter(path) as writer:

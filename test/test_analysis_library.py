@@ -9,7 +9,7 @@ import pytest
 
 from softseq_ros.analysis.library import LibraryError, library_entries, write_library
 from softseq_ros.quasistatic.equilibrium import classify
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import equilibrium_map
 from softseq_ros.scene.loader import load_scene
 
 LIBRARY = Path(__file__).resolve().parents[1] / 'config' / 'library'
@@ -37,7 +37,7 @@ pump:
   flow_rate_m3_per_s: 5.0e-8
   legs: [{{inflate_to_m3: 1.0e-5}}, {{deflate_to_m3: 0.0}}]
 """)
-        expected = classify(build_map(load_scene(scene).segments))
+        expected = classify(equilibrium_map(load_scene(scene).segments))
         assert result['sequence_type'] == expected, result['segments']
         # The sweep's own metrics reach the same verdict by the rules applied to its path.
         assert result['sequence_type_of_sweep'] == expected, result['segments']

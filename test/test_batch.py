@@ -23,13 +23,13 @@ from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core
-from softseq_ros.rig.values import Notice
-from softseq_ros.rig.wire import encode, pump_command
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.testing import spinning, wait_for
+from softseq_ros.wire import contract
+from softseq_ros.wire.payloads import encode, pump_command
+from softseq_ros.wire.values import Notice
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 # A quasi-static scene has no channels: no channel flows.

@@ -13,11 +13,11 @@ import yaml
 
 from softseq_ros.batch import BatchRun
 from softseq_ros.stopping import TerminatedError
+from softseq_ros.wire.contract import NS_PER_S
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 START_S = 1_795_000_000                 # 2026-11-18, the same start time for every run
 START_NS = START_S * 10**9
-NS_PER_S = 10**9
 
 Messages = dict[str, list[tuple[int, int, bytes]]]
 

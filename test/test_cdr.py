@@ -8,8 +8,8 @@ from sensor_msgs.msg import FluidPressure, Image, JointState
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 
-from softseq_ros.bag.cdr import ENCODERS, FixedLayout, encode
 from softseq_ros.bag.forms import message_type_name, serialize
+from softseq_ros.wire.cdr import ENCODERS, FixedLayout, encode
 
 
 def stamped(msg, sec=1_795_000_000, nanosec=123_456_789, frame='softseq_base'):
@@ -67,7 +67,7 @@ def test_padding_is_zero_so_bags_are_deterministic(msg):
 
 
 def test_every_rig_type_has_an_encoder():
-    from softseq_ros.rig import contract
+    from softseq_ros.wire import contract
     assert {topic.type_name for topic in contract.RIG_TOPICS} <= set(ENCODERS)
 
 
@@ -119,9 +119,9 @@ def test_fixed_layout_refuses_blocks_of_another_shape():
 def test_the_rig_values_encode_byte_for_byte_as_rclpy_serialises_the_messages():
     # The wire encoders (what nodes publish and batch bags hold) against rclpy's own
     # serialisation of the same message built field by field.
-    from softseq_ros.rig import values
-    from softseq_ros.rig.wire import MARKER_WIDTH_M
-    from softseq_ros.rig.wire import encode as encode_value
+    from softseq_ros.wire import values
+    from softseq_ros.wire.payloads import MARKER_WIDTH_M
+    from softseq_ros.wire.payloads import encode as encode_value
 
     sec, nanosec = 1_795_000_123, 456_789
     stamp = sec * 10**9 + nanosec

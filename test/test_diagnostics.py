@@ -23,8 +23,8 @@ from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
-from softseq_ros.rig import contract
 from softseq_ros.testing import Collector, call_trigger, spinning, wait_for
+from softseq_ros.wire import contract
 
 pytestmark = pytest.mark.ros
 NS = '/rig_d'

@@ -283,7 +283,7 @@ def test_a_segment_passing_the_end_of_its_curve_is_refused_at_the_located_instan
 
 def test_the_rig_notes_a_segment_passing_a_fold_of_its_curve(tmp_path):
     from softseq_ros.rig.build import actuator_core
-    from softseq_ros.rig.values import INFO, Notice, PumpCommand
+    from softseq_ros.wire.values import INFO, Notice, PumpCommand
 
     # Up to 4 mL at 0.2 mL/s: the top passes the peak of its curve at about 2.8 mL.
     scene = fig1_with_network(tmp_path, {'channels': [{'length_m': 0.01,
@@ -301,7 +301,7 @@ def test_the_rig_notes_a_segment_passing_a_fold_of_its_curve(tmp_path):
 
 def test_on_the_rig_feeding_the_tip_reverses_the_channel_flow_and_keeps_the_mass(tmp_path):
     from softseq_ros.rig.build import actuator_core
-    from softseq_ros.rig.values import ChannelFlows, PumpCommand, SegmentVolumes
+    from softseq_ros.wire.values import ChannelFlows, PumpCommand, SegmentVolumes
 
     channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
     bottom, top = load_scene('fig1_asymmetric').segments
@@ -335,7 +335,7 @@ def test_on_the_rig_feeding_the_tip_reverses_the_channel_flow_and_keeps_the_mass
 
 def test_suction_beyond_vacuum_is_refused_and_the_rig_holds_its_last_state(tmp_path):
     from softseq_ros.rig.build import actuator_core
-    from softseq_ros.rig.values import WARNING, Notice, PumpCommand
+    from softseq_ros.wire.values import WARNING, Notice, PumpCommand
 
     # The top holds most of 20 mL, the channel is narrow, and the syringe draws 20 mL/s: the
     # base would have to pull harder than vacuum to keep up.
@@ -367,7 +367,7 @@ def test_suction_beyond_vacuum_is_refused_and_the_rig_holds_its_last_state(tmp_p
 
 def test_a_held_pump_stays_held_while_the_fluid_evens_out_and_resumes_when_asked(tmp_path):
     from softseq_ros.rig.build import actuator_core, pump_core
-    from softseq_ros.rig.values import PumpCommand, PumpStatus, SegmentVolumes
+    from softseq_ros.wire.values import PumpCommand, PumpStatus, SegmentVolumes
 
     # The pair through a narrow channel: pumped at 0.2 mL/s the top lags far behind its share.
     # The pump is held at 2 mL (its hold service) and started again 5 s later. While held it

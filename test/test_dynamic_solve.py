@@ -15,7 +15,7 @@ import yaml
 
 from softseq_ros import cli
 from softseq_ros.quasistatic.equilibrium import Tracker
-from softseq_ros.quasistatic.solve import build_map, write_path
+from softseq_ros.quasistatic.solve import equilibrium_map, scene_map, write_path
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.validation import YamlLoader
 
@@ -56,7 +56,7 @@ def test_without_a_network_solve_writes_the_quasistatic_bytes(tmp_path, capsys):
     assert scene.network is None
     _, history = scene.pump.profile.sample(scene.pump.rate_hz)
     expected = tmp_path / 'expected.csv'
-    write_path(expected, Tracker(build_map(scene.segments, scene.solver.resolution))
+    write_path(expected, Tracker(scene_map(scene))
                .sweep(history), scene.segment_names)
     assert out.read_bytes() == expected.read_bytes()
     assert not (tmp_path / 'path_snaps.csv').exists()
@@ -74,7 +74,7 @@ def test_pumped_slowly_the_written_snaps_are_where_the_quasistatic_ones_are(tmp_
     printed = capsys.readouterr().out
     assert 'snap-throughs: 1 ->' in printed and 'peak Reynolds number per channel' in printed
     scene = load_scene(scene_file)
-    expected = Tracker(build_map(scene.segments)).sweep(history).events
+    expected = Tracker(equilibrium_map(scene.segments)).sweep(history).events
     assert len(expected) == 1
     header, rows = read_csv(tmp_path / 'path_snaps.csv')
     assert len(rows) == 1

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from softseq_ros.quasistatic.equilibrium import Tracker
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.design import load_design
 from softseq_ros.scene.loader import load_scene
 
@@ -40,7 +40,7 @@ def test_paper_fem_is_partial_on_the_papers_law_and_symmetric_with_the_yeoh_fit(
     scene = load_scene('paper_fem')
     assert scene.segments[1].source.endswith('paper_fem_top.csv')
     assert load_design(CONFIG / 'designs' / 'paper_top.yaml').material.law == 'arruda_boyce'
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     verdict = classify(emap)
     assert verdict == 'partial'
     # The verdict's margin, as docs/fem.md states it: past the top's shallow peak the bottom
@@ -56,13 +56,13 @@ def test_paper_fem_is_partial_on_the_papers_law_and_symmetric_with_the_yeoh_fit(
     lines, warnings = robustness_lines(verdict, *scene_features(scene, emap))
     assert not warnings, warnings
     yeoh = load_scene('paper_fem_yeoh')
-    assert classify(build_map(yeoh.segments, yeoh.solver.resolution)) == 'symmetric'
+    assert classify(scene_map(yeoh)) == 'symmetric'
 
 
 @pytest.fixture(scope='module')
 def paper_fem_path():
     scene = load_scene('paper_fem')
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     history = np.linspace(0.0, 65e-6, 6501)
     return scene, Tracker(emap).sweep(history), history
 

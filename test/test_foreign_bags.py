@@ -13,10 +13,10 @@ from rosbags.typesys import Stores, get_typestore
 import yaml
 
 from softseq_ros.analysis.recording import MAX_PAYLOAD_BYTES
-from softseq_ros.bag.cdr import joint_state_cdr, string_cdr
 from softseq_ros.bag.writer import BagWriter
 from softseq_ros.batch import BatchRun
-from softseq_ros.rig import contract
+from softseq_ros.wire import contract
+from softseq_ros.wire.cdr import joint_state_cdr, string_cdr
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 START_NS = 1_795_000_000 * 10**9

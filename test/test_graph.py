@@ -35,7 +35,7 @@ from softseq_ros.quasistatic.graph import (
     transition_graph,
 )
 from softseq_ros.quasistatic.landing import FlowLandings
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import equilibrium_map, scene_map
 from softseq_ros.scene.loader import load_scene, scene_from_dict
 from softseq_ros.segments.materials import NeoHookean
 from softseq_ros.segments.models import BalloonSegment, TabulatedSegment
@@ -56,13 +56,13 @@ def nested():
     """
     scene = load_scene('three_nested_loops')
     path = scene.path
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     return path, emap, transition_graph(emap)
 
 
 @pytest.fixture(scope='module')
 def asymmetric():
-    emap = build_map(load_scene('fig1_asymmetric').segments)
+    emap = equilibrium_map(load_scene('fig1_asymmetric').segments)
     return emap, transition_graph(emap)
 
 
@@ -484,7 +484,7 @@ def test_softseq_graph_proposes_a_history_that_softseq_solve_lands_on(nested, tm
 def test_the_shipped_three_segment_scene_has_one_branch_and_no_snap():
     # Jm 16 is below the peak's onset: each curve rises monotonically, so the graph is one
     # branch from rest to the end of the domain, and no snap exists to reproduce.
-    emap = build_map(load_scene('three_segments').segments)
+    emap = equilibrium_map(load_scene('three_segments').segments)
     graph = transition_graph(emap)
     assert [b.pieces for b in graph.branches] == [('rising', 'rising', 'rising')]
     assert [t.kind for t in graph.transitions] == [END, END]
@@ -634,7 +634,7 @@ def test_the_report_of_a_rig_bag_lists_the_branches_of_the_graphs_default_path(t
     data['camera'] = {'rate_hz': 1}
     scene = scene_from_dict(data, tmp_path / 'fast.yaml')
     BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     metrics = recording_metrics(load_recording(tmp_path / 'bag'), scene, emap)
     visited = [stay['branch'] for stay in metrics['branches_visited']]
     graph = transition_graph(emap)

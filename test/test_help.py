@@ -17,7 +17,7 @@ from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.nodes.sim_clock import SimClockNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
-from softseq_ros.rig import contract
+from softseq_ros.wire import contract
 
 pytestmark = pytest.mark.ros
 

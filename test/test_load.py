@@ -31,13 +31,13 @@ from test_nodes_processes import PATIENT_FEEDBACK_TIMEOUT_S, STARTUP_TIMEOUT_S, 
 from softseq_ros.bag.reader import read_bag
 from softseq_ros.nodes.core_node import qos_profile
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.intake import BACKLOG_COMMANDS, CommandIntake
 from softseq_ros.rig.model import QuasiStaticModel
-from softseq_ros.rig.values import PumpCommand
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.testing import Collector, call_trigger, spinning, stamp_ns, wait_for
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import PumpCommand
 
 MS = 1_000_000
 ML = 1.0e-6

@@ -12,7 +12,7 @@ import pytest
 
 from softseq_ros.quasistatic.landing import PROBES, RADII, certified_radii
 from softseq_ros.quasistatic.numerics import SegmentNumerics, cofactor_sum
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import equilibrium_map
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.materials import Gent
 from softseq_ros.segments.models import BalloonSegment, TabulatedSegment
@@ -111,7 +111,7 @@ def test_every_table_evaluated_side_by_side_gives_each_table_s_numbers():
 
 
 def test_reading_many_branches_at_once_gives_each_branch_s_numbers():
-    emap = build_map(load_scene('fig1_asymmetric').segments)
+    emap = equilibrium_map(load_scene('fig1_asymmetric').segments)
     index, total = [], []
     for b, branch in enumerate(emap.branches):
         # Across the branch, and next to its ends, where the states are solved exactly.

@@ -13,7 +13,8 @@ import numpy as np
 
 from softseq_ros.bag.reader import read_bag
 from softseq_ros.batch import BatchRun
-from softseq_ros.rig.model import QuasiStaticModel, actuator_model, shared_map
+from softseq_ros.quasistatic.solve import equilibrium_map
+from softseq_ros.rig.model import QuasiStaticModel, actuator_model
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.programme import Leg
 
@@ -74,7 +75,7 @@ class LaggingModel:
 def test_a_model_with_time_is_advanced_at_its_rate_and_recorded(tmp_path):
     scene = load_scene('fig1_asymmetric')
     lag_s, rate_hz = 2.0, 7.0   # 7 Hz: its ticks fall between the pump's 50 Hz commands
-    model = LaggingModel(QuasiStaticModel(shared_map(scene.segments), scene.segment_names),
+    model = LaggingModel(QuasiStaticModel(equilibrium_map(scene.segments), scene.segment_names),
                          lag_s, rate_hz)
     run = BatchRun(scene, tmp_path / 'bag', start_time_ns=0, model=model,
                    overrides={'pump': {'open_loop': True, 'legs': (Leg.inflate(6.0e-6),)}})
@@ -110,5 +111,5 @@ def test_a_process_assembles_the_map_of_the_same_segments_once():
     first, second = actuator_model(scene), actuator_model(scene)
     assert first is not second and first.emap is second.emap
     # The pump's reach and the actuator come from one map in one process.
-    assert shared_map(scene.segments) is first.emap
-    assert shared_map(scene.segments, 400) is not first.emap
+    assert equilibrium_map(scene.segments) is first.emap
+    assert equilibrium_map(scene.segments, 400) is not first.emap

@@ -26,11 +26,12 @@ from softseq_ros.nodes.runner import spin_past_lost_messages
 from softseq_ros.nodes.sim_clock import SimClockNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.rig import contract
-from softseq_ros.rig.render import SEGMENT_RGB, SideViewRenderer
+from softseq_ros.rig.render import SideViewRenderer
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.kinematics import backbone_batch
 from softseq_ros.testing import TIMEOUT_S, Collector, call_trigger, spinning, stamp_ns, wait_for
+from softseq_ros.wire import contract
+from softseq_ros.wire.contract import SEGMENT_RGB
 
 AMBIENT = 101325.0
 

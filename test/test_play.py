@@ -26,8 +26,8 @@ from softseq_ros.nodes.player import (
     parse_remaps,
     qos_from_bag,
 )
-from softseq_ros.rig import contract
 from softseq_ros.testing import call_trigger, spinning, wait_for
+from softseq_ros.wire import contract
 
 pytestmark = pytest.mark.ros
 CONFIG = Path(__file__).resolve().parents[1] / 'config'

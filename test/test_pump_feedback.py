@@ -21,13 +21,13 @@ from sensor_msgs.msg import JointState
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.core_node import qos_profile
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import pump_core
 from softseq_ros.rig.pump import REACTIONS, RECENT_COMMANDS, STATES
-from softseq_ros.rig.values import WARNING, Notice, PumpCommand, PumpStatus, SegmentVolumes
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.programme import Leg
 from softseq_ros.testing import Collector, call_trigger, spinning, stamp_ns, wait_for
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import WARNING, Notice, PumpCommand, PumpStatus, SegmentVolumes
 
 NAMES = ('bottom', 'top')           # the segments of test/scenes.py's scene
 GOOD_VOLUMES = [1.2e-5, 1.1e-5]

@@ -22,11 +22,11 @@ from test_nodes_processes import STARTUP_TIMEOUT_S, node_processes
 
 from softseq_ros.nodes.core_node import qos_profile
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import actuator_core
-from softseq_ros.rig.values import WARNING, PumpCommand
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.testing import Collector, spinning, wait_for
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import WARNING, PumpCommand
 
 pytestmark = pytest.mark.ros
 

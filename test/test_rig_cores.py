@@ -16,11 +16,16 @@ import pytest
 from scenes import FAST_SCENE, inside_the_hysteresis_loop, write_scene
 
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import SettingError, actuator_core, camera_core, pump_core
 from softseq_ros.rig.model import QuasiStaticModel
 from softseq_ros.rig.routing import Router
-from softseq_ros.rig.values import (
+from softseq_ros.scene.loader import load_scene
+from softseq_ros.scene.programme import Leg
+from softseq_ros.segments.identity import segments_sha256
+from softseq_ros.segments.kinematics import backbone_batch
+from softseq_ros.wire import contract
+from softseq_ros.wire.payloads import InputError, pump_command
+from softseq_ros.wire.values import (
     TOPIC_VALUE_TYPES,
     WARNING,
     Backbone,
@@ -33,11 +38,6 @@ from softseq_ros.rig.values import (
     Snapshot,
     SnapshotStep,
 )
-from softseq_ros.rig.wire import InputError, pump_command
-from softseq_ros.scene.loader import load_scene
-from softseq_ros.scene.programme import Leg
-from softseq_ros.segments.identity import segments_sha256
-from softseq_ros.segments.kinematics import backbone_batch
 
 AMBIENT = 101325.0
 
@@ -85,7 +85,7 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
 def test_the_batch_runner_and_the_cores_run_without_rclpy():
     # A fresh interpreter in which rclpy cannot be imported.
     code = ('import sys; sys.modules["rclpy"] = None; '
-            'import softseq_ros.batch, softseq_ros.rig.build, softseq_ros.rig.wire; '
+            'import softseq_ros.batch, softseq_ros.rig.build, softseq_ros.wire.payloads; '
             'print("ok")')
     result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                             timeout=120)

@@ -1,7 +1,7 @@
 """
 The JSON in the rig's std_msgs/String topics: one codec per value type, both ways.
 
-Each String topic's payload is defined once, in :mod:`softseq_ros.rig.wire`, and both written
+Each String topic's payload is defined once, in :mod:`softseq_ros.wire.payloads`, and both written
 (nodes, batch bags) and read (the analysis) through it. Checked here: every String topic has a
 codec and every writer uses it; what is encoded decodes to the same value; the bytes are the
 ones bags have always held; a key the encoder writes is one the decoder needs; garbage is one
@@ -21,21 +21,11 @@ import pytest
 
 from softseq_ros.analysis import recording as recording_module
 from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_recording
-from softseq_ros.bag.cdr import string_cdr
 from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
-from softseq_ros.rig import contract
-from softseq_ros.rig.values import (
-    TOPIC_VALUE_TYPES,
-    PumpCommand,
-    PumpStatus,
-    SceneIdentity,
-    SegmentVolumes,
-    Snapshot,
-    SnapshotStep,
-    SnapThrough,
-)
-from softseq_ros.rig.wire import (
+from softseq_ros.wire import contract
+from softseq_ros.wire.cdr import string_cdr
+from softseq_ros.wire.payloads import (
     ENCODERS,
     JSON_PAYLOADS,
     JSON_PAYLOADS_BY_TOPIC,
@@ -48,6 +38,16 @@ from softseq_ros.rig.wire import (
     JsonPayload,
     PayloadError,
     encode,
+)
+from softseq_ros.wire.values import (
+    TOPIC_VALUE_TYPES,
+    PumpCommand,
+    PumpStatus,
+    SceneIdentity,
+    SegmentVolumes,
+    Snapshot,
+    SnapshotStep,
+    SnapThrough,
 )
 
 EXAMPLES = settings(max_examples=150, deadline=None, derandomize=True, database=None)
@@ -92,7 +92,7 @@ EXAMPLE_TEXT = {
 
 
 def _former_text(value: object) -> str:
-    """The JSON each encoder wrote before the codecs (as softseq_ros.rig.wire had it)."""
+    """The JSON each encoder wrote before the codecs (as softseq_ros.wire.payloads had it)."""
     if isinstance(value, PumpStatus):
         return json.dumps({'state': value.state, 'reason': value.reason,
                            'stamp_ns': value.stamp_ns})

@@ -12,8 +12,8 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 
 from softseq_ros.nodes.core_node import qos_profile
-from softseq_ros.rig import contract
 from softseq_ros.testing import Collector, call_trigger, spinning, wait_for
+from softseq_ros.wire import contract
 
 pytestmark = pytest.mark.ros
 README = Path(__file__).resolve().parents[1] / 'README.md'

@@ -17,7 +17,7 @@ from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import markdown, recording_metrics, summary_text, write_report
 from softseq_ros.bag.reader import read_bag
 from softseq_ros.batch import BatchRun
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.validation import YamlLoader
 
@@ -118,7 +118,7 @@ def test_the_report_of_a_dynamic_bag_shows_the_measured_snap_durations(fast, tmp
 def test_the_lag_shrinks_when_the_pump_is_ten_times_slower(fast, slow):
     # Both scenes have the same segments (only the pump differs): one map serves both.
     scene = load_scene(fast[0])
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     every = [recording_metrics(load_recording(bag), load_scene(scene_file), emap)
              for scene_file, bag in (fast, slow)]
     lags = [metrics['transients'] for metrics in every]

@@ -145,9 +145,9 @@ def compare_bags(bag_a: str | os.PathLike, bag_b: str | os.PathLike,
     notes_a = notes_b = []
     if scene is not None:
         notes_a, notes_b = scene_notes(recording_a, scene), scene_notes(recording_b, scene)
-        from softseq_ros.quasistatic.solve import build_map
+        from softseq_ros.quasistatic.solve import scene_map
 
-        emap = build_map(scene.segments, scene.solver.resolution)
+        emap = scene_map(scene)
     metrics_a = recording_metrics(recording_a, scene, emap)
     metrics_b = recording_metrics(recording_b, scene, emap)
     metrics_a['notes'].extend(notes_a)

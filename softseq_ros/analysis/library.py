@@ -163,7 +163,7 @@ def _segment(entry: Entry) -> object:
 def assemble(entries: tuple[Entry, ...]) -> dict:
     """Classify and sweep one assembly (base to tip); every number SI, pressures gauge."""
     from softseq_ros.quasistatic.equilibrium import classify, inflate_and_deflate
-    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.quasistatic.solve import equilibrium_map
     from softseq_ros.segments.kinematics import backbone_batch
 
     segments = []
@@ -172,7 +172,7 @@ def assemble(entries: tuple[Entry, ...]) -> dict:
         # The same table may sit twice in one assembly: the names must differ.
         segment.name = f'{entry.name}_{k + 1}' if entries.count(entry) > 1 else entry.name
         segments.append(segment)
-    emap = build_map(segments)
+    emap = equilibrium_map(segments)
     kind = classify(emap)
     lo, hi = emap.injected_range
     rising, falling = inflate_and_deflate(emap, SWEEP_POINTS)

@@ -203,11 +203,11 @@ def rate_point(point: RatePoint) -> dict:
 def quasistatic_reference(scene: Any, samples_per_leg: int = SAMPLES_PER_LEG) -> dict:
     """The quasi-static path along the scene's programme, measured as a grid point is."""
     from softseq_ros.quasistatic.equilibrium import Tracker
-    from softseq_ros.quasistatic.solve import build_map
+    from softseq_ros.quasistatic.solve import scene_map
 
     profile = scene.pump.profile
     times = programme_times(profile, samples_per_leg)
-    emap = build_map(scene.segments, scene.solver.resolution)
+    emap = scene_map(scene)
     solved = Tracker(emap).sweep(profile.injected_at(times))
     row = sequence_of(solved.injected, solved.pressure, solved.volumes,
                       leg_signs(profile, times), scene.segment_names)

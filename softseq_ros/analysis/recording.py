@@ -2,7 +2,7 @@
 A rig recording as arrays: what the pump commanded, what the actuator did, what the camera saw.
 
 Reads a bag written by the recorder or by ``softseq run``. Topics are found through the rig's
-contract (:mod:`softseq_ros.rig.contract`): names are relative to the rig's namespace, which is
+contract (:mod:`softseq_ros.wire.contract`): names are relative to the rig's namespace, which is
 found from the bag's topics. Only the topics the analysis needs are read, straight into arrays
 (:mod:`softseq_ros.bag.arrays`); everything is SI, pressures are gauge unless named absolute.
 
@@ -12,7 +12,7 @@ run) is left out and counted in ``ignored``; snap-through events carry no stamp 
 kept. The scene the actuator said it runs (``actuator/scene``, published once when it starts,
 so usually before the first command) is kept whenever it was said: it describes the actuator,
 not one run. The JSON the String topics carry is read with the codecs that write it
-(:mod:`softseq_ros.rig.wire`).
+(:mod:`softseq_ros.wire.payloads`).
 
 What cannot be used is skipped and said (``skipped``, by topic and reason; the report and the
 comparison list it): pump commands or volumes without positions (or volumes without
@@ -51,8 +51,9 @@ from softseq_ros.bag.arrays import (
     open_bag,
 )
 from softseq_ros.errors import UserError
-from softseq_ros.rig import contract
-from softseq_ros.rig.wire import (
+from softseq_ros.wire import contract
+from softseq_ros.wire.contract import NS_PER_S
+from softseq_ros.wire.payloads import (
     PUMP_STATUS_JSON,
     SCENE_IDENTITY_JSON,
     SNAP_THROUGH_JSON,
@@ -62,7 +63,6 @@ from softseq_ros.rig.wire import (
 )
 
 FloatArray = NDArray[np.float64]
-NS_PER_S = 1_000_000_000
 # Pressure messages read to find the ambient pressure (absolute minus gauge): it is constant.
 AMBIENT_SAMPLES = 2000
 INFLATION, DEFLATION = 'inflation', 'deflation'

@@ -36,8 +36,8 @@ from softseq_ros.analysis.metrics import (
 from softseq_ros.analysis.recording import Recording, load_recording
 from softseq_ros.analysis.transients import Transients, analyse_transients
 from softseq_ros.errors import UserError, write_text, writing
-from softseq_ros.rig import contract
 from softseq_ros.segments.identity import segments_sha256, short
+from softseq_ros.wire import contract
 
 ML = 1e6
 KPA = 1e-3
@@ -379,9 +379,9 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     if scene is not None:
         # Before the equilibrium set is assembled and before anything is written.
         notes = scene_notes(recording, scene)
-        from softseq_ros.quasistatic.solve import build_map
+        from softseq_ros.quasistatic.solve import scene_map
 
-        emap = build_map(scene.segments, scene.solver.resolution)
+        emap = scene_map(scene)
     transients = analyse_transients(recording, emap, _network(scene))
     metrics = recording_metrics(recording, scene, emap, transients)
     metrics['notes'].extend(notes)

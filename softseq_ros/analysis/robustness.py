@@ -326,7 +326,7 @@ def scene_features(scene: object, emap: object | None = None) -> tuple[list[Feat
         except (OSError, yaml.YAMLError, AttributeError):
             entries = None
     if emap is None:
-        from softseq_ros.quasistatic.solve import build_map
+        from softseq_ros.quasistatic.solve import scene_map
 
-        emap = build_map(scene.segments, scene.solver.resolution)
+        emap = scene_map(scene)
     return deciding_features(emap, entries if isinstance(entries, list) else None)

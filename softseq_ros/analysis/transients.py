@@ -34,7 +34,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.analysis.recording import DEFLATION, INFLATION, NS_PER_S, FloatArray, Recording
+from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
+from softseq_ros.wire.contract import NS_PER_S
 
 WINDOW_BEFORE = 2.0
 WINDOW_AFTER = 5.0

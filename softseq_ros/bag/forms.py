@@ -13,8 +13,8 @@ from typing import Any, Mapping, Sequence
 import yaml
 
 from softseq_ros.errors import UserError
+from softseq_ros.wire.cdr import encode
 
-from .cdr import encode
 from .msgdefs import message_definition
 
 # RMW_DURATION_INFINITE as rosbag2 writes it: {sec: INT64_MAX // 1e9, nsec: INT64_MAX % 1e9}.
@@ -47,7 +47,7 @@ def serialize(msg: Any) -> bytes:
     rclpy's serialize_message (Fast DDS) returns a buffer of the estimated size, which can
     end in bytes that belong to no field; strict readers (rosbags) refuse such messages, and
     a subscriber never receives them. The buffer is cut where the last field ends. The rig's
-    own types skip all that through :mod:`softseq_ros.bag.cdr`.
+    own types skip all that through :mod:`softseq_ros.wire.cdr`.
     """
     type_name = message_type_name(msg)
     encoded = encode(msg, type_name)

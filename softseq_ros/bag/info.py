@@ -31,8 +31,8 @@ import yaml
 from softseq_ros.bag.arrays import BagArrayError, string_text
 from softseq_ros.bag.reader import METADATA_FILE, BagReadError, BagSummary, bag_summary
 from softseq_ros.errors import UserError
-from softseq_ros.rig import contract
-from softseq_ros.rig.wire import SCENE_IDENTITY_JSON, PayloadError
+from softseq_ros.wire import contract
+from softseq_ros.wire.payloads import SCENE_IDENTITY_JSON, PayloadError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 

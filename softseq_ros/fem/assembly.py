@@ -22,7 +22,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from softseq_ros.quasistatic.equilibrium import Tracker, classify
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import equilibrium_map
 from softseq_ros.segments.kinematics import backbone_batch
 
 # The paper's simulated steps 3 to 5 (25, 45, 60 mL), 40 mL (its plateau) and the end.
@@ -33,7 +33,7 @@ PLATEAU_BAND = 0.01
 def assembled_path(segments: Sequence[Any], injected: np.ndarray,
                    resolution: int | None = None) -> tuple[Any, Any]:
     """The equilibrium map of the segments and its inflation path over ``injected`` [m^3]."""
-    emap = build_map(segments, resolution)
+    emap = equilibrium_map(segments, resolution)
     return emap, Tracker(emap).sweep(injected)
 
 

@@ -43,12 +43,12 @@ from softseq_ros.nodes.core_node import CoreNode, log_to, message_class, qos_pro
 from softseq_ros.nodes.diagnostics import Health
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
-from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import STATE_SAVE_PERIOD_S
 from softseq_ros.rig.build import actuator_core
 from softseq_ros.rig.intake import FLUSH_PERIOD_S, CommandIntake
-from softseq_ros.rig.values import WARNING, Notice, SegmentVolumes
-from softseq_ros.rig.wire import InputError, segment_volumes
+from softseq_ros.wire import contract
+from softseq_ros.wire.payloads import InputError, segment_volumes
+from softseq_ros.wire.values import WARNING, Notice, SegmentVolumes
 
 RESUME_POLL_S = 0.02
 # A live publisher's latched volumes come as its history, oldest first: the resume takes the

@@ -9,7 +9,7 @@ Frames come from a free-running timer at ``rate_hz`` (``frame_trigger: timer``) 
 the actuator's state (``frame_trigger: state``); see the core for the conventions.
 
 Poses and markers go out already serialised: their layout never changes, so each frame is a
-template with new stamps and numbers (softseq_ros.rig.wire), a few microseconds instead of
+template with new stamps and numbers (softseq_ros.wire.payloads), a few microseconds instead of
 filling dozens of rclpy Pose objects. Subscribers receive ordinary PoseArray and MarkerArray
 messages.
 """
@@ -23,10 +23,10 @@ from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.diagnostics import Health
 from softseq_ros.nodes.parameters import outputs_reason
 from softseq_ros.nodes.runner import run_node
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import camera_core
 from softseq_ros.rig.camera import FRAME_TRIGGERS
 from softseq_ros.scene.limits import LIMITS
+from softseq_ros.wire import contract
 
 # How often a state-triggered camera looks whether anyone wants its image.
 IMAGE_CHECK_S = 0.05

@@ -5,7 +5,7 @@ A :class:`CoreNode` hosts one core (softseq_ros.rig). It creates a publisher for
 its core produces and the scene's outputs switch on, and a subscription for every topic its
 core consumes, all with the contract's relative names and QoS, so ``-r __ns:=/rig2`` moves the
 whole rig and ``-r pump/command:=/elsewhere`` remaps one topic. What the core returns goes out
-as the CDR bytes of softseq_ros.rig.wire (the bytes a batch bag holds); what arrives is turned
+as the CDR bytes of softseq_ros.wire.payloads (the bytes a batch bag holds); what arrives is turned
 into a core value by the same module, and a message that cannot be one is a logged warning.
 
 Several nodes in one process (the ``rig`` executable) share a :class:`LocalCores`: a value one
@@ -27,11 +27,11 @@ from softseq_ros.nodes.diagnostics import (
     Health,
 )
 from softseq_ros.nodes.parameters import ParameterNode
-from softseq_ros.rig import contract
 from softseq_ros.rig.routing import Router
 from softseq_ros.rig.throttle import Throttle
-from softseq_ros.rig.values import ERROR, INFO, TOPIC_VALUE_TYPES, WARNING, Notice, Output
-from softseq_ros.rig.wire import DECODERS, ENCODERS, InputError
+from softseq_ros.wire import contract
+from softseq_ros.wire.payloads import DECODERS, ENCODERS, InputError
+from softseq_ros.wire.values import ERROR, INFO, TOPIC_VALUE_TYPES, WARNING, Notice, Output
 
 
 def qos_profile(qos: contract.Qos) -> QoSProfile:

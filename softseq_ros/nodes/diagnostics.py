@@ -20,14 +20,14 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from softseq_ros.rig import contract
-from softseq_ros.rig.values import ERROR, WARNING
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import ERROR, WARNING
 
 PERIOD_S = 1.0
 OK_LEVEL = DiagnosticStatus.OK
 WARN_LEVEL = DiagnosticStatus.WARN
 ERROR_LEVEL = DiagnosticStatus.ERROR
-# A notice's level (softseq_ros.rig.values) as a diagnostic level.
+# A notice's level (softseq_ros.wire.values) as a diagnostic level.
 LEVEL_OF_NOTICE = {WARNING: WARN_LEVEL, ERROR: ERROR_LEVEL}
 
 

@@ -35,9 +35,9 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from softseq_ros.errors import UserError
-from softseq_ros.rig.contract import OUTPUT_NAMES
 from softseq_ros.scene.limits import Limit
 from softseq_ros.scene.loader import Scene, load_scene
+from softseq_ros.wire.contract import OUTPUT_NAMES
 
 
 class NodeConfigError(UserError):

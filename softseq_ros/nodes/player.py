@@ -62,8 +62,8 @@ import yaml
 from softseq_ros.bag.arrays import BagArrays, open_bag
 from softseq_ros.bag.reader import bag_summary
 from softseq_ros.errors import UserError
-from softseq_ros.rig import contract
 from softseq_ros.stopping import HeldSignals
+from softseq_ros.wire import contract
 
 CLOCK_TOPIC = contract.CLOCK.name
 # Longest sleep between two looks at the stop signals held (a replay at a slow rate sleeps long).

@@ -44,7 +44,7 @@ from softseq_ros.nodes.diagnostics import (
 )
 from softseq_ros.nodes.parameters import NodeConfigError, ParameterNode
 from softseq_ros.nodes.runner import build_nodes, exit_with_help, init_ros
-from softseq_ros.rig import contract
+from softseq_ros.wire import contract
 
 # The topics recorded when the `topics` parameter is not given: every topic of the rig's
 # contract, relative to the recorder's namespace. A topic nobody publishes (an output the

@@ -32,9 +32,9 @@ from softseq_ros.nodes.parameters import (
     read_rules,
     split_ros_arguments,
 )
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import SettingError
 from softseq_ros.scene.loader import SceneError
+from softseq_ros.wire import contract
 
 
 def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> None:

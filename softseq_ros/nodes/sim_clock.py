@@ -20,7 +20,7 @@ from rosgraph_msgs.msg import Clock
 from softseq_ros.nodes.core_node import qos_profile
 from softseq_ros.nodes.parameters import NodeConfigError, ParameterNode
 from softseq_ros.nodes.runner import run_node
-from softseq_ros.rig.contract import CLOCK
+from softseq_ros.wire.contract import CLOCK
 
 
 class SimClockNode(ParameterNode):

@@ -24,7 +24,6 @@ from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.diagnostics import ERROR_LEVEL, OK_LEVEL, WARN_LEVEL, Health, worst
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
-from softseq_ros.rig import contract
 from softseq_ros.rig.build import (
     SettingError,
     check_programme,
@@ -41,12 +40,13 @@ from softseq_ros.rig.pump import (
     STOPPED,
     Reply,
 )
-from softseq_ros.rig.values import WARNING
-from softseq_ros.rig.wire import NS_PER_S
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import legs_from_text
 from softseq_ros.scene.programme import MAX_RUN_S, Leg, PumpProfile, longest_part
 from softseq_ros.scene.validation import SceneError
+from softseq_ros.wire import contract
+from softseq_ros.wire.contract import NS_PER_S
+from softseq_ros.wire.values import WARNING
 
 _LOADED = 'set at run time, it is taken by ~/load or ~/reset when the pump is not running'
 

@@ -1,13 +1,15 @@
 """
 From a scene to its inflation sequence: the solver as a researcher calls it.
 
-This is the one place that turns a scene into an :class:`EquilibriumMap` (so the command line, the
-nodes and the batch runner configure the solver the same way) and that reads and writes the
-volume-history CSV files of ``softseq solve``.
+This is the one place that turns a scene into an :class:`EquilibriumMap` (:func:`scene_map`:
+the API, the command line, the rig's model seam and the analysis configure the solver the same
+way and share one map per process) and that reads and writes the volume-history CSV files of
+``softseq solve``.
 """
 
+from collections import OrderedDict
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,7 +17,11 @@ from numpy.typing import NDArray
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
 from softseq_ros.scene.csv_columns import read_columns, write_rows
+from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
+
+if TYPE_CHECKING:
+    from softseq_ros.scene.loader import Scene
 
 INJECTED_COLUMN = 'injected_m3'
 
@@ -24,11 +30,36 @@ class HistoryError(UserError):
     """A volume-history file that cannot be used; the message starts with the file name."""
 
 
-def build_map(segments: Sequence[Segment], resolution: int | None = None) -> EquilibriumMap:
-    """Assemble the equilibrium set of a scene's segments (``None`` keeps the default)."""
-    if resolution is None:
-        return EquilibriumMap(segments)
-    return EquilibriumMap(segments, resolution=resolution)
+# The maps a process keeps: enough for the rigs of a few scenes side by side, bounded so that a
+# notebook running many scenes one after another does not keep them all.
+SHARED_MAPS = 8
+_MAPS: OrderedDict[tuple[str, int | None], EquilibriumMap] = OrderedDict()
+
+
+def equilibrium_map(segments: Sequence[Segment],
+                    resolution: int | None = None) -> EquilibriumMap:
+    """
+    The equilibrium map of these segments at this resolution (``None``: the default).
+
+    Assembled once per process (the same segments by their digest): it is the expensive part,
+    and it holds no actuator's state. The :data:`SHARED_MAPS` most recently used are kept.
+    """
+    key = (segments_sha256(segments), resolution)
+    emap = _MAPS.get(key)
+    if emap is None:
+        emap = (EquilibriumMap(segments) if resolution is None
+                else EquilibriumMap(segments, resolution=resolution))
+        _MAPS[key] = emap
+        while len(_MAPS) > SHARED_MAPS:
+            _MAPS.popitem(last=False)
+    else:
+        _MAPS.move_to_end(key)
+    return emap
+
+
+def scene_map(scene: 'Scene') -> EquilibriumMap:
+    """The equilibrium map of a scene's segments at the scene's solver resolution."""
+    return equilibrium_map(scene.segments, scene.solver.resolution)
 
 
 def read_history(path: str | Path) -> NDArray[np.float64]:

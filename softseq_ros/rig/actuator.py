@@ -42,10 +42,11 @@ from pathlib import Path
 import time
 from typing import Callable
 
-from softseq_ros.rig import contract
 from softseq_ros.rig.model import ActuatorModel, CommandRefusedError, Snap, TimedSnap
 from softseq_ros.rig.throttle import Throttle
-from softseq_ros.rig.values import (
+from softseq_ros.segments.identity import segments_sha256
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import (
     INFO,
     WARNING,
     ChannelFlows,
@@ -58,7 +59,6 @@ from softseq_ros.rig.values import (
     SegmentVolumes,
     SnapThrough,
 )
-from softseq_ros.segments.identity import segments_sha256
 
 ACTUATOR_OUTPUTS = ('pressure', 'volumes', 'curvature', 'events', 'flows')
 # Commands kept while waiting for a previous state (the newest; older ones are skipped, and

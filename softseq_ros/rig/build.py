@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 from softseq_ros.errors import UserError
-from softseq_ros.rig import contract
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.camera import CameraCore
 from softseq_ros.rig.model import ActuatorModel, actuator_model
@@ -17,6 +16,7 @@ from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSUR
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile, check_capacity
+from softseq_ros.wire import contract
 
 
 class SettingError(UserError):

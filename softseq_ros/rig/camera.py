@@ -35,10 +35,11 @@ from typing import Sequence
 
 import numpy as np
 
-from softseq_ros.rig import contract
 from softseq_ros.rig.render import SideViewRenderer
 from softseq_ros.rig.throttle import Throttle
-from softseq_ros.rig.values import (
+from softseq_ros.segments.kinematics import PoseSampler, segment_end_indices
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import (
     WARNING,
     Backbone,
     Markers,
@@ -50,7 +51,6 @@ from softseq_ros.rig.values import (
     Snapshot,
     SnapshotStep,
 )
-from softseq_ros.segments.kinematics import PoseSampler, segment_end_indices
 
 CAMERA_OUTPUTS = ('poses', 'markers', 'image')
 # A trigger within this share of the volume held counts as reached (see the module's text).

@@ -27,8 +27,8 @@ the node passes those numbers in.
 from dataclasses import dataclass
 from typing import Any
 
-from softseq_ros.rig import contract
-from softseq_ros.rig.values import INFO, WARNING, Notice
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import INFO, WARNING, Notice
 
 # Commands waiting behind the one taken before the actuator counts as behind: a tenth of its
 # queue (contract.PUMP_COMMAND's depth), 1 s of a 100 Hz pump, 10 ms of one at 10 kHz.

@@ -20,11 +20,11 @@ batch runner's clock or a node's timer); ``None`` means its state changes only o
 :class:`QuasiStaticModel` is the quasi-static physics (softseq_ros.quasistatic): every command
 is answered at once with the equilibrium the volume history leads to, so time changes nothing
 and a command equal to the last one is not solved again. One equilibrium map serves every
-model of the same segments in a process (:func:`shared_map`): the rig's pump, actuator and
-any second actuator of the same scene share it.
+model of the same segments in a process
+(:func:`softseq_ros.quasistatic.solve.scene_map`): the rig's pump, actuator and any second
+actuator of the same scene share it.
 """
 
-from collections import OrderedDict
 from dataclasses import dataclass
 import math
 from typing import Protocol, Sequence
@@ -35,12 +35,12 @@ from softseq_ros.dynamic.network import laminar_range_warning
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
-from softseq_ros.quasistatic.solve import build_map
+from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
-from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
+from softseq_ros.wire.contract import NS_PER_S
 
 
 class CommandRefusedError(UserError):
@@ -135,30 +135,6 @@ class ActuatorModel(Protocol):
         """What the model saw happen since the last call, worth a log line (one line each)."""
 
 
-# The maps a process keeps: enough for the rigs of a few scenes side by side, bounded so that a
-# notebook running many scenes one after another does not keep them all.
-SHARED_MAPS = 8
-_MAPS: OrderedDict[tuple[str, int | None], EquilibriumMap] = OrderedDict()
-
-
-def shared_map(segments: Sequence[Segment], resolution: int | None = None) -> EquilibriumMap:
-    """
-    The equilibrium map of these segments at this resolution (``None``: the default).
-
-    Assembled once per process (the same segments by their digest): it is the expensive part,
-    and it holds no actuator's state. The :data:`SHARED_MAPS` most recently used are kept.
-    """
-    key = (segments_sha256(segments), resolution)
-    emap = _MAPS.get(key)
-    if emap is None:
-        emap = _MAPS[key] = build_map(segments, resolution)
-        while len(_MAPS) > SHARED_MAPS:
-            _MAPS.popitem(last=False)
-    else:
-        _MAPS.move_to_end(key)
-    return emap
-
-
 class QuasiStaticModel:
     """The equilibrium the volume history leads to, at once (snap-throughs, hysteresis)."""
 
@@ -243,7 +219,6 @@ class QuasiStaticModel:
         return []
 
 
-NS_PER_S = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -413,7 +388,7 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
     The fluid network in time when the scene declares one (``network``), else the quasi-static
     equilibrium.
     """
-    quasistatic = QuasiStaticModel(shared_map(scene.segments, scene.solver.resolution),
+    quasistatic = QuasiStaticModel(scene_map(scene),
                                    scene.segment_names)
     if scene.network is None:
         return quasistatic

@@ -42,8 +42,9 @@ import math
 import time
 from typing import Callable, Sequence
 
-from softseq_ros.rig import contract
-from softseq_ros.rig.values import (
+from softseq_ros.scene.programme import PumpProfile
+from softseq_ros.wire import contract
+from softseq_ros.wire.values import (
     INFO,
     WARNING,
     Notice,
@@ -52,7 +53,6 @@ from softseq_ros.rig.values import (
     PumpStatus,
     SegmentVolumes,
 )
-from softseq_ros.scene.programme import PumpProfile
 
 # Gauge pressure above which the pump stops by default: several times the highest pressure
 # of the shipped segment models (about 20 kPa), far below what the silicone survives.

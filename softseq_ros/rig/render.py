@@ -13,10 +13,10 @@ backbone length in pixels, not with the image area.
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from softseq_ros.wire.contract import SEGMENT_RGB
+
 BACKGROUND_RGB = (236, 240, 244)
 MOUNT_RGB = (60, 60, 60)
-SEGMENT_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40),
-               (148, 103, 189), (140, 86, 75))
 DEFAULT_THICKNESS_M = 0.015
 
 

@@ -10,7 +10,7 @@ with it (publish it, record it, log a notice) is the driver's business.
 
 from typing import Any, Callable, Mapping
 
-from softseq_ros.rig.values import TOPIC_VALUE_TYPES, Output
+from softseq_ros.wire.values import TOPIC_VALUE_TYPES, Output
 
 
 class Router:

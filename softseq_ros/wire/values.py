@@ -2,9 +2,9 @@
 The typed values the rig's cores take and give: one class per topic of the contract, plus notices.
 
 A core never sees a ROS message: a node adapter turns received messages into these values and
-the values a core returns into CDR bytes (:mod:`softseq_ros.rig.wire`), the batch runner writes
-those same bytes into a bag, and the one-process rig hands the values straight from core to
-core. Each class names its topic (``topic``), so routing needs no parallel table. Times are
+the values a core returns into CDR bytes (:mod:`softseq_ros.wire.payloads`), the batch runner
+writes those same bytes into a bag, and the one-process rig hands the values straight from core
+to core. Each class names its topic (``topic``), so routing needs no parallel table. Times are
 nanoseconds on the driver's clock (ROS time, sim time or the batch runner's clock).
 """
 
@@ -13,8 +13,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from softseq_ros.rig import contract
-from softseq_ros.rig.contract import Topic
+from softseq_ros.wire import contract
+from softseq_ros.wire.contract import Topic
 
 
 @dataclass(slots=True)

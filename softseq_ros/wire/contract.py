@@ -24,6 +24,12 @@ NODE_NAMES: dict[str, str] = {PUMP: 'syringe_pump', ACTUATOR: 'actuator', CAMERA
 
 FRAME_ID = 'softseq_base'
 DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
+# Stamps on every topic and in every bag are integer nanoseconds.
+NS_PER_S = 1_000_000_000
+# Segment i is drawn in SEGMENT_RGB[i % 6] by the markers and the side-view image alike, so a
+# viewer matches the two by colour.
+SEGMENT_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40),
+               (148, 103, 189), (140, 86, 75))
 
 # The outputs a scene may list are the scene's business (scene.outputs); which topics
 # each switches on is the contract's (Topic.output).

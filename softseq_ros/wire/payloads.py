@@ -18,7 +18,8 @@ import json
 from types import SimpleNamespace
 from typing import Any, Callable
 
-from softseq_ros.bag.cdr import (
+from softseq_ros.errors import UserError
+from softseq_ros.wire.cdr import (
     ENCAPSULATION,
     FixedLayout,
     encoder_for,
@@ -26,10 +27,8 @@ from softseq_ros.bag.cdr import (
     joint_state_packer,
     string_cdr,
 )
-from softseq_ros.errors import UserError
-from softseq_ros.rig.contract import FRAME_ID
-from softseq_ros.rig.render import SEGMENT_RGB
-from softseq_ros.rig.values import (
+from softseq_ros.wire.contract import FRAME_ID, NS_PER_S, SEGMENT_RGB
+from softseq_ros.wire.values import (
     Backbone,
     ChannelFlows,
     Markers,
@@ -46,7 +45,6 @@ from softseq_ros.rig.values import (
     TopicValue,
 )
 
-NS_PER_S = 1_000_000_000
 SYRINGE_JOINT = 'syringe'
 MARKER_WIDTH_M = 0.015  # the paper's 15 x 15 mm section
 LINE_STRIP = 4
