@@ -68,7 +68,7 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 import yaml  # noqa: E402
 
-from softseq_ros.batch import BatchRun  # noqa: E402
+import softseq_ros  # noqa: E402
 from softseq_ros.dynamic.flow import NetworkFlow  # noqa: E402
 from softseq_ros.dynamic.network import tube_law  # noqa: E402
 from softseq_ros.scene.loader import load_scene, scene_from_dict  # noqa: E402
@@ -386,7 +386,7 @@ def rig_run(folder, legs, triggers, rate_hz, network):
     scene = rig_scene(folder, legs, triggers, rate_hz, network)
     bag = folder / f'bag_{"net" if network else "qs"}_{int(rate_hz)}'
     start, cpu_start = time.perf_counter(), time.process_time()
-    result = BatchRun(scene, bag, start_time_ns=0).run()
+    result = softseq_ros.run(scene, bag, start_time_ns=0)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     messages = sum(result.message_counts.values())
     for path in sorted(bag.rglob('*'), reverse=True):

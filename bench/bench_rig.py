@@ -12,9 +12,9 @@ each part, Python, rclpy) go into the file: on a shared machine the wall times m
 load, the CPU times (this process only) much less.
 
 Parts:
-  batch      softseq_ros.batch.BatchRun on the paper scene (0 -> 65 -> 0 mL, pump 50 Hz, camera
+  batch      softseq_ros.run on the paper scene (0 -> 65 -> 0 mL, pump 50 Hz, camera
              10 Hz, everything recorded); where the time goes (exclusive timers around each
-             stage of the run, through BatchRun's public ``wrap`` hook, and cProfile's top
+             stage of the run, through the run's public ``wrap`` hook, and cProfile's top
              functions); the saving from skipping work (reduced outputs, a 1 Hz camera, a pump
              hold answered from the actuator's cache).
   processes  the console-script nodes as processes on sim time (sim_clock at several speed-ups,
@@ -54,6 +54,7 @@ import sys
 import tempfile
 import threading
 import time
+from types import SimpleNamespace
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -73,8 +74,9 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  #
 from rclpy.node import Node  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+import softseq_ros  # noqa: E402
 from softseq_ros.bag.reader import read_bag  # noqa: E402
-from softseq_ros.batch import BatchRun  # noqa: E402
+from softseq_ros.batch import STAGES  # noqa: E402
 from softseq_ros.nodes.core_node import message_class, qos_profile  # noqa: E402
 from softseq_ros.rig.build import actuator_core  # noqa: E402
 from softseq_ros.scene.loader import load_scene  # noqa: E402
@@ -168,7 +170,7 @@ class BatchSizes:
 FULL = BatchSizes(None, SHORT_LEGS, HOLD_LEGS, PROFILE_LEGS, 5000)
 QUICK = BatchSizes(QUICK_LEGS, QUICK_LEGS, QUICK_HOLD_LEGS, QUICK_PROFILE_LEGS, 1000)
 
-# What each stage of BatchRun.STAGES is, for the table (a stage not named here shows its label).
+# What each stage of STAGES is, for the table (a stage not named here shows its label).
 STAGE_NAMES = {
     'pump.tick': 'pump: tick (programme, state)',
     'pump.handle': 'pump: pressure check (volumes feedback)',
@@ -184,7 +186,7 @@ STAGE_NAMES = {
 
 class StageTimer:
     """
-    A ``wrap`` hook for BatchRun: the exclusive time of every stage and its calls.
+    A ``wrap`` hook for a batch run: the exclusive time of every stage and its calls.
 
     Exclusive: each wrapped call's time minus the time of the wrapped calls inside it (the
     actuator's command handling does not count the equilibrium solve it asks for).
@@ -233,22 +235,35 @@ def _batch_overrides(legs=None, camera_rate=None, outputs=None):
     return dict(overrides)
 
 
+def _seeing(cores: dict, started: list, wrap=None):
+    """A ``wrap`` hook that keeps each core by role and the CPU time the run started at."""
+    def seen(stage: str, function):
+        # Called once per stage after the cores are built and before the run starts.
+        if not started:
+            started.append(time.process_time())
+        if stage.endswith('.tick'):
+            cores[stage.split('.')[0]] = function.__self__
+        return function if wrap is None else wrap(stage, function)
+    return seen
+
+
 def run_batch(workdir: Path, label: str, repeats: int, wrap=None, **options):
     """
     Best of ``repeats`` (by wall time) of one batch configuration: (run, result, CPU [s]).
 
-    The CPU time is this process's during ``run()`` (all its threads). ``wrap`` goes to every
-    repeat (BatchRun's public hook); a timer there adds up over the repeats.
+    The CPU time is this process's from the run's cores being built to its end (all its
+    threads). ``wrap`` goes to every repeat (the run's public hook); a timer there adds up over
+    the repeats. ``run`` holds the run's cores by role, seen through the same hook.
     """
     best = None
     for index in range(repeats):
         out = workdir / f'{re.sub(r"[^a-z0-9]+", "_", label.lower())}_{index}'
-        run = BatchRun('paper', out, overrides=_batch_overrides(**options), wrap=wrap)
-        cpu = time.process_time()
-        result = run.run()
-        cpu = time.process_time() - cpu
+        cores, started = {}, []
+        seen = _seeing(cores, started, wrap)
+        result = softseq_ros.run('paper', out, overrides=_batch_overrides(**options), wrap=seen)
+        cpu = time.process_time() - started[0]
         if best is None or result.wall_s < best[1].wall_s:
-            best = (run, result, cpu)
+            best = (SimpleNamespace(**cores), result, cpu)
         shutil.rmtree(out, ignore_errors=True)
     return best
 
@@ -286,10 +301,15 @@ def actuator_micro(repeats: int, count: int = 5000) -> dict[str, float]:
 
 def cprofile_top(workdir: Path, legs: tuple[Leg, ...] = PROFILE_LEGS, rows: int = 14) -> str:
     out = workdir / 'profiled'
-    run = BatchRun('paper', out, overrides=_batch_overrides(legs=legs))
     profile = cProfile.Profile()
-    profile.enable()
-    run.run()
+
+    def profiled(stage: str, function):
+        # The first stage handed over: the cores are built, the run is about to start.
+        if stage == STAGES[0]:
+            profile.enable()
+        return function
+
+    softseq_ros.run('paper', out, overrides=_batch_overrides(legs=legs), wrap=profiled)
     profile.disable()
     shutil.rmtree(out, ignore_errors=True)
     stats = pstats.Stats(profile)
@@ -313,7 +333,7 @@ def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
     load_before = load_text()
     scene = load_scene('paper')
     short = describe_legs(sizes.short_legs)
-    lines = ['## 1. Batch run (`softseq_ros.batch.BatchRun`, one process, no DDS)', '']
+    lines = ['## 1. Batch run (`softseq_ros.run`, one process, no DDS)', '']
     if sizes is not FULL:
         lines += ['**Quick check** (`--quick`): short programmes, too short for the numbers '
                   'to mean much; they show that the benchmark runs.', '']
@@ -359,8 +379,8 @@ def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
         lines += [
             '### Where the time goes', '',
             f'Shortened programme {short} ({result.sim_duration_s:.0f} s sim, same '
-            'scene and rates). Every stage of the run (`BatchRun.STAGES`) is wrapped, through '
-            "BatchRun's public `wrap` hook, in a timer that counts its own time without the "
+            'scene and rates). Every stage of the run (`STAGES`) is wrapped, through '
+            "the run's public `wrap` hook, in a timer that counts its own time without the "
             "wrapped calls inside it (the actuator's command handling does not count the "
             'equilibrium solve it asks for; the serialisation and bag write of what a core '
             'produces are stages of their own). The backbone kinematics have no stage of their '
@@ -377,7 +397,7 @@ def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
         rest = total - accounted
         lines += [f'| runner: routing, queue, loop, setup (the rest) | | {rest:.2f} | '
                   f'{100 * rest / total:.0f} % | |', '']
-        idle = [label for label in BatchRun.STAGES if not timer.calls.get(label)]
+        idle = [label for label in STAGES if not timer.calls.get(label)]
         if idle:
             lines += ['Stages never called in this run: '
                       + ', '.join(f'`{label}`' for label in idle)
@@ -943,8 +963,11 @@ def baseline_tree(ref: str):
 
 _BATCH_CHILD = """
 import json, sys
-from softseq_ros.batch import run_scene
-result = run_scene('paper', sys.argv[1], show_progress=False)
+try:
+    from softseq_ros.batch import run
+except ImportError:  # the code before one way to run a batch
+    from softseq_ros.batch import run_scene as run
+result = run('paper', sys.argv[1])
 print(json.dumps({'wall': result.wall_s, 'sim': result.sim_duration_s,
                   'messages': sum(result.message_counts.values()),
                   'module': __import__('softseq_ros').__file__}))

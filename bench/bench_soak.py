@@ -13,7 +13,7 @@ Parts:
   batch     `softseq run` of the paper scene repeated ``--cycles`` times (18 by default:
             10.3 M messages), in a fresh interpreter that imports no rclpy: a temporary scene
             file beside the shipped ones (config/, the public scene format, removed
-            afterwards), run by softseq_ros.batch.BatchRun. Its progress stream (a line every
+            afterwards), run by softseq_ros.run. Its progress stream (a line every
             0.25 s of wall time) is the sampling hook: resident memory (VmRSS), Python's
             allocated blocks, CPU time and messages written so far. Reported per pump cycle
             (equal work) and at the start, at 10 % and at the end; the bag is checked with
@@ -57,8 +57,8 @@ from mcap.reader import make_reader  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
+import softseq_ros  # noqa: E402
 from softseq_ros.bag.reader import bag_summary, read_bag  # noqa: E402
-from softseq_ros.batch import BatchRun  # noqa: E402
 from softseq_ros.scene.loader import load_scene  # noqa: E402
 from softseq_ros.scene.paths import config_dir  # noqa: E402
 
@@ -152,7 +152,7 @@ def mcap_chunks(bag: Path) -> tuple[int, int]:
 
 class _Sampler:
     """
-    Samples of a BatchRun as it goes, through its public hooks only.
+    Samples of a batch run as it goes, through its public hooks only.
 
     The run's progress stream (a line every 0.25 s of wall time) takes a sample at every line.
     Its ``wrap`` hook counts the messages written (``append``: how many, and the log time of
@@ -163,8 +163,11 @@ class _Sampler:
     at its start and at its end).
     """
 
-    def __init__(self) -> None:
-        self.run: BatchRun | None = None
+    def __init__(self, start_time_ns: int) -> None:
+        self.start_time_ns = start_time_ns
+        self.pump = None
+        # What was measured once the run's cores were built, just before it started.
+        self.built: dict[str, float] = {}
         self.origin = time.perf_counter()
         self.samples: list[tuple[float, float, int, int, int, float]] = []
         # Messages written, log time of the last [ns], whether the programme has ended.
@@ -172,7 +175,7 @@ class _Sampler:
 
     def _sample(self) -> tuple[float, float, int, int, int, float]:
         count, last_ns, _ = self.written
-        sim = (last_ns - self.run.start_time_ns) * 1e-9 if count else 0.0
+        sim = (last_ns - self.start_time_ns) * 1e-9 if count else 0.0
         rss, _ = proc_memory()
         return (time.perf_counter() - self.origin, sim, count, rss, sys.getallocatedblocks(),
                 time.process_time())
@@ -184,7 +187,13 @@ class _Sampler:
         self.samples[-1] = self._sample()
 
     def wrap(self, label: str, function):
-        """BatchRun's ``wrap`` hook: count what is written, see the programme end."""
+        """The run's ``wrap`` hook: count what is written, see the programme end."""
+        if not self.built:
+            # The first stage handed over: the cores are built, the run is about to start.
+            self.built['rss'] = proc_memory()[0]
+            self.origin = time.perf_counter()
+            self.sample()
+            self.built['machine_busy_s'] = machine_cpu_s()[0]
         if label == 'append':
             written, renew = self.written, self.renew
 
@@ -196,9 +205,11 @@ class _Sampler:
                     renew()
             return counted
         if label == 'pump.tick':
+            self.pump = function.__self__
+
             def ticked(now: int):
                 outputs = function(now)
-                if not self.written[2] and self.run.pump.state in ('finished', 'stopped'):
+                if not self.written[2] and self.pump.state in ('finished', 'stopped'):
                     # The run's last instant: its messages renew this sample as they go out.
                     self.sample()
                     self.written[2] = True
@@ -220,19 +231,15 @@ class _Sampler:
 def batch_child(scene: Path, out: Path) -> None:
     """Run the soak scene into ``out`` sampling as it goes; print one JSON object."""
     rss_imported, _ = proc_memory()
-    sampler = _Sampler()
-    run = BatchRun(scene, out, progress=sampler, wrap=sampler.wrap)
-    sampler.run = run
-    rss_built, _ = proc_memory()
-    sampler.origin = time.perf_counter()
-    sampler.sample()
-    machine_before = machine_cpu_s()[0]
-    result = run.run()
+    sampler = _Sampler(time.time_ns())
+    result = softseq_ros.run(scene, out, progress=sampler, wrap=sampler.wrap,
+                             start_time_ns=sampler.start_time_ns)
     machine_after = machine_cpu_s()[0]
+    rss_built, machine_before = sampler.built['rss'], sampler.built['machine_busy_s']
     closing_s = time.perf_counter() - sampler.origin - sampler.samples[-1][0]
     cpu_end = time.process_time()
     rss_end, hwm = proc_memory()
-    profile = run.pump.profile
+    profile = sampler.pump.profile
     print(json.dumps({
         'rss_imported': rss_imported, 'rss_built': rss_built, 'rss_end': rss_end, 'hwm': hwm,
         'samples': sampler.samples, 'wall_s': result.wall_s,
@@ -240,7 +247,7 @@ def batch_child(scene: Path, out: Path) -> None:
         'pump_state': result.pump_state, 'closing_s': closing_s,
         'machine_busy_s': machine_after - machine_before, 'cpu_end': cpu_end,
         'cycles': profile.cycles,
-        'cycle_s': run.pump.duration_s / profile.cycles, 'warnings': result.warnings[:20]}))
+        'cycle_s': sampler.pump.duration_s / profile.cycles, 'warnings': result.warnings[:20]}))
 
 
 def write_soak_scene(cycles: int, folder: Path | None = None, legs: list | None = None) -> Path:
@@ -357,7 +364,7 @@ def part_batch(cycles: int, keep_bag: bool, quick: bool = False) -> str:
     programme, where = ('0 -> 65 -> 0 mL', 'in `config/`') if not quick else (
         '**quick check**: programme shortened to 0 -> 10 -> 0 mL', 'in a temporary folder')
     lines = [
-        '## 1. Batch soak (`softseq_ros.batch.BatchRun`, one process, no rclpy)', '',
+        '## 1. Batch soak (`softseq_ros.run`, one process, no rclpy)', '',
         f'The paper scene (`config/paper.yaml`: {programme} at 0.05 mL/s, pump 50 Hz, '
         f'camera 10 Hz, every output recorded) with its pump programme repeated '
         f'{info["cycles"]} times, {info["sim_s"]:,.0f} s of rig time, from a temporary scene '

@@ -1,18 +1,21 @@
 """
 softseq_ros: an emulated rig for soft actuators with a hardware-encoded inflation sequence.
 
-From a notebook or a script::
+One function per job, from a notebook or a script (the ``softseq`` command runs the same ones)::
 
     import softseq_ros
     scene = softseq_ros.load_scene('paper')                 # a shipped name or a YAML file
-    path = softseq_ros.solve(scene, [0.0, 2.5e-5, 6.5e-5])  # injected volumes [m^3]
-    print(path.pressure, path.volumes, path.events)         # gauge Pa, m^3 per segment, snaps
+    path = softseq_ros.solve(scene, [0.0, 2.5e-5, 6.5e-5])  # injected volumes [m^3], in order
+    print(softseq_ros.classify(scene))                      # 'partial'
+    graph = softseq_ros.graph(scene)                        # every stable branch, every snap
     result = softseq_ros.run(scene, 'bags/mine')            # the whole rig, recorded to a bag
     recording = softseq_ros.load_recording('bags/mine')     # the bag's rig topics as arrays
+    metrics, summary = softseq_ros.report('bags/mine')      # metrics.json, report.md, figures
 
-Nothing here imports ROS; ``run`` steps the rig's cores without rclpy. Each function imports
-what it needs when first called, so ``import softseq_ros`` stays cheap. Launch-free tests of
-the ROS nodes have their helpers in :mod:`softseq_ros.testing`.
+These are the package's public API, with what their results hold; every other module is the
+inside of one of them. Nothing here imports ROS; ``run`` steps the rig's cores without rclpy.
+Each function imports what it needs when first called, so ``import softseq_ros`` stays cheap.
+Launch-free tests of the ROS nodes have their helpers in :mod:`softseq_ros.testing`.
 """
 
 import typing as _typing
@@ -23,12 +26,14 @@ if _typing.TYPE_CHECKING:
     from typing import Any
 
     from softseq_ros.analysis.recording import load_recording  # noqa: F401 - for type checkers
-    from softseq_ros.batch import BatchResult
+    from softseq_ros.batch import run  # noqa: F401 - for type checkers
+    from softseq_ros.dynamic.path import DynamicPath
     from softseq_ros.quasistatic.equilibrium import SolvedPath
+    from softseq_ros.quasistatic.graph import TransitionGraph
     from softseq_ros.scene.loader import Scene
 
 __version__ = '0.1.0'
-__all__ = ['load_recording', 'load_scene', 'run', 'solve']
+__all__ = ['classify', 'graph', 'load_recording', 'load_scene', 'report', 'run', 'solve']
 
 
 def load_scene(scene: 'str | PathLike | Scene') -> 'Scene':
@@ -39,46 +44,106 @@ def load_scene(scene: 'str | PathLike | Scene') -> 'Scene':
     return scene if isinstance(scene, Scene) else _load(scene)
 
 
-def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float]',
-          resolution: int | None = None) -> 'SolvedPath':
+def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = None,
+          resolution: int | None = None) -> 'SolvedPath | DynamicPath':
     """
-    The quasi-static path along a history of injected volumes [m^3], from rest.
+    The scene's path along a history of injected volumes [m^3] from rest (``softseq solve``).
 
-    The history matters (snap-throughs, hysteresis): the volumes are followed in order. The
-    result holds per row the injected volume, the gauge pressure [Pa], the segment volumes
-    [m^3] and curvatures [1/m], and the snap-throughs on the way (``events``).
+    The history matters (snap-throughs, hysteresis): the volumes are followed in order;
+    without one, the scene's pump programme is sampled at the pump's rate (and refused, naming
+    the scene file, where it goes beyond what the segments take). A quasi-static scene gives a
+    :class:`~softseq_ros.quasistatic.equilibrium.SolvedPath`: per row the injected volume, the
+    gauge pressure [Pa], the segment volumes [m^3] and curvatures [1/m], and the snap-throughs
+    on the way (``events``); ``resolution`` overrides the scene's solver resolution. A scene
+    with a ``network`` gives the path in time, a
+    :class:`~softseq_ros.dynamic.path.DynamicPath` (the history pushed at the pump's flow rate,
+    row by row; snap-throughs with their durations in ``snaps``).
     """
-    from softseq_ros.quasistatic.equilibrium import Tracker
-    from softseq_ros.quasistatic.solve import equilibrium_map
+    import numpy as np
 
     loaded = load_scene(scene)
+    history = None if injected is None else np.asarray(injected, dtype=float)
+    if loaded.network is not None:
+        from softseq_ros.dynamic.path import history_path, programme_path
+
+        profile = loaded.pump.profile
+        if history is None:
+            return programme_path(loaded.segments, loaded.network, profile,
+                                  rate_hz=loaded.pump.rate_hz)
+        return history_path(loaded.segments, loaded.network, history, profile.flow_rate)
+    from softseq_ros.quasistatic.equilibrium import Tracker
+    from softseq_ros.quasistatic.reach import check_scene_reach
+    from softseq_ros.quasistatic.solve import equilibrium_map
+
     emap = equilibrium_map(loaded.segments, resolution or loaded.solver.resolution)
-    return Tracker(emap).sweep(injected)
+    if history is None:
+        check_scene_reach(loaded, emap)
+        _, history = loaded.pump.profile.sample(loaded.pump.rate_hz)
+    return Tracker(emap).sweep(history)
 
 
-def run(scene: 'str | PathLike | Scene', out: 'str | PathLike', *,
-        start_time_ns: int | None = None, overrides: 'dict[str, dict[str, Any]] | None' = None,
-        namespace: str = '/') -> 'BatchResult':
+def classify(scene: 'str | PathLike | Scene') -> str:
     """
-    Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
+    The scene's sequence type (the paper's Fig. 1): none, partial, symmetric or asymmetric.
 
-    A loaded scene runs as it is in memory (``dataclasses.replace`` a part to change it); a
-    path or shipped name is loaded first. The same cores as the ROS nodes, stepped on a
-    simulated clock that starts at ``start_time_ns`` (default: now); ``overrides`` replace
-    core settings by role, e.g. ``{'camera': {'rate_hz': 30.0}}``.
+    From the quasi-static equilibrium (a scene's network changes how fast, not which): inflated
+    over the segments' whole range and deflated back (``softseq classify``). The scene's own
+    programme is checked as ``solve`` checks it.
     """
-    from softseq_ros.batch import BatchRun
+    from softseq_ros.quasistatic.equilibrium import classify as _classify
+    from softseq_ros.quasistatic.reach import check_scene_reach
+    from softseq_ros.quasistatic.solve import scene_map
 
-    return BatchRun(scene, out, overrides=overrides, start_time_ns=start_time_ns,
-                    namespace=namespace).run()
+    loaded = load_scene(scene)
+    emap = scene_map(loaded)
+    check_scene_reach(loaded, emap)
+    return _classify(emap)
 
 
-# Loaded on first use: the bag readers and numpy take about a second to import.
-_LAZY = {'load_recording': 'softseq_ros.analysis.recording'}
+def graph(scene: 'str | PathLike | Scene') -> 'TransitionGraph':
+    """
+    Every stable state of the scene's segments and how they connect (``softseq graph``).
+
+    Its branches carry their volume intervals and labels, its transitions the joins and snaps
+    (fluid moved, energy released); ``history_to(index)`` gives the fewest reversals of a
+    volume history from rest that reaches a branch.
+    """
+    from softseq_ros.quasistatic.graph import transition_graph
+    from softseq_ros.quasistatic.solve import scene_map
+
+    return transition_graph(scene_map(load_scene(scene)))
+
+
+def report(bag: 'str | PathLike', out: 'str | PathLike | None' = None, *,
+           scene: 'str | PathLike | None' = None, experiment: 'str | PathLike | None' = None,
+           reference: 'str | PathLike | None' = None, namespace: str | None = None,
+           svg: bool = False, style: 'Any' = None,
+           workers: object | None = None) -> 'tuple[dict, str]':
+    """
+    Analyse a rig bag into ``out`` (default ``BAG/report``): the metrics and the summary text.
+
+    Writes metrics.json (SI, gauge pressures), report.md, summary.txt and the figures, as
+    ``softseq report`` does; ``scene`` adds the quasi-static prediction, ``experiment`` a
+    measured CSV beside it, ``namespace`` picks one rig of several, ``style`` is a
+    :class:`softseq_ros.analysis.figures.FigureStyle`. ``workers``: a figure worker a command
+    started before its imports (:mod:`softseq_ros.analysis.figure_workers`); else one is
+    started here.
+    """
+    from pathlib import Path
+
+    from softseq_ros.analysis.report import write_report
+
+    folder = Path(out) if out is not None else Path(bag) / 'report'
+    return write_report(bag, folder, None if scene is None else str(scene), experiment,
+                        reference, namespace, svg, workers=workers, style=style)
+
+
+# Loaded on first use: the bag readers, numpy and the rig's cores take about a second to import.
+_LAZY = {'load_recording': 'softseq_ros.analysis.recording', 'run': 'softseq_ros.batch'}
 
 
 def __getattr__(name: str) -> _typing.Any:
-    """``load_recording`` (softseq_ros.analysis.recording's), imported when first asked for."""
+    """``load_recording`` and ``run``, imported from their modules when first asked for."""
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

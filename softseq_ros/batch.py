@@ -14,7 +14,6 @@ clock, or ``start_time_ns`` for reproducible bags), so a batch bag is dated like
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
-import sys
 import time
 from typing import Any, Callable, TextIO
 
@@ -92,27 +91,13 @@ class _Channel:
 Stage = Callable[..., Any]
 
 
-class BatchRun:
-    """
-    One lock-step run of a scene into the bag directory ``out``.
+# The stages a ``wrap`` hook of :func:`run` sees, by label.
+STAGES = ('pump.tick', 'pump.handle', 'actuator.tick', 'actuator.handle',
+          'actuator.model.command', 'camera.tick', 'camera.handle', 'encode', 'append')
 
-    ``scene`` is a loaded :class:`Scene` (run as it is in memory, changes included) or a scene
-    file or shipped name. ``overrides`` replace core settings by role
-    (``{'camera': {'rate_hz': 1.0}}``; the names of softseq_ros.rig.build). ``namespace`` is
-    the rig's namespace in the bag's topic names. ``progress`` gets a progress line, ``log``
-    the cores' warnings (also kept in the result).
 
-    ``model`` is the actuator's model (softseq_ros.rig.model; default: the one the scene asks
-    for); one with a rate is advanced at that rate on the run's clock.
-
-    ``wrap`` lets a benchmark or a profiler see every stage of the run without touching the
-    runner: it is called once per stage as ``wrap(label, function)`` before the run starts and
-    returns the function to call instead (the same one, or one that times or counts it). The
-    stages and their labels are in :data:`STAGES`.
-    """
-
-    STAGES = ('pump.tick', 'pump.handle', 'actuator.tick', 'actuator.handle',
-              'actuator.model.command', 'camera.tick', 'camera.handle', 'encode', 'append')
+class _BatchRun:
+    """One lock-step run of a scene into a bag directory (what :func:`run` builds and runs)."""
 
     def __init__(self, scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
                  overrides: dict[str, dict[str, Any]] | None = None,
@@ -312,12 +297,38 @@ class BatchRun:
         write_progress(self.progress, text)
 
 
-def run_scene(scene: 'Scene | str | os.PathLike', out: str | os.PathLike,
-              show_progress: bool = True,
-              start_time_ns: int | None = None, allow_long: bool = False) -> BatchResult:
-    """Run a scene in batch mode into the bag directory ``out`` (see BatchRun's limits)."""
-    return BatchRun(scene, out, progress=sys.stderr if show_progress else None,
-                    log=sys.stderr, start_time_ns=start_time_ns, allow_long=allow_long).run()
+def run(scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
+        overrides: dict[str, dict[str, Any]] | None = None,
+        progress: TextIO | None = None, log: TextIO | None = None,
+        start_time_ns: int | None = None, namespace: str = '/',
+        wrap: Callable[[str, Stage], Stage] | None = None,
+        model: ActuatorModel | None = None, allow_long: bool = False) -> BatchResult:
+    """
+    Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
+
+    ``scene`` is a loaded :class:`Scene` (run as it is in memory: ``dataclasses.replace`` a
+    part to change it) or a scene file or shipped name; ``out`` must not exist, and the bag is
+    complete on return. The same cores as the ROS nodes, stepped on a simulated clock that
+    starts at ``start_time_ns`` (default: now), so the same scene and start give the same bag.
+
+    ``overrides`` replace core settings by role (``{'camera': {'rate_hz': 1.0}}``; the names of
+    softseq_ros.rig.build). ``namespace`` is the rig's namespace in the bag's topic names.
+    ``progress`` gets a progress line, ``log`` the cores' warnings (also kept in the result).
+    ``model`` is the actuator's model (softseq_ros.rig.model; default: the one the scene asks
+    for); one with a rate is advanced at that rate on the run's clock.
+
+    ``wrap`` lets a benchmark or a profiler see every stage of the run without touching the
+    runner: it is called once per stage as ``wrap(label, function)`` before anything is
+    written and returns the function to call instead (the same one, or one that times or
+    counts it). The stages and their labels are in :data:`STAGES`.
+
+    A run longer than :data:`~softseq_ros.scene.programme.MAX_RUN_S` of rig time, or whose bag
+    would hold more than ``MAX_RUN_MESSAGES`` messages or ``MAX_RUN_BYTES`` bytes, is refused
+    before anything is written (LongRunError), unless ``allow_long``.
+    """
+    return _BatchRun(scene, out, overrides=overrides, progress=progress, log=log,
+                     start_time_ns=start_time_ns, namespace=namespace, wrap=wrap, model=model,
+                     allow_long=allow_long).run()
 
 
-__all__ = ['BatchResult', 'BatchRun', 'LongRunError', 'qos_yaml', 'run_scene']
+__all__ = ['STAGES', 'BatchResult', 'LongRunError', 'qos_yaml', 'run']

@@ -17,62 +17,52 @@ USER_ERRORS: tuple[type[BaseException], ...] = (UserError, OSError)
 
 
 def _solve(args: argparse.Namespace) -> int:
-    from softseq_ros.quasistatic.equilibrium import DomainError, Tracker
-    from softseq_ros.quasistatic.reach import beyond_domain, check_scene_reach
+    import softseq_ros
+    from softseq_ros.dynamic.path import PathError
+    from softseq_ros.quasistatic.equilibrium import DomainError
+    from softseq_ros.quasistatic.reach import beyond_domain
     from softseq_ros.quasistatic.solve import read_history, scene_map, write_path
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
-    if scene.network is not None:
-        return _solve_network(args, scene)
-    emap = scene_map(scene)
-    if args.path is not None:
-        history = read_history(args.path)
-    else:
-        check_scene_reach(scene, emap)
-        _, history = scene.pump.profile.sample(scene.pump.rate_hz)
+    history = None if args.path is None else read_history(args.path)
     try:
-        solved = Tracker(emap).sweep(history)
-    except DomainError as err:
-        if err.row is None:
+        solved = softseq_ros.solve(scene, history)
+    except PathError as err:
+        if history is None:
             raise
-        reason = beyond_domain(float(history[err.row]), err, emap, scene.segment_names)
+        raise PathError(f'{args.path}: injected_m3: {err}') from None
+    except DomainError as err:
+        if err.row is None or history is None:
+            raise
+        reason = beyond_domain(float(history[err.row]), err, scene_map(scene),
+                               scene.segment_names)
         raise DomainError(f'{args.path}: injected_m3 in data row {err.row + 1}: {reason}') \
             from None
+    if scene.network is not None:
+        return _write_network_path(args, scene, solved)
     write_path(args.out, solved, scene.segment_names)
-    _warn_unconverged('solve', emap)
+    _warn_unconverged('solve', scene_map(scene))
     snaps = ', '.join(f'{e.injected * 1e6:.3f} mL' for e in solved.events) or 'none'
-    print(f'{scene.name}: {history.size} commanded volumes solved -> {args.out} '
+    print(f'{scene.name}: {solved.injected.size} commanded volumes solved -> {args.out} '
           f'(snap-throughs: {snaps})')
     return 0
 
 
-def _solve_network(args: argparse.Namespace, scene: Any) -> int:
+def _write_network_path(args: argparse.Namespace, scene: Any, path: Any) -> int:
     """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
     from softseq_ros.dynamic.events import fold_crossing_line
     from softseq_ros.dynamic.network import laminar_range_warning
     from softseq_ros.dynamic.path import (
-        PathError,
         folds_file,
-        history_path,
-        programme_path,
         snaps_file,
         write_folds,
         write_path,
         write_snaps,
     )
-    from softseq_ros.quasistatic.solve import read_history
     from softseq_ros.scene.network import LAMINAR, channel_names
 
     profile = scene.pump.profile
-    if args.path is not None:
-        history = read_history(args.path)
-        try:
-            path = history_path(scene.segments, scene.network, history, profile.flow_rate)
-        except PathError as err:
-            raise PathError(f'{args.path}: injected_m3: {err}') from None
-    else:
-        path = programme_path(scene.segments, scene.network, profile, rate_hz=scene.pump.rate_hz)
     snaps_out, folds_out = snaps_file(args.out), folds_file(args.out)
     write_path(args.out, path, scene.segment_names)
     write_snaps(snaps_out, path.snaps, scene.segment_names)
@@ -107,16 +97,14 @@ def _warn_unconverged(command: str, emap: Any) -> None:
 
 
 def _classify(args: argparse.Namespace) -> int:
+    import softseq_ros
     from softseq_ros.analysis.robustness import robustness_lines, scene_features
-    from softseq_ros.quasistatic.equilibrium import classify
-    from softseq_ros.quasistatic.reach import check_scene_reach
     from softseq_ros.quasistatic.solve import scene_map
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
+    verdict = softseq_ros.classify(scene)
     emap = scene_map(scene)
-    check_scene_reach(scene, emap)
-    verdict = classify(emap)
     _warn_unconverged('classify', emap)
     print(f'{scene.name}: {verdict}')
     lines, warnings = robustness_lines(verdict, *scene_features(scene, emap))
@@ -128,8 +116,9 @@ def _classify(args: argparse.Namespace) -> int:
 
 
 def _graph(args: argparse.Namespace) -> int:
+    import softseq_ros
     from softseq_ros.analysis.graph_figure import plot_graph
-    from softseq_ros.quasistatic.graph import transition_graph, write_graph_json
+    from softseq_ros.quasistatic.graph import write_graph_json
     from softseq_ros.quasistatic.solve import scene_map
     from softseq_ros.scene.loader import load_scene
 
@@ -137,8 +126,8 @@ def _graph(args: argparse.Namespace) -> int:
         raise UserError(f'--reversals must be >= 0, got {args.reversals}')
     style = _figure_style(args)
     scene = load_scene(args.scene)
+    graph = softseq_ros.graph(scene)
     emap = scene_map(scene)
-    graph = transition_graph(emap)
     out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}'
     out.mkdir(parents=True, exist_ok=True)
     write_graph_json(out / 'graph.json', graph, args.reversals)
@@ -196,12 +185,12 @@ def start_time_ns(text: str) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from softseq_ros.batch import run_scene
+    from softseq_ros.batch import run
 
     # Parsed here, not by argparse: a refusal is one line, without the usage text.
     start = None if args.start_time is None else start_time_ns(args.start_time)
-    result = run_scene(args.scene, args.out, show_progress=not args.quiet,
-                       start_time_ns=start, allow_long=args.allow_long)
+    result = run(args.scene, args.out, progress=None if args.quiet else sys.stderr,
+                 log=sys.stderr, start_time_ns=start, allow_long=args.allow_long)
     print(f'{args.out}: {result.sim_duration_s:.1f} s of rig time in {result.wall_s:.1f} s '
           f'({result.speedup:.0f}x real time), {sum(result.message_counts.values())} messages, '
           f'pump {result.pump_state}')
@@ -235,10 +224,11 @@ def _write_report(bag: Path, scene_name: str | None, experiment_csv: Path | None
                   out: Path, reference: Path | None = None, namespace: str | None = None,
                   svg: bool = False, workers: object | None = None,
                   style: Any = None) -> None:
-    from softseq_ros.analysis.report import write_report
+    import softseq_ros
 
-    _, text = write_report(bag, out, scene_name, experiment_csv, reference, namespace, svg,
-                           workers=workers, style=style)
+    _, text = softseq_ros.report(bag, out, scene=scene_name, experiment=experiment_csv,
+                                 reference=reference, namespace=namespace, svg=svg,
+                                 workers=workers, style=style)
     print(text)
     print(f'report: {out / "report.md"}, {out / "metrics.json"}, figures in {out}')
 

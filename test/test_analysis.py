@@ -11,11 +11,11 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 import yaml
 
+import softseq_ros
 from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
 from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_recording
 from softseq_ros.analysis.report import SceneMismatchError, recording_trace, write_report
 from softseq_ros.bag.arrays import BagArrayError, JointStateDecoder, open_bag
-from softseq_ros.batch import run_scene
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
@@ -47,7 +47,7 @@ def asymmetric(tmp_path_factory) -> tuple[Path, Path]:
                     'legs': [{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}]},
                    {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5, 4.5e-5]})
     bag = scene.parent / 'bag'
-    run_scene(scene, bag, show_progress=False)
+    softseq_ros.run(scene, bag)
     return scene, bag
 
 
@@ -59,7 +59,7 @@ def paper(tmp_path_factory) -> tuple[Path, Path]:
                    {'rate_hz': 5,
                     'trigger_injected_m3': [5.0e-6, 1.5e-5, 2.5e-5, 4.5e-5, 6.0e-5]})
     bag = scene.parent / 'bag'
-    run_scene(scene, bag, show_progress=False)
+    softseq_ros.run(scene, bag)
     return scene, bag
 
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
+import softseq_ros
 from softseq_ros.analysis.compare import compare_bags
 from softseq_ros.analysis.report import write_report
-from softseq_ros.batch import run_scene
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 ML = 1e-6
@@ -28,7 +28,7 @@ def _bag(folder: Path, source: str, legs: list[dict], triggers: list[float]) -> 
     path = folder / f'{scene["name"]}.yaml'
     path.write_text(yaml.safe_dump(scene))
     bag = folder / scene['name']
-    run_scene(path, bag, show_progress=False, start_time_ns=10**18)
+    softseq_ros.run(path, bag, start_time_ns=10**18)
     return bag
 
 
@@ -108,7 +108,7 @@ def test_compare_says_which_metric_does_not_apply_and_why(linear, peaked):
 
 
 def _reset_once_at(volume_m3: float):
-    """A BatchRun ``wrap`` that stops and resets the pump once (as ~/stop and ~/reset do)."""
+    """A batch run's ``wrap`` that stops and resets the pump once (as ~/stop and ~/reset do)."""
     done = []
 
     def wrap(label, function):
@@ -132,7 +132,6 @@ def two_runs(tmp_path_factory) -> Path:
     pump is stopped and reset at 3.8 mL (the command goes back to 0 mL in one step) and then
     runs its programme again from the start.
     """
-    from softseq_ros.batch import BatchRun
 
     folder = tmp_path_factory.mktemp('two_runs')
     scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
@@ -143,7 +142,7 @@ def two_runs(tmp_path_factory) -> Path:
     path = folder / 'two_runs.yaml'
     path.write_text(yaml.safe_dump(scene))
     bag = folder / 'bag'
-    BatchRun(path, bag, start_time_ns=10**18, wrap=_reset_once_at(3.8 * ML)).run()
+    softseq_ros.run(path, bag, start_time_ns=10**18, wrap=_reset_once_at(3.8 * ML))
     return bag
 
 

@@ -1,8 +1,11 @@
-"""The package-level entry points a notebook uses: load_scene, solve, run."""
+"""The package-level API a notebook uses: one function per job, each run here as documented."""
 
 from dataclasses import replace
+from pathlib import Path
+import re
 import subprocess
 import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -77,8 +80,9 @@ def test_the_top_level_shows_the_notebook_functions_only(ros_env):
             'print("softseq_ros.analysis.recording" in sys.modules)')
     out = subprocess.run([sys.executable, '-c', code], env=ros_env, capture_output=True,
                          text=True, check=True).stdout.splitlines()
-    public = ['load_recording', 'load_scene', 'run', 'solve']
-    assert out == [repr(public), repr(['load_scene', 'run', 'solve']), 'False']
+    public = ['classify', 'graph', 'load_recording', 'load_scene', 'report', 'run', 'solve']
+    assert out == [repr(public), repr(['classify', 'graph', 'load_scene', 'report', 'solve']),
+                   'False']
     assert sorted(softseq_ros.__all__) == public
 
 
@@ -96,3 +100,69 @@ def test_load_recording_at_the_top_level_is_the_analysis_loader(tmp_path):
                                recording.state_injected, atol=1e-15)
     with pytest.raises(AttributeError, match="no attribute 'load_recordings'"):
         softseq_ros.load_recordings  # noqa: B018
+
+
+def test_run_at_the_top_level_is_the_batch_runner():
+    from softseq_ros.batch import run
+
+    assert softseq_ros.run is run
+
+
+@pytest.mark.parametrize('kind', ['none', 'partial', 'symmetric', 'asymmetric'])
+def test_classify_names_the_sequence_type_of_the_papers_fig1_scenes(kind):
+    # The shipped Fig. 1 scenes reproduce the paper's four types, one each.
+    assert softseq_ros.classify(f'fig1_{kind}') == kind
+
+
+def test_solve_of_a_scene_with_a_network_is_its_path_in_time():
+    from softseq_ros.dynamic.path import history_path
+
+    scene = softseq_ros.load_scene('rate_inversion')
+    history = np.linspace(0.0, 20e-6, 41)
+    path = softseq_ros.solve(scene, history)
+    reference = history_path(scene.segments, scene.network, history, scene.pump.profile.flow_rate)
+    np.testing.assert_array_equal(path.time_s, reference.time_s)
+    np.testing.assert_array_equal(path.volumes, reference.volumes)
+    # Pushed at the pump's flow rate: the last row is reached after the history's volume / rate.
+    assert path.time_s[-1] == pytest.approx(20e-6 / scene.pump.profile.flow_rate, rel=1e-9)
+    # The same scene without its network is the quasi-static path, along the same volumes.
+    slow = softseq_ros.solve(replace(scene, network=None), history)
+    np.testing.assert_array_equal(slow.injected, history)
+
+
+def test_solve_without_a_history_follows_the_scenes_programme():
+    scene = softseq_ros.load_scene('fig1_asymmetric')
+    path = softseq_ros.solve(scene)
+    _, programme = scene.pump.profile.sample(scene.pump.rate_hz)
+    np.testing.assert_array_equal(path.injected, programme)
+    assert path.events
+
+
+def test_graph_holds_every_branch_the_paths_visit():
+    scene = softseq_ros.load_scene('fig1_asymmetric')
+    graph = softseq_ros.graph(scene)
+    path = softseq_ros.solve(scene)
+    # Every state of the default path sits on one of the graph's stable branches, and the
+    # graph has snaps on inflation and deflation (the asymmetric type's two snap-throughs).
+    on_path = [b for b in graph.branches if b.default_path]
+    assert len(on_path) >= 2 and len(graph.snaps()) >= 2
+    for total in path.injected[::50]:
+        assert any(b.injected_lo - 1e-12 <= total <= b.injected_hi + 1e-12
+                   for b in on_path)
+
+
+def test_the_readmes_python_section_runs_as_written(tmp_path, monkeypatch):
+    # The README shows one function per job; its first code block runs here as it stands.
+    text = (Path(__file__).resolve().parents[1] / 'README.md').read_text(encoding='utf-8')
+    section = text.split('## From Python\n', 1)[1].split('\n## ', 1)[0]
+    block = re.search(r'\n\n((?:    .*\n)+)', section).group(1)
+    code = textwrap.dedent(block)
+    for job in ('solve', 'classify', 'graph', 'run', 'load_recording', 'report'):
+        assert f'softseq_ros.{job}(' in code, job
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {}
+    exec(compile(code, 'README.md', 'exec'), namespace)  # noqa: S102
+    assert namespace['metrics']['sequence_type'] == 'partial'
+    assert namespace['metrics']['sequence_type_of_scene'] == 'partial'
+    assert (tmp_path / 'bags' / 'mine' / 'report' / 'metrics.json').is_file()
+    assert (tmp_path / 'bags' / 'mine' / 'report' / 'report.md').is_file()

@@ -15,9 +15,9 @@ from rclpy.parameter import Parameter
 from rosbags.rosbag2 import Reader
 import yaml
 
+import softseq_ros
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.bag.reader import bag_summary, read_bag
-from softseq_ros.batch import BatchRun
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.recorder import Recorder
@@ -97,8 +97,8 @@ def check_bag_against_solver(bag: Path, scene_path: Path, complete: bool = True)
 
 def test_batch_bag_is_deterministic_and_matches_the_solver(fast_scene, tmp_path):
     # Same bag name in two places: the name is part of the bag's own metadata.
-    first = BatchRun(fast_scene, tmp_path / 'a' / 'run', start_time_ns=START_NS).run()
-    BatchRun(fast_scene, tmp_path / 'b' / 'run', start_time_ns=START_NS).run()
+    first = softseq_ros.run(fast_scene, tmp_path / 'a' / 'run', start_time_ns=START_NS)
+    softseq_ros.run(fast_scene, tmp_path / 'b' / 'run', start_time_ns=START_NS)
     assert first.pump_state == 'finished'
     # Same scene, same bag, byte for byte (no wall-clock time and no padding garbage in it).
     bag = tmp_path / 'a' / 'run'
@@ -139,7 +139,7 @@ def test_a_batch_bag_without_snaps_still_has_its_events_topic_and_starts_now(tmp
     path = tmp_path / 'none.yaml'
     path.write_text(yaml.safe_dump(scene))
     before = time.time_ns()
-    result = BatchRun(path, tmp_path / 'bag').run()
+    result = softseq_ros.run(path, tmp_path / 'bag')
     summary = bag_summary(tmp_path / 'bag')
     assert summary.topics['/actuator/events'].message_count == 0
     assert result.message_counts['/actuator/events'] == 0
@@ -149,7 +149,7 @@ def test_a_batch_bag_without_snaps_still_has_its_events_topic_and_starts_now(tmp
 @pytest.mark.ros
 def test_batch_bag_agrees_with_a_bag_of_the_nodes_over_dds(context, fast_scene, tmp_path):
     batch_bag, dds_bag = tmp_path / 'batch', tmp_path / 'dds'
-    BatchRun(fast_scene, batch_bag, start_time_ns=START_NS).run()
+    softseq_ros.run(fast_scene, batch_bag, start_time_ns=START_NS)
 
     scene = [Parameter('scene', value=str(fast_scene))]
     pump = SyringePumpNode(context=context, parameter_overrides=[

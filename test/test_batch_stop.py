@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 import pytest
 import yaml
 
-from softseq_ros.batch import BatchRun
+import softseq_ros
 from softseq_ros.stopping import TerminatedError
 from softseq_ros.wire.contract import NS_PER_S
 
@@ -66,7 +66,7 @@ def short_scene(tmp_path_factory) -> Path:
 @pytest.fixture(scope='module')
 def short_whole(short_scene, tmp_path_factory) -> Messages:
     out = tmp_path_factory.mktemp('whole') / 'whole'
-    BatchRun(short_scene, out, start_time_ns=START_NS).run()
+    softseq_ros.run(short_scene, out, start_time_ns=START_NS)
     return read_topics(out)
 
 
@@ -90,7 +90,7 @@ def test_a_signal_between_two_cores_of_one_instant_keeps_the_whole_instant(
 
     out = tmp_path / 'stopped'
     with pytest.raises(raised):
-        BatchRun(short_scene, out, start_time_ns=START_NS, wrap=wrap).run()
+        softseq_ros.run(short_scene, out, start_time_ns=START_NS, wrap=wrap)
     stopped = read_topics(out)
     assert stopped['/camera/backbone'][-1][0] == at_ns
     assert stopped['/pump/command'][-1][0] == at_ns

@@ -26,6 +26,7 @@ from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 import yaml
 
+import softseq_ros
 from softseq_ros.bag.forms import serialize
 from softseq_ros.bag.writer import BagWriter
 
@@ -98,7 +99,6 @@ def _rosbags_messages(directory: Path) -> list[tuple[str, int, bytes]]:
 @pytest.fixture(scope='module')
 def rig_bag(tmp_path_factory) -> Path:
     """A rig bag from the batch runner on a short programme (2.5 s in, 2.5 s out)."""
-    from softseq_ros.batch import run_scene
 
     scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
     scene['name'] = 'faults'
@@ -107,7 +107,7 @@ def rig_bag(tmp_path_factory) -> Path:
     scene['camera'] = {'rate_hz': 2, 'trigger_injected_m3': [2.5e-5]}
     folder = tmp_path_factory.mktemp('faults')
     (folder / 'faults.yaml').write_text(yaml.safe_dump(scene))
-    run_scene(folder / 'faults.yaml', folder / 'bag', show_progress=False,
+    softseq_ros.run(folder / 'faults.yaml', folder / 'bag',
               start_time_ns=T0)
     return folder / 'bag'
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import softseq_ros
 from softseq_ros.bag.reader import read_bag
-from softseq_ros.batch import BatchRun
 from softseq_ros.dynamic.flow import NetworkFlow, damping_ratio, time_constant
 from softseq_ros.dynamic.network import tube_law
 from softseq_ros.rig.model import DynamicModel, QuasiStaticModel, actuator_model
@@ -184,7 +184,7 @@ def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):
         'camera': {'rate_hz': 2},
         'network': {'channels': [{'length_m': 0.1, 'radius_m': 0.5e-3}], 'rate_hz': 200}}
     scene = scene_from_dict(data, tmp_path / 'network_pair.yaml')
-    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
     assert result.pump_state == 'finished'
     commands = {m.log_time_ns: m.msg.position[0]
                 for m in read_bag(tmp_path / 'bag', ['/pump/command'])}
@@ -404,7 +404,7 @@ def test_on_the_rig_a_snap_through_goes_out_on_the_events_topic(tmp_path):
     data['camera'] = {'rate_hz': 1}
     data['network'] = {'channels': [{'length_m': 0.01, 'radius_m': 0.5e-3}], 'rate_hz': 50}
     scene = scene_from_dict(data, tmp_path / 'fig1_network.yaml')
-    BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
     events = [json.loads(m.msg.data) for m in read_bag(tmp_path / 'bag', ['/actuator/events'])]
     assert len(events) == 1
     # The pump outruns the exchange: the snap starts past the fold of the quasi-static path.

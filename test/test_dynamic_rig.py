@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
+import softseq_ros
 from softseq_ros import cli
 from softseq_ros.bag.reader import bag_summary, read_bag
-from softseq_ros.batch import BatchRun
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import LAMINAR_REYNOLDS, tube_law
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
@@ -44,7 +44,7 @@ def fig1_with_network(tmp_path: Path, network: dict, flow: float = 2e-7,
 def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_path):
     channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
     scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 200})
-    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
     bag = tmp_path / 'bag'
     flows = list(read_bag(bag, ['/actuator/channel_flows']))
     volumes = list(read_bag(bag, ['/actuator/volumes']))
@@ -89,8 +89,8 @@ def test_a_quasi_static_scene_has_no_channel_flows_topic(tmp_path):
     data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
     data['pump'].update({'legs': [{'inflate_to_m3': 2.0e-6}]})
     data['camera'] = {'rate_hz': 1}
-    BatchRun(scene_from_dict(data, tmp_path / 'fig1.yaml'), tmp_path / 'bag',
-             start_time_ns=0).run()
+    softseq_ros.run(scene_from_dict(data, tmp_path / 'fig1.yaml'), tmp_path / 'bag',
+             start_time_ns=0)
     assert '/actuator/channel_flows' not in bag_summary(tmp_path / 'bag').topics
 
 
@@ -101,7 +101,7 @@ def test_the_pump_relief_acts_on_the_dynamic_pressure_at_the_syringe(tmp_path):
     supply = {'length_m': 0.5, 'radius_m': 0.5e-3}
     relief = {'pump': {'max_pressure_pa': 9.0e3}}
     narrow = fig1_with_network(tmp_path, {'channels': [channel], 'supply': supply})
-    result = BatchRun(narrow, tmp_path / 'narrow', start_time_ns=0, overrides=relief).run()
+    result = softseq_ros.run(narrow, tmp_path / 'narrow', start_time_ns=0, overrides=relief)
     assert result.pump_state == 'stopped'
     statuses = [json.loads(m.msg.data) for m in read_bag(tmp_path / 'narrow',
                                                            ['/pump/status'])]
@@ -110,7 +110,7 @@ def test_the_pump_relief_acts_on_the_dynamic_pressure_at_the_syringe(tmp_path):
     assert max(commands) < 2.9e-5
     # Without the supply line the same programme runs to its end under the same relief.
     ideal = fig1_with_network(tmp_path, {'channels': [channel]})
-    result = BatchRun(ideal, tmp_path / 'ideal', start_time_ns=0, overrides=relief).run()
+    result = softseq_ros.run(ideal, tmp_path / 'ideal', start_time_ns=0, overrides=relief)
     assert result.pump_state == 'finished'
 
 
@@ -156,7 +156,7 @@ def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path, 
     # thousands. Warned once, with the channel's name and what to do.
     channel = {'length_m': 0.01, 'radius_m': 1.0e-3}
     scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
-    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
     turbulent = [line for line in result.warnings if 'no longer laminar' in line]
     assert len(turbulent) == 1
     assert 'channel bottom_to_top' in turbulent[0] and 'friction: blasius' in turbulent[0]
@@ -176,7 +176,7 @@ def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path, 
     # exchange: the snap takes longer.
     channel['friction'] = BLASIUS
     scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
-    blasius = BatchRun(scene, tmp_path / 'blasius', start_time_ns=0).run()
+    blasius = softseq_ros.run(scene, tmp_path / 'blasius', start_time_ns=0)
     assert any('follows Blasius' in line for line in blasius.warnings)
     durations = [json.loads(m.msg.data)['duration_s']
                  for bag in ('bag', 'blasius')
@@ -241,7 +241,7 @@ def test_a_withdrawal_faster_than_the_channel_collapses_the_base_and_still_ends_
     data['camera'] = {'rate_hz': 1}
     data['network'] = {'channels': [{'length_m': 0.02, 'radius_m': 0.25e-3}]}
     scene = scene_from_dict(data, tmp_path / 'withdrawal.yaml')
-    result = BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
     assert result.pump_state == 'finished'
     assert not [line for line in result.warnings if 'refused' in line or 'held' in line]
     states = [m.msg for m in read_bag(tmp_path / 'bag', ['/actuator/volumes'])]

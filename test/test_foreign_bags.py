@@ -12,9 +12,9 @@ import pytest
 from rosbags.typesys import Stores, get_typestore
 import yaml
 
+import softseq_ros
 from softseq_ros.analysis.recording import MAX_PAYLOAD_BYTES
 from softseq_ros.bag.writer import BagWriter
-from softseq_ros.batch import BatchRun
 from softseq_ros.wire import contract
 from softseq_ros.wire.cdr import joint_state_cdr, string_cdr
 
@@ -41,7 +41,7 @@ def rig_bag(tmp_path_factory) -> Path:
     directory = tmp_path_factory.mktemp('rig')
     path = directory / 'scene.yaml'
     path.write_text(yaml.safe_dump(scene))
-    BatchRun(path, directory / 'bag', start_time_ns=START_NS).run()
+    softseq_ros.run(path, directory / 'bag', start_time_ns=START_NS)
     return directory / 'bag'
 
 

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 import yaml
 
+import softseq_ros
 from softseq_ros.analysis.figures import STYLE
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import recording_metrics, summary_text
-from softseq_ros.batch import BatchRun
 from softseq_ros.cli import main
 from softseq_ros.quasistatic.branch_ends import BranchEnds
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, inflate_and_deflate
@@ -633,7 +633,7 @@ def test_the_report_of_a_rig_bag_lists_the_branches_of_the_graphs_default_path(t
     data['pump']['flow_rate_m3_per_s'] = 1e-6
     data['camera'] = {'rate_hz': 1}
     scene = scene_from_dict(data, tmp_path / 'fast.yaml')
-    BatchRun(scene, tmp_path / 'bag', start_time_ns=0).run()
+    softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
     emap = scene_map(scene)
     metrics = recording_metrics(load_recording(tmp_path / 'bag'), scene, emap)
     visited = [stay['branch'] for stay in metrics['branches_visited']]

@@ -161,3 +161,110 @@ def test_only_the_model_seam_of_the_rig_knows_the_physics_models():
     drivers = {name for name in graph if name.startswith((f'{PACKAGE}.nodes', f'{PACKAGE}.batch'))}
     assert not {name: sorted(m for m in graph[name] if m.startswith(PHYSICS_MODELS))
                 for name in drivers if any(m.startswith(PHYSICS_MODELS) for m in graph[name])}
+
+
+# Data flows one way: scene -> segment models -> physics -> rig cores -> node or batch ->
+# wire -> bag -> analysis. A layer never imports the layers it feeds.
+NEVER_IMPORTS = {
+    'wire': ('rig', 'nodes', 'batch', 'bag', 'analysis', 'cli', 'fem', 'quasistatic', 'dynamic',
+             'testing', 'parallel'),
+    'bag': ('rig', 'nodes', 'batch', 'analysis', 'cli', 'fem', 'quasistatic', 'dynamic',
+            'testing'),
+    'analysis': ('rig', 'nodes', 'batch', 'cli', 'testing'),
+}
+
+
+def layer_faults(graph: dict[str, set[str]]) -> dict[str, list[str]]:
+    """Each module that imports a layer its own layer must never import, with those imports."""
+    faults = {}
+    for name, imported in graph.items():
+        layer = name.split('.')[1] if name.count('.') else ''
+        banned = tuple(f'{PACKAGE}.{other}' for other in NEVER_IMPORTS.get(layer, ()))
+        wrong = sorted(module for module in imported
+                       if any(module == b or module.startswith(b + '.') for b in banned))
+        if wrong:
+            faults[name] = wrong
+    return faults
+
+
+def test_the_layer_check_catches_a_bag_module_importing_the_rig():
+    graph = {f'{PACKAGE}.bag.info': {f'{PACKAGE}.rig.build', f'{PACKAGE}.wire.contract'},
+             f'{PACKAGE}.wire.payloads': {f'{PACKAGE}.bag.writer'},
+             f'{PACKAGE}.rig.pump': {f'{PACKAGE}.wire.values'}}
+    assert layer_faults(graph) == {f'{PACKAGE}.bag.info': [f'{PACKAGE}.rig.build'],
+                                   f'{PACKAGE}.wire.payloads': [f'{PACKAGE}.bag.writer']}
+
+
+def test_data_flows_one_way_through_the_wire_the_bag_and_the_analysis():
+    graph, _ = import_graph()
+    assert {name for name in graph if name.startswith(f'{PACKAGE}.wire.')}
+    assert layer_faults(graph) == {}
+
+
+# What the public API's functions give back tells their job: a run of the rig into a bag, or a
+# bag read back. Each job has one public function.
+BATCH_RESULTS = ('BatchResult',)
+BAG_READS = ('Recording', 'BagArrays', 'BagMessage', 'BagInfo', 'BagSummary')
+
+
+def public_api() -> dict[str, object]:
+    """Every name the package's faces export: the top level's and each subpackage's __all__."""
+    import importlib
+
+    found = {}
+    faces = [PACKAGE] + sorted(name for name, path in package_modules().items()
+                               if path.name == '__init__.py' and name != PACKAGE)
+    for face in faces:
+        module = importlib.import_module(face)
+        for name in getattr(module, '__all__', ()):
+            found[f'{face}.{name}'] = getattr(module, name)
+    return found
+
+
+def jobs_of(api: dict[str, object]) -> dict[str, list[str]]:
+    """The public names that run a batch and those that read a bag, by their return types."""
+    import inspect
+
+    jobs: dict[str, list[str]] = {'run a batch': [], 'read a bag': []}
+    for name, value in api.items():
+        if inspect.isclass(value):
+            returned = value.__name__
+        elif callable(value):
+            annotation = inspect.signature(value).return_annotation
+            returned = annotation if isinstance(annotation, str) else getattr(
+                annotation, '__name__', str(annotation))
+        else:
+            continue
+        words = set(returned.replace('[', ' ').replace(']', ' ').replace('|', ' ').split())
+        if words & set(BATCH_RESULTS):
+            jobs['run a batch'].append(name)
+        if words & set(BAG_READS):
+            jobs['read a bag'].append(name)
+    return jobs
+
+
+def test_the_job_check_catches_a_second_public_bag_reader():
+    class Recording:
+        pass
+
+    class BatchResult:
+        pass
+
+    def load(directory: str) -> Recording:
+        """One way."""
+
+    def read(directory: str) -> 'Iterator[BagMessage]':  # noqa: F821 - read as text only
+        """Another."""
+
+    def run(scene: str) -> BatchResult:
+        """A batch."""
+
+    assert jobs_of({'a.load': load, 'b.read': read, 'c.run': run, 'c.n': 3}) == {
+        'run a batch': ['c.run'], 'read a bag': ['a.load', 'b.read']}
+
+
+def test_one_public_way_to_run_a_batch_and_one_to_read_a_bag():
+    api = public_api()
+    assert f'{PACKAGE}.solve' in api and f'{PACKAGE}.bag.BagWriter' in api
+    assert jobs_of(api) == {'run a batch': [f'{PACKAGE}.run'],
+                            'read a bag': [f'{PACKAGE}.load_recording']}

@@ -14,8 +14,8 @@ import pytest
 from rosbags.rosbag2 import Reader
 import yaml
 
+import softseq_ros
 from softseq_ros import cli
-from softseq_ros.batch import BatchRun
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
 
@@ -35,7 +35,7 @@ def made(tmp_path_factory):
     path = folder / 'fast_asymmetric.yaml'
     path.write_text(yaml.safe_dump(scene), encoding='utf-8')
     bag = folder / 'bag'
-    BatchRun(path, bag, start_time_ns=START_NS, namespace='/rig_b').run()
+    softseq_ros.run(path, bag, start_time_ns=START_NS, namespace='/rig_b')
     return path, bag
 
 

@@ -11,8 +11,8 @@ from collections import deque
 
 import numpy as np
 
+import softseq_ros
 from softseq_ros.bag.reader import read_bag
-from softseq_ros.batch import BatchRun
 from softseq_ros.quasistatic.solve import equilibrium_map
 from softseq_ros.rig.model import QuasiStaticModel, actuator_model
 from softseq_ros.scene.loader import load_scene
@@ -77,9 +77,9 @@ def test_a_model_with_time_is_advanced_at_its_rate_and_recorded(tmp_path):
     lag_s, rate_hz = 2.0, 7.0   # 7 Hz: its ticks fall between the pump's 50 Hz commands
     model = LaggingModel(QuasiStaticModel(equilibrium_map(scene.segments), scene.segment_names),
                          lag_s, rate_hz)
-    run = BatchRun(scene, tmp_path / 'bag', start_time_ns=0, model=model,
-                   overrides={'pump': {'open_loop': True, 'legs': (Leg.inflate(6.0e-6),)}})
-    result = run.run()
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0, model=model,
+                             overrides={'pump': {'open_loop': True,
+                                                 'legs': (Leg.inflate(6.0e-6),)}})
     assert result.pump_state == 'finished'
     commands = [(m.log_time_ns, m.msg.position[0])
                 for m in read_bag(tmp_path / 'bag', ['/pump/command'])]

@@ -14,8 +14,8 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 import yaml
 
+import softseq_ros
 from softseq_ros.bag.reader import bag_summary
-from softseq_ros.batch import run_scene
 from softseq_ros.nodes import player as player_module
 from softseq_ros.nodes.player import (
     CLOCK_QOS,
@@ -42,7 +42,7 @@ def small_bag(tmp_path_factory) -> Path:
     scene['camera'] = {'rate_hz': 2, 'trigger_injected_m3': [2.5e-5]}
     folder = tmp_path_factory.mktemp('replay')
     (folder / 'replay.yaml').write_text(yaml.safe_dump(scene))
-    run_scene(folder / 'replay.yaml', folder / 'bag', show_progress=False)
+    softseq_ros.run(folder / 'replay.yaml', folder / 'bag')
     return folder / 'bag'
 
 

@@ -117,14 +117,24 @@ def test_run_refuses_a_scene_in_one_line(tmp_path, make, names):
 
 
 def test_allow_long_insists_on_a_long_programme(tmp_path):
-    from softseq_ros.batch import BatchRun, LongRunError
+    from softseq_ros.batch import LongRunError, run
 
     long_hold = paper(tmp_path, ('hold_s: 10', 'hold_s: 1.0e7'))
     with pytest.raises(LongRunError):
-        BatchRun(long_hold, tmp_path / 'refused', start_time_ns=0)
+        run(long_hold, tmp_path / 'refused', start_time_ns=0)
+    assert not (tmp_path / 'refused').exists()
+
+    class BuiltError(Exception):
+        pass
+
+    def built(label, function):
+        # The first stage handed to ``wrap``: the run passed its checks and built its cores.
+        raise BuiltError(function.__self__.duration_s if label == 'pump.tick' else None)
+
     # Insisting is allowed: the run is built (and would run), nothing is written yet.
-    run = BatchRun(long_hold, tmp_path / 'insisted', start_time_ns=0, allow_long=True)
-    assert run.pump.duration_s > 1.0e7
+    with pytest.raises(BuiltError) as seen:
+        run(long_hold, tmp_path / 'insisted', start_time_ns=0, allow_long=True, wrap=built)
+    assert seen.value.args[0] > 1.0e7
     assert not (tmp_path / 'insisted').exists()
 
 

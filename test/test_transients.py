@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import yaml
 
+import softseq_ros
 from softseq_ros.analysis.compare import compare_bags
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import markdown, recording_metrics, summary_text, write_report
 from softseq_ros.bag.reader import read_bag
-from softseq_ros.batch import BatchRun
 from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.validation import YamlLoader
@@ -42,7 +42,7 @@ def fig1_with_network(directory: Path, flow: float, rate_hz: float) -> Path:
 
 
 def run(scene_file: Path, out: Path) -> Path:
-    BatchRun(load_scene(scene_file), out, start_time_ns=0).run()
+    softseq_ros.run(load_scene(scene_file), out, start_time_ns=0)
     return out
 
 

@@ -1,9 +1,9 @@
 """
-MCAP bags in the rosbag2 layout: writing, reading, playback.
+MCAP bags in the rosbag2 layout: writing, recovery, message definitions.
 
-The names below load their module on first use: reading a rig bag into arrays
-(softseq_ros.bag.arrays, what a report does) then never imports rosbags, which only the
-message-by-message reader needs (a third of a second off every ``softseq report``).
+A rig bag is read with :func:`softseq_ros.load_recording` (the one public reader: its topics
+as arrays); the readers below it (``arrays``, ``reader``, ``info``) are this package's inside.
+The names below load their module on first use, so that writing a bag never imports rosbags.
 """
 
 from importlib import import_module
@@ -13,8 +13,6 @@ _MODULE_OF = {
     'offered_qos_yaml': 'forms', 'qos_profile_dict': 'forms', 'serialize': 'forms',
     'MessageDefinitionError': 'msgdefs', 'message_definition': 'msgdefs',
     'type_description_hash': 'msgdefs',
-    'BagMessage': 'reader', 'BagReadError': 'reader', 'BagSummary': 'reader',
-    'TopicSummary': 'reader', 'bag_summary': 'reader', 'read_bag': 'reader',
     'RecoveryResult': 'recovery', 'recover': 'recovery',
     'BagWriter': 'writer', 'BagWriterError': 'writer',
 }
