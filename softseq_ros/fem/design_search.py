@@ -418,13 +418,14 @@ def ensure_tables(designs: list[Design], cache_dir: Path | None, workers: int,
 
 # --- interpolation -------------------------------------------------------------------------
 
-def _membranes(design: Design, values: dict[str, float]) -> int:
+def membrane_count(design: Design, values: dict[str, float]) -> int:
+    """How many membranes a segment of this design has at these parameter values."""
     g = design.geometry
     length = values.get('membrane_length_m', g.membrane_length_m)
     return max(1, round(g.length_m / (g.wall_length_m + length)))
 
 
-def _read_cell(path: Path, design: Design) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+def read_cell(path: Path, design: Design) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """A unit-cell table as (cell rest volume, cell injected volumes, pressures, curvatures)."""
     from softseq_ros.scene.tables import read_table
 
@@ -451,7 +452,7 @@ class SegmentFamily:
         """Build from the grid's tables (index -> (path, design))."""
         from scipy.interpolate import RegularGridInterpolator
 
-        cells = {index: _read_cell(path, design) for index, (path, design) in tables.items()}
+        cells = {index: read_cell(path, design) for index, (path, design) in tables.items()}
         reach = min(u[-1] for _, u, _, _ in cells.values())
         cell_u = np.linspace(0.0, reach, CURVE_SAMPLES)
         shape = tuple(len(v) for v in axes.values())
@@ -500,7 +501,7 @@ class SegmentFamily:
         point = np.array([[values[k] for k in self.axes]]) if self.axes else None
         rest = float(self.rest(point)[0])
         curves = self.curves(point)[0]
-        factor = 4.0 * _membranes(self.segment.design, values)
+        factor = 4.0 * membrane_count(self.segment.design, values)
         n = self.cell_u.size
         return TabulatedSegment(name or self.segment.name, self.segment.design.geometry.length_m,
                                 factor * (rest + self.cell_u), curves[:n], curves[n:],
@@ -635,8 +636,8 @@ def _membrane_counts(segment: SegmentSpace) -> tuple[int, int]:
     lo, hi = segment.ranges.get('membrane_length_m', (None, None))
     if lo is None:
         return (segment.design.geometry.membranes,) * 2
-    return (_membranes(segment.design, {'membrane_length_m': hi}),
-            _membranes(segment.design, {'membrane_length_m': lo}))
+    return (membrane_count(segment.design, {'membrane_length_m': hi}),
+            membrane_count(segment.design, {'membrane_length_m': lo}))
 
 
 def _corners_text(problem: Problem, which: str) -> str:
@@ -749,7 +750,7 @@ def corner_pairs(problem: Problem, paths: dict[str, Path],
                             'error': str(err)})
                 continue
             out.append({'material': material.law, 'corners': list(whiches),
-                        **{k: v for k, v in _plain(metrics).items()
+                        **{k: v for k, v in plain_metrics(metrics).items()
                            if k not in ('min_share', 'snap_throughs')}})
     return out
 
@@ -773,7 +774,7 @@ def check_reach(problem: Problem, cache_dir: Path | None, workers: int,
                  'mesh; grid points all, so the search reuses them)')
     paths, runs = ensure_tables(unique, cache_dir, workers, scheduler, progress,
                                 'reach (corners)')
-    cells = {(s, m, which): _read_cell(paths[d.digest()], d)[1:3]
+    cells = {(s, m, which): read_cell(paths[d.digest()], d)[1:3]
              for s, m, which, d in corners}
     pressure, notes = pressure_reach(problem, cells)
     bounds.update(pressure)
@@ -1025,7 +1026,7 @@ def write_result_files(result: SearchResult, out: Path) -> list[Path]:
         rows.append({'rank': rank, 'score': float(evaluation.score), 'designs': files,
                      'parameters': {s.name: v for s, v in zip(problem.segments,
                                                               evaluation.values)},
-                     'predicted': _plain(evaluation.metrics)})
+                     'predicted': plain_metrics(evaluation.metrics)})
     summary = {'problem': str(problem.path) if problem.path else problem.name,
                'ranked': rows, 'assembled_pairs': result.evaluations,
                'fem_runs': result.fem_runs, 'grid_tables': result.grid_tables,
@@ -1034,7 +1035,7 @@ def write_result_files(result: SearchResult, out: Path) -> list[Path]:
                'reach_notes': result.reach.notes,
                'corner_pairs': result.reach.corner_pairs,
                'verified': result.verified,
-               'verification': (_plain(result.verification.metrics)
+               'verification': (plain_metrics(result.verification.metrics)
                                 if result.verification else None)}
     path = out / 'results.yaml'
     path.write_text('# softseq design: ranked designs (SI units, gauge pressures)\n'
@@ -1043,7 +1044,8 @@ def write_result_files(result: SearchResult, out: Path) -> list[Path]:
     return written
 
 
-def _plain(metrics: dict[str, Any]) -> dict[str, Any]:
+def plain_metrics(metrics: dict[str, Any]) -> dict[str, Any]:
+    """A pair's numbers worth writing down, as plain Python values."""
     keep = ('sequence', 'leader', 'switch_injected_m3', 'plateau_pressure_pa',
             'plateau_from_m3', 'min_share', 'tip_distance_m', 'snap_throughs')
     return {k: (float(v) if isinstance(v, (float, np.floating)) else v)
