@@ -33,10 +33,9 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from softseq_ros.fem.design_grid import ensure_tables, grid_designs  # noqa: E402
 from softseq_ros.fem.design_problem import load_problem  # noqa: E402
 from softseq_ros.fem.design_search import (  # noqa: E402
-    ensure_tables,
-    grid_designs,
     numbers_text,
     search,
     values_text,
