@@ -8,8 +8,9 @@ import pytest
 import yaml
 
 from softseq_ros.fem.design_grid import cell_design, ensure_tables, grid_axes, grid_designs
+from softseq_ros.fem.design_interpolation import SegmentFamily
 from softseq_ros.fem.design_problem import load_problem
-from softseq_ros.fem.design_search import SegmentFamily, search
+from softseq_ros.fem.design_search import search
 from softseq_ros.scene.design import cache_path, load_design
 from softseq_ros.scene.tables import read_table
 
