@@ -266,8 +266,8 @@ def test_bad_problems_are_refused_in_one_line_before_any_work(change, expected, 
 
 
 def test_the_tip_reach_is_the_chord_of_the_backbone_and_judged_in_tolerances():
+    from softseq_ros.fem.design_evaluation import judge, predict
     from softseq_ros.fem.design_problem import Target, Tolerance
-    from softseq_ros.fem.design_search import judge, predict
     from softseq_ros.segments.models import TabulatedSegment
 
     # Two segments bent at one constant curvature: the backbone is one arc of 0.222 m.
