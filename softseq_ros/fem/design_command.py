@@ -4,14 +4,10 @@ from pathlib import Path
 import time
 from typing import Any
 
+from softseq_ros.fem.design_output import numbers_text, values_text, write_result_files
 from softseq_ros.fem.design_problem import load_problem
 from softseq_ros.fem.design_reach import reach_text
-from softseq_ros.fem.design_search import (
-    numbers_text,
-    search,
-    values_text,
-    write_result_files,
-)
+from softseq_ros.fem.design_search import search
 from softseq_ros.scene.design import DesignError
 
 
