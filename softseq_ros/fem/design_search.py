@@ -2,35 +2,36 @@
 Inverse design: segment designs whose assembled sequence meets a target (``softseq design``).
 
 The paper's conclusion is that a library of simulated segments makes design fast. This module
-is that library, searched:
+is that library, searched (the steps before the search have modules of their own):
 
-1. **Reach.** Before the grid and the search, the target is checked against what the ranges
-   can reach, and refused naming the bound and the parameter to widen: the tip's reach needs
-   no FEM (at most the actuator's length); the plateau pressure and the plateau's start are
-   bounded soundly from each segment's softest and stiffest corner (:mod:`.bounds`: the
-   premise that thicker membranes and walls stiffen and a longer membrane softens, and
-   envelopes for curves with peaks). The corners are grid points: when some are not cached
-   the command says so before computing them, and the search reuses them. The switch, the
-   leader and the sequence type are not bounded (they follow from slopes, not levels); what
-   the corner pairs do is shown beside the bounds.
-2. **Grid.** Unit-cell FEM tables on a coarse grid of each segment's varied parameters and
-   material fits, cached by their design hash, run on the shared executor
-   (:func:`softseq_ros.parallel.run_jobs`: local processes or a Dask scheduler).
-3. **Interpolation.** Between grid points a segment's curve is interpolated multilinearly at
-   fixed fluid volume per unit cell (pressure, curvature, and the cell's rest volume, which
-   is multilinear in the thicknesses and lengths itself); the segment is its cells times four
-   times its membrane count. ``test_fem_design_search.py`` checks it against direct FEM runs
-   off the grid.
+1. **Reach** (:mod:`.design_reach`). Before the grid and the search, the target is checked
+   against what the ranges can reach, and refused naming the bound and the parameter to widen:
+   the tip's reach needs no FEM (at most the actuator's length); the plateau pressure and the
+   plateau's start are bounded soundly from each segment's softest and stiffest corner
+   (:mod:`.bounds`: the premise that thicker membranes and walls stiffen and a longer membrane
+   softens, and envelopes for curves with peaks). The corners are grid points: when some are
+   not cached the command says so before computing them, and the search reuses them. The
+   switch, the leader and the sequence type are not bounded (they follow from slopes, not
+   levels); what the corner pairs do is shown beside the bounds.
+2. **Grid** (:mod:`.design_grid`). Unit-cell FEM tables on a coarse grid of each segment's
+   varied parameters and material fits, cached by their design hash, run on the shared
+   executor (:func:`softseq_ros.parallel.run_jobs`: local processes or a Dask scheduler).
+3. **Interpolation** (:mod:`.design_interpolation`). Between grid points a segment's curve is
+   interpolated multilinearly at fixed fluid volume per unit cell (pressure, curvature, and
+   the cell's rest volume, which is multilinear in the thicknesses and lengths itself); the
+   segment is its cells times four times its membrane count. ``test_fem_design_search.py``
+   checks it against direct FEM runs off the grid.
 4. **Search.** The assembly of the two interpolated segments
-   (:func:`softseq_ros.fem.assembly.pair_metrics`) is the inner model; scipy's
-   differential evolution minimises the sum of squared errors over their tolerances, plus a
-   penalty for a wrong sequence type or leader, for each material fit. Every design it
-   evaluated that meets the target is kept; they are ranked by that sum.
+   (:func:`softseq_ros.fem.assembly.pair_metrics`) is the inner model; scipy's differential
+   evolution minimises the sum of squared errors over their tolerances, plus a penalty for a
+   wrong sequence type or leader, for each material fit (:mod:`.design_evaluation`). Every
+   design it evaluated that meets the target is kept; they are ranked by that sum.
 5. **Verification.** The best design's two segments are run by FEM directly (unit cells at
-   their exact parameters, same mesh), assembled and classified; the command says whether
-   that meets the target.
+   their exact parameters, same mesh), assembled and classified; the command says whether that
+   meets the target.
 
-The problem file and its checks: :mod:`softseq_ros.fem.design_problem`.
+The problem file and its checks: :mod:`.design_problem`; what the command prints and writes:
+:mod:`.design_output`; the command itself: :mod:`.design_command`.
 """
 
 from dataclasses import dataclass
