@@ -33,15 +33,14 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from softseq_ros.fem.design_search import (  # noqa: E402
-    ensure_tables,
-    grid_designs,
-    load_problem,
+from softseq_ros.fem.design_grid import ensure_tables, grid_designs  # noqa: E402
+from softseq_ros.fem.design_output import (  # noqa: E402
     numbers_text,
-    search,
     values_text,
     write_result_files,
 )
+from softseq_ros.fem.design_problem import load_problem  # noqa: E402
+from softseq_ros.fem.design_search import search  # noqa: E402
 from softseq_ros.scene.design import cache_path  # noqa: E402
 
 TARGETS = REPO / 'config' / 'design_targets'

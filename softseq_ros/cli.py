@@ -399,7 +399,7 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _design(args: argparse.Namespace) -> int:
-    from softseq_ros.fem.design_search import run_design_command
+    from softseq_ros.fem.design_command import run_design_command
 
     return run_design_command(args)
 

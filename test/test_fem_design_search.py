@@ -7,15 +7,10 @@ import numpy as np
 import pytest
 import yaml
 
-from softseq_ros.fem.design_search import (
-    SegmentFamily,
-    cell_design,
-    ensure_tables,
-    grid_axes,
-    grid_designs,
-    load_problem,
-    search,
-)
+from softseq_ros.fem.design_grid import cell_design, ensure_tables, grid_axes, grid_designs
+from softseq_ros.fem.design_interpolation import SegmentFamily
+from softseq_ros.fem.design_problem import load_problem
+from softseq_ros.fem.design_search import search
 from softseq_ros.scene.design import cache_path, load_design
 from softseq_ros.scene.tables import read_table
 
@@ -271,7 +266,8 @@ def test_bad_problems_are_refused_in_one_line_before_any_work(change, expected, 
 
 
 def test_the_tip_reach_is_the_chord_of_the_backbone_and_judged_in_tolerances():
-    from softseq_ros.fem.design_search import Target, Tolerance, judge, predict
+    from softseq_ros.fem.design_evaluation import judge, predict
+    from softseq_ros.fem.design_problem import Target, Tolerance
     from softseq_ros.segments.models import TabulatedSegment
 
     # Two segments bent at one constant curvature: the backbone is one arc of 0.222 m.

@@ -29,7 +29,7 @@ at V lies between P_low(V) = inf{P : sum A_i(P) >= V} and P_high(V) = sup{P : su
 whichever branch the path is on, snaps included. Every rounding (volumes on a grid) is taken
 to the side that widens the band.
 
-What follows for the target's numbers (:mod:`softseq_ros.fem.design_search`): the plateau
+What follows for the target's numbers (:mod:`softseq_ros.fem.design_reach`): the plateau
 (the largest pressure on the path up to V_end) lies in [P_low(V_end), P_high(V_max)]; the volume
 from which the pressure is within 1 % of its plateau lies between the first V where P_high
 reaches 99 % of the lowest plateau and the first where P_low reaches 99 % of the highest. The

@@ -1,0 +1,60 @@
+"""The ``softseq design`` command: a problem file searched, its designs reported and written."""
+
+from pathlib import Path
+import time
+from typing import Any
+
+from softseq_ros.fem.design_output import numbers_text, values_text, write_result_files
+from softseq_ros.fem.design_problem import load_problem
+from softseq_ros.fem.design_reach import reach_text
+from softseq_ros.fem.design_search import search
+from softseq_ros.scene.design import DesignError
+
+
+def run_design_command(args: Any) -> int:
+    """``softseq design PROBLEM.yaml``: exit 0 when the best design is verified, else 1."""
+    import os
+    import sys
+
+    from softseq_ros.progress import end_progress, write_progress
+
+    problem = load_problem(args.problem)
+    if args.scheduler is not None and args.workers is not None:
+        raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if workers < 1:
+        raise DesignError(f'--workers: must be >= 1, got {workers}')
+    out = args.out if args.out is not None else Path('bags') / f'design_{problem.name}'
+    stream = None if args.quiet else sys.stderr
+    start = time.perf_counter()
+
+    def announce(line: str) -> None:
+        end_progress(stream)
+        print(line, flush=True)
+
+    result = search(problem, cache_dir=args.cache_dir, workers=workers,
+                    scheduler=args.scheduler,
+                    progress=None if stream is None else
+                    (lambda line: write_progress(stream, line)), announce=announce)
+    end_progress(stream)
+    wall = time.perf_counter() - start
+    target = problem.target
+    print(f'{problem.name}: {result.evaluations} pairs assembled on {result.grid_tables} '
+          f'grid tables ({result.fem_runs} FEM runs now, the rest from the cache) in '
+          f'{wall:.1f} s')
+    print(reach_text(result.reach))
+    if not result.ranked:
+        print('no design met the target; the closest:')
+    for rank, evaluation in enumerate(result.ranked, start=1):
+        material = problem.materials[evaluation.material]
+        print(f'{rank}. ' + '; '.join(f'{s.name}: {values_text(v)}' for s, v in
+                                      zip(problem.segments, evaluation.values))
+              + (f'; {material.law}' if len(problem.materials) > 1 else '')
+              + f' -> predicted {numbers_text(evaluation.metrics, target)}')
+    if result.verification is not None:
+        verdict = 'meets the target' if result.verified else 'does NOT meet the target'
+        print(f'verification (direct FEM of the best design): '
+              f'{numbers_text(result.verification.metrics, target)}: {verdict}')
+    written = write_result_files(result, Path(out))
+    print(f'designs and results.yaml in {Path(out)} ({len(written)} files)')
+    return 0 if result.verified else 1
