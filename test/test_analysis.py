@@ -13,13 +13,14 @@ import yaml
 
 import softseq_ros
 from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
-from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_recording
+from softseq_ros.analysis.recording import RecordingError, load_recording
 from softseq_ros.analysis.report import SceneMismatchError, recording_trace, write_report
 from softseq_ros.bag.arrays import BagArrayError, JointStateDecoder, open_bag
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.wire import contract
+from softseq_ros.wire.values import SceneIdentity
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 ML = 1e-6
@@ -572,8 +573,8 @@ def test_the_bag_names_its_scene_and_a_scene_with_other_segments_is_refused(asym
     scene, bag = asymmetric
     recorded = segments_sha256(load_scene(scene).segments)
     recording = load_recording(bag)
-    assert recording.scene == RecordedScene('fast_asymmetric', ('bottom', 'top'), recorded,
-                                            recording.scene.stamp_ns)
+    assert recording.scene == SceneIdentity(recording.scene.stamp_ns, 'fast_asymmetric',
+                                            ('bottom', 'top'), recorded)
     # fig1_symmetric has segments named bottom and top too: only the digest tells them apart.
     other = segments_sha256(load_scene('fig1_symmetric').segments)
     assert other != recorded

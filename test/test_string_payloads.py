@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from softseq_ros.analysis import recording as recording_module
-from softseq_ros.analysis.recording import RecordedScene, RecordingError, load_recording
+from softseq_ros.analysis.recording import RecordingError, load_recording
 from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
 from softseq_ros.wire import contract
@@ -371,7 +371,7 @@ def test_a_recording_reads_every_string_payload_with_its_codec(tmp_path):
     recording = load_recording(bag)
     assert recording.status == [(0.0, 'running', ''), (0.2, 'finished', 'programme done')]
     assert recording.events == [json.loads(SNAP_THROUGH_JSON.text(event))]
-    assert recording.scenes == [RecordedScene('paper', ('bottom', 'top'), SHA, T0 - 10**9)]
+    assert recording.scenes == [SceneIdentity(T0 - 10**9, 'paper', ('bottom', 'top'), SHA)]
     shot, = recording.snapshots
     assert (shot.step, shot.trigger_injected, shot.direction) == (2, 1e-6, 'inflation')
 

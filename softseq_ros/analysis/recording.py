@@ -61,6 +61,7 @@ from softseq_ros.wire.payloads import (
     JsonPayload,
     PayloadError,
 )
+from softseq_ros.wire.values import SceneIdentity
 
 FloatArray = NDArray[np.float64]
 # Pressure messages read to find the ambient pressure (absolute minus gauge): it is constant.
@@ -116,21 +117,6 @@ class ChannelFlows:
     drop: FloatArray
 
 
-@dataclass(frozen=True)
-class RecordedScene:
-    """The scene an actuator said it runs: name, segments base to tip, their SHA-256."""
-
-    scene: str
-    segments: tuple[str, ...]
-    segments_sha256: str
-    stamp_ns: int = 0
-
-    def as_dict(self) -> dict:
-        """The identity as metrics.json holds it."""
-        return {'scene': self.scene, 'segments': list(self.segments),
-                'segments_sha256': self.segments_sha256, 'stamp_ns': self.stamp_ns}
-
-
 @dataclass
 class Recording:
     """Time series of one rig run (times in s from the first pump command)."""
@@ -160,7 +146,7 @@ class Recording:
     snap_rows: NDArray[np.intp] | None = None
     # The distinct scenes the actuator said it runs, in the order said (none in older bags;
     # more than one when an actuator was restarted on other segments during the recording).
-    scenes: list[RecordedScene] = field(default_factory=list)
+    scenes: list[SceneIdentity] = field(default_factory=list)
     # A scene with a fluid network only: the flows through its channels.
     channel_flows: ChannelFlows | None = None
     # Messages left out as unusable: topic -> reason -> count.
@@ -180,7 +166,7 @@ class Recording:
                 for why, count in sorted(reasons.items())]
 
     @property
-    def scene(self) -> RecordedScene | None:
+    def scene(self) -> SceneIdentity | None:
         """The scene the recording was made with (the first said), None when not recorded."""
         return self.scenes[0] if self.scenes else None
 
@@ -634,26 +620,21 @@ def _events(messages: list[tuple[int, str]], topic: str) -> list[dict]:
             for number, (log_time, text) in enumerate(messages, start=1)]
 
 
-def _scenes(messages: list[tuple[int, str]], topic: str) -> tuple[list[RecordedScene],
+def _scenes(messages: list[tuple[int, str]], topic: str) -> tuple[list[SceneIdentity],
                                                                      list[int]]:
     """
     The distinct scene identities of ``actuator/scene``, in the order said, and every stamp.
 
     An actuator names its scene each time it starts: a stamp after its first state is a restart.
     """
-    scenes: list[RecordedScene] = []
+    scenes: list[SceneIdentity] = []
     stamps = []
     for number, (log_time, text) in enumerate(messages, start=1):
         said = _decode(SCENE_IDENTITY_JSON, topic, number, text, log_time)
-        scene = RecordedScene(said.scene, said.segments, said.segments_sha256, said.stamp_ns)
         stamps.append(said.stamp_ns)
-        if not any(_same_scene(scene, seen) for seen in scenes):
-            scenes.append(scene)
+        if not any(said.names() == seen.names() for seen in scenes):
+            scenes.append(said)
     return scenes, stamps
-
-
-def _same_scene(a: RecordedScene, b: RecordedScene) -> bool:
-    return (a.scene, a.segments, a.segments_sha256) == (b.scene, b.segments, b.segments_sha256)
 
 
 def _snapshots(shots: list, steps: list[tuple[int, str]] | None, steps_topic: str,

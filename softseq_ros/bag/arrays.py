@@ -27,11 +27,10 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 import numpy as np
 from numpy.typing import NDArray
-import yaml
 
+from softseq_ros.bag.layout import MCAP_MAGIC, listed_files, mcap_files
 from softseq_ros.errors import UserError
 
-MAGIC = b'\x89MCAP0\r\n'
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
 _OP_MESSAGE_INDEX = 0x07
@@ -486,36 +485,14 @@ class BagArrays:
                                     f'{expected} messages, the chunks hold {decoder.count}')
 
 
-def _mcap_files(path: Path) -> list[Path]:
-    metadata = path / 'metadata.yaml'
-    if metadata.is_file():
-        try:
-            # libyaml's loader where it is built in: a tenth of a report's reading otherwise.
-            info = yaml.load(metadata.read_text(encoding='utf-8'),
-                             Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))[
-                'rosbag2_bagfile_information']
-            names = info.get('relative_file_paths') or []
-        except (yaml.YAMLError, KeyError, TypeError) as err:
-            raise BagArrayError(f'{metadata}: not a rosbag2 metadata file ({err})') from None
-        files = [path / name for name in names]
-        missing = [str(f) for f in files if not f.is_file()]
-        if missing:
-            raise BagArrayError(f'{metadata}: lists {", ".join(missing)}, which does not exist')
-        if files:
-            return files
-    files = sorted(path.glob('*.mcap'))
-    if not files:
-        raise BagArrayError(f'{path}: no .mcap file in this directory')
-    return files
-
-
 def open_bag(directory: str | os.PathLike) -> BagArrays:
     """Open a bag directory (or one .mcap file): channels and counts from the summary."""
     path = Path(directory)
     if path.is_file():
         files, root = [path], path
     elif path.is_dir():
-        files, root = _mcap_files(path), path
+        files = listed_files(path, BagArrayError) or list(mcap_files(path, BagArrayError)[1])
+        root = path
     else:
         raise BagArrayError(f'{path}: no such bag directory or file')
     bag = BagArrays(root, files)
@@ -534,8 +511,8 @@ def open_bag(directory: str | os.PathLike) -> BagArrays:
 
 
 def _summary(stream: BinaryIO, file: Path) -> Any:
-    head = stream.read(len(MAGIC))
-    if head != MAGIC:
+    head = stream.read(len(MCAP_MAGIC))
+    if head != MCAP_MAGIC:
         raise BagArrayError(f'{file}: not an MCAP file (it starts with {head[:8]!r})')
     stream.seek(0)
     try:

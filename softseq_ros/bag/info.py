@@ -29,12 +29,12 @@ from mcap.stream_reader import StreamReader
 import yaml
 
 from softseq_ros.bag.arrays import BagArrayError, string_text
-from softseq_ros.bag.reader import METADATA_FILE, BagReadError, BagSummary, bag_summary
+from softseq_ros.bag.layout import MCAP_MAGIC, METADATA_FILE, mcap_files
+from softseq_ros.bag.reader import BagReadError, BagSummary, bag_summary
 from softseq_ros.errors import UserError
 from softseq_ros.wire import contract
 from softseq_ros.wire.payloads import SCENE_IDENTITY_JSON, PayloadError
-
-MCAP_MAGIC = b'\x89MCAP0\r\n'
+from softseq_ros.wire.values import SceneIdentity
 
 
 class BagInfoError(UserError):
@@ -46,9 +46,7 @@ class SceneSaid:
     """One scene identity an actuator published in the bag, with the namespace it ran in."""
 
     namespace: str
-    scene: str
-    segments: tuple[str, ...]
-    segments_sha256: str
+    identity: SceneIdentity
 
 
 @dataclass(frozen=True)
@@ -71,23 +69,6 @@ class BagInfo:
     def complete(self) -> bool:
         """True when the recorder closed the bag: metadata.yaml and every MCAP summary."""
         return self.has_metadata and not self.files_without_summary
-
-
-def _mcap_files(path: Path) -> tuple[Path, tuple[Path, ...]]:
-    """The bag folder and its .mcap files (in metadata.yaml's order when it lists them)."""
-    if path.is_file():
-        if path.suffix != '.mcap':
-            raise BagInfoError(f'{path}: not a bag (give the bag folder or its .mcap file)')
-        return path.parent, (path,)
-    if not path.is_dir():
-        raise BagInfoError(f'{path}: no such bag folder')
-    files = tuple(sorted(path.glob('*.mcap')))
-    if not files:
-        others = sorted(p.name for p in path.glob('*.db3'))
-        why = (f'a sqlite3 bag ({", ".join(others)}); softseq reads MCAP bags only'
-               if others else 'no .mcap file in it')
-        raise BagInfoError(f'{path}: not an MCAP bag: {why}')
-    return path, files
 
 
 def _check_magic(file: Path) -> None:
@@ -139,10 +120,10 @@ def _scenes(files: tuple[Path, ...], namespaces: tuple[str, ...]) -> tuple[Scene
                             value = SCENE_IDENTITY_JSON.decode(text, stamp_ns=record.log_time)
                         except (PayloadError, BagArrayError):
                             continue  # a garbled identity names no scene
-                        scene = SceneSaid(wanted[topic], value.scene, tuple(value.segments),
-                                          value.segments_sha256)
-                        if scene not in said:
-                            said.append(scene)
+                        namespace = wanted[topic]
+                        if not any(s.namespace == namespace
+                                   and s.identity.names() == value.names() for s in said):
+                            said.append(SceneSaid(namespace, value))
             except Exception:  # noqa: S110 - the damaged tail of an unfinished file ends it
                 pass
     return tuple(said)
@@ -159,7 +140,7 @@ def _ros_distro(folder: Path) -> tuple[str, str]:
 
 def bag_info(path: str | os.PathLike) -> BagInfo:
     """Read what ``softseq info`` shows of the bag at ``path`` (a folder or its .mcap file)."""
-    folder, files = _mcap_files(Path(path))
+    folder, files = mcap_files(Path(path), BagInfoError)
     for file in files:
         _check_magic(file)
     has_metadata = (folder / METADATA_FILE).is_file()
@@ -220,9 +201,10 @@ def format_info(info: BagInfo) -> str:
                                  'counts are from a scan; softseq recover BAG repairs it)'))
     rows.append(('Namespaces', ', '.join(info.namespaces) or '- (no rig topics)'))
     if info.scenes:
-        for index, scene in enumerate(info.scenes):
+        for index, said in enumerate(info.scenes):
+            scene = said.identity
             rows.append(('Scene' if index == 0 else '',
-                         f'{scene.scene or "(unnamed)"} in {scene.namespace}: segments '
+                         f'{scene.scene or "(unnamed)"} in {said.namespace}: segments '
                          f'{", ".join(scene.segments)} (base to tip), segments SHA-256 '
                          f'{scene.segments_sha256}'))
     else:

@@ -44,7 +44,8 @@ from mcap.records import (
 )
 import numpy as np
 
-MAGIC = b'\x89MCAP0\r\n'
+from softseq_ros.bag.layout import MCAP_MAGIC
+
 # Message record: opcode, record length, channel id, sequence, log time, publish time.
 _MESSAGE_FIXED = 2 + 4 + 8 + 8
 _MESSAGE_INDEX_HEADER = struct.Struct('<BQHI')
@@ -154,7 +155,7 @@ class ChunkedMcapWriter:
 
     def start(self, profile: str, library: str) -> None:
         """Write the magic and the header."""
-        self._write(MAGIC)
+        self._write(MCAP_MAGIC)
         self._write_record(Header(profile=profile, library=library))
 
     def _append_to_chunk(self, record: Any) -> None:
@@ -317,7 +318,7 @@ class ChunkedMcapWriter:
         self._write(summary)
         self._write_record(Footer(summary_start=summary_start,
                                   summary_offset_start=summary_offset_start, summary_crc=crc))
-        self._write(MAGIC)
+        self._write(MCAP_MAGIC)
 
 
 def _record_bytes(record: Any) -> bytes:

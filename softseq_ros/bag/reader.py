@@ -21,9 +21,8 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 import yaml
 
+from softseq_ros.bag.layout import METADATA_FILE, mcap_files
 from softseq_ros.errors import UserError
-
-METADATA_FILE = 'metadata.yaml'
 
 
 class BagReadError(UserError):
@@ -124,7 +123,7 @@ def _summary_from_metadata(path: Path) -> BagSummary:
 
 
 def _summary_from_mcap(path: Path) -> BagSummary:
-    candidates = sorted(path.glob('*.mcap'))
+    _, candidates = mcap_files(path, BagReadError)
     if len(candidates) != 1:
         raise BagReadError(f'{path}: no {METADATA_FILE} and not exactly one .mcap file')
     schemas: dict[int, str] = {}

@@ -40,6 +40,7 @@ from mcap.records import (
 )
 from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 
+from .layout import MCAP_MAGIC, file_order
 from .writer import (
     BagWriter,
     BagWriterError,
@@ -87,7 +88,6 @@ class RecoveryResult:
         return sum(known) if len(known) == len(self.dropped) else None
 
 
-MCAP_MAGIC = b'\x89MCAP0\r\n'
 DAMAGED_SUFFIX = '.truncated'
 RECOVERING_SUFFIX = '.recovering'
 _RECORD_HEAD = struct.Struct('<BQ')
@@ -106,13 +106,6 @@ class BagInUseError(BagWriterError):
     """A bag whose writer still holds its lock: it is being written."""
 
 
-def _file_index(path: Path) -> tuple[int, str]:
-    """Sort key of a bag's files: the number after the last '_' (name_0, name_1, ..., name_10)."""
-    stem = path.name.split('.mcap')[0]
-    number = stem.rpartition('_')[2]
-    return (int(number), path.name) if number.isdigit() else (-1, path.name)
-
-
 def _bag_files(directory: Path) -> list[tuple[Path, Path | None]]:
     """
     Each .mcap path of the bag (perhaps missing) with an earlier recovery's damaged original.
@@ -124,7 +117,7 @@ def _bag_files(directory: Path) -> list[tuple[Path, Path | None]]:
     damaged = {p.name[:-len(DAMAGED_SUFFIX)]: p for p in directory.glob('*.mcap' + DAMAGED_SUFFIX)}
     if not mcaps and not damaged:
         raise BagWriterError(f'{directory}: no .mcap file in it')
-    names = sorted(set(mcaps) | set(damaged), key=lambda n: _file_index(directory / n))
+    names = sorted(set(mcaps) | set(damaged), key=lambda n: file_order(directory / n))
     return [(directory / name, damaged.get(name)) for name in names]
 
 

@@ -46,6 +46,7 @@ import threading
 import time
 from typing import Any, BinaryIO, Callable, Mapping, Sequence
 
+from softseq_ros.bag.layout import METADATA_FILE
 from softseq_ros.errors import UserError
 
 from .forms import QosFormError, dump_yaml, parse_qos_yaml
@@ -57,7 +58,6 @@ try:
 except ImportError:  # Windows has no fcntl: bags there are written without a lock
     fcntl = None  # type: ignore[assignment]
 
-METADATA_FILE = 'metadata.yaml'
 METADATA_VERSION = 9
 STORAGE_IDENTIFIER = 'mcap'
 PROFILE = 'ros2'

@@ -120,6 +120,15 @@ class SceneIdentity:
     segments: tuple[str, ...]
     segments_sha256: str
 
+    def names(self) -> tuple[str, tuple[str, ...], str]:
+        """What tells one scene from another (not when it was said)."""
+        return self.scene, tuple(self.segments), self.segments_sha256
+
+    def as_dict(self) -> dict:
+        """The identity as metrics.json holds it."""
+        return {'scene': self.scene, 'segments': list(self.segments),
+                'segments_sha256': self.segments_sha256, 'stamp_ns': self.stamp_ns}
+
 
 @dataclass(slots=True)
 class Backbone:
