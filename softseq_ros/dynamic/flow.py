@@ -171,10 +171,6 @@ class NetworkFlow:
         # The next stretch watched starts where the flow or the state changed at once.
         self._fresh = False
         self._steady = [None if law.inertance > 0.0 else law.flow for law in self.laws]
-        # The last two balances computed, keyed by (t, state): Radau evaluates the rates at
-        # each accepted step's end, which the step's checks need again (the other entry
-        # survives a numerical Jacobian's probe in between).
-        self._recent: list[tuple[float, list[float], tuple]] = []
         # Volumes, pressures and flows of the state now, computed once per state: the rig
         # asks for them several times per output.
         self._now: tuple[list[float], list[float], list[float]] | None = None
@@ -233,9 +229,6 @@ class NetworkFlow:
                                                               FloatArray]:
         """Volumes, pressures, channel flows and the state's rates at time ``t``."""
         state = y.tolist()
-        for key_t, key_state, found in self._recent:
-            if key_t == t and key_state == state:
-                return found
         volumes = self._volume_list(state, self._injected_at(t))
         pressures = self._pressure_list(volumes)
         flows = self._flow_list(state, pressures)
@@ -246,21 +239,13 @@ class NetworkFlow:
         for j in self.inertial:
             law = self.laws[j]
             rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
-        found = (np.array(volumes), np.array(pressures), np.array(flows), np.array(rates))
-        self._recent = [self._recent[-1], (t, state, found)] if self._recent \
-            else [(t, state, found)]
-        return found
-
-    def _rhs(self, t: float, y: FloatArray) -> FloatArray:
-        # A copy: the solver may work on the array it is given, and the balance is kept.
-        return self._balance(t, y)[3].copy()
+        return np.array(volumes), np.array(pressures), np.array(flows), np.array(rates)
 
     def _rates(self, t: float, y: FloatArray) -> FloatArray:
         """
         The state's rates alone, as :meth:`_balance` computes them (the same numbers).
 
-        What the integrator asks for, a dozen times per step: nothing kept, nothing but the
-        rates built. The step's checks ask :meth:`_balance` at its end.
+        What the integrator asks for, a dozen times per step: nothing but the rates built.
         """
         state = y.tolist()
         start_t, start_injected = self._origin
@@ -280,8 +265,7 @@ class NetworkFlow:
         return np.array(rates)
 
     def _new_solver(self) -> Integrator:
-        rates = self._rhs if self.integrator == 'scipy-radau' else self._rates
-        return new_integrator(self.integrator, rates, self._rate_of_one, self.t, self.y,
+        return new_integrator(self.integrator, self._rates, self._rate_of_one, self.t, self.y,
                               self.t + HORIZON_S, self.rtol, self.atol)
 
     def _rate_of_one(self, t: float, v: float) -> float:
@@ -390,7 +374,6 @@ class NetworkFlow:
         if self._solver is None:
             self._solver = self._new_solver()
             self._dense = None
-            self._recent = []
             self._curve = None
             self._watched_to = self.t
             self._leaves_at = math.inf
@@ -599,7 +582,6 @@ class NetworkFlow:
         What the exchange was before (a calm step long ago, say) says nothing about it after:
         an episode that is fast where the next stretch starts starts there.
         """
-        self._recent = []
         self._fresh = True
         _, _, flows, rates = self._balance(self.t, self.y)
         for j, flow in enumerate(flows.tolist()):
