@@ -5,6 +5,7 @@ against FONSim: run time against error, and the batch rig with the network on.
     python bench/bench_dynamic.py [--out bench/dynamic_results.md] [--fonsim-python PATH]
                                   [--no-fonsim-install] [--skip-rig]
     python bench/bench_dynamic.py --quick
+    python bench/bench_dynamic.py --integrators-only [--quick] [--out FILE]
 
 Benchmarks, not tests: nothing is asserted about time. Every ratio is measured in this one run.
 
@@ -37,6 +38,13 @@ tens of seconds (10-90 % of the fluid moved) and move fluid 6-13 times faster th
 5. The batch rig (softseq_ros.batch.BatchRun, every topic recorded) on the paper scene with
    the network block added in memory, as a multiple of real time, beside the quasi-static run
    of the same programme.
+6. The integrators alone (softseq_ros.dynamic.integrators), against scipy's Radau on the same
+   problem at equal tolerances, in this one process: the network's equations written here
+   (all volumes but the tip's as states, laminar channels), the paper pair (one state: our
+   ScalarRadau) and config/three_segments.yaml (two states: our LeanRadau), each stepped from
+   rest to the end of the scene's first inflation, best of 11; the largest difference of the
+   two solutions at 1 Hz (from each one's dense output), as a share of the pumped volume.
+   ``--integrators-only`` runs this part alone.
 
 FONSim is never imported by softseq_ros and is not in requirements.txt: it is installed into
 its own virtual environment from bench/requirements-fonsim.txt, by default
@@ -45,8 +53,9 @@ missing (``--no-fonsim-install``: it does not); ``--fonsim-python`` names anothe
 
 ``--quick``: a check that it runs, in about 15 s: two tolerances, once each, a reference at
 rtol 1e-9, FONSim at one 2 s step (only when its environment exists; skipped and
-said otherwise), a short rig programme; printed, nothing written into the repository (unless
-``--out``). The test suite runs it (test/test_bench_quick.py).
+said otherwise), a short rig programme, the integrators at one tolerance once; printed,
+nothing written into the repository (unless ``--out``). The test suite runs it
+(test/test_bench_quick.py).
 """
 
 import argparse
@@ -65,11 +74,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
-from scipy.integrate import solve_ivp  # noqa: E402
+from scipy.integrate import Radau, solve_ivp  # noqa: E402
 import yaml  # noqa: E402
 
 import softseq_ros  # noqa: E402
-from softseq_ros.dynamic.flow import NetworkFlow  # noqa: E402
+from softseq_ros.dynamic.flow import ATOL_SHARE, NetworkFlow  # noqa: E402
+from softseq_ros.dynamic.integrators import new_integrator  # noqa: E402
 from softseq_ros.dynamic.network import tube_law  # noqa: E402
 from softseq_ros.scene.loader import load_scene, scene_from_dict  # noqa: E402
 from softseq_ros.scene.network import (  # noqa: E402
@@ -85,6 +95,8 @@ REQUIREMENTS = ROOT / 'bench' / 'requirements-fonsim.txt'
 WORKER = ROOT / 'bench' / 'fonsim_run.py'
 ML = 1e-6
 SCENES = ('paper', 'fig1_asymmetric')
+# The integrators alone: one scene whose network has one state, one whose has two.
+INTEGRATOR_SCENES = ('paper', 'three_segments')
 CHANNEL = Tube(length_m=0.01, radius_m=0.4e-3)
 FLUID = Fluid()
 NETWORK = {'channels': [{'length_m': CHANNEL.length_m, 'radius_m': CHANNEL.radius_m}]}
@@ -104,14 +116,17 @@ class Sizes:
     rig_legs: list
     rig_triggers: list
     rig_rates_hz: tuple[float, ...]
+    integrator_rtols: tuple[float, ...]
+    integrator_repeats: int
 
 
 FULL = Sizes(1.0, (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10), 5, 1e-13, 1e-12,
              (0.5, 0.1, 0.02),
              [{'inflate_to_m3': 6.5e-5}, {'hold_s': 10}, {'deflate_to_m3': 0.0}],
-             [5.0e-6, 1.5e-5, 2.5e-5, 4.5e-5, 6.0e-5], (200.0, 50.0))
+             [5.0e-6, 1.5e-5, 2.5e-5, 4.5e-5, 6.0e-5], (200.0, 50.0), (1e-3, 1e-6), 11)
 QUICK = Sizes(1.0, (1e-3, 1e-5), 1, 1e-9, 1e-8, (2.0,),
-              [{'inflate_to_m3': 3.0e-6}, {'deflate_to_m3': 0.0}], [2.0e-6], (200.0,))
+              [{'inflate_to_m3': 3.0e-6}, {'deflate_to_m3': 0.0}], [2.0e-6], (200.0,),
+              (1e-3,), 1)
 
 
 def best_of(fn, repeats):
@@ -395,6 +410,120 @@ def rig_run(folder, legs, triggers, rate_hz, network):
     return result.sim_duration_s, wall, cpu, messages, result.pump_state
 
 
+# ---------------------------------------------------------------------------------- integrators
+
+class IntegratorProblem:
+    """
+    A scene's network written as the integrators see it, without NetworkFlow around it.
+
+    The states are the volumes but the tip's (mass gives it), the syringe feeds the base at the
+    scene's flow, laminar channels (CHANNEL) join the segments; a volume outside a segment's
+    curve reads the pressure at its end. ``rates`` takes and gives arrays (scipy's Radau,
+    LeanRadau), ``rate_of_one`` floats (ScalarRadau, one state); the same arithmetic.
+    """
+
+    def __init__(self, name):
+        segments = load_scene(name).segments
+        self.name = name
+        self.flow, self.pumped = pump_of(name)
+        self.duration = self.pumped / self.flow
+        self.count = len(segments)
+        self.bounds = [(s.rest_volume, s.max_volume) for s in segments]
+        self.y0 = np.array([lo for lo, _ in self.bounds[:-1]])
+        rest_total = sum(lo for lo, _ in self.bounds)
+        self.atol_per_rtol = np.full(self.count - 1,
+                                     ATOL_SHARE * sum(hi - lo for lo, hi in self.bounds))
+        resistance = tube_law(CHANNEL, FLUID).resistance
+        pressure_of = [s.pressure for s in segments]
+        last = self.count - 1
+
+        def pressures(t, others):
+            volumes = others + [rest_total + self.flow * t - sum(others)]
+            return [float(p(min(max(v, lo), hi)))
+                    for p, v, (lo, hi) in zip(pressure_of, volumes, self.bounds)]
+
+        def rates(t, y):
+            p = pressures(t, y.tolist())
+            q = [(p[j] - p[j + 1]) / resistance for j in range(last)]
+            return np.array([self.flow - q[0]] + [q[i - 1] - q[i] for i in range(1, last)])
+
+        def rate_of_one(t, v):
+            p = pressures(t, [v])
+            return self.flow - (p[0] - p[1]) / resistance
+
+        self.rates, self.rate_of_one = rates, rate_of_one
+
+    def ours(self, rtol):
+        """Our default for this state (new_integrator: ScalarRadau or LeanRadau)."""
+        return new_integrator('radau', self.rates, self.rate_of_one, 0.0, self.y0,
+                              self.duration, rtol, self.atol_per_rtol * rtol)
+
+    def scipys(self, rtol):
+        """scipy's Radau as it comes, on the same rates and tolerances."""
+        return Radau(self.rates, 0.0, self.y0, self.duration, rtol=rtol,
+                     atol=self.atol_per_rtol * rtol)
+
+
+def step_through(solver, times=None):
+    """Step ``solver`` to its end: its steps, and its state at ``times`` (dense output)."""
+    rows = None if times is None else np.empty((times.size, solver.y.size))
+    k, steps = 0, 0
+    while solver.status == 'running':
+        message = solver.step()
+        steps += 1
+        if solver.status == 'failed':
+            raise RuntimeError(f'{type(solver).__name__} failed at {solver.t:g} s: {message}')
+        if rows is not None:
+            inside = int(np.searchsorted(times, solver.t, side='right'))
+            if inside > k:
+                rows[k:inside] = np.asarray(solver.dense_output()(times[k:inside])).T
+                k = inside
+    return steps, rows
+
+
+def integrator_section(sizes):
+    """Our integrators against scipy's Radau, each problem and tolerance in turn."""
+    load = os.getloadavg()[0]
+    rows = []
+    for name in INTEGRATOR_SCENES:
+        problem = IntegratorProblem(name)
+        times = np.arange(1.0, problem.duration, 1.0)
+        for rtol in sizes.integrator_rtols:
+            kind = type(problem.ours(rtol)).__name__
+            ours_s, _, (ours_steps, _) = best_of(
+                lambda p=problem, r=rtol: step_through(p.ours(r)), sizes.integrator_repeats)
+            scipy_s, _, (scipy_steps, _) = best_of(
+                lambda p=problem, r=rtol: step_through(p.scipys(r)), sizes.integrator_repeats)
+            _, ours_rows = step_through(problem.ours(rtol), times)
+            _, scipy_rows = step_through(problem.scipys(rtol), times)
+            difference = float(np.max(np.abs(ours_rows - scipy_rows))) / problem.pumped
+            rows.append((name, problem.count - 1, kind, rtol, ours_s, ours_steps, scipy_s,
+                         scipy_steps, difference))
+            print(f'  integrators {name} rtol={rtol:g}: {kind} {ours_s * 1e3:.2f} ms, scipy '
+                  f'{scipy_s * 1e3:.2f} ms ({ours_s / scipy_s:.2f}), difference '
+                  f'{difference:.1e}', flush=True)
+    lines = ["## The integrators alone, against scipy's Radau", '',
+             "softseq_ros.dynamic.integrators on the network's equations written in the bench "
+             "(all volumes but the tip's as states; channels of "
+             f'{CHANNEL.length_m * 1e3:g} mm, radius {CHANNEL.radius_m * 1e3:g} mm), pumped '
+             "from rest to the end of the scene's first inflation at its flow; ours (what "
+             "`new_integrator` picks for the state) and scipy's `Radau` at the same rtol and "
+             'atol (1e-3 rtol of the volume scale), stepped to the end in turn in one process, '
+             f'best of {sizes.integrator_repeats} each (load average {load:.2f} at the start). '
+             "ScalarRadau gets the rate as a float function, scipy's Radau and LeanRadau the "
+             'same rates as an array function. Difference: max over 1 Hz outputs (each '
+             "solution's dense output) of |ours - scipy's|, over the pumped volume.", '',
+             '| scene | states | ours | rtol | ours [ms] | steps | scipy Radau [ms] | steps '
+             '| ours / scipy | difference / pumped |',
+             '|---|---:|---|---:|---:|---:|---:|---:|---:|---:|']
+    lines += [f'| {name} | {states} | {kind} | {rtol:.0e} | {ours_s * 1e3:.2f} | {ours_steps} | '
+              f'{scipy_s * 1e3:.2f} | {scipy_steps} | **{ours_s / scipy_s:.2f}** | '
+              f'{difference:.1e} |'
+              for name, states, kind, rtol, ours_s, ours_steps, scipy_s, scipy_steps, difference
+              in rows]
+    return lines + ['']
+
+
 # ---------------------------------------------------------------------------------- report
 
 def fmt(x, digits=2):
@@ -536,6 +665,7 @@ def run(args, sizes, folder):
                   '(shared caches slow both).', '']
     if not args.skip_rig:
         lines += rig_section(sizes, folder)
+    lines += integrator_section(sizes)
     return '\n'.join(lines) + '\n'
 
 
@@ -603,8 +733,16 @@ def main():
     parser.add_argument('--no-fonsim-install', action='store_true',
                         help="do not create FONSim's environment when it is missing")
     parser.add_argument('--skip-rig', action='store_true')
+    parser.add_argument('--integrators-only', action='store_true',
+                        help="only our integrators against scipy's Radau, printed (part 6)")
     args = parser.parse_args()
     sizes = QUICK if args.quick else FULL
+    if args.integrators_only:
+        report = '\n'.join(integrator_section(sizes)) + '\n'
+        if args.out:
+            Path(args.out).write_text(report)
+        print('\n' + report)
+        return
     with tempfile.TemporaryDirectory(prefix='bench_dynamic_') as folder:
         report = run(args, sizes, Path(folder))
     out = Path(args.out) if args.out else (None if args.quick else RESULTS)

@@ -9,8 +9,10 @@ floats, whose steps drift from scipy's by round-off) within the tolerance over a
 
 import numpy as np
 import pytest
+from scipy.integrate import Radau
 
 from softseq_ros.dynamic.flow import NetworkFlow
+from softseq_ros.dynamic.integrators import LeanRadau, ScalarRadau, new_integrator
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.network import Fluid, NetworkSettings, Tube
 
@@ -86,3 +88,21 @@ def test_for_one_state_the_port_lands_where_scipys_radau_lands():
 def test_an_unknown_integrator_is_refused():
     with pytest.raises(ValueError, match='integrator must be one of radau, scipy-radau'):
         NetworkFlow(load_scene('paper').segments, network(2), integrator='rk4')
+
+
+def test_the_default_ports_a_state_of_one_entry_to_floats_and_leaves_several_to_scipy():
+    def rates(t, y):
+        return -y
+
+    def rate_of_one(t, v):
+        return -v
+
+    def made(method, y0):
+        return new_integrator(method, rates, rate_of_one, 0.0, np.array(y0), 1.0, 1e-6,
+                              np.full(len(y0), 1e-9))
+
+    assert isinstance(made('radau', [1.0]), ScalarRadau)
+    assert isinstance(made('radau', [1.0, 2.0]), LeanRadau)
+    assert type(made('scipy-radau', [1.0])) is Radau
+    with pytest.raises(ValueError, match='method must be one of radau, scipy-radau'):
+        made('rk4', [1.0])
