@@ -35,7 +35,7 @@ tens of seconds (10-90 % of the fluid moved) and move fluid 6-13 times faster th
    own steps.
 4. Our error at FONSim's run time and our run time at FONSim's error, interpolated (log-log)
    in our tolerance sweep, and the ratio.
-5. The batch rig (softseq_ros.batch.BatchRun, every topic recorded) on the paper scene with
+5. The batch rig (softseq_ros.run, every topic recorded) on the paper scene with
    the network block added in memory, as a multiple of real time, beside the quasi-static run
    of the same programme.
 6. The integrators alone (softseq_ros.dynamic.integrators), against scipy's Radau on the same
@@ -672,7 +672,7 @@ def run(args, sizes, folder):
 def rig_section(sizes, folder):
     legs = sizes.rig_legs
     lines = ['## Batch rig: the paper scene with the network on', '',
-             f'`BatchRun` of config/paper.yaml with the network block above added in memory '
+             f'`softseq_ros.run` of config/paper.yaml with the network block above added in memory '
              f'(pump at 50 Hz, camera at 10 Hz, every topic recorded to a bag), programme '
              f'{" -> ".join(describe(leg) for leg in legs)} (at the end of the withdrawal the '
              "base segment collapses below its rest volume and pulls the tip's fluid through "
