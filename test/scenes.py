@@ -1,8 +1,14 @@
 """Small scenes the tests write to files (no ROS needed to use them)."""
 
 import json
+from pathlib import Path
 
 import yaml
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+# The Fig. 1 asymmetric pair pumped 0 -> 50 mL -> 0 at 20 mL/s: 5 s, two snaps each way.
+FAST_ASYMMETRIC_PUMP = {'flow_rate_m3_per_s': 2.0e-5,
+                        'legs': [{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}]}
 
 # Linear bottom and a neo-Hookean balloon top (the symmetric case of Fig. 1): the top passes its
 # pressure peak at about 20 mL injected and then takes the bottom's fluid, so the path is
@@ -55,3 +61,32 @@ def inside_the_hysteresis_loop(emap, samples: int = 1001):
     gap = np.max(np.abs(deflating.volumes[::-1] - inflating.volumes), axis=1)
     row = int(np.argmax(gap))
     return float(grid[row]), inflating.volumes[row], deflating.volumes[::-1][row]
+
+
+def shipped_scene_changed(folder: Path, source: str, name: str, pump: dict, camera: dict,
+                          file_name: str | None = None) -> Path:
+    """
+    A shipped scene (``config/SOURCE``) renamed, with pump settings changed and its camera
+    replaced, written to ``folder`` (its tables named by absolute path); return its path.
+    """
+    scene = yaml.safe_load((CONFIG / source).read_text(encoding='utf-8'))
+    scene['name'] = name
+    scene['pump'].update(pump)
+    scene['camera'] = camera
+    for segment in scene['segments']:
+        if 'table' in segment:
+            segment['table'] = str(CONFIG / segment['table'])
+    path = folder / (file_name or f'{name}.yaml')
+    path.write_text(yaml.safe_dump(scene), encoding='utf-8')
+    return path
+
+
+def fast_asymmetric(folder: Path, name: str, pump_rate_hz: float = 50,
+                    camera_rate_hz: float = 10,
+                    triggers: tuple[float, ...] = (5.0e-6, 2.5e-5, 4.5e-5),
+                    file_name: str | None = None) -> Path:
+    """The Fig. 1 asymmetric pair, 0 -> 50 mL -> 0 at 20 mL/s, as ``folder/NAME.yaml``."""
+    return shipped_scene_changed(
+        folder, 'fig1_asymmetric.yaml', name,
+        {**FAST_ASYMMETRIC_PUMP, 'rate_hz': pump_rate_hz},
+        {'rate_hz': camera_rate_hz, 'trigger_injected_m3': list(triggers)}, file_name)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
-import yaml
+from scenes import shipped_scene_changed
 
 import softseq_ros
 from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_experiment
@@ -27,17 +27,7 @@ ML = 1e-6
 
 
 def _scene(tmp_path_factory, source: str, name: str, pump: dict, camera: dict) -> Path:
-    scene = yaml.safe_load((CONFIG / source).read_text())
-    scene['name'] = name
-    scene['pump'].update(pump)
-    scene['camera'] = camera
-    folder = tmp_path_factory.mktemp(name)
-    for segment in scene['segments']:
-        if 'table' in segment:
-            segment['table'] = str(CONFIG / segment['table'])
-    path = folder / f'{name}.yaml'
-    path.write_text(yaml.safe_dump(scene))
-    return path
+    return shipped_scene_changed(tmp_path_factory.mktemp(name), source, name, pump, camera)
 
 
 @pytest.fixture(scope='module')

@@ -8,6 +8,7 @@ import sys
 from figure_checks import capture_figures, laid_out, png_pixels, share_of, titles, whole
 import numpy as np
 import pytest
+from scenes import fast_asymmetric
 import yaml
 
 import softseq_ros
@@ -134,13 +135,7 @@ def two_runs(tmp_path_factory) -> Path:
     """
 
     folder = tmp_path_factory.mktemp('two_runs')
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    scene['name'] = 'two_runs'
-    scene['pump'].update({'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50,
-                          'legs': [{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}]})
-    scene['camera'] = {'rate_hz': 5, 'trigger_injected_m3': [2.5e-6, 2.5e-5]}
-    path = folder / 'two_runs.yaml'
-    path.write_text(yaml.safe_dump(scene))
+    path = fast_asymmetric(folder, 'two_runs', camera_rate_hz=5, triggers=(2.5e-6, 2.5e-5))
     bag = folder / 'bag'
     softseq_ros.run(path, bag, start_time_ns=10**18, wrap=_reset_once_at(3.8 * ML))
     return bag

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rosbags.rosbag2 import Reader
+from scenes import fast_asymmetric
 import yaml
 
 import softseq_ros
@@ -41,14 +42,7 @@ START_NS = 1_795_000_000 * 10**9   # 2026-11-18, a fixed date for reproducible b
 @pytest.fixture(scope='module')
 def fast_scene(tmp_path_factory) -> Path:
     """The Fig. 1 asymmetric pair, pumped 0 -> 50 mL -> 0 at 20 mL/s: four snaps in 5 s."""
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    scene['name'] = 'fast_asymmetric'
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=50,
-                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
-    scene['camera'] = {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5, 4.5e-5]}
-    path = tmp_path_factory.mktemp('scene') / 'fast_asymmetric.yaml'
-    path.write_text(yaml.safe_dump(scene))
-    return path
+    return fast_asymmetric(tmp_path_factory.mktemp('scene'), 'fast_asymmetric')
 
 
 def messages(bag: Path, topic: str) -> list:

@@ -9,7 +9,7 @@ import time
 
 from mcap.reader import make_reader
 import pytest
-import yaml
+from scenes import fast_asymmetric
 
 import softseq_ros
 from softseq_ros.stopping import TerminatedError
@@ -53,14 +53,7 @@ def assert_prefix(whole: Messages, stopped: Messages) -> None:
 @pytest.fixture(scope='module')
 def short_scene(tmp_path_factory) -> Path:
     """The Fig. 1 asymmetric pair over 5 s: pump 50 Hz, camera 10 Hz and three triggers."""
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    scene['name'] = 'short_asymmetric'
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=50,
-                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
-    scene['camera'] = {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5, 4.5e-5]}
-    path = tmp_path_factory.mktemp('scene') / 'short_asymmetric.yaml'
-    path.write_text(yaml.safe_dump(scene))
-    return path
+    return fast_asymmetric(tmp_path_factory.mktemp('scene'), 'short_asymmetric')
 
 
 @pytest.fixture(scope='module')

@@ -23,8 +23,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 import pytest
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
+from scenes import fast_asymmetric
 from sensor_msgs.msg import JointState
-import yaml
 
 import softseq_ros
 from softseq_ros.bag.forms import serialize
@@ -99,16 +99,10 @@ def _rosbags_messages(directory: Path) -> list[tuple[str, int, bytes]]:
 @pytest.fixture(scope='module')
 def rig_bag(tmp_path_factory) -> Path:
     """A rig bag from the batch runner on a short programme (2.5 s in, 2.5 s out)."""
-
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    scene['name'] = 'faults'
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=20,
-                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
-    scene['camera'] = {'rate_hz': 2, 'trigger_injected_m3': [2.5e-5]}
     folder = tmp_path_factory.mktemp('faults')
-    (folder / 'faults.yaml').write_text(yaml.safe_dump(scene))
-    softseq_ros.run(folder / 'faults.yaml', folder / 'bag',
-              start_time_ns=T0)
+    scene = fast_asymmetric(folder, 'faults', pump_rate_hz=20, camera_rate_hz=2,
+                            triggers=(2.5e-5,))
+    softseq_ros.run(scene, folder / 'bag', start_time_ns=T0)
     return folder / 'bag'
 
 

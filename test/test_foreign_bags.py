@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
-import yaml
+from scenes import fast_asymmetric
 
 import softseq_ros
 from softseq_ros.analysis.recording import MAX_PAYLOAD_BYTES
@@ -33,14 +33,8 @@ Edit = Callable[[str, int, bytes], Iterable[Message]]
 @pytest.fixture(scope='module')
 def rig_bag(tmp_path_factory) -> Path:
     """A real rig bag: the Fig. 1 asymmetric pair over 5 s, two snaps each way."""
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    scene['name'] = 'foreign_asymmetric'
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=50,
-                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
-    scene['camera'] = {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5, 4.5e-5]}
     directory = tmp_path_factory.mktemp('rig')
-    path = directory / 'scene.yaml'
-    path.write_text(yaml.safe_dump(scene))
+    path = fast_asymmetric(directory, 'foreign_asymmetric', file_name='scene.yaml')
     softseq_ros.run(path, directory / 'bag', start_time_ns=START_NS)
     return directory / 'bag'
 

@@ -12,7 +12,7 @@ import shutil
 from mcap.reader import make_reader
 import pytest
 from rosbags.rosbag2 import Reader
-import yaml
+from scenes import fast_asymmetric
 
 import softseq_ros
 from softseq_ros import cli
@@ -27,13 +27,7 @@ START_NS = 1_795_000_000 * 10**9   # 2026-11-18 11:06:40 UTC
 def made(tmp_path_factory):
     """A scene pumped 0 -> 50 mL -> 0 at 20 mL/s (5 s) and its batch bag in /rig_b."""
     folder = tmp_path_factory.mktemp('info')
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text(encoding='utf-8'))
-    scene['name'] = 'fast_asymmetric'
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=50,
-                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
-    scene['camera'] = {'rate_hz': 10, 'trigger_injected_m3': [5.0e-6, 2.5e-5]}
-    path = folder / 'fast_asymmetric.yaml'
-    path.write_text(yaml.safe_dump(scene), encoding='utf-8')
+    path = fast_asymmetric(folder, 'fast_asymmetric', triggers=(5.0e-6, 2.5e-5))
     bag = folder / 'bag'
     softseq_ros.run(path, bag, start_time_ns=START_NS, namespace='/rig_b')
     return path, bag

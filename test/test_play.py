@@ -12,7 +12,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
-import yaml
+from scenes import fast_asymmetric
 
 import softseq_ros
 from softseq_ros.bag.reader import bag_summary
@@ -35,14 +35,10 @@ CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 @pytest.fixture(scope='module')
 def small_bag(tmp_path_factory) -> Path:
-    scene = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    scene['name'] = 'replay'
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=20,
-                         legs=[{'inflate_to_m3': 5.0e-5}, {'deflate_to_m3': 0.0}])
-    scene['camera'] = {'rate_hz': 2, 'trigger_injected_m3': [2.5e-5]}
     folder = tmp_path_factory.mktemp('replay')
-    (folder / 'replay.yaml').write_text(yaml.safe_dump(scene))
-    softseq_ros.run(folder / 'replay.yaml', folder / 'bag')
+    scene = fast_asymmetric(folder, 'replay', pump_rate_hz=20, camera_rate_hz=2,
+                            triggers=(2.5e-5,))
+    softseq_ros.run(scene, folder / 'bag')
     return folder / 'bag'
 
 
