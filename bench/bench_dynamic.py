@@ -672,8 +672,8 @@ def run(args, sizes, folder):
 def rig_section(sizes, folder):
     legs = sizes.rig_legs
     lines = ['## Batch rig: the paper scene with the network on', '',
-             f'`softseq_ros.run` of config/paper.yaml with the network block above added in memory '
-             f'(pump at 50 Hz, camera at 10 Hz, every topic recorded to a bag), programme '
+             '`softseq_ros.run` of config/paper.yaml with the network block above added in '
+             f'memory (pump at 50 Hz, camera at 10 Hz, every topic recorded to a bag), programme '
              f'{" -> ".join(describe(leg) for leg in legs)} (at the end of the withdrawal the '
              "base segment collapses below its rest volume and pulls the tip's fluid through "
              "the channel). Between the pump's commands the actuator speaks at its rate while "
