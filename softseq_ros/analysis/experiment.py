@@ -28,6 +28,8 @@ from softseq_ros.scene.plausibility import (
 )
 
 FloatArray = NDArray[np.float64]
+# The volume shift that aligns an experiment is found to this share of the volume span.
+SHIFT_XATOL = 1e-6
 DEFAULT_AMBIENT_PA = 101325.0
 KINDS = ('gauge', 'absolute')
 REQUIRED = ('injected_m3', 'pressure_pa')
@@ -215,7 +217,7 @@ def compare(trace: Trace, experiment: Experiment, snapshots: list | None = None)
         # finite values (inf - inf ends in NaN and a RuntimeWarning): a finite ceiling.
         ceiling = 1.0e6 * (costs[best] + 1.0)
         found = minimize_scalar(lambda s: min(misfit(s)[0], ceiling), bounds=(lo, hi),
-                                method='bounded', options={'xatol': 1e-6 * span})
+                                method='bounded', options={'xatol': SHIFT_XATOL * span})
         shift = float(found.x) if found.fun <= costs[best] else float(grid[best])
         rmse, scale, used = misfit(shift)
         result['alignment'] = {'volume_shift_m3': shift, 'pressure_scale': scale,

@@ -37,6 +37,8 @@ SWITCH_WINDOW_BINS = SHARE_BINS // 10
 # step, and more than this share of the injected range.
 SNAP_EXCHANGE_PER_STEP = 5.0
 SNAP_SHARE_OF_RANGE = 1e-3
+# A chord turning less than this [rad] is straight: its arc is its chord.
+STRAIGHT_RAD = 1e-9
 # The plateau is reached where the pressure first comes within this share of its level.
 PLATEAU_SHARE = 0.95
 # A plateau is level: somewhere after its steepest rise the pressure's slope (over a tenth of
@@ -368,7 +370,8 @@ def segment_lengths(snapshots: list, count: int) -> FloatArray | None:
         for length, direction in chords:
             turn = (direction[-1] - direction[0]) / max(direction.size - 1, 1)
             half = 0.5 * abs(turn)
-            lengths.append(float(np.sum(length) * (half / np.sin(half) if half > 1e-9 else 1)))
+            lengths.append(float(np.sum(length) * (half / np.sin(half) if half > STRAIGHT_RAD
+                                                      else 1)))
         return np.array(lengths)
     return None
 

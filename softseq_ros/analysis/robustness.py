@@ -40,6 +40,8 @@ FIT_DEGREE = 3
 # clipping keeps 0.9866 of its deviation).
 CLIP_DEVIATIONS = 3.0
 CLIPPED_DEVIATION_SHARE = 0.9866
+# The clipping has converged when the deviation changes by less than this share of itself.
+CLIP_CONVERGED = 1e-12
 # Features listed per verdict; the others are counted.
 FEATURES_SHOWN = 4
 
@@ -146,7 +148,7 @@ def estimated_noise(volumes: ArrayLike, pressures: ArrayLike) -> float | None:
         if not kept.size:
             break
         clipped = float(np.sqrt(np.mean(kept**2))) / CLIPPED_DEVIATION_SHARE
-        if abs(clipped - deviation) <= 1e-12 * max(deviation, 1e-300):
+        if abs(clipped - deviation) <= CLIP_CONVERGED * max(deviation, 1e-300):
             deviation = clipped
             break
         deviation = clipped
@@ -224,7 +226,7 @@ def deciding_features(emap: object, scene_entries: list[dict] | None = None,
     if not any(features):
         return [], []
     inflation, deflation = inflate_and_deflate(emap, samples)
-    tolerance = 1e-9 * float(emap.v_scale)
+    tolerance = emap.tolerances.same_volume * float(emap.v_scale)
     for leg, path in (('inflation', inflation), ('deflation', deflation)):
         for event in path.events:
             before, after = np.asarray(event.from_volumes), np.asarray(event.to_volumes)

@@ -64,6 +64,8 @@ FloatArray = NDArray[np.float64]
 # Absolute tolerances: this share of the volume scale for a volume, of the volume scale per
 # second for a flow (with the relative tolerance on top).
 ATOL_SHARE = 1e-3
+# A volume within this share of the volume scale past the end of a curve is at its end.
+END_SLACK = 1e-9
 # Flows closer than this share of their size are the same (a ramp's commands, to round-off).
 SAME_FLOW = 1e-9
 # The solver is never asked to step beyond this horizon [s] at once.
@@ -152,7 +154,7 @@ class NetworkFlow:
         # The levels a segment's volume must not pass: the end of its curve (with round-off's
         # slack: a programme may end exactly there) and, below its rest volume, where its
         # collapse reaches vacuum; and the folds of its curve, which are reported.
-        slack = 1e-9 * self.v_scale
+        slack = END_SLACK * self.v_scale
         self._upper = [hi + slack for _, hi in self._bounds]
         self._lower = [lo + min(VACUUM_GAUGE_PA - float(pressure(lo)), 0.0) / collapse
                        for pressure, (lo, _), collapse in zip(self._pressure_of, self._bounds,

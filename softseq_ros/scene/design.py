@@ -65,6 +65,9 @@ FEM_CODE_VERSION = '4'
 MAX_MESH_CELLS = 2_000_000
 # Cells through a thin layer: each adds a plane of cells across the whole mesh.
 MAX_THIN_CELLS = 64
+# Two ways of giving one length agree when they differ by round-off (a decimal in YAML).
+SAME_LENGTH_RTOL = 1e-9
+SAME_LENGTH_ATOL_M = 1e-12
 
 
 class DesignError(SceneError):
@@ -194,7 +197,7 @@ def _geometry(ctx: Context, value: object) -> Geometry:
                             'required with wall_reading side_walls')
         band = ctx.number(raw['skin_band_thickness_m'], 'geometry.skin_band_thickness_m',
                        gt=0.0)
-        if not math.isclose(g, w - 2 * d, rel_tol=1e-9, abs_tol=1e-12):
+        if not math.isclose(g, w - 2 * d, rel_tol=SAME_LENGTH_RTOL, abs_tol=SAME_LENGTH_ATOL_M):
             raise ctx.error('geometry.cavity_width_m',
                             f'with side walls {d:g} m thick the cavity is width_m - 2 '
                             f'wall_thickness_m = {w - 2 * d:g} m wide, got {g:g}')

@@ -47,7 +47,13 @@ from pathlib import Path
 
 import yaml
 
-from softseq_ros.scene.design import DesignError, cached_table, design_path, load_design
+from softseq_ros.scene.design import (
+    SAME_LENGTH_RTOL,
+    DesignError,
+    cached_table,
+    design_path,
+    load_design,
+)
 from softseq_ros.scene.network import NetworkSettings, read_network
 from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.scene.paths import scene_path
@@ -231,7 +237,7 @@ def _designed(ctx: Context, text: str, where: str, name: str, length: float,
         table = cached_table(design)
     except DesignError as err:
         raise ctx.error(where, str(err)) from None
-    if not math.isclose(length, design.geometry.length_m, rel_tol=1e-9):
+    if not math.isclose(length, design.geometry.length_m, rel_tol=SAME_LENGTH_RTOL):
         raise ctx.error(length_key, f"{length:g} m differs from the design's geometry.length_m "
                                     f'({design.geometry.length_m:g} m)')
     return read_table(table, name=name, length=length, design=design.identity())

@@ -29,6 +29,8 @@ WATER_VISCOSITY_PA_S = 1.0e-3      # water at 20 C
 WATER_DENSITY_KG_PER_M3 = 998.0
 DEFAULT_NETWORK_RATE_HZ = 200.0
 DEFAULT_NETWORK_RTOL = 1.0e-6
+# The integrator's relative tolerance: from near round-off to a percent.
+NETWORK_RTOL_RANGE = (1e-13, 1e-2)
 MAX_NETWORK_RATE_HZ = 1.0e4
 LAMINAR, BLASIUS = 'laminar', 'blasius'
 FRICTION_LAWS = (LAMINAR, BLASIUS)
@@ -134,6 +136,7 @@ def read_network(ctx: Context, value: object,
     if rate > MAX_NETWORK_RATE_HZ:
         raise ctx.error('network.rate_hz', f'must be <= {MAX_NETWORK_RATE_HZ:g}, got {rate:g}')
     rtol = ctx.number(raw.get('rtol', DEFAULT_NETWORK_RTOL), 'network.rtol', gt=0.0)
-    if not 1e-13 <= rtol <= 1e-2:
-        raise ctx.error('network.rtol', f'must be within 1e-13 and 1e-2, got {rtol:g}')
+    low, high = NETWORK_RTOL_RANGE
+    if not low <= rtol <= high:
+        raise ctx.error('network.rtol', f'must be within {low:g} and {high:g}, got {rtol:g}')
     return NetworkSettings(fluid, supply, channels, rate, rtol, segment_names.index(feeds))

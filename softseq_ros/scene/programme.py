@@ -23,6 +23,8 @@ ACTIONS = ('inflate', 'deflate', 'hold')
 
 # 0.05 mL/s, the flow rate of the paper's syringe pump.
 DEFAULT_FLOW_RATE = 5.0e-8
+# A duration within this share of a sampling period of a whole number of periods is one.
+SAMPLE_SLACK = 1e-9
 # A sampled history longer than this would not fit in a workstation's memory (0.8 GB a column).
 MAX_SAMPLES = 10**8
 # What a batch run (softseq run) takes on without being told to insist: 1e6 s of rig time
@@ -228,9 +230,9 @@ class PumpProfile:
                              'lower the rate or shorten the programme')
         # Round so that a duration that is a multiple of the period up to rounding does not
         # produce a sliver of an interval at the end.
-        whole = int(math.floor(end * rate + 1e-9))
+        whole = int(math.floor(end * rate + SAMPLE_SLACK))
         t = np.arange(whole + 1, dtype=float) / rate
-        if end - t[-1] > 1e-9 / rate:
+        if end - t[-1] > SAMPLE_SLACK / rate:
             t = np.append(t, end)
         else:
             t[-1] = end

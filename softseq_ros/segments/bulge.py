@@ -37,6 +37,9 @@ from numpy.typing import ArrayLike, NDArray
 from softseq_ros.errors import UserError
 from softseq_ros.segments.materials import Material
 
+# A length that is a whole number of pitches up to round-off holds that many.
+PITCH_SLACK = 1e-9
+
 
 class BulgeModelError(UserError):
     """Geometry or stretch outside what the cap model describes."""
@@ -172,7 +175,7 @@ class SegmentGeometry:
     @property
     def membrane_count(self) -> int:
         """Whole wall + membrane pitches that fit in the segment length."""
-        return int(math.floor(self.segment_length / self.pitch + 1e-9))
+        return int(math.floor(self.segment_length / self.pitch + PITCH_SLACK))
 
     @property
     def cap_base_radius(self) -> float:

@@ -17,6 +17,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.segments.identity import exact, exact_list
 
+# A polynomial root whose imaginary part is below this is a real stretch (numpy's roots
+# leave round-off there).
+REAL_ROOT_IMAG = 1e-9
+
 
 class Material(Protocol):
     """What the membrane models need from a material law."""
@@ -147,7 +151,7 @@ class Gent:
     def max_stretch(self) -> float:
         """Stretch at which I1 - 3 = Jm (2 lam^6 - (Jm + 3) lam^4 + 1 = 0, largest root)."""
         roots = np.roots([2.0, 0.0, -(self.jm + 3.0), 0.0, 0.0, 0.0, 1.0])
-        real = roots[np.abs(roots.imag) < 1e-9].real
+        real = roots[np.abs(roots.imag) < REAL_ROOT_IMAG].real
         return float(real[real > 1.0].max())
 
 

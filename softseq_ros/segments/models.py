@@ -24,6 +24,12 @@ from softseq_ros.segments.materials import Material, material_definition
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, ConvergenceLog, Tolerances
 
 FloatArray = NDArray[np.float64]
+# A turning volume of a law's curve is found to this share of its largest volume.
+TURN_XTOL = 1e-15
+# The central difference of dW/dlambda steps this share of the stretch: a millionth balances
+# truncation against round-off in double precision.
+STRETCH_STEP = 1e-6
+
 
 class TableError(UserError):
     """A segment table that cannot be used; the message starts with the file name."""
@@ -436,7 +442,7 @@ class _SmoothSegment(Segment):
         turns = []
         for i in np.flatnonzero(np.sign(slope[:-1]) * np.sign(slope[1:]) < 0.0):
             turns.append(brentq(lambda x: float(self.stiffness(x)), grid[i], grid[i + 1],
-                                xtol=1e-15 * self.max_volume, rtol=4 * np.finfo(float).eps))
+                                xtol=TURN_XTOL * self.max_volume, rtol=4 * np.finfo(float).eps))
         return turns, []
 
     def _turn_search_grid(self) -> FloatArray:
@@ -535,7 +541,7 @@ class BalloonSegment(_SmoothSegment):
     def stiffness(self, v: ArrayLike) -> FloatArray:
         """dp/dv by the chain rule through the stretch (central difference of dW/dlam)."""
         lam = self.stretch(v)
-        h = 1e-6 * lam
+        h = STRETCH_STEP * lam
         dwl = self.material.energy_derivative(lam)
         d2w = (self.material.energy_derivative(lam + h)
                - self.material.energy_derivative(lam - h)) / (2.0 * h)
