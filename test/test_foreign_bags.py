@@ -187,3 +187,38 @@ def test_nothing_usable_left_is_refused_in_one_line(rig_bag, tmp_path, topic, ma
         assert result.stderr == (f'softseq {command[0]}: error: {bag}: no usable {topic} '
                                  f'messages: all skipped ({len(count)} {why})\n')
     assert not (tmp_path / 'out').exists()
+
+
+def test_recover_keeps_every_message_of_a_complete_unchunked_bag(rig_bag, tmp_path):
+    # Some writers put every record at the top level, with no chunks, and no metadata.yaml
+    # beside the file (messages in the order they came): recover must keep every message, and
+    # only add the metadata.
+    from mcap.writer import Writer
+
+    from softseq_ros.bag.recovery import recover
+
+    folder = tmp_path / 'unchunked'
+    folder.mkdir()
+    source = next(rig_bag.glob('*.mcap'))
+    with open(source, 'rb') as stream, open(folder / 'unchunked.mcap', 'wb') as out:
+        reader, writer = make_reader(stream), Writer(out, use_chunking=False)
+        writer.start(profile='ros2', library='another writer')
+        summary = reader.get_summary()
+        schemas = {i: writer.register_schema(s.name, s.encoding, s.data)
+                   for i, s in summary.schemas.items()}
+        channels = {i: writer.register_channel(c.topic, c.message_encoding,
+                                               schemas[c.schema_id], c.metadata)
+                    for i, c in summary.channels.items()}
+        count = 0
+        for _, channel, message in reader.iter_messages(log_time_order=True):
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time)
+            count += 1
+        writer.finish()
+    result = recover(folder)
+    assert result.was_complete and result.message_count == count
+    assert not list(folder.glob('*.truncated'))
+    whole, copy = softseq_ros.load_recording(rig_bag), softseq_ros.load_recording(folder)
+    np.testing.assert_array_equal(copy.pump_injected, whole.pump_injected)
+    np.testing.assert_array_equal(copy.volumes, whole.volumes)
+    assert len(copy.events) == len(whole.events) > 0

@@ -93,8 +93,9 @@ RECOVERING_SUFFIX = '.recovering'
 _RECORD_HEAD = struct.Struct('<BQ')
 # Footer record: opcode, length, summary start, summary offset start, summary CRC.
 _FOOTER = struct.Struct('<BQQQI')
+# Messages stand at the top level too, in a file written without chunks.
 _READERS = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
-            Opcode.CHUNK: Chunk, Opcode.MESSAGE_INDEX: MessageIndex,
+            Opcode.CHUNK: Chunk, Opcode.MESSAGE_INDEX: MessageIndex, Opcode.MESSAGE: Message,
             Opcode.DATA_END: DataEnd, Opcode.FOOTER: Footer}
 
 
