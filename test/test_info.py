@@ -6,10 +6,13 @@ start time the run was given, the digest from the scene's segments
 (softseq_ros.segments.identity), the compression from the mcap library's own summary.
 """
 
+import io
 from pathlib import Path
 import shutil
 
 from mcap.reader import make_reader
+from mcap.records import Message
+from mcap.stream_reader import StreamReader
 import pytest
 from rosbags.rosbag2 import Reader
 from scenes import fast_asymmetric
@@ -88,6 +91,35 @@ def test_info_on_an_unfinished_recording_says_it_is_incomplete(made, tmp_path, c
     assert 'softseq recover' in complete
     # The scene is said at the start: an unfinished bag still names it.
     assert _field(out, 'Scene').startswith('fast_asymmetric in /rig_b: ')
+
+
+def test_info_on_a_file_cut_short_beside_its_metadata_counts_what_the_file_holds(
+        made, tmp_path, capsys):
+    # metadata.yaml says what the writer meant to finish; a file cut short holds less, and the
+    # counts shown are what a scan of the file finds.
+    _, bag = made
+    cut = tmp_path / 'cut'
+    cut.mkdir()
+    mcap = next(bag.glob('*.mcap'))
+    (cut / 'metadata.yaml').write_bytes((bag / 'metadata.yaml').read_bytes())
+    with open(mcap, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    last = max(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
+    middle = last.chunk_start_offset + last.chunk_length // 2   # the last chunk torn
+    written = sum(summary.statistics.channel_message_counts.values())
+    (cut / mcap.name).write_bytes(mcap.read_bytes()[:middle])
+    # mcap's own stream reader on what is left, to where the cut ends it.
+    kept = 0
+    try:
+        for record in StreamReader(io.BytesIO((cut / mcap.name).read_bytes())).records:
+            kept += isinstance(record, Message)
+    except Exception:  # noqa: S110 - the cut tail ends the reading
+        pass
+    code, out, err = _info(cut, capsys)
+    assert code == 0, err
+    assert 0 < kept < written
+    assert _field(out, 'Messages') == str(kept)
+    assert _field(out, 'Complete').startswith(f'no: {mcap.name} has no MCAP summary')
 
 
 def test_info_refuses_a_damaged_or_foreign_bag_in_one_line(made, tmp_path, capsys):

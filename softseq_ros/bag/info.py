@@ -30,7 +30,7 @@ import yaml
 
 from softseq_ros.bag.arrays import BagArrayError, string_text
 from softseq_ros.bag.layout import MCAP_MAGIC, METADATA_FILE, mcap_files
-from softseq_ros.bag.reader import BagReadError, BagSummary, bag_summary
+from softseq_ros.bag.reader import BagReadError, BagSummary, bag_summary, scanned_summary
 from softseq_ros.errors import UserError
 from softseq_ros.wire import contract
 from softseq_ros.wire.payloads import SCENE_IDENTITY_JSON, PayloadError
@@ -144,10 +144,6 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
     for file in files:
         _check_magic(file)
     has_metadata = (folder / METADATA_FILE).is_file()
-    try:
-        summary = bag_summary(folder)
-    except BagReadError as err:
-        raise BagInfoError(str(err)) from None
     compressions: set[str] = set()
     unclosed = []
     for file in files:
@@ -155,6 +151,14 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
         compressions |= found
         if not closed:
             unclosed.append(file)
+    if unclosed:
+        # metadata.yaml, where there is one, counts what the writer meant to finish.
+        summary = scanned_summary(files)
+    else:
+        try:
+            summary = bag_summary(folder)
+        except BagReadError as err:
+            raise BagInfoError(str(err)) from None
     topics = tuple(summary.topics)
     namespaces = tuple(sorted(set(contract.find_namespaces(topics))
                               | set(contract.find_namespaces(topics, contract.SCENE.name))))

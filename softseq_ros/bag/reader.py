@@ -126,24 +126,37 @@ def _summary_from_mcap(path: Path) -> BagSummary:
     _, candidates = mcap_files(path, BagReadError)
     if len(candidates) != 1:
         raise BagReadError(f'{path}: no {METADATA_FILE} and not exactly one .mcap file')
-    schemas: dict[int, str] = {}
-    channels: dict[int, tuple[str, str]] = {}
+    return scanned_summary(candidates)
+
+
+def scanned_summary(files: Iterable[Path]) -> BagSummary:
+    """
+    What the intact part of ``files`` holds, counted message by message (complete=False).
+
+    For a bag whose writer did not finish: neither metadata.yaml nor an MCAP summary counts
+    what is there.
+    """
     counts: dict[str, int] = {}
+    types: dict[str, str] = {}
     times: list[int] = []
-    with open(candidates[0], 'rb') as stream:
-        try:
-            for record in StreamReader(io.BufferedReader(stream), validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record.name
-                elif isinstance(record, Channel):
-                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
-                    counts.setdefault(record.topic, 0)
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    counts[channels[record.channel_id][0]] += 1
-                    times.append(record.log_time)
-        except Exception:  # noqa: S110 - the damaged tail of an unfinished file ends the scan
-            pass
-    types = dict(channels.values())
+    for file in files:
+        schemas: dict[int, str] = {}
+        channels: dict[int, str] = {}
+        with open(file, 'rb') as stream:
+            try:
+                for record in StreamReader(io.BufferedReader(stream),
+                                           validate_crcs=True).records:
+                    if isinstance(record, Schema):
+                        schemas[record.id] = record.name
+                    elif isinstance(record, Channel):
+                        channels[record.id] = record.topic
+                        types.setdefault(record.topic, schemas.get(record.schema_id, ''))
+                        counts.setdefault(record.topic, 0)
+                    elif isinstance(record, Message) and record.channel_id in channels:
+                        counts[channels[record.channel_id]] += 1
+                        times.append(record.log_time)
+            except Exception:  # noqa: S110 - the damaged tail of an unfinished file ends it
+                pass
     start = min(times) if times else 0
     return BagSummary(
         topics={topic: TopicSummary(types[topic], count) for topic, count in counts.items()},
