@@ -99,3 +99,62 @@ def test_configure_activate_deactivate_cleanup_shutdown(context):
         last = json.loads(rig.messages('pump/status')[-1].data)
         assert last['reason'] == 'requested'
         assert pump.core is None
+
+
+# The transitions each primary state has (the ROS 2 managed-node design); every other id is
+# one the state machine must refuse.
+ALLOWED = {
+    'unconfigured': {Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_UNCONFIGURED_SHUTDOWN},
+    'inactive': {Transition.TRANSITION_CLEANUP, Transition.TRANSITION_ACTIVATE,
+                 Transition.TRANSITION_INACTIVE_SHUTDOWN},
+    'active': {Transition.TRANSITION_DEACTIVATE, Transition.TRANSITION_ACTIVE_SHUTDOWN},
+    'finalized': set(),
+}
+
+
+def test_a_transition_the_state_has_not_is_refused_and_the_node_lives_on(context):
+    pump = ManagedSyringePumpNode(context=context, parameter_overrides=[
+        Parameter('scene', value='fig1_none'), Parameter('autostart', value=False),
+        Parameter('open_loop', value=True)])
+    rig = Collector(['pump/status'], context)
+    operator = Operator(rig, '/syringe_pump')
+    path = [('unconfigured', Transition.TRANSITION_CONFIGURE),
+            ('inactive', Transition.TRANSITION_ACTIVATE),
+            ('active', Transition.TRANSITION_ACTIVE_SHUTDOWN), ('finalized', None)]
+    with spinning(context, pump, rig):
+        for state, onwards in path:
+            assert operator.state() == state
+            for transition in sorted((set(range(0, 12)) | {99, 255}) - ALLOWED[state]):
+                assert not operator.set(transition), (state, transition)
+                assert operator.state() == state, (state, transition)
+            if onwards is not None:
+                assert operator.set(onwards)
+
+
+def test_a_pump_configured_again_starts_where_its_plunger_stands(context):
+    # Cleanup does not empty the actuator: the fluid pushed stays, and so does the plunger.
+    pump = ManagedSyringePumpNode(context=context, parameter_overrides=[
+        Parameter('scene', value='fig1_none'), Parameter('autostart', value=True),
+        Parameter('open_loop', value=True), Parameter('flow_rate_m3_per_s', value=2e-6),
+        Parameter('legs', value='[{inflate_to_m3: 4.0e-6}, {deflate_to_m3: 0.0}]')])
+    rig = Collector(['pump/command', 'pump/status'], context)
+    operator = Operator(rig, '/syringe_pump')
+    with spinning(context, pump, rig):
+        assert operator.set(Transition.TRANSITION_CONFIGURE)
+        assert operator.set(Transition.TRANSITION_ACTIVATE)
+        wait_for(lambda: any(m.position[0] > 0.5e-6 for m in rig.messages('pump/command')),
+                 'half a millilitre pushed')
+        assert operator.set(Transition.TRANSITION_DEACTIVATE)
+        held = pump.core.volume_m3
+        assert 0.5e-6 < held < 4.0e-6
+        assert operator.set(Transition.TRANSITION_CLEANUP)
+        assert operator.set(Transition.TRANSITION_CONFIGURE)
+        assert pump.core.volume_m3 == held
+        assert pump.get_parameter('start_injected_m3').value == held
+        before = len(rig.messages('pump/command'))
+        assert operator.set(Transition.TRANSITION_ACTIVATE)
+        assert call_trigger(rig, 'syringe_pump/start').success
+        rig.wait_for_count('pump/command', before + 5)
+        # The commands go on from the volume held, never back to 0 with fluid in the actuator.
+        after = [m.position[0] for m in rig.messages('pump/command')[before:]]
+        assert min(after) >= held - 1e-15

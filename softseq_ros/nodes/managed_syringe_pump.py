@@ -14,7 +14,10 @@ step by step and can take it down without killing the process:
 - deactivate: a running pump holds (``held``, reason ``requested``) and the timer stops;
   activated again it stays held until ``~/start``.
 - cleanup: topics, services and core are gone (unconfigured again; a new configure takes
-  the parameters as they are then).
+  the parameters as they are then). The syringe's plunger stays where it was, and so does
+  the fluid it pushed into the actuator: configured again, the pump starts from the volume
+  it held (its ``start_injected_m3`` is set to it, and the programme runs from there), never
+  from 0 with the fluid still in the segments.
 - shutdown: a running or held pump is stopped first, then everything is released.
 
 Transitions are requested with ``ros2 lifecycle set /syringe_pump configure`` (or the
@@ -23,9 +26,11 @@ Transitions are requested with ``ros2 lifecycle set /syringe_pump configure`` (o
 plain pump, which configures and activates itself at start.
 """
 
-from typing import Any
+from typing import Any, Callable
 
+from lifecycle_msgs.srv import ChangeState
 from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
 
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
@@ -48,6 +53,31 @@ class ManagedSyringePumpNode(LifecycleNodeMixin, SyringePumpNode):
         """Declare the parameters only: the node starts unconfigured."""
         SyringePumpNode.__init__(self, **kwargs)
         LifecycleNodeMixin.__init__(self, enable_communication_interface=True)
+        # Where the plunger stood when the pump was last released (None: never configured).
+        self._plunger_m3: float | None = None
+        for service in self.services:
+            if service.srv_type is ChangeState:
+                service.callback = self._refusing_transitions(service.callback)
+
+    def _refusing_transitions(self, change_state: Callable) -> Callable:
+        """
+        ``~/change_state`` that answers success False to a transition its state has not.
+
+        rclpy's own answer raises out of the service (configure twice, cleanup while active,
+        an unknown id, anything once finalized) and ends the process; the state machine refuses
+        such a transition before it moves, so the node stays where it was and says so.
+        """
+        def guarded(request: ChangeState.Request,
+                    response: ChangeState.Response) -> ChangeState.Response:
+            try:
+                return change_state(request, response)
+            except Exception as err:  # noqa: BLE001 - rclpy's RCLError is not public
+                self.get_logger().warning(
+                    f'~/change_state: transition {request.transition.id} '
+                    f'{request.transition.label!r} refused: {" ".join(str(err).split())}')
+                response.success = False
+                return response
+        return guarded
 
     # SyringePumpNode.__init__ declares, configures and activates; here only the first step
     # runs at construction, the others are the lifecycle's transitions.
@@ -60,6 +90,7 @@ class ManagedSyringePumpNode(LifecycleNodeMixin, SyringePumpNode):
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Build the core, its topics and services from the parameters as they are now."""
         try:
+            self._start_at_the_plunger()
             SyringePumpNode._configure_core(self)
         except (SettingError, NodeConfigError, SceneError) as err:
             self.get_logger().error(f'configure failed: {" ".join(str(err).split())}')
@@ -100,7 +131,22 @@ class ManagedSyringePumpNode(LifecycleNodeMixin, SyringePumpNode):
             self.destroy_timer(self._timer)
             self._timer = None
 
+    def _start_at_the_plunger(self) -> None:
+        """A pump configured again starts where its plunger stands (else NodeConfigError)."""
+        held = self._plunger_m3
+        if held is None or held == self.get_parameter('start_injected_m3').value:
+            return
+        result, = self.set_parameters([Parameter('start_injected_m3', value=held)])
+        if not result.successful:
+            raise NodeConfigError(f'the syringe still holds {held * 1e6:.6g} mL pushed before '
+                                  f'the cleanup, and the programme cannot start there: '
+                                  f'{result.reason}')
+        self.get_logger().info(f'configured again with {held * 1e6:.6g} mL in the actuator: '
+                               'the programme starts there (start_injected_m3)')
+
     def _release(self) -> None:
+        if self.core is not None:
+            self._plunger_m3 = float(self.core.volume_m3)
         self._stop_timer()
         for service in self._pump_services:
             self.destroy_service(service)
