@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 import softseq_ros
 from softseq_ros.bag.reader import read_bag
@@ -29,6 +30,7 @@ C1, C2 = 1.0e-10, 2.0e-10          # compliances [m^3/Pa]: 1 mL raises 10 kPa, 5
 REST = 1.0 * ML
 PRESSURE = 1.0e5                   # both segments start inflated to 100 kPa, in equilibrium
 CHANNEL = Tube(length_m=0.1, radius_m=1.0e-3)
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
 @pytest.fixture(scope='module')
@@ -169,6 +171,38 @@ def test_the_scene_declares_the_network_and_refuses_a_bad_one_in_one_line(tmp_pa
     with pytest.raises(SceneError, match=r'network\.channels\[0\]\.radius_mm: wrong or missing '
                                          'unit suffix'):
         scene_from_dict(bad, tmp_path / 'x.yaml')
+
+
+@pytest.mark.parametrize('where, value, key, reason', [
+    ('channel radius', 1e-300, r'network\.channels\[0\]\.radius_m', 'must be >= 1e-06'),
+    ('supply radius', 1e-300, r'network\.supply\.radius_m', 'must be >= 1e-06'),
+    ('viscosity', 1e-300, r'network\.fluid\.viscosity_pa_s', 'must be >= 1e-06'),
+    ('viscosity', 1e300, r'network\.fluid\.viscosity_pa_s', 'must be <= 10000'),
+    ('density', 1e-300, r'network\.fluid\.density_kg_per_m3', 'must be >= 0.01'),
+    ('minor loss', 1e300, r'network\.channels\[0\]\.minor_loss', r'must be <= 1e\+06'),
+    ('segment length', 1e300, r'segments\[0\]\.length_m', 'must be <= 10'),
+])
+def test_network_and_segment_sizes_no_rig_has_are_refused_naming_the_key(tmp_path, where, value,
+                                                                         key, reason):
+    # Such values divided by zero (a radius to the fourth power underflows), overflowed in the
+    # plausibility check or stalled the integration: refused when the scene loads.
+    data = yaml.safe_load((CONFIG / 'rate_inversion.yaml').read_text())
+    network = data['network']
+    if where == 'channel radius':
+        network['channels'][0]['radius_m'] = value
+    elif where == 'supply radius':
+        network['supply']['radius_m'] = value
+    elif where == 'viscosity':
+        network['fluid'] = {'viscosity_pa_s': value}
+    elif where == 'density':
+        network['fluid'] = {'density_kg_per_m3': value}
+        network['channels'][0]['inertance'] = True
+    elif where == 'minor loss':
+        network['channels'][0]['minor_loss'] = value
+    else:
+        data['segments'][0]['length_m'] = value
+    with pytest.raises(SceneError, match=rf'x\.yaml: {key}: {reason}, got '):
+        scene_from_dict(data, tmp_path / 'x.yaml')
 
 
 def test_the_rig_runs_the_network_in_time_and_keeps_the_mass(tmp_path):

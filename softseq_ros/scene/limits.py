@@ -53,4 +53,16 @@ LIMITS: dict[str, Limit] = {
     'camera.image_width_px': Limit(16, 8192),
     'camera.image_height_px': Limit(16, 8192),
     'solver.resolution': Limit(16, 100_000),
+    # A segment from a micrometre to 10 m (the paper's: 0.111 m).
+    'segments.length_m': Limit(0.0, 10.0, open_minimum=True),
+    # From a gas (air: 1.8e-5 Pa s) to a silicone gum (1e4 Pa s); water: 1e-3 Pa s. Beyond,
+    # a channel's resistance leaves the numbers a double holds (1e-300 Pa s divided by zero).
+    'network.fluid.viscosity_pa_s': Limit(1.0e-6, 1.0e4),
+    # From a thin gas to beyond mercury (13,500 kg/m^3).
+    'network.fluid.density_kg_per_m3': Limit(1.0e-2, 3.0e4),
+    # A tube from microfluidics (1 um) to 10 cm across, and up to 1 km long.
+    'network.tube.radius_m': Limit(1.0e-6, 0.1),
+    'network.tube.length_m': Limit(1.0e-6, 1.0e3),
+    # A loss coefficient of ends and bends: a sharp orifice is about 1e3.
+    'network.tube.minor_loss': Limit(0.0, 1.0e6),
 }

@@ -162,7 +162,7 @@ def _segment(ctx: Context, value: object, key_path: str) -> Segment:
         raise ctx.error(join(key_path, 'name'),
                         f'must start with a letter and hold only letters, digits and _, '
                         f'got {name!r}')
-    length = ctx.number(raw['length_m'], join(key_path, 'length_m'), gt=0.0)
+    length = ctx.limited(raw['length_m'], join(key_path, 'length_m'), 'segments.length_m')
     models = [model for model in _MODELS if model in raw]
     if len(models) != 1:
         found = ', '.join(models) if models else 'none'

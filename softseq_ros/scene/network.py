@@ -89,8 +89,8 @@ def channel_names(segment_names: tuple[str, ...] | list[str]) -> tuple[str, ...]
 def _tube(ctx: Context, value: object, key_path: str) -> Tube:
     raw = ctx.mapping(value, key_path, ('length_m', 'radius_m'),
                       ('inertance', 'minor_loss', 'friction'))
-    length = ctx.number(raw['length_m'], join(key_path, 'length_m'), gt=0.0)
-    radius = ctx.number(raw['radius_m'], join(key_path, 'radius_m'), gt=0.0)
+    length = ctx.limited(raw['length_m'], join(key_path, 'length_m'), 'network.tube.length_m')
+    radius = ctx.limited(raw['radius_m'], join(key_path, 'radius_m'), 'network.tube.radius_m')
     if radius > length:
         # Hagen-Poiseuille needs a tube, not an orifice.
         raise ctx.error(join(key_path, 'radius_m'), f'{radius:g} m exceeds the length '
@@ -98,7 +98,8 @@ def _tube(ctx: Context, value: object, key_path: str) -> Tube:
     inertance = raw.get('inertance', False)
     if not isinstance(inertance, bool):
         raise ctx.error(join(key_path, 'inertance'), f'must be true or false, got {inertance!r}')
-    minor_loss = ctx.number(raw.get('minor_loss', 0.0), join(key_path, 'minor_loss'), ge=0.0)
+    minor_loss = ctx.limited(raw.get('minor_loss', 0.0), join(key_path, 'minor_loss'),
+                             'network.tube.minor_loss')
     friction = raw.get('friction', LAMINAR)
     if friction not in FRICTION_LAWS:
         raise ctx.error(join(key_path, 'friction'), f'must be one of {", ".join(FRICTION_LAWS)}, '
@@ -117,10 +118,10 @@ def read_network(ctx: Context, value: object,
     fluid_raw = ctx.mapping(raw.get('fluid', {}), 'network.fluid', (),
                             ('viscosity_pa_s', 'density_kg_per_m3'))
     fluid = Fluid(
-        ctx.number(fluid_raw.get('viscosity_pa_s', WATER_VISCOSITY_PA_S),
-                   'network.fluid.viscosity_pa_s', gt=0.0),
-        ctx.number(fluid_raw.get('density_kg_per_m3', WATER_DENSITY_KG_PER_M3),
-                   'network.fluid.density_kg_per_m3', gt=0.0))
+        ctx.limited(fluid_raw.get('viscosity_pa_s', WATER_VISCOSITY_PA_S),
+                    'network.fluid.viscosity_pa_s'),
+        ctx.limited(fluid_raw.get('density_kg_per_m3', WATER_DENSITY_KG_PER_M3),
+                    'network.fluid.density_kg_per_m3'))
     supply = None if raw.get('supply') is None else _tube(ctx, raw['supply'], 'network.supply')
     feeds = raw.get('feeds', segment_names[0])
     if feeds not in segment_names:
