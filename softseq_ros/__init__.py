@@ -63,6 +63,8 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
 
     loaded = load_scene(scene)
     history = None if injected is None else np.asarray(injected, dtype=float)
+    if history is None:
+        _check_samples(loaded)
     if loaded.network is not None:
         from softseq_ros.dynamic.path import history_path, programme_path
 
@@ -80,6 +82,21 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
         check_scene_reach(loaded, emap)
         _, history = loaded.pump.profile.sample(loaded.pump.rate_hz)
     return Tracker(emap).sweep(history)
+
+
+def _check_samples(scene: 'Scene') -> None:
+    """Refuse, naming the scene and its keys, a programme too long to sample at the pump's rate."""
+    from softseq_ros.scene.programme import MAX_SAMPLES
+    from softseq_ros.scene.validation import SceneError
+
+    samples = scene.pump.profile.duration() * scene.pump.rate_hz
+    if samples > MAX_SAMPLES:
+        raise SceneError(
+            f'{scene.path if scene.path is not None else "<scene>"}: pump.rate_hz: '
+            f"{scene.pump.rate_hz:g} Hz over the programme's {scene.pump.profile.duration():.6g} "
+            f's (pump.legs, pump.cycles) gives {samples:.3g} samples, more than '
+            f'{MAX_SAMPLES:.0e}: lower the rate or shorten the programme, or give a volume '
+            'history')
 
 
 def classify(scene: 'str | PathLike | Scene') -> str:

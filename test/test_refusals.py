@@ -116,6 +116,17 @@ def test_run_refuses_a_scene_in_one_line(tmp_path, make, names):
     assert not out.exists()
 
 
+def test_solve_refuses_a_programme_too_long_to_sample_naming_the_scene(tmp_path):
+    # A hold of 1e7 s at the pump's 50 Hz is 5e8 samples: a traceback before, and without a
+    # --path history solve samples the whole programme.
+    scene = paper(tmp_path, ('hold_s: 10', 'hold_s: 1.0e7'))
+    out = tmp_path / 'path.csv'
+    result = softseq('solve', str(scene), '--out', str(out))
+    assert_one_line(result, 'solve', 'scene.yaml: pump.rate_hz: 50 Hz')
+    assert 'give a volume history' in result.stderr
+    assert not out.exists()
+
+
 def test_allow_long_insists_on_a_long_programme(tmp_path):
     from softseq_ros.batch import LongRunError, run
 
