@@ -365,3 +365,30 @@ def test_a_fem_design_with_an_overflowing_law_is_refused_before_meshing(tmp_path
         warnings.simplefilter('error')
         with pytest.raises(DesignError, match=r'design\.yaml: material: ' + words):
             load_design(path)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('legs, words', [
+    ('[' * 100_000 + ']' * 100_000, 'YAML nested too deeply'),
+    ('[{inflate_to_m3: 1' + '0' * 5000 + '}]', 'YAML: a value cannot be read'),
+], ids=['nested_100000_deep', 'integer_of_5000_digits'])
+def test_the_pump_refuses_legs_yaml_it_cannot_read_and_lives_on(context, legs, words):
+    # Such text ended the running pump (RecursionError) and gave a traceback at start.
+    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.parameter import Parameter
+
+    from softseq_ros.nodes.syringe_pump import SyringePumpNode
+
+    scene = Parameter('scene', value='fig1_none')
+    with pytest.raises(InvalidParameterValueException, match=f'legs: {words}'):
+        SyringePumpNode(context=context,
+                        parameter_overrides=[scene, Parameter('legs', value=legs)])
+    pump = SyringePumpNode(context=context, parameter_overrides=[scene])
+    try:
+        result, = pump.set_parameters([Parameter('legs', value=legs)])
+        assert not result.successful and f'legs: {words}' in result.reason
+        # The pump goes on taking good values.
+        assert pump.set_parameters([Parameter('legs', value='[{inflate_to_m3: 5.0e-6}]')])[
+            0].successful
+    finally:
+        pump.destroy_node()

@@ -45,8 +45,6 @@ from dataclasses import dataclass
 import math
 from pathlib import Path
 
-import yaml
-
 from softseq_ros.scene.design import (
     SAME_LENGTH_RTOL,
     DesignError,
@@ -71,8 +69,8 @@ from softseq_ros.scene.validation import (
     SEGMENT_NAME,
     Context,
     SceneError,
-    YamlLoader,
     join,
+    parse_yaml,
     read_yaml,
 )
 from softseq_ros.segments.models import BalloonSegment, LinearSegment, Segment, TabulatedSegment
@@ -321,12 +319,7 @@ def legs_from_text(text: str, key_path: str = 'legs') -> tuple[Leg, ...]:
     For settings given as text (the pump node's ``legs`` parameter); SceneError names the leg
     and key at fault (``legs[1].hold_s: ...``).
     """
-    try:
-        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
-    except yaml.YAMLError as err:
-        raise SceneError(f'{key_path}: not valid YAML ({" ".join(str(err).split())})') \
-            from None
-    return tuple(read_legs(Context('', Path('.')), data, key_path))
+    return tuple(read_legs(Context('', Path('.')), parse_yaml(text, key_path), key_path))
 
 
 def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:

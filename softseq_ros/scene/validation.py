@@ -65,6 +65,11 @@ def read_yaml(path: Path, shown: str) -> Any:
         raise SceneError(f'{shown}: cannot read the scene file ({err.strerror})') from None
     except UnicodeDecodeError:
         raise SceneError(f'{shown}: not a UTF-8 text file') from None
+    return parse_yaml(text, shown)
+
+
+def parse_yaml(text: str, shown: str) -> Any:
+    """YAML text parsed, or SceneError naming ``shown`` (a file or a setting) and the fault."""
     try:
         return yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
     except RecursionError:
