@@ -61,7 +61,7 @@ pump:
 def test_a_folder_without_tables_or_lengths_is_refused(tmp_path):
     with pytest.raises(LibraryError, match='no segment tables'):
         library_entries(tmp_path)
-    (tmp_path / 'a.csv').write_text('volume_m3,pressure_pa,curvature_per_m\n0,0,0\n1e-6,1,0\n')
+    (tmp_path / 'a.csv').write_text('volume_m3,pressure_pa,curvature_per_m\n0,0,0\n1e-6,1000,0\n')
     with pytest.raises(LibraryError, match='--length-m'):
         library_entries(tmp_path)
     assert library_entries(tmp_path, length_m=0.1)[0].length_m == 0.1

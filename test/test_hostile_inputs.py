@@ -7,6 +7,8 @@ bifurcation deterministically, the segment nearest the base taking the larger sh
 """
 
 import math
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -54,6 +56,30 @@ def assert_table_error(path, *words):
 def test_bad_rows_name_the_file_and_the_problem(tmp_path, rows, words):
     path = write_table(tmp_path, 'bad.csv', HEADER + '\n'.join(rows) + '\n')
     assert_table_error(path, *words)
+
+
+@pytest.mark.parametrize('pressures', [
+    [-1000.0 * k for k in range(20)],               # falling from the first row
+    [5000.0] * 20,                                   # level throughout
+    [-1000.0 * k for k in range(10)] + [-9000.0] * 10,   # falling, then level
+], ids=['falling', 'level', 'falling_then_level'])
+def test_a_table_whose_pressure_never_rises_is_refused_naming_it(tmp_path, pressures):
+    # No state of such a segment is stable: the map had no branch to build (a ValueError of
+    # numpy, or a JobError in the library) instead of a line naming the table.
+    rows = [f'{1e-6 * (1 + k)},{p},0' for k, p in enumerate(pressures)]
+    path = write_table(tmp_path, 'never_rises.csv', HEADER + '\n'.join(rows) + '\n')
+    assert_table_error(path, 'never_rises.csv', 'column pressure_pa', 'never rises')
+    library = tmp_path / 'library'
+    library.mkdir()
+    path.rename(library / path.name)
+    result = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'library', str(library),
+                             '--length-m', '0.1', '--out', str(tmp_path / 'out')],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2 and 'Traceback' not in result.stderr
+    assert result.stderr.strip().splitlines() == [
+        f'softseq library: error: {library / path.name}: column pressure_pa: its pressure '
+        'never rises with its volume (it falls or stays level from the first row to the '
+        'last): no state of it is stable']
 
 
 def test_empty_file_and_missing_columns(tmp_path):

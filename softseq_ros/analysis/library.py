@@ -135,6 +135,9 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None,
             raise LibraryError(f'{table}: no "# length_m:" line; give the length with '
                                '--length-m')
         entries.append(Entry(table.stem, str(table), length))
+    for entry in entries:
+        # Read once here: a table no assembly can use is refused before any job starts.
+        _segment(entry)
     return entries
 
 

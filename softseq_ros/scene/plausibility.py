@@ -107,8 +107,23 @@ def material_problem(material: 'Material') -> str | None:
 
 
 def segment_problem(segment: 'Segment') -> str | None:
-    """The first unit or overflow problem of a segment of any model, or None."""
-    return volume_problem(segment.max_volume, segment.length) or curve_problem(segment)
+    """The first unit, overflow or shape problem of a segment of any model, or None."""
+    return (volume_problem(segment.max_volume, segment.length) or curve_problem(segment)
+            or rising_problem(segment))
+
+
+def rising_problem(segment: 'Segment') -> str | None:
+    """
+    Why no state of ``segment`` can be stable, or None.
+
+    A segment sitting alone at a pressure is stable only where its pressure rises with its
+    volume; one whose curve never rises (it falls or stays flat from its first row to its
+    last) has no stable state, alone or beside others, and no assembly could start from rest.
+    """
+    if any(piece.direction > 0 for piece in segment.monotone_pieces()):
+        return None
+    return ('its pressure never rises with its volume (it falls or stays level from the '
+            'first row to the last): no state of it is stable')
 
 
 def absolute_problem(pressures: NDArray[np.float64]) -> str | None:

@@ -12,7 +12,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from softseq_ros.scene.csv_columns import read_columns
-from softseq_ros.scene.plausibility import MAX_PRESSURE_PA, small_pressure_problem, volume_problem
+from softseq_ros.scene.plausibility import (
+    MAX_PRESSURE_PA,
+    rising_problem,
+    small_pressure_problem,
+    volume_problem,
+)
 from softseq_ros.segments.models import TableError, TabulatedSegment
 
 TABLE_COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m')
@@ -54,5 +59,8 @@ def read_table(path: str | Path, name: str | None = None, length: float | None =
     segment = TabulatedSegment(name or path.stem, length, columns['volume_m3'],
                                columns['pressure_pa'], columns['curvature_per_m'],
                                source=str(path))
+    problem = rising_problem(segment)
+    if problem is not None:
+        raise TableError(f'{path}: column pressure_pa: {problem}')
     segment.design = design
     return segment
