@@ -526,8 +526,9 @@ def _record_bytes(record: Any) -> bytes:
 
 def _assemble(chunk: _OpenChunk) -> tuple[np.ndarray, bytes]:
     """The message record headers of a chunk, and the chunk's uncompressed bytes."""
-    lengths = np.fromiter(map(len, chunk.data), dtype=np.uint64, count=chunk.count)
-    records = np.empty(chunk.count, dtype=_MESSAGE_RECORD)
+    count = len(chunk.data)
+    lengths = np.fromiter(map(len, chunk.data), dtype=np.uint64, count=count)
+    records = np.empty(count, dtype=_MESSAGE_RECORD)
     records['opcode'] = Opcode.MESSAGE
     records['length'] = lengths + _MESSAGE_FIXED
     records['channel'] = chunk.channels
@@ -535,7 +536,7 @@ def _assemble(chunk: _OpenChunk) -> tuple[np.ndarray, bytes]:
     records['log_time'] = chunk.log_times
     records['publish_time'] = chunk.publish_times
     headers = records.tobytes()
-    parts: list[bytes | memoryview] = [b''] * (2 * chunk.count)
+    parts: list[bytes | memoryview] = [b''] * (2 * count)
     view = memoryview(headers)
     size = _MESSAGE_HEADER_SIZE
     parts[0::2] = [view[i:i + size] for i in range(0, len(headers), size)]
