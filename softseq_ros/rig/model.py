@@ -227,7 +227,7 @@ class QuasiStaticModel:
                             len(self.names))
 
     def _rows(self, branch_ids: 'np.ndarray', totals: 'np.ndarray') -> 'np.ndarray':
-        """:meth:`StateReader.row` of many states: the same cubics, Horner steps and polish."""
+        """``StateReader.row`` of many states: the same cubics, Horner steps and polish."""
         reader = self.emap.reader
         values = np.empty((totals.size, 2 * len(self.names) + 1))
         for b in np.unique(branch_ids).tolist():
@@ -238,9 +238,11 @@ class QuasiStaticModel:
                                branch.total.size - 2)
             rough = (np.asarray(branch.rough_list, dtype=bool)[interval] if reader.polish
                      else np.zeros(rows.size, dtype=bool))
+            # The cubics of the intervals read, computed for all of them at once (the same
+            # numbers as one interval at a time: every step of interval_cubics is elementwise).
             unique, where = np.unique(interval, return_inverse=True)
-            table = np.array([branch.coefficient_rows(i) for i in unique.tolist()])
-            a, b_, c, d = (table[where, :, k] for k in range(4))
+            table = branch.coefficients(unique)
+            a, b_, c, d = (table[k][where] for k in range(4))
             dt = (total - branch.total[interval])[:, None]
             values[rows] = ((a * dt + b_) * dt + c) * dt + d
             for r in np.flatnonzero(rough).tolist():
