@@ -107,7 +107,9 @@ SHORT_LEGS_YAML = '[{inflate_to_m3: 1.0e-5}, {deflate_to_m3: 0.0}]'
 # Same 400 s and command count, but half of it a hold: 0 -> 5 mL, hold 200 s, -> 0.
 HOLD_LEGS = (Leg.inflate(5.0e-6), Leg.hold(200.0), Leg.deflate(0.0))
 # For cProfile (about 4x slower under the profiler): 0 -> 2.5 mL -> 0, 100 s.
-PROFILE_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
+# Under cProfile: the scene's own programme (None); by blocks a short one is mostly the bag's
+# closing.
+PROFILE_LEGS = None
 # --quick: the batch part only, every run 0 -> 2.5 -> 0 mL (100 s sim; cProfile 40 s).
 QUICK_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
 QUICK_HOLD_LEGS = (Leg.inflate(1.25e-6), Leg.hold(50.0), Leg.deflate(0.0))
@@ -173,7 +175,7 @@ class BatchSizes:
     full_legs: tuple[Leg, ...] | None   # the headline run; None: the scene's own programme
     short_legs: tuple[Leg, ...]         # where the time goes, and the skipping-work variants
     hold_legs: tuple[Leg, ...]          # as long as short_legs, as many commands, half a hold
-    profile_legs: tuple[Leg, ...]       # under cProfile
+    profile_legs: tuple[Leg, ...] | None  # under cProfile; None: the scene's own programme
     micro_commands: int                 # the actuator alone
 
 
@@ -319,7 +321,8 @@ def actuator_micro(repeats: int, count: int = 5000) -> dict[str, float]:
             'held_solves': held_solves, 'count': count}
 
 
-def cprofile_top(workdir: Path, legs: tuple[Leg, ...] = PROFILE_LEGS, rows: int = 14) -> str:
+def cprofile_top(workdir: Path, legs: tuple[Leg, ...] | None = PROFILE_LEGS,
+                 rows: int = 14) -> str:
     out = workdir / 'profiled'
     profile = cProfile.Profile()
 
@@ -345,8 +348,8 @@ def cprofile_top(workdir: Path, legs: tuple[Leg, ...] = PROFILE_LEGS, rows: int 
                 where = ('softseq_ros/' + where) if marker == 'softseq_ros/' else where
         name = f'`{where}:{line}({function})`' if line else f'`{function}`'
         lines.append(f'| {name} | {calls} | {own:.2f} | {100.0 * own / total:.1f} % |')
-    return '\n'.join(lines) + f'\n\nProfiled total: {total:.1f} s (cProfile slows the run ' \
-        'about 4x, pure-Python call-heavy code the most).'
+    return '\n'.join(lines) + f'\n\nProfiled total: {total:.1f} s (cProfile slows most what ' \
+        'makes many Python calls: the instants run one at a time more than the blocks).'
 
 
 def stage_table(title: str, timer: StageTimer, result, stages: tuple[str, ...]) -> list[str]:
@@ -439,8 +442,10 @@ def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
                                  BLOCK_STAGES if by_blocks else STEP_STAGES)
 
         print('batch: cProfile ...', flush=True)
-        lines += [f'cProfile of a {describe_legs(sizes.profile_legs)} run, functions by own '
-                  'time:', '', cprofile_top(workdir, sizes.profile_legs), '']
+        profiled = ('the paper programme (0 -> 65 -> 0 mL)' if sizes.profile_legs is None
+                    else f'a {describe_legs(sizes.profile_legs)} programme')
+        lines += [f'cProfile of a run of {profiled}, by blocks, functions by own time:', '',
+                  cprofile_top(workdir, sizes.profile_legs), '']
 
         print('batch: skipping work ...', flush=True)
         hold_s = PumpProfile(sizes.hold_legs, scene.pump.profile.flow_rate).duration()
