@@ -197,7 +197,7 @@ class _Blocks:
         pump_clock = clocks[0]
         start, period = pump_clock[0], pump_clock[3]
         times = start + period * np.arange(self.size, dtype=np.int64)
-        count, volumes, flows = self.plan(times)
+        count, volumes, flows = self.plan(times, self.volumes_sent)
         block = self.preview(volumes) if count else None
         if block is not None:
             count = block.count

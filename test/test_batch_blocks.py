@@ -19,12 +19,14 @@ import multiprocessing
 from pathlib import Path
 
 from mcap.reader import make_reader
+import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 from test_bag_regression import _flatten
 
 import softseq_ros
 from softseq_ros.batch import BLOCK_STAGES
+from softseq_ros.rig.model import CommandRefusedError
 from softseq_ros.scene.programme import Leg
 
 START_NS = 1_795_000_000 * 10**9
@@ -159,3 +161,46 @@ def test_a_hook_that_changes_a_core_stage_runs_one_message_at_a_time(tmp_path):
     _, result = _run(tmp_path, 'hooked', *CASES['paper'], True, wrap=wrap)
     assert result.pump_state == 'finished'
     assert not counter.calls
+
+
+@pytest.mark.parametrize('scene', ['paper', 'fig1_asymmetric'])
+def test_a_models_preview_gives_the_states_of_one_command_at_a_time(scene):
+    # Ramps up and down with holds, through the snap-throughs, past the end of the domain
+    # and a NaN: each preview stops at the first command that is not plain (a snap, a
+    # refusal), whose states before it are those of the commands one at a time.
+    from softseq_ros.rig.build import actuator_core
+    from softseq_ros.scene.loader import load_scene
+    loaded = load_scene(scene)
+    step_by_step = actuator_core(loaded).model
+    by_blocks = actuator_core(loaded).model
+    top = step_by_step.end_stop_m3
+    up = np.linspace(0.0, top, 3001)
+    commands = np.concatenate([up, np.full(50, top), up[::-1], up[:700], [top * 1.5],
+                               up[700:1400], [np.nan], up[1400:2000]])
+    index, previews, cut = 0, 0, 0
+    while index < commands.size:
+        block = by_blocks.preview(commands[index:index + 257]) \
+            if np.isfinite(commands[index:index + 257]).all() else None
+        count = block.count if block is not None else 0
+        for row in range(count):
+            assert step_by_step.command(float(commands[index + row]), 0) in (None, [])
+            state = step_by_step.state()
+            assert list(block.volumes[row]) == list(state.volumes)
+            assert block.pressure[row] == state.pressure
+            assert list(block.curvatures[row]) == list(state.curvatures)
+        if block is not None:
+            by_blocks.commit(block, count)
+            previews += 1
+        index += count
+        if index < commands.size and count < min(257, commands.size - index):
+            # Not plain (or a NaN in reach): one command at a time, on both models.
+            cut += 1
+            for model in (step_by_step, by_blocks):
+                try:
+                    model.command(float(commands[index]), 0)
+                except CommandRefusedError:
+                    pass
+            index += 1
+        assert by_blocks.state() == step_by_step.state()
+    assert by_blocks.solves == step_by_step.solves
+    assert previews > 10 and cut >= 2

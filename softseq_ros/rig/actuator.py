@@ -173,7 +173,7 @@ class ActuatorCore:
             return None
         plain = np.isfinite(injected_m3) & (injected_m3 >= 0.0)
         count = int(np.argmin(plain)) if not plain.all() else plain.size
-        return preview(injected_m3[:count])
+        return preview(injected_m3[:count]) if count else None
 
     def commit(self, block: 'CommandBlock', count: int) -> None:
         """Take the first ``count`` commands of a :meth:`preview` as handled."""

@@ -183,6 +183,10 @@ class QuasiStaticModel:
         emap, tracker = self.emap, self.tracker
         totals = injected_m3 + emap.total_rest_volume
         n = totals.size
+        if not n:
+            return CommandBlock(injected_m3, np.empty(0, dtype=np.intp), totals,
+                                np.empty((0, 2 * len(self.names) + 1)),
+                                np.empty(0, dtype=bool), len(self.names))
         branch_ids = np.empty(n, dtype=np.intp)
         at = totals.copy()
         probe = Tracker.__new__(Tracker)

@@ -390,14 +390,16 @@ class PumpCore:
 
     # ---------------------------------------------------------------- blocks of ticks
 
-    def plan(self, times: 'np.ndarray') -> tuple[int, 'np.ndarray', 'np.ndarray']:
+    def plan(self, times: 'np.ndarray',
+             answered: bool = True) -> tuple[int, 'np.ndarray', 'np.ndarray']:
         """
         The commands of ticks at ``times`` (int64 ns, increasing) that change no state.
 
         ``(count, volumes, flows)``: the first ``count`` ticks are a running pump's plain
         commands, as :meth:`tick` gives them when each is answered at once by a trustworthy
-        answer (no start, hold, finish or end stop among them); a driver hands them to
-        :meth:`commit_plan` instead of ticking. Count 0 when the next tick is not plain.
+        answer (``answered``; else by none), with no start, hold, finish or end stop among
+        them; a driver hands them to :meth:`commit_plan` instead of ticking. Count 0 when the
+        next tick is not plain.
         """
         empty = np.empty(0)
         if self.state != RUNNING or self._frozen_volume is not None \
@@ -410,9 +412,12 @@ class PumpCore:
         run_time = elapsed.astype(float) * 1e-9
         volumes, flows = self.profile.commands_at(run_time)
         plain = (volumes <= self.max_injected_m3) & (run_time < self.duration_s)
-        if not self.open_loop and times.size > 1:
+        timeout = self.feedback_timeout_s * 1e9
+        if not self.open_loop and answered and times.size > 1:
             # Each answer renews the feedback: only a gap longer than the timeout loses it.
-            plain[1:] &= np.diff(times) <= self.feedback_timeout_s * 1e9
+            plain[1:] &= np.diff(times) <= timeout
+        elif not self.open_loop and not answered and self._last_feedback is not None:
+            plain &= times - self._last_feedback <= timeout
         count = int(np.argmin(plain)) if not plain.all() else times.size
         return count, volumes[:count], flows[:count]
 
