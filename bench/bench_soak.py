@@ -207,8 +207,8 @@ class _Sampler:
         if label == 'pump.tick':
             self.pump = function.__self__   # seen, not wrapped: the run stays by blocks
         if label == 'block.pump':
-            def planned(times):
-                plan = function(times)
+            def planned(times, *options):
+                plan = function(times, *options)
                 pump = self.pump
                 if not plan[0] and not self.written[2] and pump.state == 'running' \
                         and pump.run_time_s(int(times[0])) >= pump.duration_s:
