@@ -98,6 +98,10 @@ CASES = {
     # An over-pressure stop heard on the actuator's answers.
     'over_pressure': ('paper', {'pump': {'legs': (Leg.inflate(10 * ML), Leg.deflate(0.0)),
                                          'max_pressure_pa': 2000.0}}),
+    # No volumes: the pump runs open loop (its commands unanswered), the camera on curvatures.
+    'open_loop': ('paper', {'pump': {'legs': (Leg.inflate(5 * ML), Leg.deflate(0.0))},
+                            'actuator': {'outputs': frozenset({'pressure', 'curvature'})},
+                            'camera': {'outputs': frozenset({'poses'})}}),
     # Pressure and volumes only: no curvatures, no frames, the pump's feedback still on.
     'few_outputs': ('paper', {'pump': {'legs': (Leg.inflate(5 * ML), Leg.deflate(0.0))},
                               'actuator': {'outputs': frozenset({'pressure', 'volumes'})},
