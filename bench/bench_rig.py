@@ -1,8 +1,9 @@
 """
 Rig benchmarks: batch speed, hand-started processes on sim time, real-time latency.
 
-    python bench/bench_rig.py [--part batch|processes|latency|baseline|all] [--repeats N]
-                              [--baseline-ref REF] [--out bench/rig_results.md] [--quick]
+    python bench/bench_rig.py [--part batch|processes|latency|baseline|former|all]
+                              [--repeats N] [--baseline-ref REF] [--former-ref REF]
+                              [--out bench/rig_results.md] [--quick]
 
 Benchmarks, not tests: nothing is asserted about time. Each part prints a markdown section and
 replaces its own section of the results file (the other parts' sections stay), so one part can
@@ -14,9 +15,10 @@ load, the CPU times (this process only) much less.
 Parts:
   batch      softseq_ros.run on the paper scene (0 -> 65 -> 0 mL, pump 50 Hz, camera
              10 Hz, everything recorded); where the time goes (exclusive timers around each
-             stage of the run, through the run's public ``wrap`` hook, and cProfile's top
-             functions); the saving from skipping work (reduced outputs, a 1 Hz camera, a pump
-             hold answered from the actuator's cache).
+             stage of the run, through the run's public ``wrap`` hook: the stages of a block
+             of instants, and those of one message at a time with ``by_blocks=False``; and
+             cProfile's top functions); the saving from skipping work (reduced outputs, a 1 Hz
+             camera, a pump hold answered from the actuator's cache).
   processes  the console-script nodes as processes on sim time (sim_clock at several speed-ups,
              recorder writing a bag): the highest speed-up at which no message is lost.
   latency    real time, pump and camera at 100 Hz, nodes as processes, a probe node in this
@@ -26,6 +28,11 @@ Parts:
              code at --baseline-ref (checked out into a temporary git worktree) against this
              checkout, alternated A B A B in this one run; and what a line logged through
              rclpy's public logger costs.
+  former     the batch run of the paper scene (as ``softseq run paper --no-report`` runs it:
+             ``softseq_ros.run`` in a fresh interpreter) of the code at --former-ref (the
+             code before the batch ran by blocks, checked out into a temporary git worktree)
+             against this checkout, alternated A B A B, 5 pairs: medians and pair ratios of
+             the run's wall time (its real-time factor) and of the whole process.
 
 ``--quick``: the batch part only (no DDS, no processes), every run on a 100 s programme and
 once, the actuator alone on 1000 commands; a few seconds. Printed, not written into the results
@@ -76,7 +83,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 import softseq_ros  # noqa: E402
 from softseq_ros.bag.reader import read_bag  # noqa: E402
-from softseq_ros.batch import STAGES  # noqa: E402
+from softseq_ros.batch import BLOCK_STAGES, STAGES, STEP_STAGES  # noqa: E402
 from softseq_ros.nodes.core_node import message_class, qos_profile  # noqa: E402
 from softseq_ros.rig.build import actuator_core  # noqa: E402
 from softseq_ros.scene.loader import load_scene  # noqa: E402
@@ -86,9 +93,12 @@ from softseq_ros.wire import contract  # noqa: E402
 from softseq_ros.wire.values import PumpCommand  # noqa: E402
 
 RESULTS = ROOT / 'bench' / 'rig_results.md'
-PARTS = ('batch', 'processes', 'latency', 'baseline')
+PARTS = ('batch', 'processes', 'latency', 'baseline', 'former')
 # The last commit whose batch runner stepped rclpy nodes (before the ROS-free cores).
 BASELINE_REF = '7a1bb18'
+# The code before the batch runner ran its plain instants by blocks.
+FORMER_REF = 'c888a0c'
+FORMER_PAIRS = 5
 ML = 1.0e-6
 
 # A shortened paper programme (same scene, flow and rates): 0 -> 10 mL -> 0, 400 s of sim time.
@@ -97,7 +107,9 @@ SHORT_LEGS_YAML = '[{inflate_to_m3: 1.0e-5}, {deflate_to_m3: 0.0}]'
 # Same 400 s and command count, but half of it a hold: 0 -> 5 mL, hold 200 s, -> 0.
 HOLD_LEGS = (Leg.inflate(5.0e-6), Leg.hold(200.0), Leg.deflate(0.0))
 # For cProfile (about 4x slower under the profiler): 0 -> 2.5 mL -> 0, 100 s.
-PROFILE_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
+# Under cProfile: the scene's own programme (None); by blocks a short one is mostly the bag's
+# closing.
+PROFILE_LEGS = None
 # --quick: the batch part only, every run 0 -> 2.5 -> 0 mL (100 s sim; cProfile 40 s).
 QUICK_LEGS = (Leg.inflate(2.5e-6), Leg.deflate(0.0))
 QUICK_HOLD_LEGS = (Leg.inflate(1.25e-6), Leg.hold(50.0), Leg.deflate(0.0))
@@ -163,7 +175,7 @@ class BatchSizes:
     full_legs: tuple[Leg, ...] | None   # the headline run; None: the scene's own programme
     short_legs: tuple[Leg, ...]         # where the time goes, and the skipping-work variants
     hold_legs: tuple[Leg, ...]          # as long as short_legs, as many commands, half a hold
-    profile_legs: tuple[Leg, ...]       # under cProfile
+    profile_legs: tuple[Leg, ...] | None  # under cProfile; None: the scene's own programme
     micro_commands: int                 # the actuator alone
 
 
@@ -181,6 +193,11 @@ STAGE_NAMES = {
     'camera.handle': 'camera: input handlers (snapshots, with their backbone kinematics)',
     'encode': 'serialisation (CDR encode)',
     'append': 'bag writing (MCAP, zstd chunks)',
+    'block.pump': 'pump: plain ticks of a block (programme, limits)',
+    'block.actuator': 'actuator: states of a block of commands (walk, branch cubics)',
+    'block.camera': 'camera: states taken, frames (backbone kinematics)',
+    'block.encode': 'serialisation of a block (CDR rows per topic)',
+    'block.append': 'bag writing of a block (MCAP rows, chunks, zstd)',
 }
 
 
@@ -192,12 +209,16 @@ class StageTimer:
     actuator's command handling does not count the equilibrium solve it asks for).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, labels: tuple[str, ...] = STAGES) -> None:
+        """Time the stages ``labels`` (those of a block alone leave the run by blocks)."""
+        self.labels = labels
         self.exclusive: dict[str, float] = defaultdict(float)
         self.calls: dict[str, int] = defaultdict(int)
         self.stack: list[float] = []
 
     def __call__(self, label: str, function):
+        if label not in self.labels:
+            return function
         stack, exclusive, calls, clock = self.stack, self.exclusive, self.calls, \
             time.perf_counter
 
@@ -247,7 +268,7 @@ def _seeing(cores: dict, started: list, wrap=None):
     return seen
 
 
-def run_batch(workdir: Path, label: str, repeats: int, wrap=None, **options):
+def run_batch(workdir: Path, label: str, repeats: int, wrap=None, by_blocks=True, **options):
     """
     Best of ``repeats`` (by wall time) of one batch configuration: (run, result, CPU [s]).
 
@@ -260,7 +281,8 @@ def run_batch(workdir: Path, label: str, repeats: int, wrap=None, **options):
         out = workdir / f'{re.sub(r"[^a-z0-9]+", "_", label.lower())}_{index}'
         cores, started = {}, []
         seen = _seeing(cores, started, wrap)
-        result = softseq_ros.run('paper', out, overrides=_batch_overrides(**options), wrap=seen)
+        result = softseq_ros.run('paper', out, overrides=_batch_overrides(**options), wrap=seen,
+                                 by_blocks=by_blocks)
         cpu = time.process_time() - started[0]
         if best is None or result.wall_s < best[1].wall_s:
             best = (SimpleNamespace(**cores), result, cpu)
@@ -299,7 +321,8 @@ def actuator_micro(repeats: int, count: int = 5000) -> dict[str, float]:
             'held_solves': held_solves, 'count': count}
 
 
-def cprofile_top(workdir: Path, legs: tuple[Leg, ...] = PROFILE_LEGS, rows: int = 14) -> str:
+def cprofile_top(workdir: Path, legs: tuple[Leg, ...] | None = PROFILE_LEGS,
+                 rows: int = 14) -> str:
     out = workdir / 'profiled'
     profile = cProfile.Profile()
 
@@ -325,8 +348,35 @@ def cprofile_top(workdir: Path, legs: tuple[Leg, ...] = PROFILE_LEGS, rows: int 
                 where = ('softseq_ros/' + where) if marker == 'softseq_ros/' else where
         name = f'`{where}:{line}({function})`' if line else f'`{function}`'
         lines.append(f'| {name} | {calls} | {own:.2f} | {100.0 * own / total:.1f} % |')
-    return '\n'.join(lines) + f'\n\nProfiled total: {total:.1f} s (cProfile slows the run ' \
-        'about 4x, pure-Python call-heavy code the most).'
+    return '\n'.join(lines) + f'\n\nProfiled total: {total:.1f} s (cProfile slows most what ' \
+        'makes many Python calls: the instants run one at a time more than the blocks).'
+
+
+def stage_table(title: str, timer: StageTimer, result, stages: tuple[str, ...]) -> list[str]:
+    """The timer's stages by own time, as a table, and the stages never called."""
+    total = result.wall_s
+    called = [label for label in timer.exclusive if timer.calls[label]]
+    rows = sorted(called, key=lambda label: -timer.exclusive[label])
+    accounted = sum(timer.exclusive.values())
+    lines = [f'**{title}**: run wall {total:.2f} s ({result.speedup:.0f}x).', '',
+             '| component (stage) | calls | own time [s] | share | per call [us] |',
+             '|---|---:|---:|---:|---:|']
+    for label in rows:
+        seconds, calls = timer.exclusive[label], timer.calls[label]
+        lines.append(f'| {STAGE_NAMES.get(label, label)} (`{label}`) | {calls} | '
+                     f'{seconds:.2f} | {100 * seconds / total:.0f} % | '
+                     f'{1e6 * seconds / max(calls, 1):.1f} |')
+    rest = total - accounted
+    lines += [f'| runner: routing, queue, loop, setup (the rest) | | {rest:.2f} | '
+              f'{100 * rest / total:.0f} % | |', '']
+    idle = [label for label in stages if not timer.calls.get(label)]
+    if idle:
+        lines += ['Stages never called in this run: '
+                  + ', '.join(f'`{label}`' for label in idle)
+                  + (' (the quasi-static model changes only on commands: it has no rate, '
+                     'so the runner never ticks the actuator)'
+                     if 'actuator.tick' in idle else '') + '.', '']
+    return lines
 
 
 def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
@@ -364,50 +414,38 @@ def part_batch(repeats: int, sizes: BatchSizes = FULL) -> str:
             '',
             'Messages: ' + ', '.join(f'{t} {n}' for t, n in sorted(full.message_counts.items()))
             + '.', '',
-            'Target in the issue: at least 300x on 2 cores. CPU-bound: the node code runs on '
-            'one core (the issue asks for one process, lock-step); the second core compresses '
-            'the finished chunks and keeps other work off the first.', '']
+            'Target in the issue: past 1000x with every output (at first 300x). CPU-bound: the '
+            'cores run on one core (one process, lock-step), most instants by blocks of '
+            'up to 4096 pump ticks; the second core compresses the finished chunks and keeps '
+            'other work off the first.', '']
 
         print('batch: where the time goes ...', flush=True)
-        timer = StageTimer()
-        _, result, _ = run_batch(workdir, 'instrumented', 1, wrap=timer,
-                                 legs=sizes.short_legs)
-        total = result.wall_s
-        called = [label for label in timer.exclusive if timer.calls[label]]
-        rows = sorted(called, key=lambda label: -timer.exclusive[label])
-        accounted = sum(timer.exclusive.values())
         lines += [
             '### Where the time goes', '',
-            f'Shortened programme {short} ({result.sim_duration_s:.0f} s sim, same '
-            'scene and rates). Every stage of the run (`STAGES`) is wrapped, through '
-            "the run's public `wrap` hook, in a timer that counts its own time without the "
-            "wrapped calls inside it (the actuator's command handling does not count the "
-            'equilibrium solve it asks for; the serialisation and bag write of what a core '
-            'produces are stages of their own). The backbone kinematics have no stage of their '
-            "own: they are in the camera's frame (`camera.tick`) and snapshots "
-            f'(`camera.handle`). Run wall {total:.2f} s ({result.speedup:.0f}x; the timers '
-            'themselves add a few %).', '',
-            '| component (stage) | calls | own time [s] | share | per call [us] |',
-            '|---|---:|---:|---:|---:|']
-        for label in rows:
-            seconds, calls = timer.exclusive[label], timer.calls[label]
-            lines.append(f'| {STAGE_NAMES.get(label, label)} (`{label}`) | {calls} | '
-                         f'{seconds:.2f} | {100 * seconds / total:.0f} % | '
-                         f'{1e6 * seconds / max(calls, 1):.1f} |')
-        rest = total - accounted
-        lines += [f'| runner: routing, queue, loop, setup (the rest) | | {rest:.2f} | '
-                  f'{100 * rest / total:.0f} % | |', '']
-        idle = [label for label in STAGES if not timer.calls.get(label)]
-        if idle:
-            lines += ['Stages never called in this run: '
-                      + ', '.join(f'`{label}`' for label in idle)
-                      + (' (the quasi-static model changes only on commands: it has no rate, '
-                         'so the runner never ticks the actuator)'
-                         if 'actuator.tick' in idle else '') + '.', '']
+            f'Shortened programme {short} (same scene and rates). The stages of the run '
+            "(`STAGES`) are wrapped, through the run's public `wrap` hook, in a timer that "
+            'counts its own time without the wrapped calls inside it. Twice: by blocks (the '
+            'default: only the block stages `BLOCK_STAGES` are wrapped, which leaves the run '
+            'by blocks), and one message at a time (`by_blocks=False`, every per-message '
+            "stage wrapped: the actuator's command handling does not count the equilibrium "
+            'solve it asks for; the serialisation and bag write of what a core produces are '
+            "stages of their own; the backbone kinematics are in the camera's frame "
+            '(`camera.tick`) and snapshots (`camera.handle`)). The instants that are not plain '
+            '(start, snapshots, the end) go one message at a time in a run by blocks too; '
+            'their stages are not timed there. The timers themselves add a few %.', '']
+        for title, labels, by_blocks in (('By blocks', BLOCK_STAGES, True),
+                                         ('One message at a time', STAGES, False)):
+            timer = StageTimer(labels)
+            _, result, _ = run_batch(workdir, f'instrumented {by_blocks}', 1, wrap=timer,
+                                     legs=sizes.short_legs, by_blocks=by_blocks)
+            lines += stage_table(title, timer, result,
+                                 BLOCK_STAGES if by_blocks else STEP_STAGES)
 
         print('batch: cProfile ...', flush=True)
-        lines += [f'cProfile of a {describe_legs(sizes.profile_legs)} run, functions by own '
-                  'time:', '', cprofile_top(workdir, sizes.profile_legs), '']
+        profiled = ('the paper programme (0 -> 65 -> 0 mL)' if sizes.profile_legs is None
+                    else f'a {describe_legs(sizes.profile_legs)} programme')
+        lines += [f'cProfile of a run of {profiled}, by blocks, functions by own time:', '',
+                  cprofile_top(workdir, sizes.profile_legs), '']
 
         print('batch: skipping work ...', flush=True)
         hold_s = PumpProfile(sizes.hold_legs, scene.pump.profile.flow_rate).duration()
@@ -1077,6 +1115,67 @@ def part_baseline(repeats: int) -> str:
     return '\n'.join(lines)
 
 
+# ------------------------------------------------------------------------------ part 5: former
+
+def timed_batch_in_child(code_root: Path, out: Path) -> dict:
+    """:func:`batch_in_child`, with the whole process's wall and CPU time (its start-up too)."""
+    before = os.times()
+    start = time.perf_counter()
+    info = batch_in_child(code_root, out)
+    info['process_wall'] = time.perf_counter() - start
+    after = os.times()
+    info['process_cpu'] = (after.children_user - before.children_user
+                           + after.children_system - before.children_system)
+    return info
+
+
+def part_former(repeats: int) -> str:
+    load_before = load_text()
+    ref = FORMER_REF
+    described = subprocess.run(['git', 'log', '-1', '--format=%h %s', ref], cwd=ROOT,
+                               capture_output=True, text=True).stdout.strip()
+    pairs = FORMER_PAIRS
+    lines = ['## 5. The batch run by blocks against the former code (the same run)', '',
+             f'Former code: `{described[:110]}` (before the batch ran by blocks), checked out '
+             'into a temporary git worktree; "now" is this checkout. Each run is the paper '
+             'scene as `softseq run paper --no-report` runs it (`softseq_ros.run`, every topic '
+             'recorded) in a fresh interpreter, former and now in turn (A B A B ...), '
+             f'{pairs} pairs. "Run" is the wall time the run reports (the lock-step loop and '
+             'the bag, what the real-time factor divides); "process" is the whole command '
+             'timed from outside (interpreter start, imports, the scene and its equilibrium '
+             'map, the run). Ratios are taken pair by pair and their median quoted.', '']
+    with baseline_tree(ref) as tree, tempfile.TemporaryDirectory(prefix='bench_rig_') as tmp:
+        runs: dict[str, list[dict]] = {'former': [], 'now': []}
+        for index in range(pairs):
+            for label, root in (('former', tree), ('now', ROOT)):
+                print(f'former: batch {label} {index + 1}/{pairs} ...', flush=True)
+                runs[label].append(timed_batch_in_child(root, Path(tmp) / f'{label}_{index}'))
+    sim = runs['now'][0]['sim']
+    messages = runs['now'][0]['messages']
+    lines += [f'Paper scene: {sim:.0f} s of rig time, {messages:.0f} messages.', '',
+              '| code | run wall, median [s] | min | max | real time, median | process wall, '
+              'median [s] | process CPU, median [s] |',
+              '|---|---:|---:|---:|---:|---:|---:|']
+    for label in ('former', 'now'):
+        walls = [run['wall'] for run in runs[label]]
+        median = float(np.median(walls))
+        lines.append(
+            f'| {label} | {median:.2f} | {min(walls):.2f} | {max(walls):.2f} | '
+            f'**{sim / median:.0f}x** | '
+            f'{np.median([run["process_wall"] for run in runs[label]]):.2f} | '
+            f'{np.median([run["process_cpu"] for run in runs[label]]):.2f} |')
+    ratios = {key: [old[key] / new[key] for old, new in zip(runs['former'], runs['now'])]
+              for key in ('wall', 'process_wall', 'process_cpu')}
+    spread = {key: f'{min(values):.2f} to {max(values):.2f}' for key, values in ratios.items()}
+    lines += ['', f'Now against the former code, median of the {pairs} pair ratios former / '
+              f'now: the run **{np.median(ratios["wall"]):.2f}x** faster (pairs '
+              f'{spread["wall"]}), the whole process {np.median(ratios["process_wall"]):.2f}x '
+              f'by wall time ({spread["process_wall"]}) and '
+              f'{np.median(ratios["process_cpu"]):.2f}x by CPU time ({spread["process_cpu"]}).',
+              '', under_load_note(load_before, load_text())]
+    return '\n'.join(lines)
+
+
 # ------------------------------------------------------------------------------ results file
 
 def write_results(path: Path, sections: dict[str, str]) -> None:
@@ -1108,7 +1207,7 @@ def write_results(path: Path, sections: dict[str, str]) -> None:
 
 
 def main() -> None:
-    global LATENCY_RUN_S, BASELINE_REF
+    global LATENCY_RUN_S, BASELINE_REF, FORMER_REF
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--part', choices=(*PARTS, 'all'), default='all')
     parser.add_argument('--repeats', type=int, default=None,
@@ -1124,11 +1223,15 @@ def main() -> None:
                         'benchmark runs, in a few seconds')
     parser.add_argument('--baseline-ref', default=BASELINE_REF,
                         help='git revision the baseline part compares against')
+    parser.add_argument('--former-ref', default=FORMER_REF,
+                        help='git revision the former part compares against (the code before '
+                        'the batch ran by blocks)')
     options = parser.parse_args()
     if options.latency_seconds <= LATENCY_WARMUP_S:
         parser.error(f'--latency-seconds: must be more than the {LATENCY_WARMUP_S:g} s warm-up')
     LATENCY_RUN_S = options.latency_seconds
     BASELINE_REF = options.baseline_ref
+    FORMER_REF = options.former_ref
     if options.quick and options.part not in ('batch', 'all'):
         parser.error(f'--quick runs the batch part only, not {options.part} (DDS, processes)')
     repeats = options.repeats if options.repeats is not None else (1 if options.quick else 3)
@@ -1137,7 +1240,7 @@ def main() -> None:
     out = options.out or (None if options.quick else RESULTS)
     sizes = QUICK if options.quick else FULL
     runners = {'batch': lambda repeats: part_batch(repeats, sizes), 'processes': part_processes,
-               'latency': part_latency, 'baseline': part_baseline}
+               'latency': part_latency, 'baseline': part_baseline, 'former': part_former}
     chosen = ('batch',) if options.quick else PARTS if options.part == 'all' \
         else (options.part,)
     sections = {}

@@ -155,12 +155,12 @@ class _Sampler:
     Samples of a batch run as it goes, through its public hooks only.
 
     The run's progress stream (a line every 0.25 s of wall time) takes a sample at every line.
-    Its ``wrap`` hook counts the messages written (``append``: how many, and the log time of
-    the last, the run's simulated clock) and sees the pump's programme end (``pump.tick``):
-    from there every message written renews the last sample, so the last sample is taken
-    with the last message, before the bag is closed. The counting costs one Python call per
-    message, 0.2-0.3 us against about 11 us of CPU a message takes (2-4 % of the run, the same
-    at its start and at its end).
+    Its ``wrap`` hook counts the messages written by blocks (``block.append``: how many, and
+    the log time of the last, the run's simulated clock) and sees the programme's last instant
+    coming (``block.pump``: no plain tick left, the programme over), where it takes the last
+    sample, before the bag is closed. It wraps no per-message stage, so the run goes by blocks
+    as ``softseq run`` does; the few instants that go one message at a time (the start,
+    snapshots, the last instant) are not counted in the samples, only in the run's totals.
     """
 
     def __init__(self, start_time_ns: int) -> None:
@@ -194,27 +194,29 @@ class _Sampler:
             self.origin = time.perf_counter()
             self.sample()
             self.built['machine_busy_s'] = machine_cpu_s()[0]
-        if label == 'append':
-            written, renew = self.written, self.renew
+        if label == 'block.append':
+            written = self.written
 
-            def counted(data: bytes, log_ns: int, publish_ns: int) -> None:
-                function(data, log_ns, publish_ns)
-                written[0] += 1
-                written[1] = log_ns
-                if written[2]:
-                    renew()
+            def counted(blocks) -> None:
+                function(blocks)
+                for block in blocks:
+                    written[0] += block.rows.size * len(block.channels)
+                    if block.log_times.size:
+                        written[1] = max(written[1], int(block.log_times[-1]))
             return counted
         if label == 'pump.tick':
-            self.pump = function.__self__
-
-            def ticked(now: int):
-                outputs = function(now)
-                if not self.written[2] and self.pump.state in ('finished', 'stopped'):
-                    # The run's last instant: its messages renew this sample as they go out.
+            self.pump = function.__self__   # seen, not wrapped: the run stays by blocks
+        if label == 'block.pump':
+            def planned(times, *options):
+                plan = function(times, *options)
+                pump = self.pump
+                if not plan[0] and not self.written[2] and pump.state == 'running' \
+                        and pump.run_time_s(int(times[0])) >= pump.duration_s:
+                    # The programme's last instant is next: the last sample, before it.
                     self.sample()
                     self.written[2] = True
-                return outputs
-            return ticked
+                return plan
+            return planned
         return function
 
     def write(self, text: str) -> None:
@@ -294,6 +296,8 @@ def _window_rate(samples: list, start: int, end: int) -> float:
     At least one sample apart: a short run (``--quick``) may have no sample between them.
     """
     index = next(i for i, s in enumerate(samples) if s[2] >= start)
+    if index == len(samples) - 1 and index > 0:
+        index -= 1   # the window lies past the last sample but one: from that one on
     first = samples[index]
     last = next((s for s in samples[index + 1:] if s[2] >= end), samples[-1])
     return (last[2] - first[2]) / max(last[0] - first[0], 1e-9)
@@ -373,8 +377,9 @@ def part_batch(cycles: int, keep_bag: bool, quick: bool = False) -> str:
         'progress stream is the sampling hook (a line every 0.25 s of wall time): VmRSS from '
         '/proc/self/status, `sys.getallocatedblocks()` (Python objects alive), CPU time and '
         "the messages written so far (counted through the run's public `wrap` hook around "
-        f'the bag write; the last sample is taken with the last message); {len(samples)} '
-        'samples.', '',
+        'the bag write of each block of instants; the few instants written one message at a '
+        'time, the start, snapshots and the last instant, count in the totals only; the last '
+        f'sample is taken just before the last instant); {len(samples)} samples.', '',
         f'**{total:,} messages** in {info["wall_s"]:.0f} s wall '
         f'({info["sim_s"] / info["wall_s"]:.0f}x real time; target >= '
         f'{BATCH_TARGET_MESSAGES:,}: {"met" if total >= BATCH_TARGET_MESSAGES else "**not met**"}'
@@ -391,7 +396,7 @@ def part_batch(cycles: int, keep_bag: bool, quick: bool = False) -> str:
         f'{start[4]:,} |',
         f'| start (first progress line) | {first[2]:,} | {mb(first[3])} | {first[4]:,} |',
         f'| at 10 % | {tenth[2]:,} | {mb(tenth[3])} | {tenth[4]:,} |',
-        f'| end (last message written) | {end[2]:,} | {mb(end[3])} | {end[4]:,} |',
+        f'| end (before the last instant) | {end[2]:,} | {mb(end[3])} | {end[4]:,} |',
         f'| bag closed ({info["closing_s"]:.1f} s: last chunk, summary, metadata) | '
         f'{end[2]:,} | {mb(info["rss_end"])} | - |',
         f'| lowest / highest sample after the start | | {mb(min(rss_values))} / '

@@ -17,12 +17,15 @@ from pathlib import Path
 import time
 from typing import Any, Callable, TextIO
 
+import numpy as np
+
 from softseq_ros.bag.forms import offered_qos_yaml, qos_profile_dict
+from softseq_ros.bag.mcap_file import RowBlock, row_dtype
 from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
 from softseq_ros.progress import is_terminal, write_progress
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
-from softseq_ros.rig.model import ActuatorModel
+from softseq_ros.rig.model import ActuatorModel, CommandBlock
 from softseq_ros.rig.routing import Router
 from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.scene.programme import (
@@ -34,8 +37,19 @@ from softseq_ros.scene.programme import (
 from softseq_ros.stopping import HeldSignals
 from softseq_ros.wire import contract
 from softseq_ros.wire.contract import NS_PER_S
-from softseq_ros.wire.payloads import ENCODERS
-from softseq_ros.wire.values import ERROR, TOPIC_VALUE_TYPES, WARNING, Notice
+from softseq_ros.wire.payloads import ENCODERS, row_layout
+from softseq_ros.wire.values import (
+    ERROR,
+    TOPIC_VALUE_TYPES,
+    WARNING,
+    Backbone,
+    Markers,
+    Notice,
+    Pressure,
+    PumpCommand,
+    SegmentCurvatures,
+    SegmentVolumes,
+)
 
 PROGRESS_PERIOD_S = 0.25
 # The last instant a bag can carry: its times are int64 nanoseconds (2262-04-11).
@@ -91,9 +105,173 @@ class _Channel:
 Stage = Callable[..., Any]
 
 
-# The stages a ``wrap`` hook of :func:`run` sees, by label.
-STAGES = ('pump.tick', 'pump.handle', 'actuator.tick', 'actuator.handle',
-          'actuator.model.command', 'camera.tick', 'camera.handle', 'encode', 'append')
+# The stages a ``wrap`` hook of :func:`run` sees, by label: first those of one message at a
+# time, then those of a block of instants (BLOCK_STAGES).
+STEP_STAGES = ('pump.tick', 'pump.handle', 'actuator.tick', 'actuator.handle',
+               'actuator.model.command', 'camera.tick', 'camera.handle', 'encode', 'append')
+BLOCK_STAGES = ('block.pump', 'block.actuator', 'block.camera', 'block.encode',
+                'block.append')
+STAGES = STEP_STAGES + BLOCK_STAGES
+# Pump ticks a block holds at most, and at first (a block cut short starts small again).
+MAX_BLOCK = 4096
+FIRST_BLOCK = 64
+
+
+class _Blocks:
+    """
+    The run's plain instants a block at a time: the same values, the same bag.
+
+    Most instants of a run are plain: the pump commands the next volume of its programme,
+    the actuator answers with its equilibrium (no snap-through, no refusal), the pump takes the
+    answer as feedback and the camera takes the state (no trigger crossed) and, on its timer,
+    a frame. For a block of pump ticks each core says how many of them are plain
+    (``PumpCore.plan``, ``ActuatorCore.preview``, ``PumpCore.trusted``,
+    ``CameraCore.plain_states``) with the same numbers as one instant after another; those
+    are committed to the cores, encoded per topic in bulk (softseq_ros.wire.payloads.RowLayout)
+    and written as rows of records (ChunkedMcapWriter.add_rows), message for message and byte
+    for byte what the per-message path writes. The first instant that is not plain (a start,
+    a snap-through, a snapshot, the programme's end) goes through the per-message path.
+    """
+
+    def __init__(self, run: '_BatchRun', writer: BagWriter,
+                 wrap: Callable[[str, Stage], Stage] | None) -> None:
+        self.run = run
+        pump, actuator, camera = run.pump, run.actuator, run.camera
+        channel_ids, self.add_rows = writer.row_writer()
+        channels = run._channels
+        names = actuator.names
+        n = len(names)
+        self.names = names
+        self.size = FIRST_BLOCK
+        self.ambient = actuator.ambient_pressure_pa
+        self.volumes_sent = actuator._send_volumes
+        self.curvatures_sent = actuator._send_curvatures
+        # The topics of a pump instant: its command, then the answers (as the actuator
+        # sends them); of a camera instant: backbone, then markers.
+        samples = [(PumpCommand(0, 0.0, 0.0), True),
+                   (Pressure(0, 0.0), actuator._send_pressure),
+                   (SegmentVolumes(0, names, [0.0] * n, 0.0), self.volumes_sent),
+                   (SegmentCurvatures(0, names, [0.0] * n), self.curvatures_sent)]
+        points = np.zeros((camera.n_points, 3))
+        frame_samples = [(Backbone(0, np.zeros((camera.n_points, 7))), 'poses'),
+                         (Markers(0, [points[a:b] for a, b in camera._line_rows]), 'markers')]
+        self.slots = self._slots(samples, channels, channel_ids)
+        self.frame_slots = self._slots([(value, output in camera.outputs)
+                                        for value, output in frame_samples],
+                                       channels, channel_ids)
+        self.line_rows = camera._line_rows
+        stage = wrap or (lambda _label, function: function)
+        self.plan = stage('block.pump', pump.plan)
+        self.preview = stage('block.actuator', actuator.preview)
+        self.plain_states = stage('block.camera', camera.plain_states)
+        self.frames = stage('block.camera', camera.frames)
+        self.encode = stage('block.encode', self._encode)
+        self.append = stage('block.append', self.add_rows)
+
+    @staticmethod
+    def _slots(samples: list, channels: dict, channel_ids: dict[str, int]) -> list:
+        slots = []
+        for value, sent in samples:
+            channel = channels.get(type(value))
+            if sent and channel is not None:
+                slots.append((type(value), row_layout(value), channel,
+                              channel_ids[channel.topic]))
+        return slots
+
+    @staticmethod
+    def usable(run: '_BatchRun') -> bool:
+        """Whether the run's cores take blocks (else every instant goes one at a time)."""
+        actuator, camera = run.actuator, run.camera
+        return (getattr(actuator.model, 'preview', None) is not None
+                and actuator.rate_hz is None and actuator.state_file is None
+                and not actuator._send_flows and camera.frame_trigger == 'timer'
+                and not camera.image_wanted)
+
+    def step(self, clocks: list) -> bool:
+        """
+        Run a block of plain instants from the pump's next tick on.
+
+        False when the next instant is not plain: the caller runs it one core at a time.
+        """
+        run = self.run
+        pump_clock = clocks[0]
+        start, period = pump_clock[0], pump_clock[3]
+        times = start + period * np.arange(self.size, dtype=np.int64)
+        count, volumes, flows = self.plan(times, self.volumes_sent)
+        block = self.preview(volumes) if count else None
+        if block is not None:
+            count = block.count
+            answers = block.volumes[:count]
+            if count and self.volumes_sent:
+                count = min(count, run.pump.trusted(self.names, answers, block.pressure[:count]))
+            below = None
+            if count and (self.volumes_sent or self.curvatures_sent):
+                seen, below = self.plain_states(
+                    self.names, block.volumes[:count] if self.volumes_sent else None,
+                    block.curvatures[:count] if self.curvatures_sent else None)
+                count = min(count, seen)
+        if not count or block is None:
+            self.size = FIRST_BLOCK
+            return False
+        self.size = min(2 * self.size, MAX_BLOCK) if count == times.size else FIRST_BLOCK
+        times, volumes, flows = times[:count], volumes[:count], flows[:count]
+        last = int(times[-1])
+        # The camera's frames up to the last instant, each of the state at its time.
+        camera_clock = next((clock for clock in clocks if clock[2] is run.camera), None)
+        frame_times = np.empty(0, dtype=np.int64)
+        frame_rows = np.empty(0, dtype=np.intp)
+        if camera_clock is not None and camera_clock[0] <= last:
+            frame_times = np.arange(camera_clock[0], last + 1, camera_clock[3], dtype=np.int64)
+            camera_clock[0] = int(frame_times[-1]) + camera_clock[3]
+            frame_rows = np.searchsorted(times, frame_times, side='right') - 1
+        camera = run.camera
+        frame_states = None
+        if frame_times.size and self.curvatures_sent:
+            frame_states = block.curvatures[frame_rows]
+            if camera._curvatures is not None:
+                frame_states[frame_rows < 0] = camera._curvatures
+            else:
+                frame_times, frame_rows = frame_times[frame_rows >= 0], \
+                    frame_rows[frame_rows >= 0]
+                frame_states = frame_states[-frame_times.size:] if frame_times.size else None
+        run.pump.commit_plan(times, volumes, answered=self.volumes_sent)
+        run.actuator.commit(block, count)
+        camera.commit_states(times, block.curvatures[:count] if self.curvatures_sent else None,
+                             below)
+        poses = (self.frames(frame_times, frame_states) if frame_states is not None
+                 else None)
+        self.append(self.encode(times, volumes, flows, block, count, frame_times, frame_rows,
+                                poses))
+        pump_clock[0] = last + period
+        run._now_ns = last
+        return True
+
+    def _encode(self, times: np.ndarray, volumes: np.ndarray, flows: np.ndarray,
+                block: CommandBlock, count: int, frame_times: np.ndarray,
+                frame_rows: np.ndarray, poses: np.ndarray | None) -> list[RowBlock]:
+        """The rows of records of a block's instants: one per pump instant, one per frame."""
+        n = len(self.names)
+        values = {PumpCommand: [volumes, flows],
+                  Pressure: [block.pressure[:count] + self.ambient],
+                  SegmentVolumes: [block.volumes[:count],
+                                   np.repeat(block.pressure[:count, None], n, axis=1)],
+                  SegmentCurvatures: [block.curvatures[:count]]}
+        parts = [self._rows(self.slots, times, values, 2 * np.arange(count))]
+        if poses is not None and self.frame_slots:
+            lines = [np.ascontiguousarray(poses[:, a:b, :3]) for a, b in self.line_rows]
+            values = {Backbone: [poses], Markers: lines}
+            parts.append(self._rows(self.frame_slots, frame_times, values,
+                                    2 * frame_rows + 1))
+        return parts
+
+    @staticmethod
+    def _rows(slots: list, times: np.ndarray, values: dict, keys: np.ndarray) -> RowBlock:
+        rows = np.empty(times.size, dtype=row_dtype([layout.dtype for _, layout, _, _ in slots]))
+        for index, (kind, layout, channel, _) in enumerate(slots):
+            layout.fill(rows[f'p{index}'], times, values[kind])
+            channel.count += times.size
+        return RowBlock(rows, tuple(slot[3] for slot in slots),
+                        tuple(slot[1].size for slot in slots), times, keys)
 
 
 class _BatchRun:
@@ -104,9 +282,14 @@ class _BatchRun:
                  progress: TextIO | None = None, log: TextIO | None = None,
                  start_time_ns: int | None = None, namespace: str = '/',
                  wrap: Callable[[str, Stage], Stage] | None = None,
-                 model: ActuatorModel | None = None, allow_long: bool = False) -> None:
+                 model: ActuatorModel | None = None, allow_long: bool = False,
+                 by_blocks: bool = True) -> None:
         """
         Load the scene (unless given loaded) and build the cores; ``out`` must not exist.
+
+        ``by_blocks`` False runs every instant one core at a time (the reference the block
+        path is checked against); blocks are also off when ``wrap`` changes a per-message
+        stage (a hook that changes what a core does sees every call).
 
         A run longer than :data:`~softseq_ros.scene.programme.MAX_RUN_S` of rig time, or whose
         bag would hold more than ``MAX_RUN_MESSAGES`` messages or ``MAX_RUN_BYTES`` bytes, is
@@ -138,10 +321,14 @@ class _BatchRun:
         self.start_time_ns = time.time_ns() if start_time_ns is None else int(start_time_ns)
         self._now_ns = self.start_time_ns
         self._check_length(allow_long)
+        self._changed_stages = False
         if wrap is not None:
             self._wrap_cores(wrap)
         self._router = Router(self.cores, lambda: self._now_ns)
         self._channels: dict[type, _Channel] = {}
+        self._blocks: _Blocks | None = None
+        # Blocks of instants unless asked not to, or a hook changes a per-message stage.
+        self.by_blocks = by_blocks and not self._changed_stages
         self.warnings: list[str] = []
 
     def estimate(self) -> tuple[float, float]:
@@ -201,9 +388,14 @@ class _BatchRun:
         # Instance attributes shadow the methods: the router and the loop call the wrappers.
         for role, core in self.cores.items():
             for method in ('tick', 'handle'):
-                setattr(core, method, wrap(f'{role}.{method}', getattr(core, method)))
+                original = getattr(core, method)
+                wrapped = wrap(f'{role}.{method}', original)
+                self._changed_stages |= wrapped is not original
+                setattr(core, method, wrapped)
         model = self.actuator.model
-        model.command = wrap('actuator.model.command', model.command)
+        original = model.command
+        model.command = wrap('actuator.model.command', original)
+        self._changed_stages |= model.command is not original
 
     def run(self) -> BatchResult:
         """Run the scene's pump programme to its end; the bag is complete on return."""
@@ -211,6 +403,8 @@ class _BatchRun:
         # A stop signal ends the run between two steps, never inside a chunk being written.
         with HeldSignals() as held, BagWriter(self.out, flush_period_s=None) as writer:
             self._open_channels(writer)
+            if self.by_blocks and _Blocks.usable(self):
+                self._blocks = _Blocks(self, writer, self.wrap)
             self._loop(wall_start, held)
         wall = time.perf_counter() - wall_start
         if self.progress is not None:
@@ -230,7 +424,9 @@ class _BatchRun:
             writer.add_topic(name, topic.type_name, qos_yaml(topic.qos))
             encode, append = ENCODERS[kind], writer.appender(name)
             if self.wrap is not None:
-                encode, append = self.wrap('encode', encode), self.wrap('append', append)
+                wrapped = self.wrap('encode', encode), self.wrap('append', append)
+                self._changed_stages |= wrapped != (encode, append)
+                encode, append = wrapped
             self._channels[kind] = _Channel(name, encode, append)
 
     def _record(self, values: list) -> None:
@@ -266,6 +462,7 @@ class _BatchRun:
         next_report = wall_start + PROGRESS_PERIOD_S
         # The actuator names its scene first, then the pump gives its status.
         self._record(router.run(self.actuator.begin(start) + pump.begin(start)))
+        blocks = self._blocks
         while True:
             clock = min(clocks)
             now, _, core, period = clock
@@ -275,6 +472,11 @@ class _BatchRun:
             # would leave that instant's frame out).
             if stop_signals and now > self._now_ns:
                 held.check()
+            if blocks is not None and core is pump and blocks.step(clocks):
+                if self.progress is not None and time.perf_counter() >= next_report:
+                    next_report = time.perf_counter() + PROGRESS_PERIOD_S
+                    self._report(wall_start, duration)
+                continue
             self._now_ns = now
             self._record(router.run(core.tick(now)))
             clock[0] = now + period
@@ -302,7 +504,8 @@ def run(scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
         progress: TextIO | None = None, log: TextIO | None = None,
         start_time_ns: int | None = None, namespace: str = '/',
         wrap: Callable[[str, Stage], Stage] | None = None,
-        model: ActuatorModel | None = None, allow_long: bool = False) -> BatchResult:
+        model: ActuatorModel | None = None, allow_long: bool = False,
+        by_blocks: bool = True) -> BatchResult:
     """
     Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
 
@@ -320,7 +523,18 @@ def run(scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
     ``wrap`` lets a benchmark or a profiler see every stage of the run without touching the
     runner: it is called once per stage as ``wrap(label, function)`` before anything is
     written and returns the function to call instead (the same one, or one that times or
-    counts it). The stages and their labels are in :data:`STAGES`.
+    counts it). The stages and their labels are in :data:`STAGES`: those of one message at a
+    time (:data:`STEP_STAGES`) and those of a block of instants (:data:`BLOCK_STAGES`).
+
+    Most instants are run by blocks: the cores say how many of the next instants are plain
+    (no start, snap-through, snapshot, refusal, stop or end among them), those are committed
+    to the cores and encoded and written in bulk, with the same numbers and the same bag, byte
+    for byte, as one message at a time; the other instants go one core at a time. A ``wrap``
+    that changes a per-message stage (returns another function for it) makes every instant
+    go one core at a time, so that it sees every call; ``by_blocks=False`` does so too (the
+    reference the blocks are checked against). Blocks need the quasi-static model, a camera
+    on its timer without the image and no state file; otherwise every instant goes one at a
+    time.
 
     A run longer than :data:`~softseq_ros.scene.programme.MAX_RUN_S` of rig time, or whose bag
     would hold more than ``MAX_RUN_MESSAGES`` messages or ``MAX_RUN_BYTES`` bytes, is refused
@@ -328,7 +542,8 @@ def run(scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
     """
     return _BatchRun(scene, out, overrides=overrides, progress=progress, log=log,
                      start_time_ns=start_time_ns, namespace=namespace, wrap=wrap, model=model,
-                     allow_long=allow_long).run()
+                     allow_long=allow_long, by_blocks=by_blocks).run()
 
 
-__all__ = ['STAGES', 'BatchResult', 'LongRunError', 'qos_yaml', 'run']
+__all__ = ['BLOCK_STAGES', 'STAGES', 'STEP_STAGES', 'BatchResult', 'LongRunError', 'qos_yaml',
+           'run']

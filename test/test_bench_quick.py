@@ -32,6 +32,8 @@ QUICK = {
          r'\d+\.\d+ \| \d+ % \| \d+\.\d+ \|',
          r'\| camera: frame [^|]*\(`camera\.tick`\) \| [1-9]\d* \|',
          r'\| bag writing [^|]*\(`append`\) \| [1-9]\d* \|',
+         r'\| bag writing of a block [^|]*\(`block\.append`\) \| [1-9]\d* \|',
+         r'\| actuator: states of a block [^|]*\(`block\.actuator`\) \| [1-9]\d* \|',
          r'\| \d+\.\d \| \d+\.\d \| \*\*\d+x\*\* \| \d+x \| [1-9]\d* \| [\d,]+ \|',
          r'\| pump hold: [^|]* \| \d+\.\d\d \| \d+\.\d\d \| \d+x \| \d+ % \| \d+ \| '
          r'[1-9]\d* / [1-9]\d* \(rejected 0\) \|',

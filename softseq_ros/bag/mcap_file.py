@@ -72,10 +72,16 @@ BULK_MESSAGE_BYTES = 1024
 
 
 class _OpenChunk:
-    """The chunk being filled: its schema and channel records, then its messages' fields."""
+    """
+    The chunk being filled: its schema and channel records, then its messages.
+
+    Messages added one by one wait in the lists until the chunk closes or a block of records
+    built elsewhere (:meth:`ChunkedMcapWriter.add_rows`) follows them; then they become a
+    *piece*: the records' bytes with each record's channel, log time and size, in order.
+    """
 
     __slots__ = ('prefix', 'channels', 'sequences', 'log_times', 'publish_times', 'data',
-                 'size')
+                 'size', 'pieces', 'piece_count', 'first_time')
 
     def __init__(self) -> None:
         self.prefix = bytearray()
@@ -85,10 +91,36 @@ class _OpenChunk:
         self.publish_times: list[int] = []
         self.data: list[bytes] = []
         self.size = 0
+        # (records' bytes, channels, log times, record sizes) of the messages before the lists.
+        self.pieces: list[tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.piece_count = 0
+        self.first_time: int | None = None   # log time of the chunk's first message
 
     @property
     def count(self) -> int:
-        return len(self.data)
+        return len(self.data) + self.piece_count
+
+    def first_log_time(self) -> int:
+        return self.first_time if self.first_time is not None else self.log_times[0]
+
+    def time_range(self) -> tuple[int, int]:
+        times = [min(self.log_times), max(self.log_times)] if self.log_times else []
+        for _, _, log_times, _ in self.pieces:
+            times += [int(log_times.min()), int(log_times.max())]
+        return min(times), max(times)
+
+    def seal(self) -> None:
+        """The messages of the lists as a piece (their record headers built at once)."""
+        if not self.data:
+            return
+        records, data = _assemble(self)
+        if self.first_time is None:
+            self.first_time = self.log_times[0]
+        self.pieces.append((data, records['channel'].copy(), records['log_time'].copy(),
+                            records['length'] + np.uint64(9)))
+        self.piece_count += len(self.data)
+        self.channels, self.sequences, self.log_times = [], [], []
+        self.publish_times, self.data = [], []
 
 
 class ChunkedMcapWriter:
@@ -138,7 +170,7 @@ class ChunkedMcapWriter:
         ranges = [(self._start, self._end)] if self._message_count else []
         for lane in self._lanes:
             if lane.count:
-                ranges.append((min(lane.log_times), max(lane.log_times)))
+                ranges.append(lane.time_range())
         if not ranges:
             return None
         return min(r[0] for r in ranges), max(r[1] for r in ranges)
@@ -197,6 +229,70 @@ class ChunkedMcapWriter:
         if chunk.size > self._chunk_size:
             self._close_chunk(lane)
 
+    def lane_of(self, channel_id: int, size: int) -> int:
+        """The open chunk (0 small, 1 bulk) a channel's messages go to; ``size``: a message's."""
+        lane = self._lane_of.get(channel_id)
+        if lane is None:
+            lane = self._lane_of[channel_id] = int(size >= BULK_MESSAGE_BYTES)
+        return lane
+
+    def add_rows(self, parts: 'list[RowBlock]') -> None:
+        """
+        Add blocks of messages as :meth:`add_message` would add them one at a time.
+
+        Each :class:`RowBlock` holds rows of records built elsewhere (a structured array of
+        :func:`row_dtype`: one record per slot, headers left for this method to fill) and
+        each row's log time (also its publish time) and order key. Messages are added in the
+        order of (key, block, slot): chunks close after the same messages, in the same order,
+        with the same bytes as one message after another would give.
+        """
+        streams: dict[int, list[tuple[np.ndarray, np.ndarray, int, 'RowBlock', list[int]]]] = {}
+        for number, block in enumerate(parts):
+            rows, count = block.rows, block.rows.size
+            if not count:
+                continue
+            by_lane: dict[int, list[int]] = {}
+            for slot, (channel_id, size) in enumerate(zip(block.channels, block.sizes)):
+                header = rows[f'h{slot}']
+                header['opcode'] = Opcode.MESSAGE
+                header['length'] = size + _MESSAGE_FIXED
+                header['channel'] = channel_id
+                first = self._channel_counts[channel_id]
+                header['sequence'] = np.arange(first, first + count, dtype=np.uint32)
+                self._channel_counts[channel_id] = first + count
+                header['log_time'] = block.log_times
+                header['publish_time'] = block.log_times
+                by_lane.setdefault(self.lane_of(channel_id, size), []).append(slot)
+            for lane, slots in by_lane.items():
+                streams.setdefault(lane, []).append((block.keys, block.log_times, number,
+                                                     block, slots))
+        cuts = []
+        lanes = {}
+        for lane, blocks in streams.items():
+            lanes[lane] = stream = _LaneStream(blocks)
+            for index in stream.cuts(self._lanes[lane].size, self._chunk_size):
+                cuts.append((int(stream.keys[index]), lane, index))
+        cuts.sort()
+        done = dict.fromkeys(lanes, 0)
+        for _, lane, index in cuts:
+            self._append_piece(lane, lanes[lane], done[lane], index + 1)
+            done[lane] = index + 1
+            self._close_chunk(lane)
+        for lane, stream in lanes.items():
+            if done[lane] < stream.count:
+                self._append_piece(lane, stream, done[lane], stream.count)
+
+    def _append_piece(self, lane: int, stream: '_LaneStream', begin: int, end: int) -> None:
+        chunk = self._lanes[lane]
+        chunk.seal()
+        if chunk.first_time is None:
+            chunk.first_time = int(stream.log_times[begin])
+        chunk.pieces.append((stream.data[int(stream.offsets[begin]):int(stream.offsets[end])],
+                             stream.channels[begin:end], stream.log_times[begin:end],
+                             stream.sizes[begin:end]))
+        chunk.piece_count += end - begin
+        chunk.size += int(stream.offsets[end] - stream.offsets[begin])
+
     def channel_message_count(self, channel_id: int) -> int:
         """Messages added to one channel so far."""
         return self._channel_counts[channel_id]
@@ -215,7 +311,7 @@ class ChunkedMcapWriter:
     def _close_chunks(self) -> None:
         """Close both open chunks, the one with the older first message first."""
         for lane in sorted((i for i, chunk in enumerate(self._lanes) if chunk.count),
-                           key=lambda i: self._lanes[i].log_times[0]):
+                           key=lambda i: self._lanes[i].first_log_time()):
             self._close_chunk(lane)
 
     def _close_chunk(self, lane: int) -> None:
@@ -224,13 +320,22 @@ class ChunkedMcapWriter:
             return  # schemas and channels alone stay for the next chunk, as in mcap
         self._lanes[lane] = _OpenChunk()
         chunk.prefix, self._prefix = self._prefix, bytearray()
-        records, data = _assemble(chunk)
-        start, end = int(records['log_time'].min()), int(records['log_time'].max())
+        chunk.seal()
+        pieces = chunk.pieces
+        data = bytes(chunk.prefix) + b''.join([piece[0] for piece in pieces])
+        if len(pieces) == 1:
+            _, channels, log_times, sizes = pieces[0]
+        else:
+            channels = np.concatenate([piece[1] for piece in pieces])
+            log_times = np.concatenate([piece[2] for piece in pieces])
+            sizes = np.concatenate([piece[3] for piece in pieces])
+        start, end = int(log_times.min()), int(log_times.max())
         self._message_count += chunk.count
         self._start = min(self._start, start) if self._chunk_count else start
         self._end = max(self._end, end)
         self._chunk_count += 1
-        indexes = _message_indexes(records, offsets=_record_offsets(chunk, records))
+        indexes = _message_indexes(channels, log_times,
+                                   _record_offsets(len(chunk.prefix), sizes))
         if self._worker is None:
             self._write_chunk(start, end, indexes, data, data)
             return
@@ -321,6 +426,97 @@ class ChunkedMcapWriter:
         self._write(MCAP_MAGIC)
 
 
+class RowBlock:
+    """
+    Rows of message records for :meth:`ChunkedMcapWriter.add_rows`: one record per slot a row.
+
+    ``rows``: a structured array of :func:`row_dtype` (``sizes``: each slot's payload bytes),
+    whose payloads the caller has filled; ``channels``: each slot's channel id;
+    ``log_times``: each row's (uint64); ``keys``: each row's order among the blocks added
+    together (int64, non-decreasing), less than 2**40.
+    """
+
+    __slots__ = ('rows', 'channels', 'sizes', 'log_times', 'keys')
+
+    def __init__(self, rows: np.ndarray, channels: tuple[int, ...], sizes: tuple[int, ...],
+                 log_times: np.ndarray, keys: np.ndarray) -> None:
+        self.rows, self.channels, self.sizes = rows, tuple(channels), tuple(sizes)
+        self.log_times = np.asarray(log_times, dtype=np.uint64)
+        self.keys = np.asarray(keys, dtype=np.int64)
+
+
+def row_dtype(payloads: 'list[np.dtype | int]') -> np.dtype:
+    """A row of message records: per slot a header ``h<i>`` and its payload ``p<i>``."""
+    fields = []
+    for slot, payload in enumerate(payloads):
+        fields.append((f'h{slot}', _MESSAGE_RECORD))
+        fields.append((f'p{slot}', ('u1', payload) if isinstance(payload, int) else payload))
+    return np.dtype(fields)
+
+
+class _LaneStream:
+    """The messages of some row blocks that go to one open chunk, in the order they are added."""
+
+    def __init__(self, blocks: list) -> None:
+        parts_data, channels, log_times, sizes, keys, row_keys = [], [], [], [], [], []
+        for row_order, times, number, block, slots in blocks:
+            rows = block.rows
+            if len(slots) * 2 != len(rows.dtype.names):
+                from numpy.lib import recfunctions
+                names = [name for slot in slots for name in (f'h{slot}', f'p{slot}')]
+                rows = recfunctions.repack_fields(rows[names])
+            count = rows.size
+            record_sizes = [_MESSAGE_HEADER_SIZE + block.sizes[slot] for slot in slots]
+            parts_data.append(rows)
+            channels.append(np.tile(np.array([block.channels[s] for s in slots],
+                                             dtype=np.uint16), count))
+            log_times.append(np.repeat(times, len(slots)))
+            sizes.append(np.tile(np.array(record_sizes, dtype=np.uint64), count))
+            order = (row_order.astype(np.int64) << 10) + (number << 5)
+            keys.append((order[:, None] + np.array(slots, dtype=np.int64)[None, :]).ravel())
+            row_keys.append(order)
+        if len(parts_data) == 1:
+            self.data = memoryview(parts_data[0].tobytes())
+            self.channels, self.log_times = channels[0], log_times[0]
+            self.sizes, self.keys = sizes[0], keys[0]
+        else:
+            # Rows of several blocks in one chunk: merged by their keys, row by row.
+            row_sizes = [rows.dtype.itemsize for rows in parts_data]
+            per_row = [len(c) // max(rows.size, 1) for c, rows in zip(channels, parts_data)]
+            entries = sorted((int(key), number, row)
+                             for number, order in enumerate(row_keys)
+                             for row, key in enumerate(order.tolist()))
+            views = [memoryview(rows.tobytes()) for rows in parts_data]
+            pieces, pick = [], []
+            for _, number, row in entries:
+                size = row_sizes[number]
+                pieces.append(views[number][row * size:(row + 1) * size])
+                first = sum(len(c) for c in channels[:number])
+                pick.extend(range(first + row * per_row[number],
+                                  first + (row + 1) * per_row[number]))
+            self.data = memoryview(b''.join(pieces))
+            index = np.array(pick, dtype=np.intp)
+            self.channels = np.concatenate(channels)[index]
+            self.log_times = np.concatenate(log_times)[index]
+            self.sizes = np.concatenate(sizes)[index]
+            self.keys = np.concatenate(keys)[index]
+        self.count = self.sizes.size
+        self.offsets = np.zeros(self.count + 1, dtype=np.uint64)
+        np.cumsum(self.sizes, out=self.offsets[1:])
+
+    def cuts(self, size: int, chunk_size: int) -> list[int]:
+        """The messages after which a chunk that holds ``size`` bytes now closes."""
+        found = []
+        ends = self.offsets[1:].astype(np.int64) + size
+        base = 0
+        while True:
+            index = int(np.searchsorted(ends, base + chunk_size, side='right'))
+            if index >= self.count:
+                return found
+            found.append(index)
+            base = int(ends[index])
+
+
 def _record_bytes(record: Any) -> bytes:
     """One record (an mcap.records instance) as it stands in the file."""
     builder = RecordBuilder()
@@ -330,8 +526,9 @@ def _record_bytes(record: Any) -> bytes:
 
 def _assemble(chunk: _OpenChunk) -> tuple[np.ndarray, bytes]:
     """The message record headers of a chunk, and the chunk's uncompressed bytes."""
-    lengths = np.fromiter(map(len, chunk.data), dtype=np.uint64, count=chunk.count)
-    records = np.empty(chunk.count, dtype=_MESSAGE_RECORD)
+    count = len(chunk.data)
+    lengths = np.fromiter(map(len, chunk.data), dtype=np.uint64, count=count)
+    records = np.empty(count, dtype=_MESSAGE_RECORD)
     records['opcode'] = Opcode.MESSAGE
     records['length'] = lengths + _MESSAGE_FIXED
     records['channel'] = chunk.channels
@@ -339,33 +536,32 @@ def _assemble(chunk: _OpenChunk) -> tuple[np.ndarray, bytes]:
     records['log_time'] = chunk.log_times
     records['publish_time'] = chunk.publish_times
     headers = records.tobytes()
-    parts: list[bytes | memoryview] = [b''] * (2 * chunk.count)
+    parts: list[bytes | memoryview] = [b''] * (2 * count)
     view = memoryview(headers)
     size = _MESSAGE_HEADER_SIZE
     parts[0::2] = [view[i:i + size] for i in range(0, len(headers), size)]
     parts[1::2] = chunk.data
-    return records, bytes(chunk.prefix) + b''.join(parts)
+    return records, b''.join(parts)
 
 
-def _record_offsets(chunk: _OpenChunk, records: np.ndarray) -> np.ndarray:
-    """Where each message record starts in the chunk's uncompressed bytes."""
-    sizes = records['length'] + np.uint64(9)
-    offsets = np.empty(chunk.count, dtype=np.uint64)
-    offsets[0] = len(chunk.prefix)
+def _record_offsets(prefix: int, sizes: np.ndarray) -> np.ndarray:
+    """Where each message record starts in a chunk's uncompressed bytes (after ``prefix``)."""
+    offsets = np.empty(sizes.size, dtype=np.uint64)
+    offsets[0] = prefix
     np.cumsum(sizes[:-1], out=offsets[1:])
-    offsets[1:] += np.uint64(len(chunk.prefix))
+    offsets[1:] += np.uint64(prefix)
     return offsets
 
 
-def _message_indexes(records: np.ndarray, offsets: np.ndarray) -> list[tuple[int, bytes]]:
+def _message_indexes(channels: np.ndarray, log_times: np.ndarray,
+                     offsets: np.ndarray) -> list[tuple[int, bytes]]:
     """One MessageIndex record per channel of the chunk, channels in order of appearance."""
-    channels = records['channel']
     unique, first = np.unique(channels, return_index=True)
     result = []
     for channel_id in unique[np.argsort(first)].tolist():
         rows = channels == channel_id
         entries = np.empty((int(rows.sum()), 2), dtype='<u8')
-        entries[:, 0] = records['log_time'][rows]
+        entries[:, 0] = log_times[rows]
         entries[:, 1] = offsets[rows]
         payload = entries.tobytes()
         result.append((channel_id, _MESSAGE_INDEX_HEADER.pack(

@@ -426,6 +426,23 @@ class BagWriter:
                 raise BagWriterError(f'topic {topic}: not registered; call add_topic first')
             return partial(self._writer.add_message, entry.channel_id)
 
+    def row_writer(self) -> tuple[dict[str, int], Callable[[list], None]]:
+        """
+        The channel id of every registered topic and a function that adds row blocks.
+
+        For the same writers as :meth:`appender`: ``add_rows(blocks)`` takes
+        :class:`~softseq_ros.bag.mcap_file.RowBlock` s of those channels' messages, records
+        built by the caller, and writes them as one message after another would be written.
+        """
+        with self._lock:
+            self._check_open()
+            if self._flush_period_s is not None or self._max_file_size \
+                    or self._max_file_duration_ns:
+                raise BagWriterError('row_writer: only for a writer without the periodic flush '
+                                     '(flush_period_s=None) and without splitting')
+            return ({name: topic.channel_id for name, topic in self._topics.items()},
+                    self._writer.add_rows)
+
     def flush(self) -> None:
         """Close the chunk in progress and force everything written so far onto the disk."""
         with self._lock:

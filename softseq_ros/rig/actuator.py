@@ -42,7 +42,15 @@ from pathlib import Path
 import time
 from typing import Callable
 
-from softseq_ros.rig.model import ActuatorModel, CommandRefusedError, Snap, TimedSnap
+import numpy as np
+
+from softseq_ros.rig.model import (
+    ActuatorModel,
+    CommandBlock,
+    CommandRefusedError,
+    Snap,
+    TimedSnap,
+)
 from softseq_ros.rig.throttle import Throttle
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.wire import contract
@@ -147,6 +155,29 @@ class ActuatorCore:
         if snaps is not None and self.state_file is not None:
             self._changed(outputs)
         return outputs
+
+    def preview(self, injected_m3: 'np.ndarray') -> 'CommandBlock | None':
+        """
+        The answers to a block of commands (one after another) as arrays, without answering.
+
+        The states of the commands :meth:`handle` would answer with pressure, volumes and
+        curvatures only (no refusal, snap-through, note or warning), up to the first that is
+        not such (``count``); :meth:`commit` then takes them as handled.
+
+        None when this actuator answers one command at a time only (a model without blocks,
+        a state file, a wait for a previous state, outputs beyond those three).
+        """
+        preview = getattr(self.model, 'preview', None)
+        if preview is None or self.waiting or self.state_file is not None \
+                or self._send_flows or not injected_m3.size:
+            return None
+        plain = np.isfinite(injected_m3) & (injected_m3 >= 0.0)
+        count = int(np.argmin(plain)) if not plain.all() else plain.size
+        return preview(injected_m3[:count]) if count else None
+
+    def commit(self, block: 'CommandBlock', count: int) -> None:
+        """Take the first ``count`` commands of a :meth:`preview` as handled."""
+        self.model.commit(block, count)
 
     def tick(self, now: int) -> list[Output]:
         """Let the model's time run to ``now``; outputs only when its state moved."""

@@ -208,6 +208,79 @@ class CameraCore:
         self._pending_stamp = None
         self._pending = []
 
+    # ---------------------------------------------------------------- blocks of states
+
+    def plain_states(self, names: Sequence[str], volumes: np.ndarray | None,
+                     curvatures: np.ndarray | None) -> tuple[int, np.ndarray | None]:
+        """
+        How many states the camera takes without a word, a snapshot or a state's frame.
+
+        States are rows: each state's volumes, then its curvatures, as :meth:`handle` takes
+        them. Also the triggers below each (None when the volumes are not watched).
+
+        A driver hands those to :meth:`commit_states` instead of :meth:`handle`, and takes
+        the timer's frames with :meth:`frames`. 0 when the camera takes states one at a time
+        (frames on states, the image, a snapshot waiting for its curvatures).
+        """
+        if self.frame_trigger != 'timer' or self.image_wanted \
+                or self._pending_stamp is not None:
+            return 0, None
+        rows = [block for block in (volumes, curvatures) if block is not None]
+        if not rows:
+            return 0, None
+        count = rows[0].shape[0]
+        expected = self.segment_names
+        if (expected is not None and tuple(names) != expected) \
+                or any(block.shape[1] != self.n_segments for block in rows):
+            return 0, None
+        good = np.ones(count, dtype=bool)
+        if curvatures is not None:
+            good &= np.isfinite(curvatures).all(axis=1)
+        below = None
+        if volumes is not None and self._watch_triggers:
+            if self.triggers != sorted(self.triggers):
+                return 0, None
+            good &= (np.isfinite(volumes) & (volumes >= 0.0)).all(axis=1)
+            # sum(volumes) - rest, as the per-state path adds them: left to right.
+            injected = volumes[:, 0].copy()
+            for j in range(1, volumes.shape[1]):
+                injected = injected + volumes[:, j]
+            injected = injected - self.rest_total
+            below = np.searchsorted(np.asarray(self.triggers, dtype=float),
+                                    injected + self._trigger_slack, side='right')
+            previous = np.empty(count, dtype=below.dtype)
+            previous[1:] = below[:-1]
+            previous[0] = below[0] if self._triggers_below is None else self._triggers_below
+            good &= below == previous
+        count = int(np.argmin(good)) if not good.all() else count
+        return count, (None if below is None else below[:count])
+
+    def commit_states(self, stamps: np.ndarray, curvatures: np.ndarray | None,
+                      below: np.ndarray | None) -> None:
+        """The camera after the plain states of :meth:`plain_states` (their stamps)."""
+        if not stamps.size:
+            return
+        if curvatures is not None:
+            self._curvatures = curvatures[-1].tolist()
+            self._backbone_stale = True
+            self._curvature_stamp = int(stamps[-1])
+        if below is not None:
+            self._triggers_below = int(below[-1])
+
+    def frames(self, times: np.ndarray, curvatures: np.ndarray) -> np.ndarray:
+        """
+        The timer's frames at ``times`` of the states ``curvatures`` (rows): (frames, M, 7).
+
+        Noisy as :meth:`tick` gives them (the generator drawn frame by frame).
+        """
+        poses = self._sampler.poses_many(curvatures)
+        if self.noise_std_m > 0.0:
+            for frame in poses:
+                frame[:, [0, 2]] += self._rng.normal(0.0, self.noise_std_m, (self.n_points, 2))
+        if times.size:
+            self._last_frame_ns = int(times[-1])
+        return poses
+
     # ---------------------------------------------------------------- frames
 
     def _noisy_poses(self) -> np.ndarray:

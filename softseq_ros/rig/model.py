@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import math
 from typing import Protocol, Sequence
 
+import numpy as np
+
 from softseq_ros.dynamic.events import fold_crossing_line
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import laminar_range_warning
@@ -171,6 +173,97 @@ class QuasiStaticModel:
         self._state = self.emap.read(tracker.branch, tracker.total)
         return snaps
 
+    def preview(self, injected_m3: 'np.ndarray') -> 'CommandBlock':
+        """
+        What :meth:`command` would give for each of ``injected_m3``, without changing the model.
+
+        The commands (finite, >= 0) one after another: the states up to the first command that
+        snaps or is refused (``count`` of them), the same numbers as one command at a time.
+        """
+        emap, tracker = self.emap, self.tracker
+        totals = injected_m3 + emap.total_rest_volume
+        n = totals.size
+        if not n:
+            return CommandBlock(injected_m3, np.empty(0, dtype=np.intp), totals,
+                                np.empty((0, 2 * len(self.names) + 1)),
+                                np.empty(0, dtype=bool), len(self.names))
+        branch_ids = np.empty(n, dtype=np.intp)
+        at = totals.copy()
+        probe = Tracker.__new__(Tracker)
+        probe.emap, probe.branch, probe.total = emap, tracker.branch, tracker.total
+        # A command equal to the one before it is not walked: the state stays.
+        previous = np.empty(n)
+        previous[0] = math.nan if self._last_command is None else self._last_command
+        previous[1:] = injected_m3[:-1]
+        repeated = injected_m3 == previous
+        i, count = 0, n
+        while i < n:
+            branch = emap.branches[probe.branch]
+            rest = totals[i:]
+            outside = np.flatnonzero(((rest < branch.lo) | (rest > branch.hi))
+                                     & ~repeated[i:])
+            j = int(outside[0]) if outside.size else rest.size
+            branch_ids[i:i + j] = probe.branch
+            i += j
+            if i == n:
+                break
+            try:
+                snaps = probe._walk(float(totals[i]))
+            except DomainError:
+                count = i
+                break
+            if snaps:
+                count = i
+                break
+            branch_ids[i], at[i] = probe.branch, probe.total
+            i += 1
+        branch_ids, at, repeated = branch_ids[:count], at[:count], repeated[:count]
+        if count and repeated.any():
+            # A repeated command keeps the state of the last one walked (or the model's).
+            last = np.where(~repeated, np.arange(count), -1)
+            np.maximum.accumulate(last, out=last)
+            kept = last < 0
+            last[kept] = 0
+            at, branch_ids = at[last], branch_ids[last]
+            at[kept], branch_ids[kept] = tracker.total, tracker.branch
+        values = self._rows(branch_ids, at)
+        return CommandBlock(injected_m3[:count], branch_ids, at, values, repeated,
+                            len(self.names))
+
+    def _rows(self, branch_ids: 'np.ndarray', totals: 'np.ndarray') -> 'np.ndarray':
+        """``StateReader.row`` of many states: the same cubics, Horner steps and polish."""
+        reader = self.emap.reader
+        values = np.empty((totals.size, 2 * len(self.names) + 1))
+        for b in np.unique(branch_ids).tolist():
+            rows = np.flatnonzero(branch_ids == b)
+            branch = reader.branches[b]
+            total = np.minimum(np.maximum(totals[rows], branch.lo), branch.hi)
+            interval = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
+                               branch.total.size - 2)
+            rough = (np.asarray(branch.rough_list, dtype=bool)[interval] if reader.polish
+                     else np.zeros(rows.size, dtype=bool))
+            # The cubics of the intervals read, computed for all of them at once (the same
+            # numbers as one interval at a time: every step of interval_cubics is elementwise).
+            unique, where = np.unique(interval, return_inverse=True)
+            table = branch.coefficients(unique)
+            a, b_, c, d = (table[k][where] for k in range(4))
+            dt = (total - branch.total[interval])[:, None]
+            values[rows] = ((a * dt + b_) * dt + c) * dt + d
+            for r in np.flatnonzero(rough).tolist():
+                values[rows[r]] = reader.row(b, float(total[r]))
+        return values
+
+    def commit(self, block: 'CommandBlock', count: int) -> None:
+        """The state after the first ``count`` commands of ``block`` (a :meth:`preview`)."""
+        if not count:
+            return
+        tracker = self.tracker
+        last = count - 1
+        tracker.branch, tracker.total = int(block.branches[last]), float(block.totals[last])
+        self.solves += int(count - np.count_nonzero(block.repeated[:count]))
+        self._last_command = self._injected = float(block.injected[last])
+        self._state = self.emap.read(tracker.branch, tracker.total)
+
     def advance(self, now_ns: int) -> None:
         """Time alone moves nothing in a quasi-static actuator."""
         return None
@@ -219,6 +312,23 @@ class QuasiStaticModel:
         return []
 
 
+
+
+class CommandBlock:
+    """
+    States of a block of commands (:meth:`QuasiStaticModel.preview`): ``count`` rows.
+
+    ``values`` (count, 2N + 1) are (v_1..v_N, p, k_1..k_N) as the per-command read gives them.
+    """
+
+    def __init__(self, injected: 'np.ndarray', branches: 'np.ndarray', totals: 'np.ndarray',
+                 values: 'np.ndarray', repeated: 'np.ndarray', n: int) -> None:
+        self.count = injected.size
+        self.injected, self.branches, self.totals = injected, branches, totals
+        self.repeated = repeated   # commands equal to the one before (not solved again)
+        self.volumes = values[:, :n]
+        self.pressure = values[:, n]
+        self.curvatures = values[:, n + 1:]
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,8 @@ import math
 import time
 from typing import Callable, Sequence
 
+import numpy as np
+
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.wire import contract
 from softseq_ros.wire.values import (
@@ -385,6 +387,78 @@ class PumpCore:
             self._unanswered.discard(sent.popleft())
         sent.append(stamp)
         self._unanswered.add(stamp)
+
+    # ---------------------------------------------------------------- blocks of ticks
+
+    def plan(self, times: 'np.ndarray',
+             answered: bool = True) -> tuple[int, 'np.ndarray', 'np.ndarray']:
+        """
+        The commands of ticks at ``times`` (int64 ns, increasing) that change no state.
+
+        ``(count, volumes, flows)``: the first ``count`` ticks are a running pump's plain
+        commands, as :meth:`tick` gives them when each is answered at once by a trustworthy
+        answer (``answered``; else by none), with no start, hold, finish or end stop among
+        them; a driver hands them to :meth:`commit_plan` instead of ticking. Count 0 when the
+        next tick is not plain.
+        """
+        empty = np.empty(0)
+        if self.state != RUNNING or self._frozen_volume is not None \
+                or (not self.open_loop and self._feedback_clock is not None) \
+                or self._running_since is None:
+            return 0, empty, empty
+        if not self.open_loop and self._feedback_lost(int(times[0])):
+            return 0, empty, empty
+        elapsed = self._elapsed_ns + np.maximum(0, times - self._running_since)
+        run_time = elapsed.astype(float) * 1e-9
+        volumes, flows = self.profile.commands_at(run_time)
+        plain = (volumes <= self.max_injected_m3) & (run_time < self.duration_s)
+        timeout = self.feedback_timeout_s * 1e9
+        if not self.open_loop and answered and times.size > 1:
+            # Each answer renews the feedback: only a gap longer than the timeout loses it.
+            plain[1:] &= np.diff(times) <= timeout
+        elif not self.open_loop and not answered and self._last_feedback is not None:
+            plain &= times - self._last_feedback <= timeout
+        count = int(np.argmin(plain)) if not plain.all() else times.size
+        return count, volumes[:count], flows[:count]
+
+    def trusted(self, names: Sequence[str], volumes: 'np.ndarray', gauge: 'np.ndarray') -> int:
+        """
+        How many of these answers :meth:`handle` would take as plain feedback.
+
+        Rows of volumes and gauge pressures: no over-pressure stop, nothing untrustworthy.
+        """
+        if not len(gauge):
+            return 0
+        expected = self.segment_names
+        if (expected is not None and tuple(names) != expected) or not names \
+                or volumes.shape[1] != len(names):
+            return 0
+        good = ((volumes >= 0.0) & (volumes < math.inf)).all(axis=1)
+        good &= (gauge >= VACUUM_GAUGE_PA) & (gauge < math.inf)
+        if self.state in (RUNNING, HELD):
+            good &= ~(gauge > self.max_pressure_pa)
+        return int(np.argmin(good)) if not good.all() else good.size
+
+    def commit_plan(self, times: 'np.ndarray', volumes: 'np.ndarray', answered: bool) -> None:
+        """
+        The state after ticks at ``times`` commanding ``volumes`` (from :meth:`plan`).
+
+        Each was answered at once by a trustworthy answer when ``answered`` (else by none).
+        """
+        count = times.size
+        if not count:
+            return
+        self.volume_m3 = float(volumes[-1])
+        sent = self._sent
+        if answered:
+            # Every answer pops its command and every older one.
+            sent.clear()
+            self._unanswered.clear()
+            self._last_feedback = int(times[-1])
+            self._last_fault, self._foreign = None, 0
+            return
+        for stamp in times[-RECENT_COMMANDS:].tolist():
+            self._sent_command(stamp)
 
     def tick(self, now: int) -> list[Output]:
         """The command for ``now``: injected volume and signed flow (and any state change)."""

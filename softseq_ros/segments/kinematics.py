@@ -224,3 +224,47 @@ class PoseSampler:
         poses[1:, 4] = np.sin(half)
         poses[1:, 6] = np.cos(half)
         return poses
+
+    def poses_many(self, curvatures: NDArray[np.float64]) -> NDArray[np.float64]:
+        """
+        :meth:`poses` of many states (k, N): (k, M, 7), a new array.
+
+        The same operations as :meth:`poses`, state by state (sums in the same order, the
+        same choice of sin(h) / h per state), so the same numbers.
+        """
+        kappa = np.asarray(curvatures, dtype=float)
+        count, n = kappa.shape
+        lengths = self._lengths
+        start = np.zeros((count, n))
+        angle = np.zeros(count)
+        for j in range(n - 1):
+            angle = angle + kappa[:, j] * lengths[j]
+            start[:, j + 1] = angle
+        s = self._s[np.newaxis]
+        half_turn = (0.5 * kappa)[:, :, np.newaxis] * s
+        start_angle = start[:, :, np.newaxis]
+        chord_angle = start_angle + half_turn
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.sin(half_turn) / half_turn
+        # A state with a zero curvature takes sin(h) / h = 1 where h is 0 (_sin_ratio).
+        ratio[(kappa == 0.0).any(axis=1)[:, np.newaxis, np.newaxis] & (half_turn == 0.0)] = 1.0
+        chord = s * ratio
+        dx = chord * np.cos(chord_angle)
+        dz = chord * np.sin(chord_angle)
+        starts_x = np.zeros((count, n))
+        starts_z = np.zeros((count, n))
+        x0 = np.zeros(count)
+        z0 = np.zeros(count)
+        for j in range(n - 1):
+            x0 = x0 + dx[:, j, -1]
+            z0 = z0 + dz[:, j, -1]
+            starts_x[:, j + 1] = x0
+            starts_z[:, j + 1] = z0
+        poses = np.zeros((count, self.n_points, 7))
+        poses[:, 0, 6] = 1.0
+        poses[:, 1:, 0] = (starts_x[:, :, np.newaxis] + dx).reshape(count, -1)
+        poses[:, 1:, 2] = (starts_z[:, :, np.newaxis] + dz).reshape(count, -1)
+        half = -0.5 * (start_angle + 2.0 * half_turn).reshape(count, -1)
+        poses[:, 1:, 4] = np.sin(half)
+        poses[:, 1:, 6] = np.cos(half)
+        return poses

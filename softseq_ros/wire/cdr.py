@@ -11,6 +11,7 @@ encoder against rclpy's serialisation. Other types fall back to the general path
 
 from array import array
 from operator import attrgetter
+import re
 import struct
 import sys
 from typing import Any, Callable
@@ -211,6 +212,44 @@ def joint_state_packer(frame_id: str, names: Any,
 ENCAPSULATION = _ENCAPSULATION
 
 
+def _format_offsets(fmt: str) -> list[int]:
+    """Where each item of a little-endian struct format (no alignment) starts."""
+    offsets, at = [], 0
+    for count, code in re.findall(r'(\d*)([a-zA-Z])', fmt):
+        size = struct.calcsize('<' + code)
+        if code == 'x':
+            at += int(count or 1)
+            continue
+        offsets.append(at)
+        at += size * int(count or 1) if code != 's' else int(count or 1)
+    return offsets
+
+
+def joint_state_blocks(frame_id: str, names: Any,
+                       counts: tuple[int, int, int]) -> list[int | None]:
+    """
+    Where a JointState's position, velocity and effort float64 blocks start in its bytes.
+
+    Offsets count from the message's first byte (the encapsulation); None for an empty array.
+    The stamp is at 4 (sec, int32) and 8 (nanosec, uint32).
+    """
+    key = (frame_id, *counts, *names)
+    layout, _ = _joint_state_layouts.get(key) or _joint_state_layout(key)
+    # Items: sec, nanosec, texts, then per array its count and (when not empty) its floats.
+    items = iter(_format_offsets(layout.format)[3:])
+    found = []
+    for count in counts:
+        next(items)
+        found.append(4 + next(items) if count else None)
+    return found
+
+
+def fluid_pressure_block(frame_id: str) -> int:
+    """Where a FluidPressure's fluid_pressure (then variance) starts in its bytes."""
+    layout, _ = _fluid_pressure_layouts.get(frame_id) or _fluid_pressure_layout(frame_id)
+    return 4 + _format_offsets(layout.format)[3]
+
+
 def _joint_state_bytes(msg: Any) -> bytes:
     header = msg.header
     stamp = header.stamp
@@ -371,6 +410,21 @@ class FixedLayout:
         self._stamps = tuple(marks.stamps)
         self.block_sizes = tuple(size for _, size in marks.blocks)
         self._blocks = tuple(marks.blocks)
+
+    @property
+    def template(self) -> bytes:
+        """The example message's bytes."""
+        return self._template
+
+    @property
+    def stamp_offsets(self) -> tuple[int, ...]:
+        """Where each message header's stamp (sec, nanosec) starts."""
+        return self._stamps
+
+    @property
+    def blocks(self) -> tuple[tuple[int, int], ...]:
+        """(offset, bytes) of every float64 block, in message order."""
+        return self._blocks
 
     def encode(self, stamp_ns: int, blocks: Any) -> bytes:
         """

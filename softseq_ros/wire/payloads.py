@@ -18,12 +18,16 @@ import json
 from types import SimpleNamespace
 from typing import Any, Callable
 
+import numpy as np
+
 from softseq_ros.errors import UserError
 from softseq_ros.wire.cdr import (
     ENCAPSULATION,
     FixedLayout,
     encoder_for,
+    fluid_pressure_block,
     fluid_pressure_cdr,
+    joint_state_blocks,
     joint_state_packer,
     string_cdr,
 )
@@ -407,6 +411,86 @@ ENCODERS: dict[type, Callable[[Any], bytes]] = {
 def encode(value: TopicValue) -> bytes:
     """The CDR bytes of a core value, as its topic carries them."""
     return ENCODERS[type(value)](value)
+
+
+# ---------------------------------------------------------------- many values -> CDR rows
+
+class RowLayout:
+    """
+    The CDR of one topic's messages of a fixed layout, for many messages at once.
+
+    A template message (encoded by :data:`ENCODERS`, so the same bytes) and where its stamps
+    and float64 blocks lie: :attr:`dtype` is a structured type of the message's bytes
+    (``raw``: all of them; ``s<i>``, ``n<i>``: header i's sec and nanosec; ``f<i>``: float64
+    block i), so that :meth:`fill` writes thousands of messages with a few numpy assignments.
+    """
+
+    def __init__(self, template: bytes, stamps: tuple[int, ...],
+                 blocks: tuple[tuple[int, int], ...]) -> None:
+        """``stamps``: offsets of each header's stamp; ``blocks``: (offset, bytes) of each."""
+        names, formats, offsets = ['raw'], [('u1', (len(template),))], [0]
+        for i, offset in enumerate(stamps):
+            names += [f's{i}', f'n{i}']
+            formats += ['<i4', '<u4']
+            offsets += [offset, offset + 4]
+        for i, (offset, size) in enumerate(blocks):
+            names.append(f'f{i}')
+            formats.append(('<f8', (size // 8,)))
+            offsets.append(offset)
+        self.dtype = np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
+                               'itemsize': len(template)})
+        self.size = len(template)
+        self.template = np.frombuffer(template, dtype=np.uint8)
+        self.stamps = len(stamps)
+        self.blocks = len(blocks)
+
+    def fill(self, view: np.ndarray, stamps_ns: np.ndarray, blocks: list[np.ndarray]) -> None:
+        """
+        Write messages into ``view`` (an array of :attr:`dtype`): one per stamp, with ``blocks``.
+
+        Each block is (messages, floats of the block), float64, in the template's order.
+        """
+        view['raw'] = self.template
+        sec, nanosec = np.divmod(np.asarray(stamps_ns, dtype=np.int64), NS_PER_S)
+        for i in range(self.stamps):
+            view[f's{i}'] = sec
+            view[f'n{i}'] = nanosec
+        for i, block in enumerate(blocks):
+            view[f'f{i}'] = block.reshape(view.shape[0], -1)
+
+
+def row_layout(value: TopicValue) -> RowLayout | None:
+    """
+    The :class:`RowLayout` of every message like ``value`` (same names, sizes and lengths).
+
+    The float64 blocks of each type, in order: a pump command's injected volume and flow; a
+    pressure's absolute pressure (its variance stays 0); segment volumes' volumes and
+    gauge pressure per joint; curvatures; a backbone's or snapshot's poses (n, 7); markers'
+    points per line. None for a type without a fixed layout (JSON, images).
+    """
+    template = ENCODERS[type(value)](value)
+    stamp = (4,)
+    if type(value) is PumpCommand:
+        offsets = joint_state_blocks('', _SYRINGE, (1, 1, 0))
+        return RowLayout(template, stamp, ((offsets[0], 8), (offsets[1], 8)))
+    if type(value) is Pressure:
+        return RowLayout(template, stamp, ((fluid_pressure_block(''), 8),))
+    if type(value) is SegmentVolumes:
+        n = len(value.names)
+        offsets = joint_state_blocks('', value.names, (len(value.volumes_m3), 0, n))
+        return RowLayout(template, stamp, ((offsets[0], 8 * len(value.volumes_m3)),
+                                           (offsets[2], 8 * n)))
+    if type(value) is SegmentCurvatures:
+        count = len(value.curvatures_per_m)
+        offsets = joint_state_blocks('', value.names, (count, 0, 0))
+        return RowLayout(template, stamp, ((offsets[0], 8 * count),))
+    if type(value) in (Backbone, Snapshot):
+        layout = pose_array_layout(len(value.poses))
+    elif type(value) is Markers:
+        layout = marker_array_layout(tuple(len(line) for line in value.lines))
+    else:
+        return None
+    return RowLayout(layout.template, layout.stamp_offsets, layout.blocks)
 
 
 # ---------------------------------------------------------------- ROS messages -> values
