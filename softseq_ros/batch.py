@@ -26,6 +26,7 @@ from softseq_ros.errors import UserError
 from softseq_ros.progress import is_terminal, write_progress
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.model import ActuatorModel, CommandBlock
+from softseq_ros.rig.pump import FINISHED, HELD, STOPPED
 from softseq_ros.rig.routing import Router
 from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.scene.programme import (
@@ -480,7 +481,9 @@ class _BatchRun:
             self._now_ns = now
             self._record(router.run(core.tick(now)))
             clock[0] = now + period
-            if core is pump and pump.state in ('finished', 'stopped'):
+            if core is pump and pump.state in (FINISHED, STOPPED, HELD):
+                if pump.state == HELD:
+                    self._held_for_good()
                 # Every other core shows the last state once more, at the pump's last instant.
                 for other in clocks:
                     if other is not clock:
@@ -489,6 +492,18 @@ class _BatchRun:
             if self.progress is not None and time.perf_counter() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
+
+    def _held_for_good(self) -> None:
+        """
+        Say why the run ends with its pump held: nothing in a batch run can start it again.
+
+        A pump holds when its actuator stops answering (no pressure within its feedback
+        timeout: a refused command, a state that is no number); on a rig an operator calls
+        ``~/start``, in a batch run nobody can, and the rig would tick on forever.
+        """
+        self._notice(Notice(contract.PUMP, WARNING,
+                            'the pump is held and nothing in a batch run starts it again: the '
+                            'run ends here, its bag complete up to now'))
 
     def _report(self, wall_start: float, duration: float) -> None:
         sim = (self._now_ns - self.start_time_ns) / NS_PER_S

@@ -414,3 +414,37 @@ def test_a_held_pump_stays_held_while_the_fluid_evens_out_and_resumes_when_asked
     _, last, _ = said[-1]
     assert abs(sum(last.volumes_m3) - rest - 4.0e-6) <= 1e-12 * scene.capacity
     assert finished_ns == 25_000_000_000
+
+
+def test_a_batch_run_whose_pump_is_held_for_good_ends_with_its_bag_complete(tmp_path):
+    # A channel that passes almost nothing (minor loss 1e6): pumped at 1 mL/s, the base
+    # passes the end of its curve while the tip is nearly empty, the actuator refuses the
+    # commands beyond, the pump holds for want of answers, and in a batch run nobody can call
+    # ~/start: the run used to tick on at 100x real time for ever.
+    data = yaml.safe_load((FIG1.parent / 'rate_inversion.yaml').read_text())
+    data['network']['channels'][0]['minor_loss'] = 1.0e6
+    data['pump']['flow_rate_m3_per_s'] = 1.0e-6
+    data['camera'] = {'rate_hz': 1}
+    scene = scene_from_dict(data, tmp_path / 'overfill.yaml')
+    programme_ns = scene.pump.profile.duration() * 1e9
+
+    def bounded(stage, function):
+        # A run that goes on past twice its programme would never end: fail instead.
+        if stage != 'pump.tick':
+            return function
+
+        def tick(now):
+            assert now <= 2.0 * programme_ns, 'the run went on past twice its programme'
+            return function(now)
+        return tick
+
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0, wrap=bounded)
+    assert result.pump_state == 'held'
+    assert any('nothing in a batch run starts it again' in w for w in result.warnings)
+    # It ended where the pump held, not at the programme's end or later.
+    assert result.sim_duration_s < 0.5 * scene.pump.profile.duration()
+    summary = bag_summary(tmp_path / 'bag')
+    assert summary.complete and summary.message_count == sum(result.message_counts.values())
+    states = [json.loads(m.msg.data)['state'] for m in read_bag(tmp_path / 'bag',
+                                                                ['/pump/status'])]
+    assert states[-1] == 'held'
