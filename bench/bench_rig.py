@@ -46,12 +46,10 @@ from collections import defaultdict
 from contextlib import contextmanager
 import cProfile
 from dataclasses import dataclass
-import importlib.metadata
 import json
 import math
 import os
 from pathlib import Path
-import platform
 import pstats
 import re
 import shutil
@@ -75,6 +73,7 @@ _prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep
 if sys.prefix not in _prefixes:
     os.environ['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *_prefixes])
 
+from machine import latency_row, load_text, machine_facts  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: E402
@@ -127,33 +126,6 @@ MATCH_TOLERANCE_M3 = 1.0e-12
 
 
 # ------------------------------------------------------------------------------ machine facts
-
-def machine_facts() -> dict[str, str]:
-    try:
-        rclpy_version = importlib.metadata.version('ros-rclpy')
-    except importlib.metadata.PackageNotFoundError:
-        rclpy_version = 'unknown'
-    try:
-        model = next(line.split(':', 1)[1].strip()
-                     for line in Path('/proc/cpuinfo').read_text().splitlines()
-                     if line.startswith('model name'))
-    except (OSError, StopIteration):
-        model = platform.processor() or 'unknown'
-    return {
-        'cores (os.cpu_count)': str(os.cpu_count()),
-        'cores usable (sched_getaffinity)': str(len(os.sched_getaffinity(0))),
-        'cpu': model,
-        'python': platform.python_version(),
-        'rclpy (ros-rclpy wheel)': rclpy_version,
-        'rmw': os.environ.get('RMW_IMPLEMENTATION', 'default (rmw_fastrtps_cpp)'),
-        'platform': platform.platform(),
-    }
-
-
-def load_text() -> str:
-    one, five, fifteen = os.getloadavg()
-    return f'{one:.2f} / {five:.2f} / {fifteen:.2f}'
-
 
 def under_load_note(before: str, after: str) -> str:
     peak = max(float(before.split('/')[0]), float(after.split('/')[0]))
@@ -839,14 +811,6 @@ class Probe(Node):
         return all(self.count_publishers(t) > 0 for t in self.received)
 
 
-def percentiles(values_ms: list[float]) -> str:
-    data = np.array(values_ms)
-    if data.size == 0:
-        return '- | - | - | - | 0'
-    return (f'{np.median(data):.2f} | {np.percentile(data, 90):.2f} | '
-            f'{np.percentile(data, 99):.2f} | {data.max():.2f} | {data.size}')
-
-
 def latency_run(layout: str, domain: int, code_root: Path | None = None) -> dict:
     """
     One real-time run at 100 Hz; ``layout`` 'processes' (one process per node, camera on its
@@ -970,7 +934,7 @@ def part_latency(repeats: int) -> str:
         ('for scale: command -> /pump/command received by the probe (one hop)', 'hop')]
     for label, key in rows:
         for layout, run in (('rig', rig), ('processes', processes)):
-            lines.append(f'| {label} | {layout} | {percentiles(run[key])} |')
+            lines.append(f'| {label} | {layout} | {latency_row(run[key])} |')
     lines.append('')
     for layout, run in (('rig', rig), ('processes', processes)):
         lines.append(
@@ -1103,7 +1067,7 @@ def part_baseline(repeats: int) -> str:
         for key, label in (('taken', 'command -> pose taken'),
                            ('total', 'command -> actuator/volumes at the probe')):
             for code in ('baseline', 'now'):
-                lines.append(f'| {label} | {code} | {percentiles(latency[code][key])} |')
+                lines.append(f'| {label} | {code} | {latency_row(latency[code][key])} |')
     written, filtered = logging_cost()
     lines += [
         '', f"**Logging**: one line through rclpy's public logger (`node.get_logger().info`, "

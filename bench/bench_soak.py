@@ -53,6 +53,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from machine import latency_row, load_text, machine_facts  # noqa: E402
 from mcap.reader import make_reader  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
@@ -112,11 +113,6 @@ def machine_cpu_s() -> tuple[float, float]:
     total = sum(numbers)
     idle = numbers[3] + numbers[4]  # idle + iowait
     return (total - idle) / CLOCK_TICKS, total / CLOCK_TICKS
-
-
-def load_text() -> str:
-    one, five, fifteen = os.getloadavg()
-    return f'{one:.2f} / {five:.2f} / {fifteen:.2f}'
 
 
 def shared_machine_note(load_before: str, load_after: str, other_share: float | None) -> str:
@@ -553,14 +549,6 @@ def _keep_bag(bag: Path, kind: str) -> Path:
     return kept
 
 
-def _latency_row(values_ms: list[float]) -> str:
-    data = np.array(values_ms)
-    if data.size == 0:
-        return '- | - | - | 0'
-    return (f'{np.median(data):.2f} | {np.percentile(data, 99):.2f} | {data.max():.2f} | '
-            f'{data.size}')
-
-
 def _window(items: list, start_ns: int, lo_s: float, hi_s: float, index: int = 1) -> list:
     lo, hi = start_ns + int(lo_s * 1e9), start_ns + int(hi_s * 1e9)
     return [item for item in items if lo <= item[index] < hi]
@@ -751,12 +739,12 @@ def part_realtime(seconds: float, camera_hz: float, keep_bag: bool) -> str:
         'recorder closes its bag.', '',
         '**Latency, command -> /actuator/volumes at the probe [ms]**:', '',
         '| window | median | p99 | max | samples |', '|---|---:|---:|---:|---:|',
-        f'| first {window:.0f} s | {_latency_row(first_lat)} |',
-        f'| last {window:.0f} s | {_latency_row(last_lat)} |',
+        f'| first {window:.0f} s | {latency_row(first_lat, (50, 99))} |',
+        f'| last {window:.0f} s | {latency_row(last_lat, (50, 99))} |',
         f'| for scale, command -> /pump/command at the probe (one hop), first | '
-        f'{_latency_row(hop_ms(first_cmds))} |',
+        f'{latency_row(hop_ms(first_cmds), (50, 99))} |',
         f'| for scale, command -> /pump/command at the probe (one hop), last | '
-        f'{_latency_row(hop_ms(last_cmds))} |', '']
+        f'{latency_row(hop_ms(last_cmds), (50, 99))} |', '']
     if first_lat and last_lat:
         lines += [f'Last / first: median **{np.median(last_lat) / np.median(first_lat):.2f}**, '
                   f'p99 {np.percentile(last_lat, 99) / np.percentile(first_lat, 99):.2f}, '
@@ -856,11 +844,6 @@ def part_realtime(seconds: float, camera_hz: float, keep_bag: bool) -> str:
 
 
 # ------------------------------------------------------------------------------ results file
-
-def machine_facts() -> dict[str, str]:
-    import bench_rig
-    return bench_rig.machine_facts()
-
 
 def write_results(path: Path, sections: dict[str, str]) -> None:
     """Replace this run's sections in the results file and keep the others."""
