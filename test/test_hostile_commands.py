@@ -12,6 +12,7 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from mcap.reader import make_reader
@@ -55,6 +56,52 @@ def _recorded(bag: Path, topic: str) -> list[bytes]:
     with open(next(bag.glob('*.mcap')), 'rb') as stream:
         return [bytes(message.data) for _, _, message in make_reader(stream).iter_messages(
             topics=[topic], log_time_order=True)]
+
+
+# ------------------------------------------------------------------------ softseq play --remap
+
+@pytest.mark.ros
+def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_env):
+    # rcl took each FROM:=TO of --remap for a remap rule of its own: it warned that the syntax
+    # is deprecated and mapped the player's new names back, so a swap was silently undone.
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+
+    from softseq_ros.testing import spinning
+
+    command, volumes = '/pump/command', '/actuator/volumes'
+    listener = Node('swap_listener', context=context)
+    got: dict[str, list[bytes]] = {command: [], volumes: []}
+    lock = threading.Lock()
+    for topic in got:
+        def keep(data, topic=topic) -> None:
+            with lock:
+                got[topic].append(bytes(data))
+        listener.create_subscription(JointState, topic, keep, QoSProfile(depth=10000),
+                                     raw=True)
+    with spinning(context, listener):
+        result = softseq('play', str(small_bag), '--rate', '20', '--topics', command, volumes,
+                         '--wait-for-subscribers', '30', '--remap', f'{command}:={volumes}',
+                         '--remap', f'{volumes}:={command}', env=ros_env)
+        expected = {command: _recorded(small_bag, volumes), volumes: _recorded(small_bag, command)}
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and any(
+                len(got[t]) < len(expected[t]) for t in got):
+            time.sleep(0.05)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ''          # no rcl warning about a deprecated remap syntax
+    assert got == expected              # each recorded topic under the other's name
+
+
+@pytest.mark.ros
+def test_two_topics_of_different_types_onto_one_name_are_refused_in_one_line(small_bag,
+                                                                              ros_env):
+    # It used to end in rclpy's traceback from create_publisher.
+    line = one_line(softseq('play', str(small_bag), '--remap', '/actuator/pressure:=/x',
+                            '--remap', '/pump/command:=x', env=ros_env), 'play')
+    assert '/x would carry /actuator/pressure (sensor_msgs/msg/FluidPressure) and ' \
+        '/pump/command (sensor_msgs/msg/JointState)' in line
+    assert '--remap /actuator/pressure:=/x --remap /pump/command:=x' in line
 
 
 # ------------------------------------------------------------------------- softseq recover

@@ -10,7 +10,10 @@ order, spaced as recorded divided by ``rate``; with ``clock`` the bag's time is 
 the recording.
 
 As ``ros2 bag play`` does, a replay can start ``start_offset_s`` into the bag, publish a topic
-under another name (``remap``: recorded name -> new name), take the QoS of some topics from
+under another name (``remap``: recorded name -> new name, the player's own mapping of the
+recorded names, applied all at once, so ``A:=B`` with ``B:=A`` swaps two topics; it never
+reaches rcl, and two topics of different types under one name are refused), take the QoS of
+some topics from
 an overrides file (``ros2 bag play --qos-profile-overrides-path``'s YAML: recorded topic name
 -> history, depth, reliability, durability, deadline, lifespan, liveliness,
 liveliness_lease_duration, avoid_ros_namespace_conventions), and be paused, resumed and
@@ -45,6 +48,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
+from rclpy.expand_topic_name import expand_topic_name
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -66,6 +70,7 @@ from softseq_ros.stopping import HeldSignals
 from softseq_ros.wire import contract
 
 CLOCK_TOPIC = contract.CLOCK.name
+CLOCK_TYPE = contract.CLOCK.type_name
 # Longest sleep between two looks at the stop signals held (a replay at a slow rate sleeps long).
 SIGNAL_POLL_S = 0.05
 # rclpy's TimeSource subscribes to /clock with this QoS.
@@ -117,6 +122,33 @@ def parse_remaps(rules: list[str] | None) -> dict[str, str]:
             raise PlayError(f'--remap {rule}: {source} is remapped twice')
         remaps[source] = target
     return remaps
+
+
+def _resolved(name: str) -> str:
+    """The fully qualified name the player's publisher of ``name`` gets."""
+    return expand_topic_name(name, BagPlayer.NODE_NAME, '/')
+
+
+def _check_one_type_per_name(bag: BagArrays, topics: list[str], remap: Mapping[str, str],
+                             clock: bool) -> None:
+    """
+    Refuse two played topics of different types published under one name (PlayError).
+
+    The names are those after ``remap`` (the player's own mapping, applied to the recorded
+    names at once, so ``A:=B`` with ``B:=A`` swaps them); with ``clock`` the player also
+    publishes rosgraph_msgs/msg/Clock on /clock.
+    """
+    placed: dict[str, tuple[str, str]] = {}
+    if clock:
+        placed[CLOCK_TOPIC] = ('the bag time of --clock', CLOCK_TYPE)
+    for topic in topics:
+        name, type_name = _resolved(remap.get(topic, topic)), bag.channels[topic].type_name
+        other, other_type = placed.setdefault(name, (topic, type_name))
+        if other_type != type_name:
+            said = ' '.join(f'--remap {source}:={target}' for source, target in remap.items()
+                            if _resolved(target) == name)
+            raise PlayError(f'{said}: {name} would carry {other} ({other_type}) and {topic} '
+                            f'({type_name}); a topic has one type')
 
 
 def _qos_duration(path: str, topic: str, key: str, value: object) -> Duration:
@@ -323,6 +355,7 @@ class BagPlayer(Node):
             except InvalidTopicNameException as err:
                 raise PlayError(f'--remap {source}:={target}: {target!r} is not a valid topic '
                                 f'name ({str(err).splitlines()[0]})') from None
+        _check_one_type_per_name(self.bag, self.topics, remap, clock)
         overrides = qos_overrides(qos_overrides_path, self.topics) \
             if qos_overrides_path is not None else {}
         summary = bag_summary(bag)
@@ -483,7 +516,10 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
 
     held.check()
     context = rclpy.Context()
-    rclpy.init(args=args, context=context)
+    # Never the command line (rclpy's default): rcl would take a FROM:=TO word of --remap for
+    # a remap rule of its own, apply it to the names the player chose (undoing a swap) and
+    # warn that the syntax is deprecated. --remap is the player's alone.
+    rclpy.init(args=['softseq'] if args is None else args, context=context)
     player = None
     try:
         player = BagPlayer(bag, rate=rate, loop=loop, clock=clock, topics=topics,
