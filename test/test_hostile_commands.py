@@ -104,6 +104,49 @@ def test_two_topics_of_different_types_onto_one_name_are_refused_in_one_line(sma
     assert '--remap /actuator/pressure:=/x --remap /pump/command:=x' in line
 
 
+# ----------------------------------------------------- softseq play: QoS overrides and offset
+
+@pytest.mark.ros
+@pytest.mark.parametrize('content, reason', [
+    (b'/pump/command:\n  reliability: r\xe9liable\n', 'not UTF-8 text (byte 31)'),
+    (b'[' * 100_000, 'YAML nested too deeply'),
+    (b'/pump/command:\n  depth: 1' + b'0' * 30 + b'\n',
+     'depth: expected an integer >= 0 and <= 2147483647 (a DDS history depth is 32 bits), '
+     'got an integer of 31 digits'),
+    (b'/pump/command:\n  deadline: {sec: 1' + b'0' * 30 + b', nsec: 0}\n',
+     'deadline: an integer of 31 digits s and 0 ns is beyond the longest QoS duration'),
+    (b'/pump/command:\n  lifespan: {sec: 9223372037}\n',
+     'lifespan: 9223372037 s and 0 ns is beyond the longest QoS duration'),
+    (b'/pump/command:\n  depth: 1' + b'0' * 5000 + b'\n', 'YAML: a value cannot be read'),
+], ids=['latin1', 'nested', 'depth_1e30_as_integer', 'deadline_1e30_s',
+        'lifespan_beyond_int64_ns', 'integer_of_5000_digits'])
+def test_play_refuses_a_qos_file_it_cannot_use_in_one_line(small_bag, tmp_path, ros_env,
+                                                           content, reason):
+    overrides = tmp_path / 'qos.yaml'
+    overrides.write_bytes(content)
+    line = one_line(softseq('play', str(small_bag), '--qos-profile-overrides-path',
+                            str(overrides), env=ros_env), 'play')
+    assert f'{overrides}: ' in line and reason in line, line
+
+
+@pytest.mark.ros
+def test_play_refuses_a_fifo_as_qos_file_without_blocking(small_bag, tmp_path, ros_env):
+    # open() of a FIFO blocks until a writer comes, and play holds SIGINT and SIGTERM meanwhile.
+    fifo = tmp_path / 'qos.yaml'
+    os.mkfifo(fifo)
+    line = one_line(softseq('play', str(small_bag), '--qos-profile-overrides-path', str(fifo),
+                            env=ros_env, timeout=60), 'play')
+    assert f'{fifo}: cannot read the QoS overrides (a FIFO, not a regular file)' in line
+
+
+@pytest.mark.ros
+def test_play_refuses_a_start_offset_of_1e300_s_in_one_line(small_bag, ros_env):
+    # 1e300 s is no integer of nanoseconds: an OverflowError's traceback.
+    line = one_line(softseq('play', str(small_bag), '--start-offset', '1e300', env=ros_env),
+                    'play')
+    assert "start offset 1e+300 s is past the bag's end (5 s after its start)" in line
+
+
 # ------------------------------------------------------------------------- softseq recover
 
 def test_sigterm_during_recovers_read_back_exits_143_and_loses_nothing(tmp_path, monkeypatch,
