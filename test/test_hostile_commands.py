@@ -178,3 +178,56 @@ def test_sigterm_during_recovers_read_back_exits_143_and_loses_nothing(tmp_path,
     assert cli.main(['recover', str(bag)]) == 0
     with Reader(bag) as reader:
         assert sum(1 for _ in reader.messages()) == 200
+
+
+# ---------------------------------------------------------------------------- softseq info
+
+def _metadata_with(bag: Path, folder: Path, key: str, value: str) -> Path:
+    """A copy of ``bag`` whose metadata.yaml gives ``key`` (a leaf) ``value`` as text."""
+    copy = folder / 'bag'
+    copy.mkdir()
+    for file in bag.iterdir():
+        if file.is_file():
+            (copy / file.name).write_bytes(file.read_bytes())
+    lines = (copy / 'metadata.yaml').read_text().splitlines()
+    at = next(i for i, line in enumerate(lines) if line.strip().startswith(f'{key}:'))
+    lines[at] = lines[at].split(':')[0] + f': {value}'
+    (copy / 'metadata.yaml').write_text('\n'.join(lines) + '\n')
+    return copy
+
+
+@pytest.mark.parametrize('value, reason', [
+    ('1' + '0' * 30, 'starting_time.nanoseconds_since_epoch: an integer of 31 digits is '
+     'outside what a bag can carry: from 0 to 9223372036854775807 ns'),
+    ('-1', 'starting_time.nanoseconds_since_epoch: -1 is outside what a bag can carry'),
+], ids=['start_1e30_ns', 'start_negative'])
+def test_info_refuses_a_start_time_no_bag_can_carry_in_one_line(small_bag, tmp_path, value,
+                                                                 reason):
+    # 1e30 ns was an OverflowError's traceback from datetime; -1 ns was shown as 1969.
+    bag = _metadata_with(small_bag, tmp_path, 'nanoseconds_since_epoch', value)
+    line = one_line(softseq('info', str(bag)), 'info')
+    assert f'{bag / "metadata.yaml"}: {reason}' in line, line
+
+
+@pytest.mark.parametrize('command', ['info', 'report'])
+def test_a_metadata_file_nested_too_deeply_is_one_line(small_bag, tmp_path, command):
+    # info ended in a RecursionError's traceback; report crashed in libyaml (SIGSEGV).
+    bag = _metadata_with(small_bag, tmp_path, 'version', '1')
+    (bag / 'metadata.yaml').write_text('[' * 100_000)
+    line = one_line(softseq(command, str(bag), *(['--out', str(tmp_path / 'report')]
+                                                 if command == 'report' else [])), command)
+    assert f"{bag / 'metadata.yaml'}: YAML nested too deeply" in line, line
+    assert not (tmp_path / 'report').exists()
+
+
+@pytest.mark.parametrize('where', ['the_path_given', 'in_the_bag_folder'])
+def test_info_refuses_a_fifo_named_like_a_bag_file_without_blocking(tmp_path, where):
+    # A FIFO named x.mcap in a bag folder blocked info for ever; given itself, it was said to
+    # be "no such bag folder".
+    folder = tmp_path / 'bag'
+    folder.mkdir()
+    fifo = (folder if where == 'in_the_bag_folder' else tmp_path) / 'x.mcap'
+    os.mkfifo(fifo)
+    line = one_line(softseq('info', str(folder if where == 'in_the_bag_folder' else fifo),
+                            timeout=60), 'info')
+    assert f'{fifo}: a FIFO, not' in line, line
