@@ -231,3 +231,62 @@ def test_info_refuses_a_fifo_named_like_a_bag_file_without_blocking(tmp_path, wh
     line = one_line(softseq('info', str(folder if where == 'in_the_bag_folder' else fifo),
                             timeout=60), 'info')
     assert f'{fifo}: a FIFO, not' in line, line
+
+
+# --------------------------------------------------------------- softseq report killed (-9)
+
+def _children(pid: int) -> set[int]:
+    """The processes whose parent is ``pid``, from /proc."""
+    found = set()
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / 'stat').read_text().rpartition(')')[2].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.add(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    """True while ``pid`` runs (a zombie nobody reaped yet has ended)."""
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rpartition(')')[2].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'
+
+
+@pytest.mark.skipif(not sys.platform.startswith('linux'), reason='reads /proc')
+def test_a_report_killed_with_sigkill_takes_its_figure_worker_with_it(small_bag, tmp_path):
+    # The forked worker waited for jobs on a pipe it holds both ends of: after a kill -9 of
+    # the report it lived on for ever, holding the caller's stdout and stderr open.
+    report = subprocess.Popen([sys.executable, '-m', 'softseq_ros.cli', 'report',
+                               str(small_bag), '--out', str(tmp_path / 'report')],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              stdin=subprocess.DEVNULL)
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while not workers and report.poll() is None and time.monotonic() < deadline:
+            workers = _children(report.pid)
+            time.sleep(0.01)
+        assert workers, 'the report forked no figure worker (on one core it forks none)'
+        report.kill()
+        report.wait(timeout=30)
+        # The caller's pipes end: nothing holds them any more.
+        ended = threading.Thread(target=report.communicate, daemon=True)
+        ended.start()
+        ended.join(timeout=10)
+        assert not ended.is_alive(), "the report's pipes are still held open"
+        deadline = time.monotonic() + 10
+        while any(map(_alive, workers)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not any(map(_alive, workers)), f'workers {workers} outlived the report'
+    finally:
+        for pid in workers:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+        if report.poll() is None:
+            report.kill()
