@@ -297,6 +297,7 @@ def _library(args: argparse.Namespace) -> int:
 
 def _rates(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.rates import (
+        MAX_SAMPLES_PER_LEG,
         RatesError,
         check_grid,
         quasistatic_reference,
@@ -306,6 +307,8 @@ def _rates(args: argparse.Namespace) -> int:
         run_rates,
         write_rates_csv,
     )
+    from softseq_ros.errors import check_output_folder
+    from softseq_ros.parallel import scheduler_option
     from softseq_ros.scene.loader import load_scene
 
     def numbers(option: str, text: str) -> list[float]:
@@ -328,15 +331,21 @@ def _rates(args: argparse.Namespace) -> int:
 
     flows, radii = numbers('--flows', args.flows), numbers('--radii', args.radii)
     samples = count('--samples', args.samples, 50)
+    if samples is not None and samples > MAX_SAMPLES_PER_LEG:
+        raise RatesError(f'--samples: must be <= {MAX_SAMPLES_PER_LEG} (samples of the path '
+                         f'per leg, held in memory by every worker: 1e6 take 0.5 GB and the '
+                         f'default is 600), got {samples}')
     workers = count('--workers', args.workers, 1)
-    if args.scheduler is not None and workers is not None:
+    scheduler = scheduler_option('--scheduler', args.scheduler)
+    if scheduler is not None and workers is not None:
         raise RatesError('--workers: not with --scheduler (the cluster has its own workers)')
     style = _figure_style(args)
     scene = load_scene(args.scene)
     check_grid(scene, flows, radii)
     out = args.out or Path('bags') / f'rates_{scene.name}'
+    check_output_folder(out, '--out' if args.out is not None else 'the output folder')
     reference = quasistatic_reference(scene, samples)
-    rows = run_rates(scene, flows, radii, workers=workers, scheduler=args.scheduler,
+    rows = run_rates(scene, flows, radii, workers=workers, scheduler=scheduler,
                      samples_per_leg=samples)
     table = write_rates_csv(out / 'rates.csv', rows, scene.name, reference)
     figure = rates_figure(rows, scene.segment_names, reference, scene.name, out / 'rates.png',

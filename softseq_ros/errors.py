@@ -47,6 +47,30 @@ def write_text(path: Path, text: str) -> None:
         path.write_text(text)
 
 
+def check_output_folder(path: str | os.PathLike, option: str) -> None:
+    """
+    Refuse an output folder that cannot be made or written in, naming ``option``.
+
+    For a command that would otherwise find out only once its work is done: ``path`` (or
+    the nearest folder above it that exists) must be a folder this process may write in.
+    OutputWriteError in one line names what is in the way.
+    """
+    wanted = Path(path)
+    existing = wanted
+    while not os.path.lexists(existing) and existing.parent != existing:
+        existing = existing.parent
+    try:
+        kind = file_kind(os.stat(existing).st_mode)
+    except OSError as err:
+        raise OutputWriteError(f'{option} {wanted}: {existing}: cannot use it '
+                               f'({err.strerror or err})') from None
+    if kind != 'a folder':
+        raise OutputWriteError(f'{option} {wanted}: {existing} is {kind}, not a folder')
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise OutputWriteError(f'{option} {wanted}: cannot write in {existing} '
+                               '(permission denied)')
+
+
 class NotRegularFileError(UserError):
     """A path that is a FIFO, folder, socket or device where a file is to be read."""
 

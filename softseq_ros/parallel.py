@@ -104,6 +104,36 @@ def worker_option(option: str, text: str | None) -> int | None:
     return value
 
 
+class SchedulerAddressError(UserError):
+    """A ``--scheduler`` that is no address of a Dask scheduler."""
+
+
+def scheduler_option(option: str, text: str | None) -> str | None:
+    """
+    A command's Dask scheduler address (``--scheduler``), checked; None when not given.
+
+    Refused in one line naming ``option`` before any work starts: an address without a port
+    (``distributed`` raised its ValueError only once the grid was to run, a traceback), a
+    port that is not a number from 1 to 65535. Whether a scheduler answers there is known
+    only on connecting (an OSError naming the address, within DASK_CONNECT_TIMEOUT).
+    """
+    if text is None:
+        return None
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    example = 'e.g. tcp://10.0.0.5:8786'
+    try:
+        scheme, location = parse_address(text)
+        if scheme in ('tcp', 'tls', 'ws', 'wss'):
+            _, port = parse_host_port(location)
+            if not 1 <= int(port) <= 65535:
+                raise ValueError(f'port {port} is not from 1 to 65535')
+    except (ValueError, TypeError) as err:
+        raise SchedulerAddressError(f'{option}: {text!r} is not the address of a Dask '
+                                    f'scheduler ({err}), {example}') from None
+    return text
+
+
 def worker_count(jobs: int, workers: int | None = None) -> int:
     """The workers worth starting: ``workers`` (default one per core), at most one per job."""
     wanted = (os.cpu_count() or 1) if workers is None else int(workers)

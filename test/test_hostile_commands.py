@@ -290,3 +290,35 @@ def test_a_report_killed_with_sigkill_takes_its_figure_worker_with_it(small_bag,
                 os.kill(pid, signal.SIGKILL)
         if report.poll() is None:
             report.kill()
+
+
+# --------------------------------------------------------------------------- softseq rates
+
+@pytest.mark.parametrize('options, message', [
+    (['--scheduler', 'not a scheduler'], "--scheduler: 'not a scheduler' is not the address "
+     "of a Dask scheduler (missing port number in address 'not a scheduler'), e.g. "
+     'tcp://10.0.0.5:8786'),
+    (['--samples', '1000000000'], '--samples: must be <= 100000 (samples of the path per leg'),
+    (['--out', '{file}/map'], '--out {file}/map: {file} is a regular file, not a folder'),
+], ids=['scheduler_no_address', 'samples_1e9', 'out_under_a_file'])
+def test_rates_refuses_options_it_cannot_use_before_the_grid_runs(tmp_path, capsys,
+                                                                  monkeypatch, options,
+                                                                  message):
+    # The scheduler was a traceback from distributed once the grid was to run; --out under a
+    # file was refused only after the whole grid had run; 1e9 samples grew to 24 GB.
+    import softseq_ros.analysis.rates as rates
+
+    def ran(*_args, **_kwargs):
+        raise AssertionError('the grid ran before the options were checked')
+    monkeypatch.setattr(rates, 'run_rates', ran)
+    monkeypatch.setattr(rates, 'quasistatic_reference', ran)
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('not a folder\n')
+    options = [option.format(file=blocker) for option in options]
+    if '--out' not in options:
+        options += ['--out', str(tmp_path / 'map')]
+    assert cli.main(['rates', 'rate_inversion', '--flows', '1e-7', '--radii', '2e-4',
+                     *options]) == 2
+    line, = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith('softseq rates: error: ' + message.format(file=blocker)), line
+    assert not (tmp_path / 'map').exists()
