@@ -117,7 +117,7 @@ def _classify(args: argparse.Namespace) -> int:
 
 def _graph(args: argparse.Namespace) -> int:
     import softseq_ros
-    from softseq_ros.analysis.graph_figure import plot_graph
+    from softseq_ros.analysis.graph_figure import check_figure_size, plot_graph
     from softseq_ros.quasistatic.graph import write_graph_json
     from softseq_ros.quasistatic.solve import scene_map
     from softseq_ros.scene.loader import load_scene
@@ -127,6 +127,9 @@ def _graph(args: argparse.Namespace) -> int:
     style = _figure_style(args)
     scene = load_scene(args.scene)
     graph = softseq_ros.graph(scene)
+    # Before anything is written: a figure of too many branches exhausted the memory after
+    # graph.json was written.
+    check_figure_size(graph, str(args.scene))
     emap = scene_map(scene)
     out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}'
     out.mkdir(parents=True, exist_ok=True)

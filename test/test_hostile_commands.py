@@ -322,3 +322,47 @@ def test_rates_refuses_options_it_cannot_use_before_the_grid_runs(tmp_path, caps
     line, = capsys.readouterr().err.strip().splitlines()
     assert line.startswith('softseq rates: error: ' + message.format(file=blocker)), line
     assert not (tmp_path / 'map').exists()
+
+
+# --------------------------------------------------------------------------- softseq graph
+
+def _wiggly_scene(folder: Path, folds: int) -> Path:
+    """Three table segments whose curves each rise through ``folds`` peaks and valleys."""
+    import math
+
+    names = []
+    for s in range(3):
+        rows = ['volume_m3,pressure_pa,curvature_per_m']
+        count = 60 * folds + 40
+        for i in range(count + 1):
+            x = i / count
+            pressure = (1000 + 4000 * x + 1.8 * 4000 / (2 * math.pi * folds)
+                        * math.sin(2 * math.pi * folds * x + 0.3 * s))
+            rows.append(f'{1e-5 + 4e-5 * x:.9e},{pressure:.6f},{10 * x:.6f}')
+        (folder / f'wiggle{s}.csv').write_text('\n'.join(rows) + '\n')
+        names.append(f'  - name: s{s}\n    length_m: 0.1\n    table: wiggle{s}.csv\n')
+    scene = folder / 'wiggles.yaml'
+    scene.write_text('name: wiggles\nsegments:\n' + ''.join(names) + 'pump:\n'
+                     '  flow_rate_m3_per_s: 1.0e-6\n  rate_hz: 10\n  legs:\n'
+                     '    - inflate_to_m3: 2.0e-5\n    - deflate_to_m3: 0.0\n')
+    return scene
+
+
+def test_graph_refuses_a_graph_too_large_to_draw_before_writing_anything(tmp_path, capsys,
+                                                                         monkeypatch):
+    # Three segments of dozens of folds: graph.json was written, then the figure ran for
+    # minutes and died of a MemoryError.
+    import softseq_ros.analysis.graph_figure as graph_figure
+    import softseq_ros.quasistatic.graph as quasistatic_graph
+
+    def drew(*_args, **_kwargs):
+        raise AssertionError('graph wrote or drew before refusing')
+    monkeypatch.setattr(graph_figure, 'plot_graph', drew)
+    monkeypatch.setattr(quasistatic_graph, 'write_graph_json', drew)
+    scene = _wiggly_scene(tmp_path, 20)
+    out = tmp_path / 'graph'
+    assert cli.main(['graph', str(scene), '--out', str(out)]) == 2
+    line, = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f'softseq graph: error: {scene}: 361 stable branches, more than '
+                           'the 300 that graph.png can show'), line
+    assert not out.exists()
