@@ -366,3 +366,25 @@ def test_graph_refuses_a_graph_too_large_to_draw_before_writing_anything(tmp_pat
     assert line.startswith(f'softseq graph: error: {scene}: 361 stable branches, more than '
                            'the 300 that graph.png can show'), line
     assert not out.exists()
+
+
+# -------------------------------------------------------------------------- softseq design
+
+def test_design_refuses_a_search_of_a_million_before_it_starts(tmp_path, capsys, monkeypatch):
+    # A population of 1e6 was taken: 5 million pairs at 0.2 s each.
+    import softseq_ros.fem.design_command as design_command
+
+    def searched(*_args, **_kwargs):
+        raise AssertionError('the search started')
+    monkeypatch.setattr(design_command, 'search', searched)
+    tiny = Path(__file__).resolve().parents[1] / 'config' / 'design_targets' / 'tiny.yaml'
+    problem = tmp_path / 'big.yaml'
+    problem.write_text(tiny.read_text().replace('population: 4', 'population: 1000000'))
+    out = tmp_path / 'designs'
+    assert cli.main(['design', str(problem), '--out', str(out)]) == 2
+    line, = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f'softseq design: error: {problem}: search: population 1000000 x 1 '
+                           'varied parameters (a population of 1048576 with the Sobol start) '
+                           'x 5 generations'), line
+    assert '= 5242880 pairs to assemble, more than 20000' in line
+    assert not out.exists()
