@@ -560,7 +560,7 @@ def build_parser() -> argparse.ArgumentParser:
     rates.add_argument('--radii', required=True, metavar='R1,R2,...',
                        help='channel radii [m], comma-separated, e.g. 0.2e-3,0.5e-3')
     rates.add_argument('--samples', default='600', metavar='N', help='samples of the path per '
-                       'leg of the programme (default 600, at least 50)')
+                       'leg of the programme (default 600, at least 50, at most 100000)')
     rates.add_argument('--workers', help='local worker processes (default: one per core)')
     rates.add_argument('--scheduler', help='Dask scheduler address, e.g. tcp://10.0.0.5:8786')
     rates.add_argument('--out', type=Path, help='output folder (default bags/rates_NAME)')
