@@ -104,6 +104,19 @@ def test_two_topics_of_different_types_onto_one_name_are_refused_in_one_line(sma
     assert '--remap /actuator/pressure:=/x --remap /pump/command:=x' in line
 
 
+def test_a_recorded_clock_of_another_type_is_refused_with_clock(tmp_path):
+    from std_msgs.msg import String
+
+    from softseq_ros.nodes.player import BagPlayer, PlayError
+
+    with BagWriter(tmp_path / 'bag', flush_period_s=None) as writer:
+        writer.add_topic('/clock', 'std_msgs/msg/String')
+        writer.write('/clock', serialize(String(data='tick')), 1_700_000_000_000_000_000)
+    with pytest.raises(PlayError, match=r'^--clock: /clock would carry the bag time of --clock '
+                       r'\(rosgraph_msgs/msg/Clock\) and /clock \(std_msgs/msg/String\)'):
+        BagPlayer(str(tmp_path / 'bag'), clock=True)
+
+
 # ----------------------------------------------------- softseq play: QoS overrides and offset
 
 @pytest.mark.ros

@@ -154,7 +154,7 @@ def _check_one_type_per_name(bag: BagArrays, topics: list[str], remap: Mapping[s
         other, other_type = placed.setdefault(name, (topic, type_name))
         if other_type != type_name:
             said = ' '.join(f'--remap {source}:={target}' for source, target in remap.items()
-                            if _resolved(target) == name)
+                            if _resolved(target) == name) or '--clock'
             raise PlayError(f'{said}: {name} would carry {other} ({other_type}) and {topic} '
                             f'({type_name}); a topic has one type')
 
