@@ -246,6 +246,17 @@ def test_info_refuses_a_fifo_named_like_a_bag_file_without_blocking(tmp_path, wh
     assert f'{fifo}: a FIFO, not' in line, line
 
 
+
+@pytest.mark.parametrize('command', ['recover', 'report', 'compare'])
+def test_other_readers_refuse_a_fifo_in_the_bag_folder_without_blocking(tmp_path, command):
+    # recover opened it (to see whether a writer holds its lock) and waited for ever.
+    folder = tmp_path / 'bag'
+    folder.mkdir()
+    os.mkfifo(folder / 'x.mcap')
+    line = one_line(softseq(command, str(folder), *([str(folder)] if command == 'compare'
+                                                    else []), timeout=60), command)
+    assert f'{folder / "x.mcap"}: a FIFO, not a regular file: not a bag file' in line, line
+
 # --------------------------------------------------------------- softseq report killed (-9)
 
 def _children(pid: int) -> set[int]:
