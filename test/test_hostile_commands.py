@@ -89,8 +89,10 @@ def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_en
                 len(got[t]) < len(expected[t]) for t in got):
             time.sleep(0.05)
     assert result.returncode == 0, result.stderr
-    assert result.stderr == ''          # no rcl warning about a deprecated remap syntax
     assert got == expected              # each recorded topic under the other's name
+    # rcl saw no remap rule: it warned on each that the syntax is deprecated.
+    assert 'remap' not in result.stderr.lower() and 'deprecated' not in result.stderr, \
+        result.stderr
 
 
 @pytest.mark.ros
@@ -283,6 +285,7 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='reads /proc')
+@pytest.mark.skipif((os.cpu_count() or 1) <= 1, reason='on one core report forks no worker')
 def test_a_report_killed_with_sigkill_takes_its_figure_worker_with_it(small_bag, tmp_path):
     # The forked worker waited for jobs on a pipe it holds both ends of: after a kill -9 of
     # the report it lived on for ever, holding the caller's stdout and stderr open.
@@ -296,7 +299,7 @@ def test_a_report_killed_with_sigkill_takes_its_figure_worker_with_it(small_bag,
         while not workers and report.poll() is None and time.monotonic() < deadline:
             workers = _children(report.pid)
             time.sleep(0.01)
-        assert workers, 'the report forked no figure worker (on one core it forks none)'
+        assert workers, 'the report forked no figure worker'
         report.kill()
         report.wait(timeout=30)
         # The caller's pipes end: nothing holds them any more.
