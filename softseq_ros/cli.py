@@ -117,7 +117,7 @@ def _classify(args: argparse.Namespace) -> int:
 
 def _graph(args: argparse.Namespace) -> int:
     import softseq_ros
-    from softseq_ros.analysis.graph_figure import plot_graph
+    from softseq_ros.analysis.graph_figure import check_figure_size, plot_graph
     from softseq_ros.quasistatic.graph import write_graph_json
     from softseq_ros.quasistatic.solve import scene_map
     from softseq_ros.scene.loader import load_scene
@@ -127,6 +127,9 @@ def _graph(args: argparse.Namespace) -> int:
     style = _figure_style(args)
     scene = load_scene(args.scene)
     graph = softseq_ros.graph(scene)
+    # Before anything is written: a figure of too many branches exhausted the memory after
+    # graph.json was written.
+    check_figure_size(graph, str(args.scene))
     emap = scene_map(scene)
     out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}'
     out.mkdir(parents=True, exist_ok=True)
@@ -297,6 +300,7 @@ def _library(args: argparse.Namespace) -> int:
 
 def _rates(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.rates import (
+        MAX_SAMPLES_PER_LEG,
         RatesError,
         check_grid,
         quasistatic_reference,
@@ -306,6 +310,8 @@ def _rates(args: argparse.Namespace) -> int:
         run_rates,
         write_rates_csv,
     )
+    from softseq_ros.errors import check_output_folder
+    from softseq_ros.parallel import scheduler_option
     from softseq_ros.scene.loader import load_scene
 
     def numbers(option: str, text: str) -> list[float]:
@@ -328,15 +334,21 @@ def _rates(args: argparse.Namespace) -> int:
 
     flows, radii = numbers('--flows', args.flows), numbers('--radii', args.radii)
     samples = count('--samples', args.samples, 50)
+    if samples is not None and samples > MAX_SAMPLES_PER_LEG:
+        raise RatesError(f'--samples: must be <= {MAX_SAMPLES_PER_LEG} (samples of the path '
+                         f'per leg, held in memory by every worker: 1e6 take 0.5 GB and the '
+                         f'default is 600), got {samples}')
     workers = count('--workers', args.workers, 1)
-    if args.scheduler is not None and workers is not None:
+    scheduler = scheduler_option('--scheduler', args.scheduler)
+    if scheduler is not None and workers is not None:
         raise RatesError('--workers: not with --scheduler (the cluster has its own workers)')
     style = _figure_style(args)
     scene = load_scene(args.scene)
     check_grid(scene, flows, radii)
     out = args.out or Path('bags') / f'rates_{scene.name}'
+    check_output_folder(out, '--out' if args.out is not None else 'the output folder')
     reference = quasistatic_reference(scene, samples)
-    rows = run_rates(scene, flows, radii, workers=workers, scheduler=args.scheduler,
+    rows = run_rates(scene, flows, radii, workers=workers, scheduler=scheduler,
                      samples_per_leg=samples)
     table = write_rates_csv(out / 'rates.csv', rows, scene.name, reference)
     figure = rates_figure(rows, scene.segment_names, reference, scene.name, out / 'rates.png',
@@ -548,7 +560,7 @@ def build_parser() -> argparse.ArgumentParser:
     rates.add_argument('--radii', required=True, metavar='R1,R2,...',
                        help='channel radii [m], comma-separated, e.g. 0.2e-3,0.5e-3')
     rates.add_argument('--samples', default='600', metavar='N', help='samples of the path per '
-                       'leg of the programme (default 600, at least 50)')
+                       'leg of the programme (default 600, at least 50, at most 100000)')
     rates.add_argument('--workers', help='local worker processes (default: one per core)')
     rates.add_argument('--scheduler', help='Dask scheduler address, e.g. tcp://10.0.0.5:8786')
     rates.add_argument('--out', type=Path, help='output folder (default bags/rates_NAME)')

@@ -30,6 +30,7 @@ the package but its errors: every layer may use it.
 
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 import contextlib
+import ctypes
 import multiprocessing
 import os
 import signal
@@ -101,6 +102,36 @@ def worker_option(option: str, text: str | None) -> int | None:
     if value < 1:
         raise WorkerCountError(f'{option}: must be >= 1 (worker processes), got {value}')
     return value
+
+
+class SchedulerAddressError(UserError):
+    """A ``--scheduler`` that is no address of a Dask scheduler."""
+
+
+def scheduler_option(option: str, text: str | None) -> str | None:
+    """
+    A command's Dask scheduler address (``--scheduler``), checked; None when not given.
+
+    Refused in one line naming ``option`` before any work starts: an address without a port
+    (``distributed`` raised its ValueError only once the grid was to run, a traceback), a
+    port that is not a number from 1 to 65535. Whether a scheduler answers there is known
+    only on connecting (an OSError naming the address, within DASK_CONNECT_TIMEOUT).
+    """
+    if text is None:
+        return None
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    example = 'e.g. tcp://10.0.0.5:8786'
+    try:
+        scheme, location = parse_address(text)
+        if scheme in ('tcp', 'tls', 'ws', 'wss'):
+            _, port = parse_host_port(location)
+            if not 1 <= int(port) <= 65535:
+                raise ValueError(f'port {port} is not from 1 to 65535')
+    except (ValueError, TypeError) as err:
+        raise SchedulerAddressError(f'{option}: {text!r} is not the address of a Dask '
+                                    f'scheduler ({err}), {example}') from None
+    return text
 
 
 def worker_count(jobs: int, workers: int | None = None) -> int:
@@ -202,13 +233,42 @@ def _run_dask(function: Callable[[Any], Any], jobs: list[Any], count: int,
     return results
 
 
-def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:
+# prctl(2): the signal a process gets when its parent dies.
+PR_SET_PDEATHSIG = 1
+
+
+def end_with_parent(parent_pid: int) -> None:
     """
-    In a new worker: leave SIGINT to the parent, then initialise.
+    In a worker process: end it (SIGKILL) when its parent ``parent_pid`` dies, however.
+
+    A worker waits for jobs on a pipe that it holds both ends of (a fork inherits them), so
+    it never sees the parent go: after a ``kill -9`` of the parent it would live on for
+    ever, holding the caller's stdout and stderr open (a shell's pipe never ends). On Linux
+    the kernel sends the signal (``prctl(PR_SET_PDEATHSIG)``); a parent that died before
+    this call is seen from the parent pid. Limits: the kernel counts the death of the
+    thread that started the worker as the parent's (workers are started from the thread
+    that submits their first job, the main thread in softseq's commands); elsewhere than
+    Linux nothing is set.
+    """
+    if sys.platform.startswith('linux'):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _start_worker(initializer: Callable[..., None] | None, initargs: tuple,
+                  parent_pid: int) -> None:
+    """
+    In a new worker: end with the parent, leave SIGINT to it, then initialise.
 
     The parent stops its workers with SIGTERM, which must end one at once, also in the middle
     of C code: a forked worker would otherwise keep a Python handler of its parent's.
     """
+    end_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if initializer is not None:
@@ -253,7 +313,7 @@ class Workers:
         self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(
             self.workers,
             mp_context=multiprocessing.get_context(start_method or default_start_method()),
-            initializer=_start_worker, initargs=(initializer, initargs))
+            initializer=_start_worker, initargs=(initializer, initargs, os.getpid()))
         if start_now:
             for _ in range(self.workers):
                 self._pool.submit(_ready)

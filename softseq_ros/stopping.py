@@ -16,8 +16,14 @@ from types import FrameType, TracebackType
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-class TerminatedError(Exception):
-    """SIGTERM arrived: unwind like an interrupt, so that open bags are closed completely."""
+class TerminatedError(BaseException):
+    """
+    SIGTERM arrived: unwind like an interrupt, so that open bags are closed completely.
+
+    A BaseException, as KeyboardInterrupt is: the ``except Exception`` of a reader that takes
+    any failure for damaged data (``softseq recover``'s read-back, its scan of chunks) must
+    not take a stop for a fault of the bag.
+    """
 
 
 _MAIN_PID = os.getpid()

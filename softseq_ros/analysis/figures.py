@@ -34,6 +34,7 @@ from softseq_ros.analysis.metrics import snap_rows
 from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
 from softseq_ros.analysis.transients import Transients, TransientWindow, transient_windows
 from softseq_ros.errors import OutputWriteError, UserError, writing
+from softseq_ros.parallel import end_with_parent
 
 ML = 1e6
 KPA = 1e-3
@@ -686,10 +687,12 @@ def _draw_split(jobs: list[tuple[str, tuple]], split: int) -> list[list[Path]]:
     ours, theirs = jobs[:split], jobs[split:]
     # The fork's one-line error (a figure it could not write) comes back through a pipe.
     read_end, write_end = os.pipe() if theirs else (-1, -1)
+    parent = os.getpid()
     child = os.fork() if theirs else 0
     if theirs and child == 0:
         status = 0
         try:
+            end_with_parent(parent)   # a fork does not inherit its parent's setting
             os.close(read_end)
             for name, args in theirs:
                 _draw(name, args)

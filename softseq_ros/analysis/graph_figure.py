@@ -29,8 +29,31 @@ from softseq_ros.analysis.figures import (
     total_volume_lines,
 )
 from softseq_ros.analysis.recording import DEFLATION, INFLATION
+from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.graph import INFLATION as GRAPH_INFLATION
 from softseq_ros.quasistatic.graph import JOIN, SNAP, GraphBranch, TransitionGraph
+
+# The most stable branches graph.png draws. The figure has a row of bars per branch at most,
+# and its height, so its pixels and memory, grow with the rows: three segments of 16 folds
+# each (289 branches) take 7.6 s and 0.4 GB, of 24 folds (433) 13 s and 0.6 GB, and of
+# dozens more ran out of memory after graph.json was written. The shipped scenes have at
+# most 21. The graph itself is cheap (1,081 branches in 2 s).
+MAX_FIGURE_BRANCHES = 300
+
+
+class GraphTooLargeError(UserError):
+    """A transition graph with more stable branches than its figure can show."""
+
+
+def check_figure_size(graph: TransitionGraph, where: str) -> None:
+    """Refuse (GraphTooLargeError naming ``where`` and the bound) a graph too large to draw."""
+    count = len(graph.branches)
+    if count > MAX_FIGURE_BRANCHES:
+        raise GraphTooLargeError(
+            f'{where}: {count} stable branches, more than the {MAX_FIGURE_BRANCHES} that '
+            'graph.png can show (its height grows with them: 433 take 0.6 GB); nothing '
+            'written. softseq_ros.graph(scene) gives the graph without a figure')
+
 
 _PATH_COLOUR = '0.1'
 _OTHER_COLOUR = '0.65'

@@ -57,6 +57,11 @@ COLUMNS = ('flow_rate_m3_per_s', 'channel_radius_m', 'sequence_type', 'leading_s
            'drained_at_injected_m3', 'refused', 'integrator_steps', 'wall_s')
 
 
+# The most samples of the path per leg a rate map takes (each worker holds them all: 1e6
+# take about 0.5 GB, 1e9 would take 24 GB; the default is SAMPLES_PER_LEG).
+MAX_SAMPLES_PER_LEG = 100_000
+
+
 class RatesError(UserError):
     """A rate map that cannot be run: the message names the option or the scene."""
 

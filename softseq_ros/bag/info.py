@@ -26,10 +26,9 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Footer, Message
 from mcap.stream_reader import StreamReader
-import yaml
 
 from softseq_ros.bag.arrays import BagArrayError, string_text
-from softseq_ros.bag.layout import MCAP_MAGIC, METADATA_FILE, mcap_files
+from softseq_ros.bag.layout import MCAP_MAGIC, METADATA_FILE, mcap_files, read_metadata
 from softseq_ros.bag.reader import BagReadError, BagSummary, bag_summary, scanned_summary
 from softseq_ros.errors import UserError
 from softseq_ros.wire import contract
@@ -131,11 +130,10 @@ def _scenes(files: tuple[Path, ...], namespaces: tuple[str, ...]) -> tuple[Scene
 
 def _ros_distro(folder: Path) -> tuple[str, str]:
     try:
-        document = yaml.safe_load((folder / METADATA_FILE).read_text(encoding='utf-8'))
-        info = document['rosbag2_bagfile_information']
-        return str(info.get('storage_identifier') or 'mcap'), str(info.get('ros_distro') or '')
-    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        info = read_metadata(folder, BagInfoError)
+    except BagInfoError:
         return 'mcap', ''
+    return str(info.get('storage_identifier') or 'mcap'), str(info.get('ros_distro') or '')
 
 
 def bag_info(path: str | os.PathLike) -> BagInfo:

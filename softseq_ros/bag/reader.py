@@ -19,9 +19,8 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
-import yaml
 
-from softseq_ros.bag.layout import METADATA_FILE, mcap_files
+from softseq_ros.bag.layout import METADATA_FILE, mcap_files, read_metadata
 from softseq_ros.errors import UserError
 
 
@@ -103,23 +102,34 @@ def read_bag(directory: str | os.PathLike,
         raise BagReadError(f'{path}: {err}') from None
 
 
+# A bag's times are int64 nanoseconds since 1970 (rosbag2's rcutils_time_point_value_t).
+LAST_TIME_NS = 2**63 - 1
+
+
 def _summary_from_metadata(path: Path) -> BagSummary:
     metadata_path = path / METADATA_FILE
+    info = read_metadata(path, BagReadError)
     try:
-        document = yaml.safe_load(metadata_path.read_text(encoding='utf-8'))
-        info = document['rosbag2_bagfile_information']
         topics = {
             entry['topic_metadata']['name']: TopicSummary(
                 entry['topic_metadata']['type'], int(entry['message_count']))
             for entry in info['topics_with_message_count']}
-        return BagSummary(topics=topics, message_count=int(info['message_count']),
-                          start_ns=int(info['starting_time']['nanoseconds_since_epoch']),
-                          duration_ns=int(info['duration']['nanoseconds']))
-    except yaml.YAMLError as err:
-        raise BagReadError(f'{metadata_path}: not valid YAML: {err}') from None
-    except (KeyError, TypeError, ValueError) as err:
+        summary = BagSummary(topics=topics, message_count=int(info['message_count']),
+                             start_ns=int(info['starting_time']['nanoseconds_since_epoch']),
+                             duration_ns=int(info['duration']['nanoseconds']))
+    except (KeyError, TypeError, ValueError, OverflowError) as err:
         raise BagReadError(
             f'{metadata_path}: missing or malformed rosbag2 field {err}') from None
+    for key, value, bound in (
+            ('starting_time.nanoseconds_since_epoch', summary.start_ns, LAST_TIME_NS),
+            ('duration.nanoseconds', summary.duration_ns, LAST_TIME_NS - summary.start_ns)):
+        if not 0 <= value <= bound:
+            shown = value if abs(value) < 10**20 else \
+                f'an integer of {len(str(abs(value)))} digits'
+            raise BagReadError(
+                f'{metadata_path}: {key}: {shown} is outside what a bag can carry: from 0 to '
+                f'{bound} ns (int64 ns since 1970, until 2262)')
+    return summary
 
 
 def _summary_from_mcap(path: Path) -> BagSummary:

@@ -40,6 +40,8 @@ from mcap.records import (
 )
 from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 
+from softseq_ros.errors import file_kind
+
 from .layout import MCAP_MAGIC, file_order
 from .writer import (
     BagWriter,
@@ -116,6 +118,15 @@ def _bag_files(directory: Path) -> list[tuple[Path, Path | None]]:
     """
     mcaps = {p.name: p for p in directory.glob('*.mcap')}
     damaged = {p.name[:-len(DAMAGED_SUFFIX)]: p for p in directory.glob('*.mcap' + DAMAGED_SUFFIX)}
+    for path in [*mcaps.values(), *damaged.values()]:
+        # Checked before anything opens it: a FIFO would block the recovery for ever.
+        try:
+            kind = file_kind(os.stat(path).st_mode)
+        except OSError:
+            continue   # a dangling link: as a missing file
+        if kind != 'a regular file':
+            raise BagWriterError(f'{path}: {kind}, not a regular file: not a bag file; nothing '
+                                 'written or moved')
     if not mcaps and not damaged:
         raise BagWriterError(f'{directory}: no .mcap file in it')
     names = sorted(set(mcaps) | set(damaged), key=lambda n: file_order(directory / n))

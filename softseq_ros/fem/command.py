@@ -96,12 +96,14 @@ def run_fem_command(args: argparse.Namespace) -> int:
         return 0
 
     from softseq_ros.fem.sweep import run_sweep, sweep_cases
+    from softseq_ros.parallel import scheduler_option
 
     grid = _assignments(args.sweep, '--sweep', many=True)
     if args.out_dir is None:
         raise DesignError('--sweep: needs --out-dir for the tables and summary.csv')
     if args.out is not None:
         raise DesignError('--out: not with --sweep (tables go to --out-dir)')
+    scheduler_option('--scheduler', args.scheduler)
     if args.scheduler is not None and args.workers is not None:
         raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)

@@ -16,9 +16,11 @@ def run_design_command(args: Any) -> int:
     import os
     import sys
 
+    from softseq_ros.parallel import scheduler_option
     from softseq_ros.progress import end_progress, write_progress
 
     problem = load_problem(args.problem)
+    scheduler_option('--scheduler', args.scheduler)
     if args.scheduler is not None and args.workers is not None:
         raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)

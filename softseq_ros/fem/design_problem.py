@@ -54,6 +54,11 @@ from softseq_ros.scene.validation import SCENE_NAME, SEGMENT_NAME, Context, Scen
 
 VARIABLES = ('membrane_thickness_m', 'wall_thickness_m', 'membrane_length_m')
 DEFAULT_MAX_INJECTED_M3 = 6.5e-5
+# The most pairs a search may assemble: population x generations x material fits. A pair
+# costs about 0.2 s (docs/fem.md), so this is about an hour; the shipped problems allow 20
+# to 832 (and stop early: 128 for paper_partial). A population of 1e6 was taken and would
+# have run for months.
+MAX_SEARCH_PAIRS = 20_000
 
 
 @dataclass(frozen=True)
@@ -214,6 +219,19 @@ def problem_from_dict(data: object, path: str | Path | None = None) -> Problem:
         if not any(s.varied for s in segments) and len(materials) == 1:
             raise ctx.error('segments', 'nothing to vary: give a [low, high] range under vary, '
                                         'or several materials')
+        varied = sum(len(s.varied) for s in segments)
+        if varied:
+            # scipy's differential evolution: popsize x the varied parameters, rounded up to
+            # a power of two by the Sobol start, for the start and each generation.
+            size = 2 ** math.ceil(math.log2(population * varied))
+            pairs = size * (generations + 1) * len(materials)
+            if pairs > MAX_SEARCH_PAIRS:
+                raise ctx.error('search', f'population {population} x {varied} varied '
+                                f'parameters (a population of {size} with the Sobol start) '
+                                f'x {generations + 1} generations (the start and '
+                                f'{generations}) x {len(materials)} material fit(s) = '
+                                f'{pairs} pairs to assemble, more than {MAX_SEARCH_PAIRS} '
+                                '(about an hour at 0.2 s a pair)')
     except DesignError:
         raise
     except SceneError as err:

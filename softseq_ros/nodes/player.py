@@ -10,12 +10,15 @@ order, spaced as recorded divided by ``rate``; with ``clock`` the bag's time is 
 the recording.
 
 As ``ros2 bag play`` does, a replay can start ``start_offset_s`` into the bag, publish a topic
-under another name (``remap``: recorded name -> new name), take the QoS of some topics from
-an overrides file (``ros2 bag play --qos-profile-overrides-path``'s YAML: recorded topic name
--> history, depth, reliability, durability, deadline, lifespan, liveliness,
-liveliness_lease_duration, avoid_ros_namespace_conventions), and be paused, resumed and
-sped up while it runs. rosbag2's own service types (rosbag2_interfaces) are not installed
-here, so its services take the std_srvs forms: ``~/pause``, ``~/resume``,
+under another name (``remap``: recorded name -> new name, the player's own mapping of the
+recorded names, applied all at once, so ``A:=B`` with ``B:=A`` swaps two topics; it never
+reaches rcl, and two topics of different types under one name are refused), take the QoS of
+some topics from an overrides file (``ros2 bag play --qos-profile-overrides-path``'s YAML:
+recorded topic name -> history, depth, reliability, durability, deadline, lifespan,
+liveliness, liveliness_lease_duration, avoid_ros_namespace_conventions; a regular file of
+UTF-8, read without blocking, a depth of 32 bits, durations of int64 ns), and be paused,
+resumed and sped up while it runs. rosbag2's own service types (rosbag2_interfaces) are not
+installed here, so its services take the std_srvs forms: ``~/pause``, ``~/resume``,
 ``~/toggle_paused`` and ``~/is_paused`` (std_srvs/Trigger; ``is_paused`` answers in
 ``success``) and the rate is the node's ``rate`` parameter, set at run time as
 ``ros2 param set /softseq_player rate 2.0`` (rosbag2's ``~/set_rate`` and ``~/get_rate``).
@@ -32,6 +35,7 @@ from dataclasses import dataclass
 import importlib
 import math
 from pathlib import Path
+import sys
 import threading
 import time
 from typing import Any, Iterator, Mapping
@@ -45,6 +49,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
+from rclpy.expand_topic_name import expand_topic_name
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -61,11 +66,12 @@ import yaml
 
 from softseq_ros.bag.arrays import BagArrays, open_bag
 from softseq_ros.bag.reader import bag_summary
-from softseq_ros.errors import UserError
+from softseq_ros.errors import NotRegularFileError, UserError, read_regular_file
 from softseq_ros.stopping import HeldSignals
 from softseq_ros.wire import contract
 
 CLOCK_TOPIC = contract.CLOCK.name
+CLOCK_TYPE = contract.CLOCK.type_name
 # Longest sleep between two looks at the stop signals held (a replay at a slow rate sleeps long).
 SIGNAL_POLL_S = 0.05
 # rclpy's TimeSource subscribes to /clock with this QoS.
@@ -106,6 +112,13 @@ def rate_reason(rate: object) -> str | None:
     return None
 
 
+def _shown(value: object) -> str:
+    """``value`` for a message: an integer of hundreds of digits by its size only."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**20:
+        return f'an integer of {len(str(abs(value)))} digits'
+    return repr(value)
+
+
 def parse_remaps(rules: list[str] | None) -> dict[str, str]:
     """``FROM:=TO`` rules as a dict; PlayError naming the rule that is malformed."""
     remaps: dict[str, str] = {}
@@ -119,12 +132,68 @@ def parse_remaps(rules: list[str] | None) -> dict[str, str]:
     return remaps
 
 
+def _resolved(name: str) -> str:
+    """The fully qualified name the player's publisher of ``name`` gets."""
+    return expand_topic_name(name, BagPlayer.NODE_NAME, '/')
+
+
+def _check_one_type_per_name(bag: BagArrays, topics: list[str], remap: Mapping[str, str],
+                             clock: bool) -> None:
+    """
+    Refuse two played topics of different types published under one name (PlayError).
+
+    The names are those after ``remap`` (the player's own mapping, applied to the recorded
+    names at once, so ``A:=B`` with ``B:=A`` swaps them); with ``clock`` the player also
+    publishes rosgraph_msgs/msg/Clock on /clock.
+    """
+    placed: dict[str, tuple[str, str]] = {}
+    if clock:
+        placed[CLOCK_TOPIC] = ('the bag time of --clock', CLOCK_TYPE)
+    for topic in topics:
+        name, type_name = _resolved(remap.get(topic, topic)), bag.channels[topic].type_name
+        other, other_type = placed.setdefault(name, (topic, type_name))
+        if other_type != type_name:
+            said = ' '.join(f'--remap {source}:={target}' for source, target in remap.items()
+                            if _resolved(target) == name) or '--clock'
+            raise PlayError(f'{said}: {name} would carry {other} ({other_type}) and {topic} '
+                            f'({type_name}); a topic has one type')
+
+
+# A QoS duration is an int64 of nanoseconds in rcl (rcl_duration_t).
+MAX_QOS_DURATION_NS = 2**63 - 1
+# A history depth is a 32-bit integer in DDS (Fast DDS's HistoryQosPolicy.depth).
+MAX_QOS_DEPTH = 2**31 - 1
+
+
 def _qos_duration(path: str, topic: str, key: str, value: object) -> Duration:
     if not isinstance(value, Mapping) or set(value) - {'sec', 'nsec'} or not all(
-            isinstance(value.get(k, 0), int) and value.get(k, 0) >= 0 for k in ('sec', 'nsec')):
+            isinstance(value.get(k, 0), int) and not isinstance(value.get(k, 0), bool)
+            and value.get(k, 0) >= 0 for k in ('sec', 'nsec')):
         raise PlayError(f'{path}: {topic}.{key}: expected {{sec: S, nsec: N}} with '
                         f'non-negative integers, got {value!r}')
+    total = value.get('sec', 0) * 10**9 + value.get('nsec', 0)
+    if total > MAX_QOS_DURATION_NS:
+        raise PlayError(f'{path}: {topic}.{key}: {_shown(value.get("sec", 0))} s and '
+                        f'{_shown(value.get("nsec", 0))} ns is beyond the longest QoS duration, '
+                        f'{MAX_QOS_DURATION_NS} ns (int64, about 292 years)')
     return Duration(seconds=value.get('sec', 0), nanoseconds=value.get('nsec', 0))
+
+
+def _qos_text(path: str) -> str:
+    """The text of a QoS overrides file: a regular file of UTF-8, read without blocking."""
+    try:
+        data = read_regular_file(path)
+    except NotRegularFileError as err:
+        raise PlayError(f'{path}: cannot read the QoS overrides ({err.kind}, not a regular '
+                        'file)') from None
+    except OSError as err:
+        raise PlayError(f'{path}: cannot read the QoS overrides ({err.strerror or err})') \
+            from None
+    try:
+        return data.decode('utf-8-sig')
+    except UnicodeDecodeError as err:
+        raise PlayError(f'{path}: the QoS overrides are not UTF-8 text (byte {err.start}); '
+                        'save the file as UTF-8') from None
 
 
 def qos_overrides(path: str | Path, topics: list[str] | set[str]) -> dict[str, QoSProfile]:
@@ -137,13 +206,19 @@ def qos_overrides(path: str | Path, topics: list[str] | set[str]) -> dict[str, Q
     the key of anything that cannot be used, and a topic the bag does not hold.
     """
     path = str(path)
+    text = _qos_text(path)
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
-    except OSError as err:
-        raise PlayError(f'{path}: cannot read the QoS overrides ({err.strerror or err})') \
-            from None
+        data = yaml.safe_load(text)
+    except RecursionError:
+        # PyYAML nests one Python call per level: thousands of '[' exhaust the stack.
+        raise PlayError(f"{path}: YAML nested too deeply (more levels than Python's "
+                        f'recursion limit of {sys.getrecursionlimit()})') from None
     except yaml.YAMLError as err:
         raise PlayError(f'{path}: not YAML ({" ".join(str(err).split())})') from None
+    except ValueError as err:
+        # PyYAML's own constructors: an integer of more than 4300 digits, a bad date.
+        raise PlayError(f'{path}: YAML: a value cannot be read '
+                        f'({" ".join(str(err).split(";")[0].split())})') from None
     if not isinstance(data, Mapping):
         raise PlayError(f'{path}: expected a mapping of topic names to QoS profiles')
     profiles = {}
@@ -163,9 +238,11 @@ def qos_overrides(path: str | Path, topics: list[str] | set[str]) -> dict[str, Q
                                     f'{", ".join(names)}')
                 options[key] = names[value]
             elif key == 'depth':
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise PlayError(f'{path}: {topic}.depth: expected an integer >= 0, '
-                                    f'got {value!r}')
+                if isinstance(value, bool) or not isinstance(value, int) \
+                        or not 0 <= value <= MAX_QOS_DEPTH:
+                    raise PlayError(f'{path}: {topic}.depth: expected an integer >= 0 and '
+                                    f'<= {MAX_QOS_DEPTH} (a DDS history depth is 32 bits), '
+                                    f'got {_shown(value)}')
                 options['depth'] = value
             elif key in _DURATION_KEYS:
                 options[key] = _qos_duration(path, topic, key, value)
@@ -323,13 +400,15 @@ class BagPlayer(Node):
             except InvalidTopicNameException as err:
                 raise PlayError(f'--remap {source}:={target}: {target!r} is not a valid topic '
                                 f'name ({str(err).splitlines()[0]})') from None
+        _check_one_type_per_name(self.bag, self.topics, remap, clock)
         overrides = qos_overrides(qos_overrides_path, self.topics) \
             if qos_overrides_path is not None else {}
         summary = bag_summary(bag)
-        self.start_ns = summary.start_ns + int(round(start_offset_s * 1e9))
-        if start_offset_s > 0.0 and self.start_ns > summary.end_ns:
+        # Compared as a float first: 1e300 s is no integer of nanoseconds.
+        if start_offset_s > 0.0 and start_offset_s * 1e9 > summary.duration_ns + 0.5:
             raise PlayError(f"{bag}: start offset {start_offset_s:g} s is past the bag's end "
                             f'({summary.duration_ns * 1e-9:.9g} s after its start)')
+        self.start_ns = summary.start_ns + int(round(start_offset_s * 1e9))
         super().__init__(self.NODE_NAME, **node_options)
         self.loop = bool(loop)
         self.remap = remap
@@ -483,7 +562,10 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
 
     held.check()
     context = rclpy.Context()
-    rclpy.init(args=args, context=context)
+    # Never the command line (rclpy's default): rcl would take a FROM:=TO word of --remap for
+    # a remap rule of its own, apply it to the names the player chose (undoing a swap) and
+    # warn that the syntax is deprecated. --remap is the player's alone.
+    rclpy.init(args=['softseq'] if args is None else args, context=context)
     player = None
     try:
         player = BagPlayer(bag, rate=rate, loop=loop, clock=clock, topics=topics,
