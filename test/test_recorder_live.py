@@ -20,6 +20,27 @@ from softseq_ros.testing import spinning, wait_for
 pytestmark = pytest.mark.ros
 
 
+@pytest.fixture
+def own_domain():
+    """
+    A Context on a ROS domain no other test of this run uses.
+
+    A recorder of all topics records whatever its domain holds: the process's domain has seen
+    other tests' nodes (a managed pump's transition events), and DDS may still list them.
+    The workers of a run take consecutive domains; half the range away is free.
+    """
+    import os
+
+    import rclpy
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=(int(os.environ['ROS_DOMAIN_ID']) + 50) % 101 + 1)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
 def _get(node: Node, service: str, names: list[str]) -> list:
     client = node.create_client(GetParameters, service)
     assert client.wait_for_service(timeout_sec=15.0)
@@ -56,7 +77,9 @@ def test_get_parameters_answers_for_a_parameter_given_no_value(context, tmp_path
             Parameter('output', value=str(tmp_path / 'bad')), Parameter('types', value=5)])
 
 
-def test_regex_and_all_topics_take_topics_as_they_appear_and_split(context, tmp_path: Path):
+def test_regex_and_all_topics_take_topics_as_they_appear_and_split(own_domain,
+                                                                  tmp_path: Path):
+    context = own_domain
     # Started before any of its topics exists: what a regex or all_topics takes is found as
     # it appears. max_bag_duration splits the bag as it records.
     by_regex = Recorder(context=context, parameter_overrides=[
