@@ -27,6 +27,7 @@ equations, and that integration decides (:meth:`SnapLandings.land`).
 
 from dataclasses import dataclass
 import math
+from typing import Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,17 +85,14 @@ class UnplacedLandingError(RuntimeError):
     """
     A snap's flow came to rest where no branch is: ``pressure`` is the state's (its mean).
 
-    ``came_back``: nearer the branch the flow leaves than any other (it has not left it).
-
     The samples can step over a stable stretch shorter than their spacing (0.0014 Pa long,
     next to a single-row peak that two identical stepped tables share): the map is then
     assembled again with that pressure sampled (softseq_ros.quasistatic.equilibrium).
     """
 
-    def __init__(self, message: str, pressure: float, came_back: bool = False) -> None:
+    def __init__(self, message: str, pressure: float) -> None:
         super().__init__(message)
         self.pressure = pressure
-        self.came_back = came_back
 
 
 def base_first(direction: FloatArray, volumes: FloatArray, tol: float) -> float:
@@ -507,110 +505,72 @@ class SnapLandings:
         landings = FlowLandings(self.numerics, self.branches, self.reader).land(
             [index for index, _ in ends], np.array(totals), np.array(folds), np.array(starts))
         found = []
-        for (index, upward), total, start, landing in zip(ends, totals, starts, landings):
+        for (index, upward), total, start, fold, landing in zip(ends, totals, starts, folds,
+                                                               landings):
             if landing.branch >= 0:
                 found.append(BranchEnd('snap', landing.branch, landing.volumes))
-                continue
-            try:
-                found.append(self._land_alone(index, total, start, landing))
-            except RuntimeError as err:
-                came_back = isinstance(err, UnplacedLandingError) and err.came_back
-                end = self._land_stopped(index, upward, total, start, folds[len(found)],
-                                         landing, came_back)
-                if end is None:
-                    raise
-                found.append(end)
+            else:
+                found.append(self._land_alone(index, upward, total, start, fold, landing))
         return found
 
-    def _land_stopped(self, index: int, upward: bool, total: float, start: FloatArray,
-                      fold: FloatArray, landing: Landing, came_back: bool) -> BranchEnd | None:
+    def _land_alone(self, index: int, upward: bool, total: float, start: FloatArray,
+                    fold: FloatArray, landing: Landing) -> BranchEnd:
         """
-        The landing of a flow that stopped where no other branch holds it (None: none found).
+        Where a flow that no certain basin took lands: the first of its lone flows placed.
 
-        In turn: where the end is a corner of a plateau (_corner_starts), the steps that leave
-        it; the flow on to a tighter rest; the flow integrated alone from its start (the
-        flows run together can rest beside a fold where the state barely moves: a branch
-        whose total changes by 3e-11 m^3 over 4 Pa); the step on the fold's other side (on a
-        branch a few fold offsets long, as next to two identical tables' common valley, the
-        drift's sign is round-off, and the flow can go back onto the branch it left). A flow
-        that ``came_back`` to the branch it leaves is integrated alone before it goes on to a
-        tighter rest: beside such a fold it would creep there (72 s on four identical stepped
-        tables, against 4 s in all).
+        In turn, each run alone to rest (:meth:`RedistributionFlow.run`) and placed on the
+        branch holding the state where it rests (:meth:`_nearest_branch`), or on the domain's
+        end where a segment reaches the end of its range:
+
+        1. Where the side-by-side flow stopped, if it came to rest (not on a saddle): next to
+           a flat piece, or on a plateau (flat pieces at one pressure: a neutral set, where a
+           flow stays wherever it arrives), the flow's own end says where, and integrating it
+           again would only move it along the set. Else the flow from its start.
+        2. Where the end is a corner of a plateau (:meth:`_corner_starts`), the steps that
+           leave it.
+        3. The flow from its start, if 1 did not run it: the flows run side by side can rest
+           beside a fold where the state barely moves (a branch whose total changes by
+           3e-11 m^3 over 4 Pa), or go back onto the branch they leave.
+        4. The side-by-side flow's end, on to a balance at round-off: a balance to
+           ``flow_rest`` counts as rest, and next to a segment whose slope is nearly 0 (a
+           plateau's corner, in a table in steps) the flow can still be on its way, slowly,
+           with no equilibrium where it stopped.
+        5. The step on the fold's other side: on a branch a few fold offsets long (next to
+           two identical tables' common valley) the way the flow points is round-off, and
+           the flow from the usual step can go back onto the branch it left.
+
+        None placed: :class:`UnplacedLandingError` with where the first came to rest.
         """
-        def corner() -> BranchEnd | None:
-            return self._leave_corner(index, upward, total)
-
-        def tighter_rest() -> BranchEnd | None:
-            return self._go_on_from_rest(index, total, landing)
-
-        def alone() -> BranchEnd | None:
-            if landing.why not in ('rest', 'horizon'):
-                return None
-            return self._placed(index, total, self.flow.run(start))
-
-        def other_side() -> BranchEnd | None:
-            return self._placed(index, total, self.flow.run(2.0 * fold - start))
-
-        steps = ((corner, alone, tighter_rest, other_side) if came_back
-                 else (corner, tighter_rest, alone, other_side))
-        for step in steps:
-            end = step()
-            if end is not None:
-                return end
-        return None
-
-    def _land_alone(self, index: int, total: float, start: FloatArray,
-                    landing: Landing) -> BranchEnd:
-        """Where a flow that no certain basin took lands: its own end, or its integration."""
-        if landing.why in ('rest', 'horizon') and not self.flow.saddle(landing.volumes):
-            # At rest where no ball is certain: next to a flat piece, or on a plateau (flat
-            # pieces at one pressure: a neutral set, where a flow stays wherever it arrives).
-            # The flow's own end says where; integrating it again with looser error control
-            # would only move it along the set.
-            landed = landing.volumes
-        else:
-            landed = self.flow.run(start)
+        rested = landing.why in ('rest', 'horizon') and not self.flow.saddle(landing.volumes)
+        first = None
+        for landed in self._lone_flows(index, upward, start, fold, landing, rested):
             if self.numerics.at_edge(landed):
                 return BranchEnd('limit')
-        return self._snap_to(index, total, landed)
+            target, distance = self._nearest_branch(total, landed, exclude=index)
+            if target >= 0:
+                return BranchEnd('snap', target,
+                                 self.reader.read(target, np.array([total])).volumes[0])
+            if first is None:
+                first = landed, distance
+        landed, distance = first
+        raise UnplacedLandingError(
+            f'snap-through at total volume {total:.9g} m^3 found no stable state to land on '
+            f'(nearest {distance:.3g} m^3 away)',
+            float(np.mean(self.numerics.model_pressures(landed[None, :]))))
 
-    def _snap_to(self, index: int, total: float, landed: FloatArray) -> BranchEnd:
-        """The snap onto the branch holding ``landed`` at ``total`` (else UnplacedLandingError)."""
-        target = self._nearest_branch(total, landed, exclude=index)
-        return BranchEnd('snap', target, self.reader.read(target, np.array([total])).volumes[0])
+    def _lone_flows(self, index: int, upward: bool, start: FloatArray, fold: FloatArray,
+                    landing: Landing, rested: bool) -> Iterator[FloatArray]:
+        """Where the lone flows of :meth:`_land_alone` come to rest, in its order, lazily."""
+        flow = self.flow
+        yield landing.volumes if rested else flow.run(start)
+        for step in self._corner_starts(index, upward):
+            yield flow.run(step)
+        if rested:
+            yield flow.run(start)
+        yield flow.integrate(landing.volumes, rest=ROUND_OFF_REST)
+        yield flow.run(2.0 * fold - start)
 
-    def _placed(self, index: int, total: float, landed: FloatArray) -> BranchEnd | None:
-        """The domain's end where ``landed`` is at a range's edge, else its snap (None: none)."""
-        if self.numerics.at_edge(landed):
-            return BranchEnd('limit')
-        try:
-            return self._snap_to(index, total, landed)
-        except RuntimeError:
-            return None
-
-    def _leave_corner(self, index: int, upward: bool, total: float) -> BranchEnd | None:
-        """The first landing from the corner's steps (None: the end is no such corner)."""
-        branch = self.branches[index]
-        fold = branch.volumes[-1 if upward else 0]
-        for start in self._corner_starts(branch, fold, upward):
-            end = self._placed(index, total, self.flow.run(start))
-            if end is not None:
-                return end
-        return None
-
-    def _go_on_from_rest(self, index: int, total: float, landing: Landing) -> BranchEnd | None:
-        """
-        The landing of a flow that rested where no branch is, integrated on to a tighter rest.
-
-        A balance to ``flow_rest`` counts as rest; next to a segment whose slope is nearly 0
-        (a plateau's corner, in a table in steps) the flow can still be on its way there,
-        slowly, with no equilibrium where it stopped. It goes on until the pressures balance
-        to round-off (None: it cannot be placed then either).
-        """
-        return self._placed(index, total,
-                            self.flow.integrate(landing.volumes, rest=ROUND_OFF_REST))
-
-    def _corner_starts(self, branch: Branch, fold: FloatArray, upward: bool) -> list[FloatArray]:
+    def _corner_starts(self, index: int, upward: bool) -> list[FloatArray]:
         """
         Steps off a branch end where a flat segment reaches the end of its flat.
 
@@ -625,6 +585,8 @@ class SnapLandings:
         segment alike.
         """
         numerics = self.numerics
+        branch = self.branches[index]
+        fold = branch.volumes[-1 if upward else 0]
         k = numerics.stiffness(branch.pieces, fold[None, :])[0]
         at_end = False
         for i, (piece, a) in enumerate(zip(branch.pieces, numerics.piece_indices(branch.pieces))):
@@ -657,9 +619,13 @@ class SnapLandings:
         eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
         return v_fold + self.flow.direction(v_fold, null, eps) * eps * null
 
-    def _nearest_branch(self, total: float, volumes: FloatArray, exclude: int) -> int:
+    def _nearest_branch(self, total: float, volumes: FloatArray,
+                        exclude: int) -> tuple[int, float]:
         """
         The branch whose state at ``total`` is where the flow came to rest (``volumes``).
+
+        With its distance; -1 when none is within the landing distance, or when the branch
+        the flow leaves (``exclude``) is nearer than any other.
 
         On a plateau (segments on flat pieces at one pressure) every split of the flat
         segments' fluid is an equilibrium of the same energy; the map keeps one of them per
@@ -697,14 +663,9 @@ class SnapLandings:
         # A flow that rests nearer the branch it leaves than any other has not left it (a
         # fold so flat that the flow barely moves); another branch within the landing
         # distance is then no landing.
-        came_back = back < best_distance
-        if best < 0 or best_distance > landing or came_back:
-            raise UnplacedLandingError(
-                f'snap-through at total volume {total:.9g} m^3 found no stable state to land '
-                f'on (nearest {best_distance:.3g} m^3 away)',
-                float(np.mean(self.numerics.model_pressures(volumes[None, :]))),
-                came_back=came_back)
-        return best
+        if best < 0 or best_distance > landing or back < best_distance:
+            return -1, best_distance
+        return best, best_distance
 
 
 class _Basins:
