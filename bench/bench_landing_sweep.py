@@ -15,7 +15,7 @@ identical (the same parameters and rows for every segment: flats at the same pre
 pitchforks, saddles and plateaus shared by several segments).
 
 Each set's ``EquilibriumMap`` and ``transition_graph`` are built in a forked process with a
-time limit (``--limit``, 300 s), one set at a time, and every snap is checked as
+time limit (``--limit``, 600 s), one set at a time, and every snap is checked as
 test/test_graph.py's ``assert_snaps_land_on_balanced_stable_states`` checks it (the tie
 between identical segments not asserted: the mirror landings are equally stable): the total
 volume conserved (1e-9), the pressures after it balanced (1e-4 Pa), a stable or neutral
@@ -45,7 +45,7 @@ REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / 'bench' / 'landing_sweep_results.md'
 SEED = 20261204
 SETS = 70
-LIMIT_S = 300.0
+LIMIT_S = 600.0
 RADIUS = 0.006
 V0 = 4.0 / 3.0 * math.pi * RADIUS**3
 STEPS = (0.0, 10.0, 100.0)

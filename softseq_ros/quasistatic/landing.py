@@ -80,7 +80,6 @@ class Landing:
     why: str = 'basin'     # or why none is certain: 'range', 'rest', 'stalled', 'horizon', 'steps'
 
 
-
 class UnplacedLandingError(RuntimeError):
     """
     A snap's flow came to rest where no branch is: ``pressure`` is the state's (its mean).
