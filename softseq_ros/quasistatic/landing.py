@@ -219,7 +219,8 @@ class RedistributionFlow:
     def _balance(self, p: FloatArray) -> FloatArray:
         """The forcing from the pressures ``p`` (m, N) [Pa]: mean p - p_i, scaled."""
         p = p / self.numerics.p_scale
-        return np.mean(p, axis=1, keepdims=True) - p
+        # np.mean's numbers (its sum, then a division by the count), without its overhead.
+        return np.add.reduce(p, axis=1, keepdims=True) / p.shape[1] - p
 
     def stiffnesses(self, y: FloatArray) -> FloatArray:
         """The scaled stiffnesses dp_i/dv_i at scaled volumes ``y`` (m, N)."""
