@@ -101,6 +101,11 @@ QUICK = {
          r'\de-1[3-9]) \| - \| - \|',
          r'\| 3 \| table \| 20 / 27 \| 21 \| 12 \| \d+\.\d\d \| \d+\.\d\d \| - \|'],
         ['bench/graph_results.md']),
+    'bench_landing_sweep.py': (
+        ['| set | tables | parameters', '8 sets, 0 failed'],
+        [r'\| 2 \| 4 identical, 100 Pa \| [^|]* \| [1-9]\d* \| [1-9]\d* \| \d+\.\d \| pass \|',
+         r'\| 16 \| 3 identical, 10 Pa \| [^|]* \| [1-9]\d* \| [1-9]\d* \| \d+\.\d \| pass \|'],
+        ['bench/landing_sweep_results.md']),
     'bench_fem.py': (
         ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
          '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],

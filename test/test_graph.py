@@ -22,7 +22,6 @@ from softseq_ros.analysis.figures import STYLE
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import recording_metrics, summary_text
 from softseq_ros.cli import main
-from softseq_ros.quasistatic.branch_ends import BranchEnds
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, inflate_and_deflate
 from softseq_ros.quasistatic.graph import (
     DEFLATION,
@@ -34,7 +33,7 @@ from softseq_ros.quasistatic.graph import (
     stored_energy,
     transition_graph,
 )
-from softseq_ros.quasistatic.landing import FlowLandings
+from softseq_ros.quasistatic.landing import FlowLandings, RedistributionFlow
 from softseq_ros.quasistatic.solve import equilibrium_map, scene_map
 from softseq_ros.scene.loader import load_scene, scene_from_dict
 from softseq_ros.segments.materials import NeoHookean
@@ -332,11 +331,11 @@ def test_flows_onto_plateaus_of_different_stepped_tables_come_to_rest(monkeypatc
         ends.extend(landing.why for landing in found if landing.branch < 0)
         return found
 
-    def alone(self, start):
+    def alone(self, start, rest=None):
         raise AssertionError(f'a flow from {start} was integrated alone')
 
     monkeypatch.setattr(FlowLandings, 'land', recording)
-    monkeypatch.setattr(BranchEnds, '_integrate', alone)
+    monkeypatch.setattr(RedistributionFlow, 'integrate', alone)
     emap = EquilibriumMap(segments)
     assert 'rest' in ends and 'steps' not in ends
     assert_snaps_land_on_balanced_stable_states(segments, transition_graph(emap),

@@ -268,3 +268,82 @@ def test_one_public_way_to_run_a_batch_and_one_to_read_a_bag():
     assert f'{PACKAGE}.solve' in api and f'{PACKAGE}.bag.BagWriter' in api
     assert jobs_of(api) == {'run a batch': [f'{PACKAGE}.run'],
                             'read a bag': [f'{PACKAGE}.load_recording']}
+
+
+# The redistribution flow of a snap (its equations, its rest and stability tests, its
+# integration) lives in the landing's module alone: the other modules of the quasi-static
+# solver hand it their folds and get landings back.
+LANDING = f'{PACKAGE}.quasistatic.landing'
+FLOW_OBJECTS = ('RedistributionFlow', 'FlowLandings', 'stable')
+INTEGRATORS = ('solve_ivp', 'odeint', 'ode', 'Radau', 'LSODA', 'BDF', 'RK45')
+
+
+def _is_mean(node: ast.AST) -> bool:
+    """A call of ``mean`` or ``average`` (np.mean(p), p.mean(), mean(p, axis=1))."""
+    if not isinstance(node, ast.Call):
+        return False
+    func = node.func
+    name = func.attr if isinstance(func, ast.Attribute) else getattr(func, 'id', '')
+    return name in ('mean', 'average')
+
+
+def flow_reaches(source: str, name: str) -> list[str]:
+    """
+    Where ``source`` (module ``name``) reaches into the landing's flow: imports its flow
+    object or stability test, imports an ODE integrator, or writes a flow's forcing (a
+    pressure less the mean pressure, or the mean less a pressure).
+    """
+    package = name.split('.')[:-1]
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:
+                base = '.'.join(package[:len(package) - node.level + 1]
+                                + ([node.module] if node.module else []))
+            for alias in node.names:
+                if base == LANDING and alias.name in FLOW_OBJECTS:
+                    found.append(f'imports {alias.name} from the landing')
+                if base.startswith('scipy.integrate') and alias.name in INTEGRATORS:
+                    found.append(f'imports the integrator {alias.name}')
+        elif isinstance(node, ast.Attribute) and node.attr in FLOW_OBJECTS[:2]:
+            found.append(f'uses {node.attr}')
+        elif (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Sub)
+              and (_is_mean(node.left) or _is_mean(node.right))):
+            found.append(f'writes a flow forcing in line {node.lineno}')
+    return found
+
+
+def test_the_flow_check_catches_a_module_reaching_into_the_flow():
+    sources = {
+        'ends': 'from softseq_ros.quasistatic.landing import RedistributionFlow\n',
+        'relative': 'from .landing import stable, SnapLandings\n',
+        'drift': 'import numpy as np\ndef drift(p, n):\n    return -np.dot(p - p.mean(), n)\n',
+        'batched': 'import numpy as np\nf = np.mean(p, axis=1, keepdims=True) - p\n',
+        'alone': 'from scipy.integrate import solve_ivp\n',
+        'module': 'from softseq_ros.quasistatic import landing\nx = landing.FlowLandings\n',
+        'clean': 'from softseq_ros.quasistatic.landing import SnapLandings\nd = p - q\n',
+    }
+    found = {key: flow_reaches(text, f'{PACKAGE}.quasistatic.{key}')
+             for key, text in sources.items()}
+    assert found == {
+        'ends': ['imports RedistributionFlow from the landing'],
+        'relative': ['imports stable from the landing'],
+        'drift': ['writes a flow forcing in line 3'],
+        'batched': ['writes a flow forcing in line 2'],
+        'alone': ['imports the integrator solve_ivp'],
+        'module': ['uses FlowLandings'],
+        'clean': [],
+    }
+
+
+def test_only_the_landing_writes_the_redistribution_flow():
+    modules = package_modules()
+    quasistatic = {name: path for name, path in modules.items()
+                   if name.startswith(f'{PACKAGE}.quasistatic.')}
+    assert LANDING in quasistatic and len(quasistatic) > 5
+    # The check sees the landing's own flow.
+    assert flow_reaches(quasistatic[LANDING].read_text(encoding='utf-8'), LANDING)
+    offenders = {name: flow_reaches(path.read_text(encoding='utf-8'), name)
+                 for name, path in quasistatic.items() if name != LANDING}
+    assert {name: found for name, found in offenders.items() if found} == {}

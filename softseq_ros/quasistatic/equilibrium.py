@@ -34,8 +34,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.assembly import Assembly, EquilibriumCurve
-from softseq_ros.quasistatic.branch_ends import BranchEnds, UnplacedLandingError
+from softseq_ros.quasistatic.branch_ends import BranchEnds
 from softseq_ros.quasistatic.branches import Branch
+from softseq_ros.quasistatic.landing import UnplacedLandingError
 from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics
 from softseq_ros.quasistatic.sequence import (
     SEQUENCE_TYPES,

@@ -1,12 +1,18 @@
 """
-Where snaps land: the redistribution flow from every fold of a map, integrated side by side.
+Where snaps land: the redistribution flow of the stored energy, written once, from every fold.
 
 At a fold the fluid redistributes between the segments at constant total volume, along the
 gradient flow of the stored energy on sum v = V with equal conductances,
 dv_i/dt = -(p_i - mean p), until it rests on a stable state: the one whose basin the flow is in.
+:class:`RedistributionFlow` is that flow and nothing else: its forcing, its Jacobian, its rest
+test and its stability test, each written once, and its two integrators (every fold's flow side
+by side; one flow alone). No other module of the solver evaluates the flow: the branch ends
+(softseq_ros.quasistatic.branch_ends) hand their folds to :class:`SnapLandings` and get back
+where each snap lands.
+
 The flow only has to reach the right basin (the landing state is then read off its branch
 exactly), so it stops as soon as the basin is certain: the state lies within a ball around a
-stable branch's state on which the energy is convex (:func:`certified_radius`); a gradient flow
+stable branch's state on which the energy is convex (:func:`certified_radii`); a gradient flow
 never leaves such a ball and ends at its centre.
 
 All the folds' flows are integrated at once, each with its own step, by the Rosenbrock method
@@ -14,17 +20,26 @@ RODAS4 (6 stages, order 4, stiffly accurate, with an embedded order-3 error esti
 and Wanner, Solving ODEs II): stiff near a segment's stiff end, so implicit,
 and linearly implicit, so each step costs four solves of an N x N system with the exact
 Jacobian d(dv_i/dt)/dv_j = k_j / N - k_i delta_ij, done for every fold in one array call.
-One flow at a time cost a few hundred steps of scipy's LSODA, each several Python calls per
-segment; side by side a step is a few dozen array calls for all of them.
+A flow for which no basin becomes certain (it leaves a segment's range, comes to rest where
+no ball is certain, stalls or runs out of steps) is integrated alone, with Radau and the same
+equations, and that integration decides (:meth:`SnapLandings.land`).
 """
 
 from dataclasses import dataclass
+import math
+from typing import Iterator
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.integrate import solve_ivp
 
-from softseq_ros.quasistatic.branches import Branch
-from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics, cofactor_sum
+from softseq_ros.quasistatic.branches import Branch, BranchEnd
+from softseq_ros.quasistatic.numerics import (
+    FloatArray,
+    SegmentNumerics,
+    cofactor_sum,
+    soft_direction,
+)
 from softseq_ros.quasistatic.states import StateReader
 
 # RODAS4 (Hairer and Wanner) in the form G K_i = f(Y_i) + sum_j C_ij K_j / h with
@@ -49,6 +64,12 @@ HORIZON = 1e14
 RADII = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
 PROBES = 33
 
+# The flow's drifts on the two sides of a branch end cancel to this share of the larger: a
+# pitchfork (mirror images up to round-off, or both zero), not a fold.
+PITCHFORK = 1e-6
+# The balance (of the pressure scale) a flow that rested where no branch is goes on to.
+ROUND_OFF_REST = 1e-13
+
 
 @dataclass
 class Landing:
@@ -57,6 +78,49 @@ class Landing:
     branch: int
     volumes: FloatArray    # that branch's state at the fold's total, or where the flow stopped
     why: str = 'basin'     # or why none is certain: 'range', 'rest', 'stalled', 'horizon', 'steps'
+
+
+class UnplacedLandingError(RuntimeError):
+    """
+    A snap's flow came to rest where no branch is: ``pressure`` is the state's (its mean).
+
+    The samples can step over a stable stretch shorter than their spacing (0.0014 Pa long,
+    next to a single-row peak that two identical stepped tables share): the map is then
+    assembled again with that pressure sampled (softseq_ros.quasistatic.equilibrium).
+    """
+
+    def __init__(self, message: str, pressure: float) -> None:
+        super().__init__(message)
+        self.pressure = pressure
+
+
+def base_first(direction: FloatArray, volumes: FloatArray, tol: float) -> float:
+    """
+    The sign of ``direction`` that gives the segment nearer the base the larger share.
+
+    The tie-break wherever the physics leaves mirror continuations (identical segments at the
+    same state), the same rule as a join's: of the first two segments at the same volume
+    (to ``tol``) that ``direction`` moves apart, the one nearer the base gains; else the first
+    segment it moves at all.
+    """
+    n = direction.size
+    for i in range(n):
+        for j in range(i + 1, n):
+            apart = direction[i] - direction[j]
+            if abs(volumes[i] - volumes[j]) <= tol and abs(apart) > PITCHFORK:
+                return math.copysign(1.0, apart)
+    base = int(np.argmax(np.abs(direction) > PITCHFORK))
+    return math.copysign(1.0, direction[base])
+
+
+def stable(k: FloatArray, cofactor: float) -> NDArray[np.bool_]:
+    """
+    The stability test, along the last axis of scaled stiffnesses ``k``.
+
+    The Hessian of the stored energy on sum v = V, diag(k) restricted to sum dv = 0, is
+    positive definite: at most one k_i negative and the cofactor sum D above ``cofactor``.
+    """
+    return (np.sum(k < 0.0, axis=-1) <= 1) & (cofactor_sum(k) > cofactor)
 
 
 def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArray:
@@ -107,10 +171,208 @@ def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArra
                 least = np.minimum.reduceat(padded, bounds)[::2]
                 smallest[:, :, i][some] = np.minimum(smallest[:, :, i][some], least)
     k = smallest / numerics.k_scale
-    passes = ((np.sum(k < 0.0, axis=2) <= 1)
-              & (cofactor_sum(k) > numerics.tolerances.stable_cofactor)
+    passes = (stable(k, numerics.tolerances.stable_cofactor)
               & (radii[None, :] < room[:, None]))
     return np.where(passes.any(axis=1), radii[np.argmax(passes, axis=1)], 0.0)
+
+
+class RedistributionFlow:
+    """
+    The gradient flow of the stored energy on sum v = V: the one place its equations live.
+
+    In scaled variables y = v / v_scale and pressures over p_scale, with equal conductances,
+    dy_i/dt = mean p - p_i (:meth:`forcing`); its Jacobian is k_j / N - k_i delta_ij with the
+    scaled stiffnesses k (:meth:`shifted`). A flow is at rest where the pressures balance
+    (to ``flow_rest``) at a stable state (:func:`stable`) or at a neutral one: some segments
+    on flat pieces, every other one stiffening (:meth:`neutral`), where fluid moved between
+    the flat ones changes no pressure and fluid moved into a stiffening one raises its
+    pressure, so the flow has nowhere to go. A saddle is balanced and clearly unstable.
+    """
+
+    def __init__(self, numerics: SegmentNumerics) -> None:
+        """The flow of ``numerics``' segments, at its scales and tolerances."""
+        self.numerics = numerics
+
+    def _inside(self, v: FloatArray) -> FloatArray:
+        numerics = self.numerics
+        return np.minimum(np.maximum(v, numerics.rest_volumes),
+                          numerics.max_volumes)     # np.clip's numbers, without its dispatch
+
+    def forcing(self, y: FloatArray) -> FloatArray:
+        """dy/dt at scaled volumes ``y`` (m, N): mean p - p_i, over the pressure scale."""
+        return self._forcing_at(self._inside(y * self.numerics.v_scale))
+
+    def _forcing_at(self, v: FloatArray) -> FloatArray:
+        return self._balance(self.numerics.model_pressures(v))
+
+    def _forcing_one(self, v: FloatArray) -> FloatArray:
+        """
+        :meth:`forcing` at one state's volumes ``v`` (N,), inside the ranges, evaluated alone.
+
+        Each segment's own call at its volume (for a table, its cubic on plain floats): the
+        lone integration's numbers, equal to the side-by-side evaluation to round-off, and
+        cheaper for a single state.
+        """
+        p = np.array([s.pressure(x) for s, x in zip(self.numerics.segments, v)])
+        return self._balance(p[None, :])[0]
+
+    def _balance(self, p: FloatArray) -> FloatArray:
+        """The forcing from the pressures ``p`` (m, N) [Pa]: mean p - p_i, scaled."""
+        p = p / self.numerics.p_scale
+        # np.mean's numbers (its sum, then a division by the count), without its overhead.
+        return np.add.reduce(p, axis=1, keepdims=True) / p.shape[1] - p
+
+    def stiffnesses(self, y: FloatArray) -> FloatArray:
+        """The scaled stiffnesses dp_i/dv_i at scaled volumes ``y`` (m, N)."""
+        return self._stiffnesses_at(self._inside(y * self.numerics.v_scale))
+
+    def _stiffnesses_at(self, v: FloatArray) -> FloatArray:
+        return self.numerics.model_stiffnesses(v) / self.numerics.k_scale
+
+    def forces(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`forcing` and :meth:`stiffnesses` at once."""
+        return self.forcing(y), self.stiffnesses(y)
+
+    @staticmethod
+    def shifted(k: FloatArray, shift: FloatArray | float) -> FloatArray:
+        """
+        The matrix shift I - J, J the flow's Jacobian d(dy_i/dt)/dy_j = k_j / N - k_i delta_ij.
+
+        From scaled stiffnesses ``k`` (..., N); ``shift`` 0 gives -J (Radau's), 1 / (h gamma)
+        a Rosenbrock step's matrix.
+        """
+        n = k.shape[-1]
+        g = np.broadcast_to(-k[..., None, :] / n, k.shape[:-1] + (n, n)).copy()
+        g[..., np.arange(n), np.arange(n)] += shift + k
+        return g
+
+    def drift(self, volumes: FloatArray, direction: FloatArray) -> FloatArray:
+        """How fast the flow moves along ``direction`` at ``volumes`` (m, N) [m^3]."""
+        return self._forcing_at(self._inside(volumes)) @ direction
+
+    def neutral(self, volumes: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
+        """Per row (m, N): some segments on flat pieces, every other one clearly stiffening."""
+        flat = self.numerics.on_flat_pieces(volumes)
+        return np.any(flat, axis=1) & np.all(
+            flat | (k > self.numerics.tolerances.stable_cofactor), axis=1)
+
+    def at_rest(self, y: FloatArray, force: FloatArray, k: FloatArray,
+                rest: float | None = None) -> NDArray[np.bool_]:
+        """Per row: balanced to ``rest`` (default ``flow_rest``), stable or neutral."""
+        tolerances = self.numerics.tolerances
+        balanced = np.max(np.abs(force), axis=1) < (tolerances.flow_rest if rest is None
+                                                    else rest)
+        return balanced & (stable(k, tolerances.stable_cofactor)
+                           | self.neutral(y * self.numerics.v_scale, k))
+
+    def saddle(self, volumes: FloatArray) -> bool:
+        """
+        Balanced pressures at a clearly unstable state (two falling pieces, or D < 0).
+
+        Asked only where a flow has run to its horizon, long past the fold it started next to
+        (near a fold D is about 0 and the pressures balance too).
+        """
+        v = self._inside(volumes[None, :])
+        force, k = self._forcing_at(v), self._stiffnesses_at(v)
+        tolerances = self.numerics.tolerances
+        return bool(np.max(np.abs(force)) < tolerances.flow_rest
+                    and (np.sum(k < 0.0) >= 2
+                         or cofactor_sum(k[0]) < -tolerances.stable_cofactor))
+
+    def direction(self, volumes: FloatArray, along: FloatArray, eps: float) -> float:
+        """
+        The way the flow points along ``along`` on both sides of ``volumes`` (ties as joins).
+
+        At a fold the flow points the same way on both sides (the energy along the soft
+        direction is a cubic there). Where it points away on both sides alike, or nowhere
+        (on flat pieces), the end is a pitchfork: identical segments at the same state,
+        where either may take the fluid; the tie is broken as at a join (:func:`base_first`).
+        """
+        ahead, behind = self.drift(np.stack([volumes + eps * along, volumes - eps * along]),
+                                   along).tolist()
+        if abs(ahead + behind) <= PITCHFORK * max(abs(ahead), abs(behind)):
+            return base_first(along, volumes, self.numerics.tol_v)
+        return math.copysign(1.0, ahead + behind)
+
+    def step(self, y: FloatArray, h: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """One RODAS4 step of every flow (its own h): the new state and the error estimate."""
+        force, k = self.forces(y)
+        hh = h[:, None]
+        g = self.shifted(k, 1.0 / (hh * GAMMA))
+        try:
+            inverse = np.linalg.inv(g)
+        except np.linalg.LinAlgError:
+            inverse = np.linalg.pinv(g)
+        stages: list[FloatArray] = []
+        for i in range(len(M)):
+            f = self.forcing(y + sum(a * s for a, s in zip(A[i], stages))) if i else force
+            rhs = f + sum(c * s for c, s in zip(C[i], stages)) / hh if i else f
+            stages.append(np.einsum('mij,mj->mi', inverse, rhs))
+        return y + sum(m * s for m, s in zip(M, stages)), stages[-1]
+
+    def integrate(self, start: FloatArray, rest: float | None = None) -> FloatArray:
+        """
+        One flow from ``start`` [m^3] until it comes to rest (:meth:`at_rest`), alone.
+
+        Stiff near walls, so Radau with the exact Jacobian. The flow only has to reach the
+        right basin (the landing state is then read off its branch exactly), so the
+        tolerances are modest and the horizon grows until the flow is at rest, to ``rest``
+        (default ``flow_rest``), or leaves a segment's range.
+        """
+        numerics = self.numerics
+        scale_v = numerics.v_scale
+        lo, hi = numerics.rest_volumes, numerics.max_volumes
+
+        def rhs(_t: float, y: FloatArray) -> FloatArray:
+            return self._forcing_one(np.clip(y * scale_v, lo, hi))
+
+        def jacobian(_t: float, y: FloatArray) -> FloatArray:
+            return -self.shifted(self.stiffnesses(y[None, :])[0], 0.0)
+
+        def leaves_range(_t: float, y: FloatArray) -> float:
+            # Crosses zero when a segment leaves its model's range: the domain ends there.
+            v = y * scale_v
+            return float(np.min(np.minimum(v - lo, hi - v)) / scale_v)
+
+        leaves_range.terminal = True
+        tolerances = numerics.tolerances
+        y = start / scale_v
+        t = 0.0
+        for horizon in np.logspace(2, 14, 13):
+            with np.errstate(divide='ignore'):   # a step of zero error (on flat pieces)
+                sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian,
+                                rtol=tolerances.flow_rtol, atol=tolerances.flow_atol,
+                                events=leaves_range)
+            y, t = sol.y[:, -1], horizon
+            if sol.status == 1:
+                break
+            force = rhs(t, y)[None, :]
+            if self.at_rest(y[None, :], force, self.stiffnesses(y[None, :]), rest)[0]:
+                break
+        return np.clip(y * scale_v, lo, hi)
+
+    def run(self, start: FloatArray) -> FloatArray:
+        """
+        :meth:`integrate` from ``start``, past any saddle it stops on.
+
+        Identical segments at the same state stay identical along the flow (their equations
+        are the same to the bit), so a flow from a fold where they share the fluid alike can
+        only reach states where they still do: on three identical stepped tables, two of them
+        past their peak together, balanced on two falling pieces (a saddle). Any real
+        actuator leaves it: the flow goes on from a small step along the saddle's unstable
+        direction, the tie broken as at a join (:func:`base_first`). Each saddle passed
+        lowers the stored energy; at most one per segment.
+        """
+        numerics = self.numerics
+        eps = numerics.tolerances.fold_offset * numerics.v_scale
+        landed = self.integrate(start)
+        for _ in range(len(numerics.segments)):
+            if not self.saddle(landed):
+                break
+            null = soft_direction(self._stiffnesses_at(self._inside(landed[None, :]))[0])
+            landed = self.integrate(
+                landed + base_first(null, landed, numerics.tol_v) * eps * null)
+        return landed
 
 
 class FlowLandings:
@@ -122,6 +384,7 @@ class FlowLandings:
         self.numerics = numerics
         self.branches = branches
         self.reader = reader
+        self.flow = RedistributionFlow(numerics)
 
     def land(self, sources: list[int], totals: FloatArray, folds: FloatArray,
              starts: FloatArray) -> list[Landing]:
@@ -145,14 +408,14 @@ class FlowLandings:
         origin = np.asarray(folds, dtype=float) / scale_v
         t = np.zeros(count)
         results: list[Landing | None] = [None] * count
-        _, k = self._forces(y)
+        k = self.flow.stiffnesses(y)
         h = 1e-3 / np.maximum(1.0, np.max(np.abs(k - k / k.shape[1]), axis=1))
         next_rest_check = np.full(count, 100.0)
         active = np.arange(count)
         for _ in range(MAX_STEPS):
             if active.size == 0:
                 break
-            y_new, error = self._step(y[active], h[active])
+            y_new, error = self.flow.step(y[active], h[active])
             scale = tolerances.flow_atol + np.maximum(
                 tolerances.flow_rtol * np.maximum(np.abs(y[active]), np.abs(y_new)),
                 tolerances.flow_rtol_moved * np.maximum(np.abs(y[active] - origin[active]),
@@ -192,13 +455,10 @@ class FlowLandings:
                 next_rest_check[late] *= 10.0
             due = np.array([i for i in due.tolist() if results[i] is None], dtype=np.intp)
             if due.size:
-                force, k = self._forces(y[due])
+                force, k = self.flow.forces(y[due])
                 # Or balanced on a plateau (flat pieces), where the flow has nowhere to go:
                 # stepping on only walks it along the plateau by round-off.
-                rest = ((np.max(np.abs(force), axis=1) < tolerances.flow_rest)
-                        & (((np.sum(k < 0.0, axis=1) <= 1)
-                            & (cofactor_sum(k) > tolerances.stable_cofactor))
-                           | numerics.neutral(y[due] * scale_v, k)))
+                rest = self.flow.at_rest(y[due], force, k)
                 for index in due[rest].tolist():
                     results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'rest')
             active = np.array([i for i in active.tolist() if results[i] is None], dtype=np.intp)
@@ -206,41 +466,206 @@ class FlowLandings:
             results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'steps')
         return [r for r in results if r is not None]
 
-    def _forces(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """dy/dt (the flow, scaled) and the scaled stiffnesses at scaled volumes ``y`` (m, N)."""
-        numerics = self.numerics
-        v = np.minimum(np.maximum(y * numerics.v_scale, numerics.rest_volumes),
-                       numerics.max_volumes)     # np.clip's numbers, without its dispatch
-        p = numerics.model_pressures(v) / numerics.p_scale
-        return (np.mean(p, axis=1, keepdims=True) - p,
-                numerics.model_stiffnesses(v) / numerics.k_scale)
 
-    def _flow(self, y: FloatArray) -> FloatArray:
-        """dy/dt alone (no stiffness): the stages' evaluations."""
-        numerics = self.numerics
-        v = np.minimum(np.maximum(y * numerics.v_scale, numerics.rest_volumes),
-                       numerics.max_volumes)     # np.clip's numbers, without its dispatch
-        p = numerics.model_pressures(v) / numerics.p_scale
-        return np.mean(p, axis=1, keepdims=True) - p
+class SnapLandings:
+    """
+    Where the snaps at some branch ends land: every fold's flow together, then alone.
 
-    def _step(self, y: FloatArray, h: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """One RODAS3 step of every flow (its own h): the new state and the error estimate."""
-        force, k = self._forces(y)
-        n = y.shape[1]
-        hh = h[:, None]
-        # G = I / (h gamma) - J with J = 1 k^T / N - diag(k).
-        g = np.broadcast_to(-k[:, None, :] / n, (y.shape[0], n, n)).copy()
-        g[:, np.arange(n), np.arange(n)] += 1.0 / (hh * GAMMA) + k
-        try:
-            inverse = np.linalg.inv(g)
-        except np.linalg.LinAlgError:
-            inverse = np.linalg.pinv(g)
-        stages: list[FloatArray] = []
-        for i in range(len(M)):
-            f = self._flow(y + sum(a * s for a, s in zip(A[i], stages))) if i else force
-            rhs = f + sum(c * s for c, s in zip(C[i], stages)) / hh if i else f
-            stages.append(np.einsum('mij,mj->mi', inverse, rhs))
-        return y + sum(m * s for m, s in zip(M, stages)), stages[-1]
+    The flow starts a small step off the fold, on the side the flow itself points to. All
+    folds' flows run together until each basin is certain (:class:`FlowLandings`); a flow for
+    which none becomes certain (it leaves the domain, stalls or comes to rest first) is
+    integrated alone (:meth:`RedistributionFlow.run`), and that decides. The end of the
+    domain when the flow leaves a segment's range.
+    """
+
+    def __init__(self, numerics: SegmentNumerics, branches: list[Branch],
+                 reader: StateReader) -> None:
+        """Landings on the map's ``branches``; ``reader`` reads their states."""
+        self.numerics = numerics
+        self.branches = branches
+        self.reader = reader
+        self.flow = RedistributionFlow(numerics)
+
+    def land(self, ends: list[tuple[int, bool]]) -> list[BranchEnd]:
+        """
+        Where the folds at the branch ends ``ends`` ((branch, upward) pairs) snap to.
+
+        Each at its own total volume: the state rolls downhill from the fold to the stable
+        equilibrium whose basin it is in.
+        """
+        if not ends:
+            return []
+        folds, starts, totals = [], [], []
+        for index, upward in ends:
+            branch = self.branches[index]
+            end = -1 if upward else 0
+            folds.append(branch.volumes[end])
+            starts.append(self._flow_start(branch, branch.volumes[end]))
+            totals.append(float(branch.total[end]))
+        landings = FlowLandings(self.numerics, self.branches, self.reader).land(
+            [index for index, _ in ends], np.array(totals), np.array(folds), np.array(starts))
+        found = []
+        for (index, upward), total, start, fold, landing in zip(ends, totals, starts, folds,
+                                                               landings):
+            if landing.branch >= 0:
+                found.append(BranchEnd('snap', landing.branch, landing.volumes))
+            else:
+                found.append(self._land_alone(index, upward, total, start, fold, landing))
+        return found
+
+    def _land_alone(self, index: int, upward: bool, total: float, start: FloatArray,
+                    fold: FloatArray, landing: Landing) -> BranchEnd:
+        """
+        Where a flow that no certain basin took lands: the first of its lone flows placed.
+
+        In turn, each run alone to rest (:meth:`RedistributionFlow.run`) and placed on the
+        branch holding the state where it rests (:meth:`_nearest_branch`), or on the domain's
+        end where a segment reaches the end of its range:
+
+        1. Where the side-by-side flow stopped, if it came to rest (not on a saddle): next to
+           a flat piece, or on a plateau (flat pieces at one pressure: a neutral set, where a
+           flow stays wherever it arrives), the flow's own end says where, and integrating it
+           again would only move it along the set. Else the flow from its start.
+        2. Where the end is a corner of a plateau (:meth:`_corner_starts`), the steps that
+           leave it.
+        3. The flow from its start, if 1 did not run it: the flows run side by side can rest
+           beside a fold where the state barely moves (a branch whose total changes by
+           3e-11 m^3 over 4 Pa), or go back onto the branch they leave.
+        4. The side-by-side flow's end, on to a balance at round-off: a balance to
+           ``flow_rest`` counts as rest, and next to a segment whose slope is nearly 0 (a
+           plateau's corner, in a table in steps) the flow can still be on its way, slowly,
+           with no equilibrium where it stopped.
+        5. The step on the fold's other side: on a branch a few fold offsets long (next to
+           two identical tables' common valley) the way the flow points is round-off, and
+           the flow from the usual step can go back onto the branch it left.
+
+        None placed: :class:`UnplacedLandingError` with where the first came to rest.
+        """
+        rested = landing.why in ('rest', 'horizon') and not self.flow.saddle(landing.volumes)
+        first = None
+        for landed in self._lone_flows(index, upward, start, fold, landing, rested):
+            if self.numerics.at_edge(landed):
+                return BranchEnd('limit')
+            target, distance = self._nearest_branch(total, landed, exclude=index)
+            if target >= 0:
+                return BranchEnd('snap', target,
+                                 self.reader.read(target, np.array([total])).volumes[0])
+            if first is None:
+                first = landed, distance
+        landed, distance = first
+        raise UnplacedLandingError(
+            f'snap-through at total volume {total:.9g} m^3 found no stable state to land on '
+            f'(nearest {distance:.3g} m^3 away)',
+            float(np.mean(self.numerics.model_pressures(landed[None, :]))))
+
+    def _lone_flows(self, index: int, upward: bool, start: FloatArray, fold: FloatArray,
+                    landing: Landing, rested: bool) -> Iterator[FloatArray]:
+        """Where the lone flows of :meth:`_land_alone` come to rest, in its order, lazily."""
+        flow = self.flow
+        yield landing.volumes if rested else flow.run(start)
+        for step in self._corner_starts(index, upward):
+            yield flow.run(step)
+        if rested:
+            yield flow.run(start)
+        yield flow.integrate(landing.volumes, rest=ROUND_OFF_REST)
+        yield flow.run(2.0 * fold - start)
+
+    def _corner_starts(self, index: int, upward: bool) -> list[FloatArray]:
+        """
+        Steps off a branch end where a flat segment reaches the end of its flat.
+
+        A branch on a plateau (flat pieces at one pressure) can end at a corner of the
+        neutral set rather than at a fold: every direction along the flats is as soft as any
+        (stiffness 0), and the step along the soft direction may only slide the state back
+        onto the set, to rest where it started. What makes the end unstable is the piece
+        beyond each flat's end, the way the sweep goes (a segment that would go on down a
+        falling piece runs away). Two steps push into it: along the soft direction of the
+        stiffnesses with each such flat counted as the piece after it (its secant slope),
+        the way the flow points; and the sweep's own, a little more fluid (or less) in every
+        segment alike.
+        """
+        numerics = self.numerics
+        branch = self.branches[index]
+        fold = branch.volumes[-1 if upward else 0]
+        k = numerics.stiffness(branch.pieces, fold[None, :])[0]
+        at_end = False
+        for i, (piece, a) in enumerate(zip(branch.pieces, numerics.piece_indices(branch.pieces))):
+            edge = piece.v_hi if upward else piece.v_lo
+            if piece.direction != 0 or abs(fold[i] - edge) > numerics.tol_v:
+                continue
+            pieces = numerics.pieces[i]
+            beyond = a + (1 if upward else -1)
+            if 0 <= beyond < len(pieces):
+                at_end = True
+                after = pieces[beyond]
+                k[i] = (after.p_at_hi - after.p_at_lo) / (after.v_hi - after.v_lo) / \
+                    numerics.k_scale
+        if not at_end:
+            return []
+        eps = numerics.tolerances.fold_offset * numerics.v_scale
+        null = soft_direction(k)
+        return [fold + self.flow.direction(fold, null, eps) * eps * null,
+                fold + (eps if upward else -eps) / len(numerics.segments)]
+
+    def _flow_start(self, branch: Branch, v_fold: FloatArray) -> FloatArray:
+        """
+        A small step off the fold along its soft direction, the way the flow points.
+
+        The way the flow points there (:meth:`RedistributionFlow.direction`: a pitchfork's
+        tie, as on the flat rows of two identical quantised tables, broken as at a join).
+        """
+        k = self.numerics.stiffness(branch.pieces, v_fold[None, :])[0]
+        null = soft_direction(k)
+        eps = self.numerics.tolerances.fold_offset * self.numerics.v_scale
+        return v_fold + self.flow.direction(v_fold, null, eps) * eps * null
+
+    def _nearest_branch(self, total: float, volumes: FloatArray,
+                        exclude: int) -> tuple[int, float]:
+        """
+        The branch whose state at ``total`` is where the flow came to rest (``volumes``).
+
+        With its distance; -1 when none is within the landing distance, or when the branch
+        the flow leaves (``exclude``) is nearer than any other.
+
+        On a plateau (segments on flat pieces at one pressure) every split of the flat
+        segments' fluid is an equilibrium of the same energy; the map keeps one of them per
+        total (they fill base first), and a flow comes to rest anywhere in the set, or creeps
+        towards a flat's end, where the curve's slope goes to zero. So a flat segment's
+        volume counts as the branch's when it lies on the branch's flat piece, and is as far
+        from it as from the piece when within the landing distance of it at the flat's
+        pressure (to ``plateau_pressure`` of the pressure scale): two identical tables with
+        quantised pressures (flat rows at the same pressures in both) snap onto such sets.
+        A table run up to its limit stretch can make that tolerance as large as a step of
+        its pressures, and the distance then tells a plateau from the one a step away.
+        """
+        tolerances = self.numerics.tolerances
+        landing = tolerances.landing_distance * self.numerics.v_scale
+        on_flat = tolerances.plateau_pressure * self.numerics.p_scale
+        best, best_distance, back = -1, math.inf, math.inf
+        for j, other in enumerate(self.branches):
+            tol = self.numerics.tol_v
+            if not other.lo - tol <= total <= other.hi + tol:
+                continue
+            state = self.reader.read(j, np.array([min(max(total, other.lo), other.hi)])).volumes[0]
+            gap = np.abs(state - volumes)
+            if other.flat:
+                for i, piece in enumerate(other.pieces):
+                    if (piece.direction == 0
+                            and piece.v_lo - landing <= volumes[i] <= piece.v_hi + landing
+                            and abs(float(self.numerics.segments[i].pressure(volumes[i]))
+                                    - piece.p_at_lo) <= on_flat):
+                        gap[i] = max(piece.v_lo - volumes[i], volumes[i] - piece.v_hi, 0.0)
+            distance = float(np.max(gap))
+            if j == exclude:
+                back = distance
+            elif distance < best_distance:
+                best, best_distance = j, distance
+        # A flow that rests nearer the branch it leaves than any other has not left it (a
+        # fold so flat that the flow barely moves); another branch within the landing
+        # distance is then no landing.
+        if best < 0 or best_distance > landing or back < best_distance:
+            return -1, best_distance
+        return best, best_distance
 
 
 class _Basins:

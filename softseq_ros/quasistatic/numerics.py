@@ -337,18 +337,10 @@ class SegmentNumerics:
                                    & (volumes[:, i] <= piece.v_hi + self.tol_v))
         return flat
 
-    def neutral(self, volumes: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
-        """
-        Per row (m, N): some segments on flat pieces, every other one clearly stiffening.
-
-        ``k``: the scaled stiffnesses at ``volumes``. Fluid moved between flat segments
-        changes no pressure, and fluid moved into a stiffening one raises its pressure, so a
-        balanced state there is at rest, though its stiffness sum is 0 (a flat segment's
-        stiffness is) and it is not stable in the strict sense.
-        """
-        flat = self.on_flat_pieces(volumes)
-        return np.any(flat, axis=1) & np.all(flat | (k > self.tolerances.stable_cofactor),
-                                             axis=1)
+    def at_edge(self, volumes: FloatArray) -> bool:
+        """Whether a segment's volume is at an end of its model's range (to tol_v)."""
+        return bool(np.any(volumes >= self.max_volumes - self.tol_v)
+                    or np.any(volumes <= self.rest_volumes + self.tol_v))
 
     def model_pressures(self, volumes: FloatArray) -> FloatArray:
         """Each segment's gauge pressure at volumes (m, N) inside its range [Pa]."""
