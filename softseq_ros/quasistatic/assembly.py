@@ -27,6 +27,13 @@ from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics, cofact
 from softseq_ros.quasistatic.roots import brent_roots
 from softseq_ros.segments.models import Piece
 
+# A fold's pressure is found to this share of the pressure scale (and a relative tolerance at
+# round-off): the fold is where the branch's volumes turn, located to the last bits.
+FOLD_PRESSURE_XTOL = 1e-14
+FOLD_PRESSURE_RTOL = 1e-15
+# Flat pieces at one pressure, to this share of the pressure scale, make one plateau.
+SAME_FLAT_PRESSURE = 1e-12
+
 
 @dataclass
 class EquilibriumCurve:
@@ -245,7 +252,8 @@ class Assembly:
         if solve.size:
             roots[solve] = brent_roots(
                 lambda rows, p: cofactor_sums(solve[rows], p), p_a[solve], p_b[solve],
-                d_a[solve], d_b[solve], xtol=1e-14 * self.numerics.p_scale, rtol=1e-15)
+                d_a[solve], d_b[solve], xtol=FOLD_PRESSURE_XTOL * self.numerics.p_scale,
+                rtol=FOLD_PRESSURE_RTOL)
         return roots
 
     def _piece_samples(self, index: int, piece: Piece) -> FloatArray:
@@ -285,7 +293,8 @@ class Assembly:
         deterministic and the same both ways.
         """
         p_flat = config[flats[0]].p_at_lo
-        if any(abs(config[i].p_at_lo - p_flat) > 1e-12 * self.numerics.p_scale for i in flats):
+        if any(abs(config[i].p_at_lo - p_flat) > SAME_FLAT_PRESSURE * self.numerics.p_scale
+               for i in flats):
             return []
         others = [i for i in range(len(config)) if i not in flats]
         base = np.zeros(len(config))

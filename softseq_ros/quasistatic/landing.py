@@ -59,6 +59,10 @@ ORDER = 4        # of the error estimate's leading term: the step grows as err^(
 SAFETY, GROWTH, SHRINK = 0.9, 6.0, 0.2
 MAX_STEPS = 20_000
 HORIZON = 1e14
+# The flows side by side start with this step (scaled time, shortened where the state is stiff)
+# and count as stalled when their step falls below this share of the time they have run.
+FIRST_STEP = 1e-3
+STALLED_STEP = 1e-14
 # Radii of the balls tried around a stable state, as shares of the volume scale, and how
 # many stiffness samples per segment span a ball's box.
 RADII = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6)
@@ -409,7 +413,7 @@ class FlowLandings:
         t = np.zeros(count)
         results: list[Landing | None] = [None] * count
         k = self.flow.stiffnesses(y)
-        h = 1e-3 / np.maximum(1.0, np.max(np.abs(k - k / k.shape[1]), axis=1))
+        h = FIRST_STEP / np.maximum(1.0, np.max(np.abs(k - k / k.shape[1]), axis=1))
         next_rest_check = np.full(count, 100.0)
         active = np.arange(count)
         for _ in range(MAX_STEPS):
@@ -431,7 +435,7 @@ class FlowLandings:
             t[moved] += h[moved]
             y[moved] = y_new[accept]
             h[active] *= factor
-            stalled = active[h[active] <= 1e-14 * np.maximum(t[active], 1.0)]
+            stalled = active[h[active] <= STALLED_STEP * np.maximum(t[active], 1.0)]
             for index in stalled.tolist():
                 results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'stalled')
             for index in moved[t[moved] >= HORIZON].tolist():

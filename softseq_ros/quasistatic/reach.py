@@ -57,7 +57,8 @@ def beyond_domain(target: float, err: DomainError, emap: EquilibriumMap,
     # The segment at the end of its model: nearest to an end of its volume range, relatively.
     volumes = np.asarray(err.edge_volumes, dtype=float)
     rest, full = np.asarray(emap.rest_volumes), np.asarray(emap.max_volumes)
-    if target < err.edge_injected and np.all(volumes - rest <= 1e-9 * (full - rest)):
+    at_rest = volumes - rest <= emap.tolerances.same_volume * (full - rest)
+    if target < err.edge_injected and np.all(at_rest):
         return (f"{target:g} m^3{in_cycle} is below the equilibrium's domain: it starts at "
                 f'{err.edge_injected:.6g} m^3 injected, every segment at its rest volume')
     segment = int(np.argmin(np.minimum(full - volumes, volumes - rest) / (full - rest)))
