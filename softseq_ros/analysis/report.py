@@ -23,7 +23,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import (
@@ -38,6 +37,7 @@ from softseq_ros.analysis.transients import Transients, analyse_transients
 from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.segments.identity import segments_sha256, short
 from softseq_ros.wire import contract
+from softseq_ros.yaml_text import parse_yaml
 
 ML = 1e6
 KPA = 1e-3
@@ -221,17 +221,13 @@ def load_reference(path: str | os.PathLike) -> dict:
     """A reference file (YAML) of what a paper reports; see config/reference/."""
     path = Path(path)
     try:
-        document = yaml.safe_load(path.read_text(encoding='utf-8'))
+        text = path.read_text(encoding='utf-8')
     except OSError as err:
         raise ReferenceFileError(f'{path}: cannot read the reference file ({err.strerror})') \
             from None
     except UnicodeDecodeError as err:
         raise ReferenceFileError(f'{path}: not UTF-8 text (byte {err.start})') from None
-    except RecursionError:
-        raise ReferenceFileError(f'{path}: nested too deeply to be a reference file') from None
-    except (yaml.YAMLError, ValueError) as err:
-        reason = ' '.join(str(err).split())
-        raise ReferenceFileError(f'{path}: not valid YAML ({reason})') from None
+    document = parse_yaml(text, str(path), ReferenceFileError)
     if not isinstance(document, dict) or not isinstance(document.get('reported'), dict):
         raise ReferenceFileError(f'{path}: a reference file needs a mapping "reported"')
     _check_reported(path, document['reported'])

@@ -8,12 +8,12 @@ Every reader of the package finds the files here, in the same order.
 
 import os
 from pathlib import Path
-import sys
 from typing import Any
 
 import yaml
 
 from softseq_ros.errors import UserError, file_kind
+from softseq_ros.yaml_text import parse_yaml
 
 METADATA_FILE = 'metadata.yaml'
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -95,19 +95,11 @@ def read_metadata(folder: Path, error: type[UserError]) -> dict[str, Any]:
         fast = getattr(yaml, 'CSafeLoader', None)
         loader = fast if fast is not None and _nesting_bound(text) < FAST_YAML_MAX_NESTING \
             else yaml.SafeLoader
-        document = yaml.load(text, Loader=loader)  # noqa: S506 - safe loaders only
     except OSError as err:
         raise error(f'{metadata}: cannot read it ({err.strerror or err})') from None
     except UnicodeDecodeError as err:
         raise error(f'{metadata}: not UTF-8 text (byte {err.start})') from None
-    except RecursionError:
-        raise error(f"{metadata}: YAML nested too deeply (more levels than Python's recursion "
-                    f'limit of {sys.getrecursionlimit()})') from None
-    except yaml.YAMLError as err:
-        raise error(f'{metadata}: not valid YAML: {err}') from None
-    except ValueError as err:
-        raise error(f'{metadata}: YAML: a value cannot be read '
-                    f'({" ".join(str(err).split(";")[0].split())})') from None
+    document = parse_yaml(text, str(metadata), error, loader)
     info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
     if not isinstance(info, dict):
         raise error(f'{metadata}: not a rosbag2 metadata file (no rosbag2_bagfile_information '

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 import importlib
 import math
 from pathlib import Path
-import sys
 import threading
 import time
 from typing import Any, Iterator, Mapping
@@ -69,6 +68,7 @@ from softseq_ros.bag.reader import bag_summary
 from softseq_ros.errors import NotRegularFileError, UserError, read_regular_file
 from softseq_ros.stopping import HeldSignals
 from softseq_ros.wire import contract
+from softseq_ros.yaml_text import parse_yaml
 
 CLOCK_TOPIC = contract.CLOCK.name
 CLOCK_TYPE = contract.CLOCK.type_name
@@ -207,18 +207,7 @@ def qos_overrides(path: str | Path, topics: list[str] | set[str]) -> dict[str, Q
     """
     path = str(path)
     text = _qos_text(path)
-    try:
-        data = yaml.safe_load(text)
-    except RecursionError:
-        # PyYAML nests one Python call per level: thousands of '[' exhaust the stack.
-        raise PlayError(f"{path}: YAML nested too deeply (more levels than Python's "
-                        f'recursion limit of {sys.getrecursionlimit()})') from None
-    except yaml.YAMLError as err:
-        raise PlayError(f'{path}: not YAML ({" ".join(str(err).split())})') from None
-    except ValueError as err:
-        # PyYAML's own constructors: an integer of more than 4300 digits, a bad date.
-        raise PlayError(f'{path}: YAML: a value cannot be read '
-                        f'({" ".join(str(err).split(";")[0].split())})') from None
+    data = parse_yaml(text, path, PlayError)
     if not isinstance(data, Mapping):
         raise PlayError(f'{path}: expected a mapping of topic names to QoS profiles')
     profiles = {}

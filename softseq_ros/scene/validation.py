@@ -9,7 +9,6 @@ checks each value as it is taken (``ctx.number(raw['rate_hz'], 'pump.rate_hz', g
 import math
 from pathlib import Path
 import re
-import sys
 from typing import Any
 
 import yaml
@@ -18,6 +17,7 @@ from softseq_ros.errors import UserError
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.plausibility import material_problem
 from softseq_ros.segments.materials import LAW_NAMES, make_material, material_parameter_names
+from softseq_ros.yaml_text import parse_yaml as parse_yaml_text
 
 SEGMENT_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 SCENE_NAME = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.-]*$')
@@ -69,25 +69,8 @@ def read_yaml(path: Path, shown: str) -> Any:
 
 
 def parse_yaml(text: str, shown: str) -> Any:
-    """YAML text parsed, or SceneError naming ``shown`` (a file or a setting) and the fault."""
-    try:
-        return yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
-    except RecursionError:
-        # PyYAML nests one Python call per level: thousands of '[' exhaust the stack.
-        raise SceneError(f"{shown}: YAML nested too deeply (more levels than Python's "
-                         f'recursion limit of {sys.getrecursionlimit()})') from None
-    except yaml.MarkedYAMLError as err:
-        mark = err.problem_mark or err.context_mark
-        where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else 'YAML'
-        problem = err.problem or err.context or 'invalid YAML'
-        raise SceneError(f'{shown}: {where}: {problem}') from None
-    except yaml.YAMLError as err:
-        raise SceneError(f'{shown}: YAML: {" ".join(str(err).split())}') from None
-    except ValueError as err:
-        # PyYAML's own constructors: an integer of more than 4300 digits, a date like
-        # 2026-13-45. Their messages carry no position.
-        problem = ' '.join(str(err).split(';')[0].split())
-        raise SceneError(f'{shown}: YAML: a value cannot be read ({problem})') from None
+    """YAML text in the scenes' syntax, or SceneError naming ``shown`` and the fault."""
+    return parse_yaml_text(text, shown, SceneError, YamlLoader)
 
 
 # ----------------------------------------------------------------------------------------------
