@@ -104,6 +104,23 @@ def worker_option(option: str, text: str | None) -> int | None:
     return value
 
 
+def workers_or_scheduler(workers: int | None, scheduler: str | None,
+                         error: type[UserError] = UserError) -> int:
+    """
+    The local worker count of a command taking ``--workers`` and ``--scheduler``.
+
+    The scheduler's address is checked (:func:`scheduler_option`); ``--workers`` with it is
+    refused (the cluster has its own workers), below 1 refused; by default, one per core.
+    """
+    scheduler_option('--scheduler', scheduler)
+    if scheduler is not None and workers is not None:
+        raise error('--workers: not with --scheduler (the cluster has its own workers)')
+    count = workers if workers is not None else (os.cpu_count() or 1)
+    if count < 1:
+        raise error(f'--workers: must be >= 1, got {count}')
+    return count
+
+
 class SchedulerAddressError(UserError):
     """A ``--scheduler`` that is no address of a Dask scheduler."""
 

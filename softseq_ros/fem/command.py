@@ -1,7 +1,6 @@
 """The ``softseq fem`` command: a segment table from a design, or a sweep of designs."""
 
 import argparse
-import os
 import sys
 import time
 from typing import Any
@@ -96,19 +95,14 @@ def run_fem_command(args: argparse.Namespace) -> int:
         return 0
 
     from softseq_ros.fem.sweep import run_sweep, sweep_cases
-    from softseq_ros.parallel import scheduler_option
+    from softseq_ros.parallel import workers_or_scheduler
 
     grid = _assignments(args.sweep, '--sweep', many=True)
     if args.out_dir is None:
         raise DesignError('--sweep: needs --out-dir for the tables and summary.csv')
     if args.out is not None:
         raise DesignError('--out: not with --sweep (tables go to --out-dir)')
-    scheduler_option('--scheduler', args.scheduler)
-    if args.scheduler is not None and args.workers is not None:
-        raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    if workers < 1:
-        raise DesignError(f'--workers: must be >= 1, got {workers}')
+    workers = workers_or_scheduler(args.workers, args.scheduler, DesignError)
     cases = sweep_cases(design, grid)
     start = time.perf_counter()
     summary = run_sweep(cases, args.out_dir, workers=workers, scheduler=args.scheduler,

@@ -13,19 +13,13 @@ from softseq_ros.scene.design import DesignError
 
 def run_design_command(args: Any) -> int:
     """``softseq design PROBLEM.yaml``: exit 0 when the best design is verified, else 1."""
-    import os
     import sys
 
-    from softseq_ros.parallel import scheduler_option
+    from softseq_ros.parallel import workers_or_scheduler
     from softseq_ros.progress import end_progress, write_progress
 
     problem = load_problem(args.problem)
-    scheduler_option('--scheduler', args.scheduler)
-    if args.scheduler is not None and args.workers is not None:
-        raise DesignError('--workers: not with --scheduler (the cluster has its own workers)')
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    if workers < 1:
-        raise DesignError(f'--workers: must be >= 1, got {workers}')
+    workers = workers_or_scheduler(args.workers, args.scheduler, DesignError)
     out = args.out if args.out is not None else Path('bags') / f'design_{problem.name}'
     stream = None if args.quiet else sys.stderr
     start = time.perf_counter()
