@@ -51,6 +51,7 @@ def _solve(args: argparse.Namespace) -> int:
 
 def _write_network_path(args: argparse.Namespace, scene: Any, path: Any) -> int:
     """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
+    from softseq_ros.analysis.text import duration_text
     from softseq_ros.dynamic.events import fold_crossing_line
     from softseq_ros.dynamic.network import laminar_range_warning
     from softseq_ros.dynamic.path import (
@@ -75,7 +76,8 @@ def _write_network_path(args: argparse.Namespace, scene: Any, path: Any) -> int:
     for snap in path.snaps:
         print(f'  snap-through at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
               f'{snap.fluid_moved_m3 * 1e6:.3f} mL moved, peak '
-              f'{snap.peak_exchange_m3_per_s * 1e6:.4g} mL/s, 10-90 % in {snap.duration_s:.4g} s')
+              f'{snap.peak_exchange_m3_per_s * 1e6:.4g} mL/s, 10-90 % in '
+              f'{duration_text(snap.duration_s)}')
     channels = channel_names(scene.segment_names)
     print('  peak Reynolds number per channel: ' + ', '.join(
         f'{name} {peak:.0f}' for name, peak in zip(channels, path.peak_reynolds)))

@@ -16,6 +16,7 @@ import softseq_ros
 from softseq_ros.analysis.compare import compare_bags
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import markdown, recording_metrics, summary_text, write_report
+from softseq_ros.analysis.text import duration_text
 from softseq_ros.bag.reader import read_bag
 from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.loader import load_scene
@@ -96,7 +97,7 @@ def test_the_report_of_a_dynamic_bag_shows_the_measured_snap_durations(fast, tmp
     assert abs(peak_flow) == pytest.approx(snap['peak_exchange_m3_per_s'], rel=0.05)
     # Without the scene there is no quasi-static path to lag behind.
     assert transients['lag'] is None and snap['delay_injected_m3'] is None
-    assert f'10-90 % in {events[0]["duration_s"] * 1e3:.0f} ms' in summary
+    assert f'10-90 % in {duration_text(events[0]["duration_s"])}' in summary
     # Which segments gave the fluid and which took it, as the event named them.
     assert events[0]['giving_segments'] == ['top'] and events[0]['taking_segments'] == ['bottom']
     assert (snap['giving_segments'], snap['taking_segments']) == (['top'], ['bottom'])

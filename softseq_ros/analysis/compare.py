@@ -24,6 +24,7 @@ from softseq_ros.analysis.report import (
     recording_metrics,
     scene_notes,
 )
+from softseq_ros.analysis.text import duration_text
 from softseq_ros.errors import writing
 
 
@@ -297,8 +298,7 @@ def plot_transients_overlay(overlay: TransientsOverlay, out: Path, svg: bool = F
                 bottom.plot(time, window.volumes[:, j] * ML, SEGMENT_LINES[j % len(SEGMENT_LINES)],
                             lw=1.1, color=colour, label=f'{label[0]}: {name}')
             duration = window.snap.duration_s
-            said.append(f'{label[0]}: ' + (f'{duration:.3g} s' if duration >= 1.0
-                                           else f'{duration * 1e3:.3g} ms'))
+            said.append(f'{label[0]}: {duration_text(duration)}')
         for ax in (top, bottom):
             ax.axvline(0.0, color='0.5', lw=0.8, ls=':')
             ax.grid(alpha=0.3)

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from softseq_ros.analysis.metrics import snap_rows
 from softseq_ros.analysis.recording import DEFLATION, INFLATION, FloatArray, Recording
+from softseq_ros.analysis.text import duration_text
 from softseq_ros.analysis.transients import Transients, TransientWindow, transient_windows
 from softseq_ros.errors import OutputWriteError, UserError, writing
 from softseq_ros.parallel import end_with_parent
@@ -665,7 +666,7 @@ def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ..
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=7)
         top.set_title(f'snap {snap.number} ({snap.direction}) at {snap.injected * ML:.2f} mL\n'
-                      f'10-90 %: {snap.duration_s * 1e3:.4g} ms', fontsize=8)
+                      f'10-90 %: {duration_text(snap.duration_s)}', fontsize=8)
         top.legend(fontsize=6, loc='upper right')
         bottom.legend(fontsize=6)
         bottom.set_xlabel(f"time from the snap's start [{unit}]", fontsize=8)

@@ -41,6 +41,7 @@ from softseq_ros.analysis.figures import (
 )
 from softseq_ros.analysis.metrics import Trace, analyse
 from softseq_ros.analysis.recording import DEFLATION, INFLATION
+from softseq_ros.analysis.text import millijoules_text
 from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.parallel import run_jobs
 
@@ -272,7 +273,7 @@ def library_markdown(results: list[dict]) -> str:
         tip = r['tip_at_full_inflation_m']
         lines.append(f'| {" -> ".join(r["segments"])} | {r["sequence_type"]} | {switch} | '
                      f'{snaps} | {lo / 1e3:.2f} to {hi / 1e3:.2f} kPa | '
-                     f'{r["hysteresis_area_j"] * 1e3:.3f} mJ | {tip[0] * 1e3:.0f}, '
+                     f'{millijoules_text(r["hysteresis_area_j"], 3)} | {tip[0] * 1e3:.0f}, '
                      f'{tip[1] * 1e3:.0f} mm |')
     return '\n'.join(lines) + '\n'
 

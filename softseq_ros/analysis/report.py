@@ -33,6 +33,7 @@ from softseq_ros.analysis.metrics import (
     segment_limits,
 )
 from softseq_ros.analysis.recording import Recording, load_recording
+from softseq_ros.analysis.text import duration_text, millijoules_text
 from softseq_ros.analysis.transients import Transients, analyse_transients
 from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.segments.identity import segments_sha256, short
@@ -419,13 +420,6 @@ def _kpa(value: float | None, digits: int = 2) -> str:
     return '-' if value is None else f'{value * KPA:.{digits}f} kPa'
 
 
-def _ms(value: float | None) -> str:
-    if value is None or not np.isfinite(value):
-        return '-'
-    shown = value * MS
-    return f'{shown:.0f} ms' if shown >= 100 else f'{shown:.3g} ms'
-
-
 def _ml_per_s(value: float | None) -> str:
     return '-' if value is None or not np.isfinite(value) else f'{value * ML:.4g} mL/s'
 
@@ -477,7 +471,7 @@ def _transient_lines(transients: dict) -> list[str]:
     for number, snap in enumerate(snaps, start=1):
         lines.append(
             f'  snap {number} ({snap["direction"]}) at {_ml(snap["injected_m3"], 3)}, '
-            f't = {snap["start_time_s"]:.3f} s: 10-90 % in {_ms(snap["duration_s"])}, '
+            f't = {snap["start_time_s"]:.3f} s: 10-90 % in {duration_text(snap["duration_s"])}, '
             f'{_ml(snap["fluid_moved_m3"], 3)} moved ({parties(snap)}), peak exchange '
             f'{_ml_per_s(snap["peak_exchange_m3_per_s"])}, gauge pressure '
             f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])}')
@@ -617,7 +611,7 @@ def _not_applied(metrics: dict, key: str) -> str:
 
 def _mj(metrics: dict, key: str) -> str:
     value = metrics.get(key)
-    return _not_applied(metrics, key) if value is None else f'{value * 1e3:.4f} mJ'
+    return _not_applied(metrics, key) if value is None else millijoules_text(value)
 
 
 def _first_cycle_steps(metrics: dict) -> tuple[list[dict], int]:
@@ -657,7 +651,7 @@ def _transient_markdown(transients: dict) -> list[str]:
         for number, snap in enumerate(transients['snaps'], start=1):
             lines.append(
                 f'| {number} | {snap["direction"]} | {snap["start_time_s"]:.3f} s | '
-                f'{_ml(snap["injected_m3"], 3)} | {_ms(snap["duration_s"])} | '
+                f'{_ml(snap["injected_m3"], 3)} | {duration_text(snap["duration_s"])} | '
                 f'{_ml(snap["fluid_moved_m3"], 3)} | {parties(snap)} | '
                 f'{_ml_per_s(snap["peak_exchange_m3_per_s"])} | '
                 f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '
