@@ -6,6 +6,7 @@ parameters the help must name are those the real nodes declare, built here over 
 """
 
 import os
+import re
 import subprocess
 import sys
 
@@ -100,6 +101,20 @@ def test_help_shows_ranges_read_only_and_services(ros_env, tmp_path):
         assert f'~/{service}: ' in text
     assert 'subscribes actuator/volumes [sensor_msgs/msg/JointState]' in text
     assert list(tmp_path.iterdir()) == []
+
+
+def test_help_names_only_scene_outputs_as_scene_outputs(ros_env, tmp_path):
+    # 'flows' is no key of a scene's outputs: the channel flows come with the volumes where
+    # the scene has a network, and the help said 'scene output flows'.
+    from softseq_ros.scene.outputs import OUTPUT_NAMES
+
+    result = _help('actuator', ['--help'], tmp_path, ros_env)
+    assert result.returncode == 0, result.stderr
+    text = ' '.join(result.stdout.split())
+    named = re.findall(r', scene output (\w+)\)', text)
+    assert named and set(named) <= set(OUTPUT_NAMES)
+    assert ('publishes actuator/channel_flows [sensor_msgs/msg/JointState] (depth 1000, '
+            'reliable, with scene output volumes when the scene has a network)') in text
 
 
 def test_help_after_ros_args_is_no_help_flag(ros_env, tmp_path):

@@ -198,7 +198,12 @@ def _topics_help(node_class: Callable[..., Node]) -> list[str]:
     lines = []
     for verb, topic in topics:
         qos = topic.qos if verb == 'publishes' else topic.reader_qos
-        switch = f', scene output {topic.output}' if topic.output else ''
+        if topic.output in contract.DERIVED_OUTPUTS:
+            # Not a scene output: on with the one it belongs to, where the model has it.
+            switch = (f', with scene output {contract.DERIVED_OUTPUTS[topic.output]} when '
+                      'the scene has a network')
+        else:
+            switch = f', scene output {topic.output}' if topic.output else ''
         lines.append(_wrap(f'{verb} {topic.name} [{topic.type_name}] (depth {qos.depth}, '
                            f'{"reliable" if qos.reliable else "best effort"}'
                            f'{", latched" if qos.latched else ""}{switch})', '  ', '      '))
