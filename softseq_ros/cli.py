@@ -437,9 +437,11 @@ def _scenes(args: argparse.Namespace) -> int:
         try:
             text = yaml.safe_load((config_dir() / f'{name}.yaml').read_text(encoding='utf-8'))
             described = ' '.join(str(text.get('description', '')).split())
+            # A network puts time into the physics: its sequence depends on the pump's rate.
+            kind = 'in time, a network' if text.get('network') is not None else 'quasi-static'
         except (OSError, ValueError, AttributeError, yaml.YAMLError):
-            described = ''
-        print(f'  {name:<{width}}  {described}'.rstrip())
+            described, kind = '', '?'
+        print(f'  {name:<{width}}  [{kind}] {described}'.rstrip())
     return 0
 
 

@@ -216,5 +216,8 @@ def test_scenes_lists_each_shipped_scene_with_its_description():
     lines = result.stdout.splitlines()[1:]
     assert [line.split()[0] for line in lines] == list(shipped_scenes())
     for name, line in zip(shipped_scenes(), lines):
-        described = yaml.safe_load((config_dir() / f'{name}.yaml').read_text())['description']
-        assert line.split(None, 1)[1] == ' '.join(described.split())
+        data = yaml.safe_load((config_dir() / f'{name}.yaml').read_text())
+        # Which scenes run in time (a network: the pump's rate matters), and their description.
+        kind = '[in time, a network]' if 'network' in data else '[quasi-static]'
+        assert line.split(None, 1)[1] == f'{kind} ' + ' '.join(data['description'].split())
+    assert any('[in time, a network]' in line for line in lines)
