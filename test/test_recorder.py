@@ -99,7 +99,8 @@ def test_a_stop_signal_leaves_a_complete_bag(tmp_path, monkeypatch, stop):
         recorder = subprocess.Popen(
             [sys.executable, '-m', 'softseq_ros.nodes.recorder', '--ros-args',
              '-p', 'topics:=[/test/volume, /test/phase]',
-             '-p', 'types:=["", std_msgs/msg/String]', '-p', f'output:={output}'],
+             '-p', 'types:=["", std_msgs/msg/String]', '-p', f'output:={output}',
+             '-r', '__ns:=/rig_a'],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         _wait_for(lambda: volume_pub.get_subscription_count() >= 1
                   and phase_pub.get_subscription_count() >= 1, 'the recorder to subscribe')
@@ -114,6 +115,9 @@ def test_a_stop_signal_leaves_a_complete_bag(tmp_path, monkeypatch, stop):
         # A clean stop says so, and says nothing else (no failed publish on /rosout).
         assert f'closed {output} with {len(volumes) + 1} messages' in log, log
         assert 'Failed' not in log and 'rosout' not in log, log
+        # The last line names the node as every line before it does, namespace and all.
+        closed, = [line for line in log.splitlines() if 'closed ' in line]
+        assert '[rig_a.recorder]: ' in closed, closed
     finally:
         if recorder is not None and recorder.poll() is None:
             recorder.kill()

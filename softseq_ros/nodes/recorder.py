@@ -407,7 +407,8 @@ def main(args: list[str] | None = None) -> None:
                 if not exit_code:
                     print(f'recorder: {err}', file=sys.stderr)
                     exit_code = 1
-            name = node.get_name()
+            # The node's logger name: its namespace and name, as every other line it logged.
+            name = node.get_logger().name
             node.destroy_node()
             if closed is not None:
                 # Logged once the node is gone: after a Ctrl-C the context is shut down, and
