@@ -10,9 +10,11 @@ from contextlib import contextmanager
 import json
 import os
 from pathlib import Path
+import select
 import signal
 import subprocess
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
@@ -367,3 +369,33 @@ def test_a_signal_while_a_node_loads_ends_it_quietly(ros_env, tmp_path, signum):
     assert b'Traceback' not in output and b'KeyboardInterrupt' not in output, output
     # At once, as a shell reports the signal (0 only if it was up already: a clean stop).
     assert process.returncode in (128 + signum, 0), output
+
+
+@pytest.mark.parametrize('executable, words', [
+    ('actuator', 'ready: scene rate_inversion (base, tip), a fluid network in time, publishing '
+                 'curvature, events, flows, pressure, volumes'),
+    ('camera', 'ready: scene rate_inversion, frames at 10 Hz, 5 snapshot volumes, publishing '
+               'markers, poses'),
+])
+def test_the_actuator_and_the_camera_say_when_they_are_ready(ros_env, tmp_path, executable,
+                                                            words):
+    # They logged nothing at start: a user could not tell a node that loads its scene from one
+    # that hangs, nor which model and outputs it took.
+    process = subprocess.Popen(
+        [executable, '--ros-args', '-p', 'scene:=rate_inversion', '-r', '__ns:=/rig_r'],
+        env={**ros_env, 'ROS_HOME': str(tmp_path)}, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    try:
+        lines: list[str] = []
+        deadline = time.monotonic() + 60.0
+        while not any('ready: ' in line for line in lines) and time.monotonic() < deadline:
+            if select.select([process.stdout], [], [], 1.0)[0]:
+                line = process.stdout.readline()
+                if not line:
+                    break
+                lines.append(line)
+        ready = [line for line in lines if 'ready: ' in line]
+        assert ready and f'[rig_r.{executable}]: {words}' in ready[0], ''.join(lines)
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=30)

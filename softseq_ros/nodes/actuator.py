@@ -129,6 +129,11 @@ class ActuatorNode(CoreNode):
             self.create_timer(1.0 / self.core.rate_hz, self._advance)
         self._begin_resume()
         self.configured = True
+        model = ('a fluid network in time' if self.core.rate_hz is not None
+                 else 'quasi-static')
+        self.get_logger().info(
+            f'ready: scene {scene.name} ({", ".join(scene.segment_names)}), {model}, '
+            f'publishing {", ".join(sorted(self.core.outputs))}')
 
     def _advance(self) -> None:
         self.send(self.core.tick(self.now_ns()))

@@ -105,6 +105,10 @@ class CameraNode(CoreNode):
             self.create_timer(IMAGE_CHECK_S, self._update_image_wanted,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.configured = True
+        when = f'at {rate_hz:g} Hz' if frame_trigger == 'timer' else f'on each {frame_trigger}'
+        self.get_logger().info(
+            f'ready: scene {scene.name}, frames {when}, {len(triggers)} snapshot volumes, '
+            f'publishing {", ".join(sorted(self.core.outputs))}')
 
     DIAGNOSTIC_TASK = 'camera'
 
