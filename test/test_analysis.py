@@ -16,6 +16,7 @@ from softseq_ros.analysis.experiment import compare, read_experiment, synthetic_
 from softseq_ros.analysis.recording import RecordingError, load_recording
 from softseq_ros.analysis.report import SceneMismatchError, recording_trace, write_report
 from softseq_ros.bag.arrays import BagArrayError, JointStateDecoder, open_bag
+from softseq_ros.bag.reader import read_bag
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
@@ -161,6 +162,28 @@ def test_batch_bag_gives_the_solvers_sequence_type_and_snap_volumes(asymmetric, 
     assert [s['direction'] for s in metrics['snaps']] == ['inflation'] * 2 + ['deflation'] * 2
     # A loop: inflation runs at higher pressure than deflation.
     assert metrics['hysteresis_area_j'] > 0.0
+
+
+def test_a_run_the_relief_stopped_says_so_in_the_summary_and_the_metrics(asymmetric, tmp_path):
+    # The paper's rig stopped by its relief (here at 5 kPa, 17.8 mL) read 'sequence type: none'
+    # with no word of the stop: every number of such a run is that of the part it ran.
+    _, whole = asymmetric
+    metrics, text = write_report(whole, tmp_path / 'whole', figures=False)
+    assert metrics['pump_end']['state'] == 'finished'
+    assert 'cut short' not in text and 'did not run to its end' not in text
+    bag = tmp_path / 'relief'
+    result = softseq_ros.run('paper', bag, start_time_ns=0,
+                             overrides={'pump': {'max_pressure_pa': 5000.0}})
+    assert result.pump_state == 'stopped'
+    metrics, text = write_report(bag, tmp_path / 'report', figures=False)
+    end = metrics['pump_end']
+    assert end['state'] == 'stopped' and 'max_pressure_pa' in end['reason']
+    commands = [m.msg.position[0] for m in read_bag(bag, ['/pump/command'])]
+    assert end['injected_m3'] == pytest.approx(commands[-1], abs=1e-15)
+    assert f'pump stopped at {end["time_s"]:.3f} s' in text
+    assert '(from the recording, cut short)' in text
+    assert any('did not run to its end' in w for w in metrics['warnings'])
+    assert 'did not run to its end' in (tmp_path / 'report' / 'report.md').read_text()
 
 
 def test_paper_scene_is_partial_with_the_top_taking_over_and_meets_the_reference(paper,

@@ -154,6 +154,12 @@ def recording_metrics(recording: Recording, scene: object | None = None,
             'the actuator was restarted on other segments during the recording: '
             + ', '.join(_named(r.scene, r.segments_sha256) for r in recording.scenes)
             + '; recorded_scene is the first')
+    end = metrics['pump_end']
+    if end is not None and end['state'] in CUT_SHORT:
+        metrics['warnings'].append(
+            f'the pump {end["state"]} at {end["time_s"]:.3f} s, {_ml(end["injected_m3"])} '
+            f'injected ({end["reason"] or "no reason given"}): the programme did not run to '
+            'its end, and every number here is that of the part it ran')
     # What the analysis could not use (a foreign publisher's messages, say), topic by topic.
     metrics['warnings'].extend(recording.skipped_lines())
     if recording.ignored:
@@ -184,6 +190,26 @@ def recording_metrics(recording: Recording, scene: object | None = None,
     return metrics
 
 
+# The pump's last states that end a programme before its end: every number of such a run is
+# that of the part it ran.
+CUT_SHORT = ('stopped', 'held')
+
+
+def pump_end(recording: Recording) -> dict | None:
+    """
+    How the pump's programme ended in this run: its last status, when, and where.
+
+    ``{'state', 'reason', 'time_s', 'injected_m3'}``; None when the bag holds no status.
+    """
+    if not recording.status:
+        return None
+    time_s, state, reason = recording.status[-1]
+    at = int(np.searchsorted(recording.pump_time_s, time_s, side='right')) - 1
+    injected = float(recording.pump_injected[max(at, 0)]) if recording.pump_injected.size \
+        else None
+    return {'state': state, 'reason': reason, 'time_s': float(time_s), 'injected_m3': injected}
+
+
 def run_metrics(recording: Recording) -> dict:
     """The numbers of one run of a recording (first cycle), SI units, gauge pressures."""
     try:
@@ -197,6 +223,7 @@ def run_metrics(recording: Recording) -> dict:
     share = added / max(float(np.sum(added)), 1e-300)
     return {
         **result,
+        'pump_end': pump_end(recording),
         'peak_injection': {'injected_m3': float(recording.state_injected[top]),
                            'pressure_pa': float(recording.pressure[top]),
                            'share_of_added_volume': [float(x) for x in share]},
@@ -502,8 +529,15 @@ BRANCHES_SHOWN = 12   # stays on a branch listed in the summary; metrics.json ha
 def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
     """The summary's lines on one run: type, switch, peak, plateau, snaps, hysteresis, steps."""
     lines = []
+    end = metrics.get('pump_end')
+    cut_short = end is not None and end['state'] in CUT_SHORT
+    if cut_short:
+        lines.append(f'pump {end["state"]} at {end["time_s"]:.3f} s, {_ml(end["injected_m3"])} '
+                     f'injected: {end["reason"] or "no reason given"} (the programme did not '
+                     'run to its end: what follows is that of the part it ran)')
     scene_type = metrics.get('sequence_type_of_scene')
-    lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording)'
+    lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording'
+                 + (', cut short' if cut_short else '') + ')'
                  + (f'; scene: {scene_type}' if scene_type else ''))
     switch = metrics.get('switch')
     if switch:
