@@ -184,6 +184,17 @@ def test_a_run_the_relief_stopped_says_so_in_the_summary_and_the_metrics(asymmet
     assert '(from the recording, cut short)' in text
     assert any('did not run to its end' in w for w in metrics['warnings'])
     assert 'did not run to its end' in (tmp_path / 'report' / 'report.md').read_text()
+    # The time series marks where the pump ended it, in its own colour; a finished run not.
+    from figure_checks import png_pixels
+
+    from softseq_ros.analysis.figures import STOP_COLOUR, plot_timeseries
+
+    stop = np.array([int(STOP_COLOUR[i:i + 2], 16) for i in (1, 3, 5)])
+    for source, marked in ((bag, True), (whole, False)):
+        out = tmp_path / f'{source.name}_timeseries.png'
+        plot_timeseries(load_recording(source), out)
+        near = np.all(np.abs(png_pixels(out) - stop) <= 12, axis=2)
+        assert (near.sum() > 200) == marked, (source, near.sum())
 
 
 def test_paper_scene_is_partial_with_the_top_taking_over_and_meets_the_reference(paper,

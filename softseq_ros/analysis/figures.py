@@ -51,6 +51,8 @@ INJECTED = 'injected volume [mL]'
 MAX_TRANSIENT_SNAPS = 4
 SEGMENT_COLOURS = ['#009E73', '#CC79A7', '#E69F00', '#56B4E9', '#000000']
 UNSTABLE_COLOUR = '#CC79A7'
+# Where the pump ended its programme early (stopped, held for good).
+STOP_COLOUR = '#D55E00'
 # A journal's column and page widths [in]: what the paper style sizes its figures for.
 COLUMN_IN = 3.5
 PAGE_IN = 7.2
@@ -572,6 +574,15 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = False,
         axes[0, 0].annotate(f'run {number}', (start.time_s, 1.0), xycoords=('data',
                             'axes fraction'), xytext=(2, -2), textcoords='offset points',
                             ha='left', va='top', fontsize=7, color='0.3')
+    ended = recording.cut_short()
+    if ended is not None:
+        # The programme did not run to its end: where and why the pump ended it.
+        for ax in axes[:, 0]:
+            ax.axvline(ended[0], color=STOP_COLOUR, lw=1.0, ls='--')
+        axes[0, 0].annotate(f'pump {ended[1]}', (ended[0], 1.0),
+                            xycoords=('data', 'axes fraction'), xytext=(-4, -2),
+                            textcoords='offset points', ha='right', va='top', fontsize=7,
+                            color=STOP_COLOUR)
     style.title(axes[0, 0], 'Time series')
     return save_figure(fig, out, svg, style)
 

@@ -72,6 +72,8 @@ INFLATION, DEFLATION = 'inflation', 'deflation'
 # range, while the pump says it does not move), jumps: the pump was reset or restarted.
 JUMP_FACTOR = 4.0
 JUMP_SHARE = 1e-3
+# The pump's last states that end a programme before its end.
+CUT_SHORT = ('stopped', 'held')
 # Signs of one new run closer together than this are one (a reset's idle status and the jump of
 # the command after it).
 RUN_MERGE_S = 0.5
@@ -215,6 +217,17 @@ class Recording:
             snapshots=[s for s in self.snapshots if lo < s.time_s <= hi],
             status=[s for s in self.status if lo <= s[0] < hi],
             snap_rows=None, run_starts=[], run=number, run_span_s=shown, channel_flows=None)
+
+    def cut_short(self) -> tuple[float, str, str] | None:
+        """
+        The pump's last status when it ended the programme early: (time [s], state, reason).
+
+        None when the pump finished, or the bag says nothing of it. A stopped or held pump's
+        run ends there: every number of it is that of the part it ran.
+        """
+        if self.status and self.status[-1][1] in CUT_SHORT:
+            return self.status[-1]
+        return None
 
     @property
     def inflating(self) -> NDArray[np.bool_]:

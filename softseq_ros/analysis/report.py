@@ -32,7 +32,7 @@ from softseq_ros.analysis.metrics import (
     bend_angles,
     segment_limits,
 )
-from softseq_ros.analysis.recording import Recording, load_recording
+from softseq_ros.analysis.recording import CUT_SHORT, Recording, load_recording
 from softseq_ros.analysis.text import duration_text, millijoules_text
 from softseq_ros.analysis.transients import Transients, analyse_transients
 from softseq_ros.errors import UserError, write_text, writing
@@ -188,11 +188,6 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         metrics['transients'] = transients.metrics
         metrics['warnings'].extend(transients.warnings)
     return metrics
-
-
-# The pump's last states that end a programme before its end: every number of such a run is
-# that of the part it ran.
-CUT_SHORT = ('stopped', 'held')
 
 
 def pump_end(recording: Recording) -> dict | None:
