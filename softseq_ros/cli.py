@@ -20,6 +20,7 @@ def _solve(args: argparse.Namespace) -> int:
     import softseq_ros
     from softseq_ros.dynamic.path import PathError
     from softseq_ros.quasistatic.equilibrium import DomainError
+    from softseq_ros.quasistatic.graph import branch_labels
     from softseq_ros.quasistatic.reach import beyond_domain
     from softseq_ros.quasistatic.solve import read_history, scene_map, write_path
     from softseq_ros.scene.loader import load_scene
@@ -42,10 +43,16 @@ def _solve(args: argparse.Namespace) -> int:
     if scene.network is not None:
         return _write_network_path(args, scene, solved)
     write_path(args.out, solved, scene.segment_names)
-    _warn_unconverged('solve', scene_map(scene))
+    emap = scene_map(scene)
+    _warn_unconverged('solve', emap)
     snaps = ', '.join(f'{e.injected * 1e6:.3f} mL' for e in solved.events) or 'none'
     print(f'{scene.name}: {solved.injected.size} commanded volumes solved -> {args.out} '
           f'(snap-throughs: {snaps})')
+    if solved.branch.size:
+        # The numbering of softseq graph: where a history ends, on the map of every branch.
+        last = int(solved.branch[-1])
+        print(f'  ends at {solved.injected[-1] * 1e6:.4g} mL injected on branch {last} '
+              f'({branch_labels(emap)[last]}) of softseq graph')
     return 0
 
 

@@ -478,6 +478,9 @@ def test_softseq_graph_proposes_a_history_that_softseq_solve_lands_on(nested, tm
         assert np.max(np.abs(emap.read(index, np.array([total])).volumes[0] - landed)) > 1 * ML
     printed = capsys.readouterr().out
     assert f"branch {target['index']} ({target['label']}): 1 reversals" in printed
+    # softseq solve names the branch it ends on, in the graph's numbering and words.
+    assert (f"ends at {history[-1] * 1e6:.4g} mL injected on branch {target['index']} "
+            f"({target['label']}) of softseq graph") in printed
 
 
 def test_the_shipped_three_segment_scene_has_one_branch_and_no_snap():
