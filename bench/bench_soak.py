@@ -285,6 +285,11 @@ def _at_fraction(samples: list, fraction: float, total: int) -> tuple:
     return next(s for s in samples if s[2] >= fraction * total)
 
 
+def _ratio(value: float, baseline: float) -> str:
+    """``value / baseline`` to two places; '-' where a run too short to sample has none."""
+    return f'{value / baseline:.2f}' if baseline > 0 else '-'
+
+
 def _window_rate(samples: list, start: int, end: int) -> float:
     """
     Messages per wall second between the samples nearest two message counts.
@@ -345,8 +350,11 @@ def part_batch(cycles: int, keep_bag: bool, quick: bool = False) -> str:
         cpu = np.interp(hi, sims, cpus) - np.interp(lo, sims, cpus)
         at_end = samples[min(int(np.searchsorted(sims, hi)), len(samples) - 1)]
         rows.append((k + 1, count, wall, cpu, at_end[3], at_end[4]))
-    rate_first, rate_last = rows[0][1] / rows[0][2], rows[-1][1] / rows[-1][2]
-    cpu_first, cpu_last = rows[0][3] / rows[0][1] * 1e6, rows[-1][3] / rows[-1][1] * 1e6
+    # A cycle the samples do not resolve (a --quick run is over in a fraction of a second)
+    # has no rate: 0, and its ratios show '-'.
+    rate_first, rate_last = (row[1] / row[2] if row[2] > 0 else 0.0 for row in (rows[0], rows[-1]))
+    cpu_first, cpu_last = (row[3] / row[1] * 1e6 if row[1] > 0 else 0.0
+                           for row in (rows[0], rows[-1]))
     window = max(1, total // 10)
     early = _window_rate(samples, first[2], first[2] + window)
     late = _window_rate(samples, total - window, total)
@@ -402,17 +410,19 @@ def part_batch(cycles: int, keep_bag: bool, quick: bool = False) -> str:
         f'Python blocks {end[4] / max(first[4], 1):.3f} (end / 10 %: '
         f'{end[4] / max(tenth[4], 1):.3f}).' + later, '',
         f'**Messages per wall second**: first cycle {rate_first:,.0f}, last cycle '
-        f'{rate_last:,.0f}, **last / first {rate_last / rate_first:.2f}**; first 10 % of the '
-        f'messages {early:,.0f}, last 10 % {late:,.0f} ({late / early:.2f}). CPU per message '
-        f'(this process, all threads): {cpu_first:.1f} us in the first cycle, {cpu_last:.1f} '
-        f'us in the last ({cpu_last / cpu_first:.2f}): CPU time moves less with the load than '
-        'wall time.', '',
+        f'{rate_last:,.0f}, **last / first {_ratio(rate_last, rate_first)}**; first 10 % of '
+        f'the messages {early:,.0f}, last 10 % {late:,.0f} ({_ratio(late, early)}). CPU per '
+        f'message (this process, all threads): {cpu_first:.1f} us in the first cycle, '
+        f'{cpu_last:.1f} us in the last ({_ratio(cpu_last, cpu_first)}): CPU time moves less '
+        'with the load than wall time.', '',
         '| cycle | messages | wall [s] | messages / wall s | CPU [us / message] | RSS at its '
         'end [MB] | Python blocks at its end |',
         '|---:|---:|---:|---:|---:|---:|---:|']
     for number, count, wall, cpu, rss, blocks in rows:
-        lines.append(f'| {number} | {count:,.0f} | {wall:.1f} | {count / wall:,.0f} | '
-                     f'{cpu / count * 1e6:.1f} | {mb(rss)} | {blocks:,} |')
+        rate = f'{count / wall:,.0f}' if wall > 0 else '-'
+        per_message = f'{cpu / count * 1e6:.1f}' if count > 0 else '-'
+        lines.append(f'| {number} | {count:,.0f} | {wall:.1f} | {rate} | {per_message} | '
+                     f'{mb(rss)} | {blocks:,} |')
     lines += ['', 'Messages: ' + ', '.join(f'{t} {n:,}' for t, n in sorted(info['counts'].items()))
               + '.', '']
     if info['warnings']:
