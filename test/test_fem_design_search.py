@@ -124,6 +124,12 @@ def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, cap
     assert {tuple(pair['corners']) for pair in results['corner_pairs']} == {
         ('soft', 'soft'), ('soft', 'stiff')}   # the bottom is fixed: its corners are one
     assert 'reach of the ranges: plateau' in printed
+    # The console says the search's mesh and the mesh the written designs keep.
+    problem = yaml.safe_load(_problem(folder).read_text())
+    grid_mm = problem.get('grid', {}).get('element_size_m', 0.002) * 1e3
+    assert (f'the search meshed its grid tables at grid.element_size_m {grid_mm:g} mm; the '
+            f'design files keep their own mesh ({top.mesh.element_size_m * 1e3:g} mm)'
+            in printed)
 
 
 def test_the_corners_are_announced_before_they_run_and_the_grid_reuses_them(library):

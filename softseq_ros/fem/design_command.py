@@ -53,4 +53,10 @@ def run_design_command(args: Any) -> int:
               f'{numbers_text(result.verification.metrics, target)}: {verdict}')
     written = write_result_files(result, Path(out))
     print(f'designs and results.yaml in {Path(out)} ({len(written)} files)')
+    # The search's FEM ran on the coarse grid mesh; a design file keeps its own, finer one.
+    meshes = sorted({segment.design.mesh.element_size_m for segment in problem.segments})
+    print(f'the search meshed its grid tables at grid.element_size_m '
+          f'{problem.element_size_m * 1e3:g} mm; the design files keep their own mesh '
+          f'({", ".join(f"{size * 1e3:g} mm" for size in meshes)}): softseq fem on a design '
+          'file computes its table at that resolution')
     return 0 if result.verified else 1
