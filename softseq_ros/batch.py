@@ -145,22 +145,23 @@ class _Blocks:
         self.names = names
         self.size = FIRST_BLOCK
         self.ambient = actuator.ambient_pressure_pa
-        self.volumes_sent = actuator._send_volumes
-        self.curvatures_sent = actuator._send_curvatures
+        # What the actuator answers with, by its outputs (as it decides itself).
+        self.volumes_sent = 'volumes' in actuator.outputs
+        self.curvatures_sent = 'curvature' in actuator.outputs
         # The topics of a pump instant: its command, then the answers (as the actuator
         # sends them); of a camera instant: backbone, then markers.
         samples = [(PumpCommand(0, 0.0, 0.0), True),
-                   (Pressure(0, 0.0), actuator._send_pressure),
+                   (Pressure(0, 0.0), 'pressure' in actuator.outputs),
                    (SegmentVolumes(0, names, [0.0] * n, 0.0), self.volumes_sent),
                    (SegmentCurvatures(0, names, [0.0] * n), self.curvatures_sent)]
         points = np.zeros((camera.n_points, 3))
         frame_samples = [(Backbone(0, np.zeros((camera.n_points, 7))), 'poses'),
-                         (Markers(0, [points[a:b] for a, b in camera._line_rows]), 'markers')]
+                         (Markers(0, [points[a:b] for a, b in camera.marker_lines]), 'markers')]
         self.slots = self._slots(samples, channels, channel_ids)
         self.frame_slots = self._slots([(value, output in camera.outputs)
                                         for value, output in frame_samples],
                                        channels, channel_ids)
-        self.line_rows = camera._line_rows
+        self.line_rows = camera.marker_lines
         stage = wrap or (lambda _label, function: function)
         self.plan = stage('block.pump', pump.plan)
         self.preview = stage('block.actuator', actuator.preview)
@@ -185,7 +186,7 @@ class _Blocks:
         actuator, camera = run.actuator, run.camera
         return (getattr(actuator.model, 'preview', None) is not None
                 and actuator.rate_hz is None and actuator.state_file is None
-                and not actuator._send_flows and camera.frame_trigger == 'timer'
+                and 'flows' not in actuator.outputs and camera.frame_trigger == 'timer'
                 and not camera.image_wanted)
 
     def step(self, clocks: list) -> bool:
@@ -229,8 +230,8 @@ class _Blocks:
         frame_states = None
         if frame_times.size and self.curvatures_sent:
             frame_states = block.curvatures[frame_rows]
-            if camera._curvatures is not None:
-                frame_states[frame_rows < 0] = camera._curvatures
+            if camera.held_curvatures is not None:
+                frame_states[frame_rows < 0] = camera.held_curvatures
             else:
                 frame_times, frame_rows = frame_times[frame_rows >= 0], \
                     frame_rows[frame_rows >= 0]

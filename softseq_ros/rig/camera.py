@@ -210,6 +210,16 @@ class CameraCore:
 
     # ---------------------------------------------------------------- blocks of states
 
+    @property
+    def marker_lines(self) -> list[tuple[int, int]]:
+        """Each segment's rows of the backbone's points, as its marker line holds them."""
+        return self._line_rows
+
+    @property
+    def held_curvatures(self) -> list[float] | None:
+        """The curvatures of the last state taken (None before the first): a frame shows them."""
+        return self._curvatures
+
     def plain_states(self, names: Sequence[str], volumes: np.ndarray | None,
                      curvatures: np.ndarray | None) -> tuple[int, np.ndarray | None]:
         """
