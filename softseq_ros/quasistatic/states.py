@@ -194,6 +194,34 @@ class StateReader:
         # The same Horner steps as numpy's on the arrays, so the same numbers.
         return [((a * dt + b) * dt + c) * dt + d for a, b, c, d in coefficients]
 
+    def rows_per_command(self, index: NDArray[np.intp], total: FloatArray) -> FloatArray:
+        """
+        :meth:`row` of many states at once, to the last bit: row r on branch ``index[r]``.
+
+        The batch rig answers a block of commands with the numbers the per-command path gives
+        (:meth:`rows_many` may differ from :meth:`row` in the last bit): the same clamping, the
+        same cubics (every step of the interval cubics is elementwise, so all the intervals
+        read are computed at once), the same Horner steps, and :meth:`row` itself next to a
+        fold.
+        """
+        values = np.empty((total.size, 2 * self._n + 1))
+        for b in np.unique(index).tolist():
+            rows = np.flatnonzero(index == b)
+            branch = self.branches[b]
+            clamped = np.minimum(np.maximum(total[rows], branch.lo), branch.hi)
+            interval = np.clip(np.searchsorted(branch.total, clamped, side='right') - 1, 0,
+                               branch.total.size - 2)
+            rough = (np.asarray(branch.rough_list, dtype=bool)[interval] if self.polish
+                     else np.zeros(rows.size, dtype=bool))
+            unique, where = np.unique(interval, return_inverse=True)
+            table = branch.coefficients(unique)
+            a, b_, c, d = (table[k][where] for k in range(4))
+            dt = (clamped - branch.total[interval])[:, None]
+            values[rows] = ((a * dt + b_) * dt + c) * dt + d
+            for r in np.flatnonzero(rough).tolist():
+                values[rows[r]] = self.row(b, float(clamped[r]))
+        return values
+
     def _polish(self, branch: Branch, total: FloatArray, values: FloatArray) -> FloatArray:
         """
         Exact states next to a fold or bifurcation, where no cubic in V follows the state.

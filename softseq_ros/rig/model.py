@@ -189,8 +189,9 @@ class QuasiStaticModel:
                                 np.empty(0, dtype=bool), len(self.names))
         branch_ids = np.empty(n, dtype=np.intp)
         at = totals.copy()
-        probe = Tracker.__new__(Tracker)
-        probe.emap, probe.branch, probe.total = emap, tracker.branch, tracker.total
+        # A tracker of its own walks the commands: the model's stays where it is.
+        probe = Tracker(emap)
+        probe.branch, probe.total = tracker.branch, tracker.total
         # A command equal to the one before it is not walked: the state stays.
         previous = np.empty(n)
         previous[0] = math.nan if self._last_command is None else self._last_command
@@ -208,7 +209,7 @@ class QuasiStaticModel:
             if i == n:
                 break
             try:
-                snaps = probe._walk(float(totals[i]))
+                snaps = probe.move(float(injected_m3[i]))
             except DomainError:
                 count = i
                 break
@@ -226,32 +227,9 @@ class QuasiStaticModel:
             last[kept] = 0
             at, branch_ids = at[last], branch_ids[last]
             at[kept], branch_ids[kept] = tracker.total, tracker.branch
-        values = self._rows(branch_ids, at)
+        values = emap.reader.rows_per_command(branch_ids, at)
         return CommandBlock(injected_m3[:count], branch_ids, at, values, repeated,
                             len(self.names))
-
-    def _rows(self, branch_ids: 'np.ndarray', totals: 'np.ndarray') -> 'np.ndarray':
-        """``StateReader.row`` of many states: the same cubics, Horner steps and polish."""
-        reader = self.emap.reader
-        values = np.empty((totals.size, 2 * len(self.names) + 1))
-        for b in np.unique(branch_ids).tolist():
-            rows = np.flatnonzero(branch_ids == b)
-            branch = reader.branches[b]
-            total = np.minimum(np.maximum(totals[rows], branch.lo), branch.hi)
-            interval = np.clip(np.searchsorted(branch.total, total, side='right') - 1, 0,
-                               branch.total.size - 2)
-            rough = (np.asarray(branch.rough_list, dtype=bool)[interval] if reader.polish
-                     else np.zeros(rows.size, dtype=bool))
-            # The cubics of the intervals read, computed for all of them at once (the same
-            # numbers as one interval at a time: every step of interval_cubics is elementwise).
-            unique, where = np.unique(interval, return_inverse=True)
-            table = branch.coefficients(unique)
-            a, b_, c, d = (table[k][where] for k in range(4))
-            dt = (total - branch.total[interval])[:, None]
-            values[rows] = ((a * dt + b_) * dt + c) * dt + d
-            for r in np.flatnonzero(rough).tolist():
-                values[rows[r]] = reader.row(b, float(total[r]))
-        return values
 
     def commit(self, block: 'CommandBlock', count: int) -> None:
         """The state after the first ``count`` commands of ``block`` (a :meth:`preview`)."""
