@@ -295,7 +295,8 @@ class TabulatedSegment(Segment):
         # mesh, volume range, code versions), when it is one: the segment is defined by that,
         # not by rows that a FEM run on another machine may round otherwise.
         self.design: dict[str, object] | None = None
-        self._p = PchipInterpolator(vol, prs, extrapolate=False)
+        self.knot_volumes, self.knot_pressures = dequantised(vol, prs)
+        self._p = PchipInterpolator(self.knot_volumes, self.knot_pressures, extrapolate=False)
         self._dp = self._p.derivative()
         self._e = self._p.antiderivative()
         self._k = PchipInterpolator(vol, cur, extrapolate=False)
@@ -340,8 +341,8 @@ class TabulatedSegment(Segment):
         return data
 
     def knots(self) -> FloatArray:
-        """The table's volumes: PCHIP is only once differentiable there."""
-        return self.volumes
+        """The pressure curve's knots (:func:`dequantised`): PCHIP is once differentiable there."""
+        return self.knot_volumes
 
     def pressure_cubics(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """PCHIP's breaks (the table's volumes), its cubics and their derivatives."""
@@ -378,12 +379,51 @@ class TabulatedSegment(Segment):
         return self._dk(self._clip(v))
 
     def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
-        secant = np.sign(np.diff(self.pressures))
-        turns = [float(self.volumes[i + 1]) for i in range(secant.size - 1)
+        volumes = self.knot_volumes
+        secant = np.sign(np.diff(self.knot_pressures))
+        turns = [float(volumes[i + 1]) for i in range(secant.size - 1)
                  if secant[i] != secant[i + 1]]
-        flats = [(float(self.volumes[i]), float(self.volumes[i + 1]))
+        flats = [(float(volumes[i]), float(volumes[i + 1]))
                  for i in range(secant.size) if secant[i] == 0.0]
         return turns, flats
+
+
+def dequantised(volumes: FloatArray, pressures: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """
+    The knots of a table's pressure curve: each run of rows at one pressure read as one point.
+
+    A logger reads pressure in steps of its resolution q, so a table from a rig repeats a
+    reading over a run of rows while the true pressure moves through the step. Interpolated as
+    read, every run would be a flat (a plateau of neutral equilibria that the true curve does
+    not have) joined to the next by a cubic with zero slope at both ends. Each run of two or
+    more equal readings stands instead for one point at the run's middle volume (the first
+    and the last row stay where they are, so the table's range is kept): the curve then passes
+    through every run's middle, is monotone between them, and lies within one step of every
+    reading (within 1.5 steps of the true pressure). A table without repeated readings is
+    unchanged, row for row.
+    """
+    same = np.flatnonzero(pressures[1:] == pressures[:-1])
+    if same.size == 0:
+        return volumes, pressures
+    # Runs of equal readings: [start, stop) row ranges.
+    new_run = np.ones(pressures.size, dtype=bool)
+    new_run[1:] = pressures[1:] != pressures[:-1]
+    starts = np.flatnonzero(new_run)
+    stops = np.append(starts[1:], pressures.size)
+    last = pressures.size - 1
+    knot_v, knot_p = [], []
+    for start, stop in zip(starts.tolist(), stops.tolist()):
+        if start == 0 and stop - 1 == last:
+            ends = [volumes[0], volumes[last]]
+        elif start == 0:
+            ends = [volumes[0]]
+        elif stop - 1 == last:
+            ends = [volumes[last]]
+        else:
+            ends = [0.5 * (volumes[start] + volumes[stop - 1])]
+        knot_v.extend(ends)
+        knot_p.extend([pressures[start]] * len(ends))
+    return np.array(knot_v), np.array(knot_p)
 
 
 def polynomial_at(coefficients: FloatArray, offset: FloatArray) -> FloatArray:
