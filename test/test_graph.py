@@ -22,6 +22,7 @@ from softseq_ros.analysis.figures import STYLE
 from softseq_ros.analysis.recording import load_recording
 from softseq_ros.analysis.report import recording_metrics, summary_text
 from softseq_ros.cli import main
+from softseq_ros.quasistatic.assembly import Assembly
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker, inflate_and_deflate
 from softseq_ros.quasistatic.graph import (
     DEFLATION,
@@ -34,6 +35,7 @@ from softseq_ros.quasistatic.graph import (
     transition_graph,
 )
 from softseq_ros.quasistatic.landing import FlowLandings, RedistributionFlow
+from softseq_ros.quasistatic.numerics import SegmentNumerics
 from softseq_ros.quasistatic.solve import equilibrium_map, scene_map
 from softseq_ros.scene.loader import load_scene, scene_from_dict
 from softseq_ros.segments.materials import NeoHookean
@@ -249,10 +251,10 @@ def test_three_identical_tables_in_one_millibar_steps_get_past_symmetric_saddles
 def test_three_identical_tables_with_a_one_row_peak_land_beside_it_on_a_stretch_samples_miss():
     # At 80 rows the peak is a single row. One segment just past it and one just before it
     # balance on stable stretches under 1 Pa long (the two cubics beside the peak row bend
-    # differently), shorter than the samples' spacing: the flow from a snap came to rest
-    # where the samples had found no branch, and the map stopped with "found no stable state
-    # to land on". The map is now assembled again with the pressure where the flow came to
-    # rest sampled, which finds them; the walk passes through them.
+    # differently), shorter than the samples' spacing, against the end of their
+    # configurations' range, where every stiffness is 0: the flow from a snap came to rest
+    # where the samples had found no branch. The assembly now looks just inside such an
+    # unstable end and finds them the first time; the walk passes through them.
     segments = [quantised_gent_table(name, 80) for name in ('base', 'middle', 'tip')]
     peak = next(pc.p_at_lo for pc in segments[0].monotone_pieces() if pc.direction < 0)
     emap = EquilibriumMap(segments)
@@ -262,6 +264,20 @@ def test_three_identical_tables_with_a_one_row_peak_land_beside_it_on_a_stretch_
              if np.ptp(b.pressure) < 1.0 and abs(b.pressure[0] - peak) < 1.0}
     assert short
     assert any(t.target in short for t in graph.transitions)
+    # Every branch the walk needs is in the first assembly.
+    first = Assembly(SegmentNumerics(segments), emap.resolution).branches
+    assert [b.pressure.tolist() for b in first] == [b.pressure.tolist() for b in emap.branches]
+
+
+def test_a_snap_from_a_fold_whose_total_barely_turns_lands_past_it():
+    # Three identical 60-row tables in 1 mbar steps: near their common valley one branch (two
+    # segments rising, one falling) has a fold where its total volume turns by 2e-12 m^3 over
+    # 0.5 Pa. At the fold's own total the flow from a step off it met balanced pressures at
+    # once, on the branch it left, from either side: no landing. The flow now starts a step
+    # past the fold as well, at a total the branch does not reach, and lands.
+    segments = [quantised_gent_table(name, 60) for name in ('base', 'middle', 'tip')]
+    assert_snaps_land_on_balanced_stable_states(
+        segments, transition_graph(EquilibriumMap(segments)), base_takes_more=False)
 
 
 def test_three_identical_25_row_tables_leave_a_fold_where_the_state_barely_moves():

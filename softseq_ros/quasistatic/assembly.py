@@ -33,6 +33,10 @@ FOLD_PRESSURE_XTOL = 1e-14
 FOLD_PRESSURE_RTOL = 1e-15
 # Flat pieces at one pressure, to this share of the pressure scale, make one plateau.
 SAME_FLAT_PRESSURE = 1e-12
+# How far inside a configuration's pressure range (a share of the pressure scale) its stability
+# is looked at where its end is not stable: a stable stretch shorter than the samples' spacing
+# can lie against an end where several segments reach a peak or a valley together.
+BESIDE_END = 1e-10
 
 
 @dataclass
@@ -126,14 +130,15 @@ class Assembly:
         """
         self.numerics = numerics
         self.resolution = int(resolution)
-        self.also_sampled = np.array(also_sampled, dtype=float)
         self.configurations = self._configurations()
-        self._samples: dict[tuple[int, Piece], FloatArray] = {}
+        self.also_sampled = np.array(also_sampled, dtype=float)
+        self.grid = self._sample_grid()
+        beside = self._stable_beside_unstable_ends()
+        if beside.size:
+            self.also_sampled = np.unique(np.concatenate([self.also_sampled, beside]))
+            self.grid = self._sample_grid()
         # Per configuration, in order: a sampled configuration or a plateau's curves.
         self._sampled: list[_Sampled | list[EquilibriumCurve]] = []
-        self.grid = SharedGrid(numerics, {
-            (i, pc): self._piece_samples(i, pc) for config in self.configurations
-            for i, pc in enumerate(config) if pc.direction != 0})
         stretches = self._stretches()
         self.branches: list[Branch] = [b for b in fit_branches(numerics, stretches)
                                        if b is not None]
@@ -154,6 +159,47 @@ class Assembly:
 
         extend((), -math.inf, math.inf, 0)
         return found
+
+    def _sample_grid(self) -> SharedGrid:
+        self._samples: dict[tuple[int, Piece], FloatArray] = {}
+        return SharedGrid(self.numerics, {
+            (i, pc): self._piece_samples(i, pc) for config in self.configurations
+            for i, pc in enumerate(config) if pc.direction != 0})
+
+    def _stable_beside_unstable_ends(self) -> FloatArray:
+        """
+        Pressures just inside range ends where the samples miss a stable stretch.
+
+        At an end where two or more segments reach a peak or a valley together (identical
+        tables) the end is unstable (every stiffness there 0, or two falling), yet the
+        stretch next to it can be stable for less than the samples' spacing (under 1 Pa next
+        to a peak that three identical stepped tables share). Where a configuration's end
+        sample and the sample next to it are both unstable and the state :data:`BESIDE_END`
+        inside the end is stable, that pressure is sampled too: the stretch is then found
+        like any other, its folds solved on both sides of the sample.
+        """
+        numerics = self.numerics
+        rows, pressures = [], []
+        for config in self.configurations:
+            if any(pc.direction == 0 for pc in config):
+                continue
+            places = self.grid.sample(config)
+            if places is None or places.size < 2:
+                continue
+            stiffness, = self.grid.columns(config, places[[0, 1, -2, -1]], ('stiffness',))
+            d = cofactor_sum(stiffness)
+            p = self.grid.p[places]
+            step = min(BESIDE_END * numerics.p_scale, 0.25 * (p[-1] - p[0]))
+            for unstable, inside in ((d[0] <= 0.0 and d[1] <= 0.0, p[0] + step),
+                                     (d[3] <= 0.0 and d[2] <= 0.0, p[-1] - step)):
+                if unstable:
+                    rows.append(numerics.piece_indices(config))
+                    pressures.append(inside)
+        if not rows:
+            return np.empty(0)
+        pressures = np.array(pressures)
+        _, stiffness = numerics.states_at(np.array(rows, dtype=np.intp), pressures)
+        return pressures[cofactor_sum(stiffness) > 0.0]
 
     def curves(self) -> list[EquilibriumCurve]:
         """Every configuration's equilibria, stable and unstable, in configuration order."""
