@@ -27,7 +27,6 @@ equations, and that integration decides (:meth:`SnapLandings.land`).
 
 from dataclasses import dataclass
 import math
-from typing import Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,8 +70,6 @@ PROBES = 33
 # The flow's drifts on the two sides of a branch end cancel to this share of the larger: a
 # pitchfork (mirror images up to round-off, or both zero), not a fold.
 PITCHFORK = 1e-6
-# The balance (of the pressure scale) a flow that rested where no branch is goes on to.
-ROUND_OFF_REST = 1e-13
 
 
 @dataclass
@@ -260,12 +257,10 @@ class RedistributionFlow:
         return np.any(flat, axis=1) & np.all(
             flat | (k > self.numerics.tolerances.stable_cofactor), axis=1)
 
-    def at_rest(self, y: FloatArray, force: FloatArray, k: FloatArray,
-                rest: float | None = None) -> NDArray[np.bool_]:
-        """Per row: balanced to ``rest`` (default ``flow_rest``), stable or neutral."""
+    def at_rest(self, y: FloatArray, force: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
+        """Per row: balanced to ``flow_rest``, stable or neutral."""
         tolerances = self.numerics.tolerances
-        balanced = np.max(np.abs(force), axis=1) < (tolerances.flow_rest if rest is None
-                                                    else rest)
+        balanced = np.max(np.abs(force), axis=1) < tolerances.flow_rest
         return balanced & (stable(k, tolerances.stable_cofactor)
                            | self.neutral(y * self.numerics.v_scale, k))
 
@@ -314,14 +309,14 @@ class RedistributionFlow:
             stages.append(np.einsum('mij,mj->mi', inverse, rhs))
         return y + sum(m * s for m, s in zip(M, stages)), stages[-1]
 
-    def integrate(self, start: FloatArray, rest: float | None = None) -> FloatArray:
+    def integrate(self, start: FloatArray) -> FloatArray:
         """
         One flow from ``start`` [m^3] until it comes to rest (:meth:`at_rest`), alone.
 
         Stiff near walls, so Radau with the exact Jacobian. The flow only has to reach the
         right basin (the landing state is then read off its branch exactly), so the
-        tolerances are modest and the horizon grows until the flow is at rest, to ``rest``
-        (default ``flow_rest``), or leaves a segment's range.
+        tolerances are modest and the horizon grows until the flow is at rest or leaves a
+        segment's range.
         """
         numerics = self.numerics
         scale_v = numerics.v_scale
@@ -351,7 +346,7 @@ class RedistributionFlow:
             if sol.status == 1:
                 break
             force = rhs(t, y)[None, :]
-            if self.at_rest(y[None, :], force, self.stiffnesses(y[None, :]), rest)[0]:
+            if self.at_rest(y[None, :], force, self.stiffnesses(y[None, :]))[0]:
                 break
         return np.clip(y * scale_v, lo, hi)
 
@@ -521,96 +516,28 @@ class SnapLandings:
     def _land_alone(self, index: int, upward: bool, total: float, start: FloatArray,
                     fold: FloatArray, landing: Landing) -> BranchEnd:
         """
-        Where a flow that no certain basin took lands: the first of its lone flows placed.
+        Where a flow that no certain basin took lands: where it rests, placed on a branch.
 
-        In turn, each run alone to rest (:meth:`RedistributionFlow.run`) and placed on the
-        branch holding the state where it rests (:meth:`_nearest_branch`), or on the domain's
-        end where a segment reaches the end of its range:
+        Where the side-by-side flow came to rest (balanced at a stable state, not on a
+        saddle), that is where; else the flow integrated alone from its start, with Radau's
+        error control and past any saddle it stops on (:meth:`RedistributionFlow.run`). The
+        state is placed on the branch holding it at the snap's total (:meth:`_nearest_branch`),
+        or on the domain's end where a segment reaches the end of its range.
 
-        1. Where the side-by-side flow stopped, if it came to rest (not on a saddle): next to
-           a flat piece, or on a plateau (flat pieces at one pressure: a neutral set, where a
-           flow stays wherever it arrives), the flow's own end says where, and integrating it
-           again would only move it along the set. Else the flow from its start.
-        2. Where the end is a corner of a plateau (:meth:`_corner_starts`), the steps that
-           leave it.
-        3. The flow from its start, if 1 did not run it: the flows run side by side can rest
-           beside a fold where the state barely moves (a branch whose total changes by
-           3e-11 m^3 over 4 Pa), or go back onto the branch they leave.
-        4. The side-by-side flow's end, on to a balance at round-off: a balance to
-           ``flow_rest`` counts as rest, and next to a segment whose slope is nearly 0 (a
-           plateau's corner, in a table in steps) the flow can still be on its way, slowly,
-           with no equilibrium where it stopped.
-        5. The step on the fold's other side: on a branch a few fold offsets long (next to
-           two identical tables' common valley) the way the flow points is round-off, and
-           the flow from the usual step can go back onto the branch it left.
-
-        None placed: :class:`UnplacedLandingError` with where the first came to rest.
+        None placed: :class:`UnplacedLandingError` with where the flow came to rest.
         """
         rested = landing.why in ('rest', 'horizon') and not self.flow.saddle(landing.volumes)
-        first = None
-        for landed in self._lone_flows(index, upward, start, fold, landing, rested):
-            if self.numerics.at_edge(landed):
-                return BranchEnd('limit')
-            target, distance = self._nearest_branch(total, landed, exclude=index)
-            if target >= 0:
-                return BranchEnd('snap', target,
-                                 self.reader.read(target, np.array([total])).volumes[0])
-            if first is None:
-                first = landed, distance
-        landed, distance = first
+        landed = landing.volumes if rested else self.flow.run(start)
+        if self.numerics.at_edge(landed):
+            return BranchEnd('limit')
+        target, distance = self._nearest_branch(total, landed, exclude=index)
+        if target >= 0:
+            return BranchEnd('snap', target,
+                             self.reader.read(target, np.array([total])).volumes[0])
         raise UnplacedLandingError(
             f'snap-through at total volume {total:.9g} m^3 found no stable state to land on '
             f'(nearest {distance:.3g} m^3 away)',
             float(np.mean(self.numerics.model_pressures(landed[None, :]))))
-
-    def _lone_flows(self, index: int, upward: bool, start: FloatArray, fold: FloatArray,
-                    landing: Landing, rested: bool) -> Iterator[FloatArray]:
-        """Where the lone flows of :meth:`_land_alone` come to rest, in its order, lazily."""
-        flow = self.flow
-        yield landing.volumes if rested else flow.run(start)
-        for step in self._corner_starts(index, upward):
-            yield flow.run(step)
-        if rested:
-            yield flow.run(start)
-        yield flow.integrate(landing.volumes, rest=ROUND_OFF_REST)
-        yield flow.run(2.0 * fold - start)
-
-    def _corner_starts(self, index: int, upward: bool) -> list[FloatArray]:
-        """
-        Steps off a branch end where a flat segment reaches the end of its flat.
-
-        A branch on a plateau (flat pieces at one pressure) can end at a corner of the
-        neutral set rather than at a fold: every direction along the flats is as soft as any
-        (stiffness 0), and the step along the soft direction may only slide the state back
-        onto the set, to rest where it started. What makes the end unstable is the piece
-        beyond each flat's end, the way the sweep goes (a segment that would go on down a
-        falling piece runs away). Two steps push into it: along the soft direction of the
-        stiffnesses with each such flat counted as the piece after it (its secant slope),
-        the way the flow points; and the sweep's own, a little more fluid (or less) in every
-        segment alike.
-        """
-        numerics = self.numerics
-        branch = self.branches[index]
-        fold = branch.volumes[-1 if upward else 0]
-        k = numerics.stiffness(branch.pieces, fold[None, :])[0]
-        at_end = False
-        for i, (piece, a) in enumerate(zip(branch.pieces, numerics.piece_indices(branch.pieces))):
-            edge = piece.v_hi if upward else piece.v_lo
-            if piece.direction != 0 or abs(fold[i] - edge) > numerics.tol_v:
-                continue
-            pieces = numerics.pieces[i]
-            beyond = a + (1 if upward else -1)
-            if 0 <= beyond < len(pieces):
-                at_end = True
-                after = pieces[beyond]
-                k[i] = (after.p_at_hi - after.p_at_lo) / (after.v_hi - after.v_lo) / \
-                    numerics.k_scale
-        if not at_end:
-            return []
-        eps = numerics.tolerances.fold_offset * numerics.v_scale
-        null = soft_direction(k)
-        return [fold + self.flow.direction(fold, null, eps) * eps * null,
-                fold + (eps if upward else -eps) / len(numerics.segments)]
 
     def _flow_start(self, branch: Branch, v_fold: FloatArray, upward: bool) -> FloatArray:
         """
