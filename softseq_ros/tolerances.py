@@ -37,11 +37,7 @@ class Tolerances:
     # across to flow_rtol_moved of the way; softseq_ros.quasistatic.landing). It is at rest
     # when the scaled pressures balance to flow_rest; a state is stable when the cofactor sum
     # of its scaled stiffnesses exceeds stable_cofactor; the branch it lands on lies within
-    # landing_distance (a share of the volume scale) of where the flow came to rest. A flow
-    # at rest on a plateau (flat pieces at one pressure: any split of their fluid is an
-    # equilibrium) lands on the plateau's branch when each flat segment's pressure is the
-    # flat's to plateau_pressure (a share of the pressure scale; a quantised table's steps
-    # are far larger).
+    # landing_distance (a share of the volume scale) of where the flow came to rest.
     fold_offset: float = 1e-6
     flow_rtol: float = 1e-6
     flow_rtol_moved: float = 1e-4
@@ -49,7 +45,6 @@ class Tolerances:
     flow_rest: float = 1e-9
     stable_cofactor: float = 1e-6
     landing_distance: float = 1e-3
-    plateau_pressure: float = 1e-6
 
     def __post_init__(self) -> None:
         """Refuse budgets that cannot work."""

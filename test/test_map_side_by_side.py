@@ -36,11 +36,10 @@ def remember_own_samples(numerics: SegmentNumerics, count: int) -> None:
     """Each piece's pressures at ``count`` volumes along it, as the map's sampling leaves them."""
     for i, segment in enumerate(numerics.segments):
         for piece in numerics.pieces[i]:
-            if piece.direction != 0:
-                volumes = np.linspace(piece.v_lo, piece.v_hi, count)
-                pressure = segment.pressure(volumes)
-                order = np.argsort(pressure, kind='stable')
-                numerics.remember_inversions(i, piece, pressure[order], volumes[order])
+            volumes = np.linspace(piece.v_lo, piece.v_hi, count)
+            pressure = segment.pressure(volumes)
+            order = np.argsort(pressure, kind='stable')
+            numerics.remember_inversions(i, piece, pressure[order], volumes[order])
 
 
 @pytest.mark.parametrize('remembered', [False, True], ids=['piece-wide', 'from-samples'])
@@ -75,8 +74,6 @@ def test_an_inversion_started_between_known_samples_lands_on_the_same_volume(tab
     rng = np.random.default_rng(11)
     for i, segment in enumerate(plain.segments):
         for piece in plain.pieces[i]:
-            if piece.direction == 0:
-                continue
             # Inside the piece, at its ends, and beyond them (the nearer end).
             pressure = np.concatenate([rng.uniform(piece.p_min, piece.p_max, 200),
                                        [piece.p_min, piece.p_max, piece.p_min - 1.0,

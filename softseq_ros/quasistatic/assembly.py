@@ -31,8 +31,6 @@ from softseq_ros.segments.models import Piece
 # round-off): the fold is where the branch's volumes turn, located to the last bits.
 FOLD_PRESSURE_XTOL = 1e-14
 FOLD_PRESSURE_RTOL = 1e-15
-# Flat pieces at one pressure, to this share of the pressure scale, make one plateau.
-SAME_FLAT_PRESSURE = 1e-12
 # How far inside a configuration's pressure range (a share of the pressure scale) its stability
 # is looked at where its end is not stable: a stable stretch shorter than the samples' spacing
 # can lie against an end where several segments reach a peak or a valley together.
@@ -137,8 +135,8 @@ class Assembly:
         if beside.size:
             self.also_sampled = np.unique(np.concatenate([self.also_sampled, beside]))
             self.grid = self._sample_grid()
-        # Per configuration, in order: a sampled configuration or a plateau's curves.
-        self._sampled: list[_Sampled | list[EquilibriumCurve]] = []
+        # Per configuration, in order: where it is sampled and which samples are stable.
+        self._sampled: list[_Sampled] = []
         stretches = self._stretches()
         self.branches: list[Branch] = [b for b in fit_branches(numerics, stretches)
                                        if b is not None]
@@ -164,7 +162,7 @@ class Assembly:
         self._samples: dict[tuple[int, Piece], FloatArray] = {}
         return SharedGrid(self.numerics, {
             (i, pc): self._piece_samples(i, pc) for config in self.configurations
-            for i, pc in enumerate(config) if pc.direction != 0})
+            for i, pc in enumerate(config)})
 
     def _stable_beside_unstable_ends(self) -> FloatArray:
         """
@@ -181,8 +179,6 @@ class Assembly:
         numerics = self.numerics
         rows, pressures = [], []
         for config in self.configurations:
-            if any(pc.direction == 0 for pc in config):
-                continue
             places = self.grid.sample(config)
             if places is None or places.size < 2:
                 continue
@@ -205,9 +201,6 @@ class Assembly:
         """Every configuration's equilibria, stable and unstable, in configuration order."""
         found: list[EquilibriumCurve] = []
         for entry in self._sampled:
-            if isinstance(entry, list):
-                found.extend(entry)
-                continue
             volumes, = self.grid.columns(entry.config, entry.places, ('volumes',))
             total = volumes.sum(axis=1)
             found.append(EquilibriumCurve(total - self.numerics.total_rest_volume, volumes,
@@ -217,17 +210,11 @@ class Assembly:
     def _stretches(self) -> list[BranchSamples]:
         """Every configuration's stable stretches, their folds solved side by side."""
         # A stretch is (config, its grid places, the fold pressures at its ends) until the
-        # folds are known; a plateau's stretches come ready.
-        pending: list[tuple[tuple[Piece, ...], NDArray[np.intp], list[int]] | BranchSamples] = []
+        # folds are known.
+        pending: list[tuple[tuple[Piece, ...], NDArray[np.intp], list[int]]] = []
         # (configuration, grid places, the folds below and above it: -1 for none)
         folds: list[tuple[tuple[Piece, ...], float, float, float, float]] = []
         for config in self.configurations:
-            flats = [i for i, pc in enumerate(config) if pc.direction == 0]
-            if flats:
-                curves: list[EquilibriumCurve] = []
-                pending.extend(self._assemble_plateau(config, flats, curves))
-                self._sampled.append(curves)
-                continue
             places = self.grid.sample(config)
             if places is None:
                 continue
@@ -257,11 +244,7 @@ class Assembly:
                      dtype=np.intp).reshape(-1, len(self.numerics.segments)), fold_p)
         at_curvature = self.numerics.curvature_slopes(at_volumes)
         stretches = []
-        for entry in pending:
-            if isinstance(entry, BranchSamples):
-                stretches.append(entry)
-                continue
-            config, places, (lower, upper) = entry
+        for config, places, (lower, upper) in pending:
             pressure = self.grid.p[places]
             # A fold lies between its two samples: before the stretch's first sample or
             # after its last; at a sample's own pressure, the sample stands for it.
@@ -328,46 +311,3 @@ class Assembly:
             self.numerics.remember_inversions(index, piece, self._samples[key][order],
                                               volumes[order])
         return self._samples[key]
-
-    def _assemble_plateau(self, config: tuple[Piece, ...], flats: list[int],
-                          curves: list[EquilibriumCurve]) -> list[BranchSamples]:
-        """
-        Flat pieces at one common pressure: the flat segments absorb the volume.
-
-        Several flat segments at the same pressure are neutral (any split is an equilibrium): they
-        fill one after the other, base first, and empty in the reverse order, so the path is
-        deterministic and the same both ways.
-        """
-        p_flat = config[flats[0]].p_at_lo
-        if any(abs(config[i].p_at_lo - p_flat) > SAME_FLAT_PRESSURE * self.numerics.p_scale
-               for i in flats):
-            return []
-        others = [i for i in range(len(config)) if i not in flats]
-        base = np.zeros(len(config))
-        for i in others:
-            piece = config[i]
-            if not piece.p_min <= p_flat <= piece.p_max or piece.direction < 0:
-                return []
-            base[i] = self.numerics.segments[i].invert(
-                piece, np.array([p_flat]), self.numerics.tolerances, self.numerics.convergence)[0]
-        k_others = self.numerics.stiffness(config, base[None, :])[0, others]
-        if np.any(k_others <= 0.0):
-            return []
-        stretches = []
-        for order, i in enumerate(flats):
-            lo_hi = np.linspace(config[i].v_lo, config[i].v_hi, 3)
-            volumes = np.tile(base, (lo_hi.size, 1))
-            for j in flats[:order]:
-                volumes[:, j] = config[j].v_hi
-            for j in flats[order + 1:]:
-                volumes[:, j] = config[j].v_lo
-            volumes[:, i] = lo_hi
-            pressure = np.full(lo_hi.size, p_flat)
-            injected = volumes.sum(axis=1) - self.numerics.total_rest_volume
-            curves.append(EquilibriumCurve(injected, volumes, pressure,
-                                           np.ones(lo_hi.size, bool)))
-            stretches.append(BranchSamples(pressure, volumes,
-                                           self.numerics.stiffness(config, volumes),
-                                           self.numerics.curvature_slopes(volumes), config,
-                                           flat=True))
-        return stretches

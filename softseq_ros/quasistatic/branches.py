@@ -62,7 +62,6 @@ class BranchSamples:
     stiffness: FloatArray    # (n, N) scaled and clipped (SegmentNumerics.stiffness)
     curvature_slope: FloatArray  # (n, N) dk_i/dv_i [1/m per m^3]
     pieces: tuple[Piece, ...]
-    flat: bool = False
 
 
 @dataclass(eq=False)
@@ -75,7 +74,6 @@ class Branch:
     pieces: tuple[Piece, ...]
     rough: NDArray[np.bool_]          # per interval: the chord, states solved exactly
     numerics: SegmentNumerics = field(repr=False)
-    flat: bool = False
     lower: BranchEnd = field(default_factory=lambda: BranchEnd('limit'))
     upper: BranchEnd = field(default_factory=lambda: BranchEnd('limit'))
 
@@ -160,38 +158,21 @@ class Branch:
 
 
 def sample_slopes(numerics: SegmentNumerics, stiffness: FloatArray, volumes: FloatArray,
-                  flat: bool, curvature_slope: FloatArray | None = None,
-                  plateau: FloatArray | None = None) -> FloatArray:
+                  curvature_slope: FloatArray | None = None) -> FloatArray:
     """
     d(v_1..v_N, p, k_1..k_N)/dV at samples (n, 2N + 1): inf or NaN at a fold (D = 0).
 
-    dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D; the curvatures ride along. On a
-    plateau with several flat segments D is 0 too: there ``plateau`` (its :func:`plateau_slopes`,
-    one row per sample) gives dv_i/dV, the filling segment taking it all.
+    dv_i/dV = prod_{j != i} k_j / D and dp/dV = prod k / D; the curvatures ride along.
     """
     n = volumes.shape[1]
     weights = cofactors(stiffness)
     d = np.sum(weights, axis=-1)     # cofactor_sum, its cofactors computed once
-    if flat and plateau is not None and np.any(d == 0.0):
-        weights = np.where((d == 0.0)[:, None], plateau, weights)
-        d = np.where(d == 0.0, 1.0, d)
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         slopes = np.concatenate([weights, np.prod(stiffness, axis=1, keepdims=True)
                                  * numerics.k_scale], axis=1) / d[:, None]
         if curvature_slope is None:
             curvature_slope = numerics.curvature_slopes(volumes)
-        slopes = np.concatenate([slopes, curvature_slope * slopes[:, :n]], axis=1)
-    return np.nan_to_num(slopes) if flat else slopes
-
-
-def plateau_slopes(branch: Branch) -> FloatArray:
-    """
-    dv_i/dV on a plateau stretch (flat pieces at one pressure): exactly linear in V.
-
-    One flat segment fills (base first) while the others stay where they are, so the slopes
-    are those of the chord from the stretch's first sample to its last.
-    """
-    return (branch.volumes[-1] - branch.volumes[0]) / (branch.total[-1] - branch.total[0])
+        return np.concatenate([slopes, curvature_slope * slopes[:, :n]], axis=1)
 
 
 def hermite(y0: FloatArray, y1: FloatArray, s0: FloatArray, s1: FloatArray,
@@ -208,10 +189,7 @@ def interval_cubics(branch: Branch, intervals: NDArray[np.intp]) -> FloatArray:
     rows, where = np.unique(np.concatenate([intervals, intervals + 1]), return_inverse=True)
     left, right = where[:intervals.size], where[intervals.size:]
     volumes = branch.volumes[rows]
-    slopes = sample_slopes(numerics, numerics.stiffness(branch.pieces, volumes), volumes,
-                           branch.flat, plateau=(np.broadcast_to(plateau_slopes(branch),
-                                                                 volumes.shape)
-                                                 if branch.flat else None))
+    slopes = sample_slopes(numerics, numerics.stiffness(branch.pieces, volumes), volumes)
     values = np.concatenate([volumes, branch.pressure[rows][:, None],
                              numerics.curvatures(volumes)], axis=1)
     h = (branch.total[intervals + 1] - branch.total[intervals])[:, None]
@@ -402,17 +380,9 @@ class _Fitter:
             curvature_slope[order], total[order])
         starts = np.flatnonzero(np.concatenate([[True], branch[1:] != branch[:-1]]))
         stops = np.append(starts[1:], total.size)
-        flat_row = np.repeat([self.stretches[b].flat for b in branch[starts].tolist()],
-                             stops - starts)
-        slopes = np.empty_like(volumes)
-        finite = np.empty(total.size, dtype=bool)
-        for is_flat in (False, True):
-            rows = np.flatnonzero(flat_row == is_flat)
-            if rows.size:
-                full = sample_slopes(self.numerics, stiffness[rows], volumes[rows], is_flat,
-                                     curvature_slope[rows])
-                slopes[rows] = full[:, :self.n]
-                finite[rows] = np.all(np.isfinite(full), axis=1)
+        full = sample_slopes(self.numerics, stiffness, volumes, curvature_slope)
+        slopes = full[:, :self.n]
+        finite = np.all(np.isfinite(full), axis=1)
         for start, stop in zip(starts.tolist(), stops.tolist()):
             if stop - start >= 2:
                 samples[int(branch[start])] = (total[start:stop], pressure[start:stop],
@@ -420,7 +390,7 @@ class _Fitter:
         ends = _Ends(branch, total, pressure, volumes, stiffness, slopes, finite)
         left = np.flatnonzero(branch[:-1] == branch[1:])
         split = ~(finite[left] & finite[left + 1])
-        checked = np.flatnonzero(~split & ~flat_row[left])
+        checked = np.flatnonzero(~split)
         split[checked] = self._misses(ends.take(left[checked]), ends.take(left[checked] + 1))
         # Regions: the split intervals and a margin, within their branch, overlaps merged.
         at = left[split]
@@ -600,8 +570,7 @@ class _Fitter:
             # Each part's flags are for the intervals from its samples to the next.
             rough = np.concatenate([p[3] for p in parts])[:total.size - 1]
         stretch = self.stretches[index]
-        return Branch(total, volumes, pressure, stretch.pieces, rough, self.numerics,
-                      stretch.flat)
+        return Branch(total, volumes, pressure, stretch.pieces, rough, self.numerics)
 
     def _fit_alone(self, index: int) -> Branch | None:
         """
@@ -613,7 +582,7 @@ class _Fitter:
         """
         stretch = self.stretches[index]
         branch = np.full(stretch.pressure.size, index, dtype=np.intp)
-        full = sample_slopes(self.numerics, stretch.stiffness, stretch.volumes, stretch.flat,
+        full = sample_slopes(self.numerics, stretch.stiffness, stretch.volumes,
                              stretch.curvature_slope)
         ends = _Ends(branch, stretch.volumes.sum(axis=1), stretch.pressure, stretch.volumes,
                      stretch.stiffness, full[:, :self.n], np.all(np.isfinite(full), axis=1))
@@ -644,7 +613,7 @@ class _Fitter:
             new_split[fresh] = self._check(merged, fresh)[fresh]
             ends, split = merged, new_split
         return Branch(ends.total, ends.volumes, ends.pressure, stretch.pieces, split,
-                      self.numerics, stretch.flat)
+                      self.numerics)
 
     def _check(self, ends: _Ends, which: NDArray[np.bool_]) -> NDArray[np.bool_]:
         """Split flags of the intervals ``which`` of one branch's sorted samples."""
@@ -653,9 +622,8 @@ class _Fitter:
         split = np.zeros(which.size, dtype=bool)
         rough = ~(a.finite & b.finite)
         split[rows] = rough
-        if not self.stretches[int(ends.branch[0])].flat:
-            checked = np.flatnonzero(~rough)
-            split[rows[checked]] = self._misses(a.take(checked), b.take(checked))
+        checked = np.flatnonzero(~rough)
+        split[rows[checked]] = self._misses(a.take(checked), b.take(checked))
         return split
 
 

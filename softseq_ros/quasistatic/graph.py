@@ -28,7 +28,7 @@ DEFLATION = 'deflation'
 # The kinds of a branch end, named for a designer: the map's 'continue' and 'limit'.
 JOIN, SNAP, END = 'join', 'snap', 'end'
 _KINDS = {'continue': JOIN, 'snap': SNAP, 'limit': END}
-_DIRECTION_WORDS = {1: 'rising', -1: 'falling', 0: 'flat'}
+_DIRECTION_WORDS = {1: 'rising', -1: 'falling'}
 # Gauss-Legendre nodes per sub-interval of the energy quadrature and the fewest sub-intervals:
 # a smooth curve's energy comes out to round-off, a table's (cubic between its rows, which are
 # sub-interval ends) exactly.
@@ -41,7 +41,7 @@ def piece_labels(segment: Segment) -> list[str]:
     """
     Names of a segment's monotone pieces, base of the curve to top.
 
-    'rising', 'falling' or 'flat', numbered from 1 along the curve when the segment has more
+    'rising' or 'falling', numbered from 1 along the curve when the segment has more
     than one piece of that kind: a peak-valley curve is rising-1, falling, rising-2.
     """
     pieces = segment.monotone_pieces()

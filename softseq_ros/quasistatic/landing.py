@@ -133,9 +133,9 @@ def certified_radii(numerics: SegmentNumerics, centres: FloatArray) -> FloatArra
     positive definite on a box of volumes when it is at each segment's smallest stiffness over
     the box (the quadratic form grows with every k_i). The smallest stiffness over a box's side
     is sampled at evenly spaced volumes and, for a table, bounded by the exact least stiffness
-    of every interval between rows that the side reaches (a steep step between two flat rows
-    falls inside one interval, where samples can miss it). Every centre and radius at once:
-    one stiffness call per segment.
+    of every interval between rows that the side reaches (a steep rise between two rows of
+    gentle slope falls inside one interval, where samples can miss it). Every centre and
+    radius at once: one stiffness call per segment.
     """
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
     count, n = centres.shape
@@ -184,10 +184,8 @@ class RedistributionFlow:
     In scaled variables y = v / v_scale and pressures over p_scale, with equal conductances,
     dy_i/dt = mean p - p_i (:meth:`forcing`); its Jacobian is k_j / N - k_i delta_ij with the
     scaled stiffnesses k (:meth:`shifted`). A flow is at rest where the pressures balance
-    (to ``flow_rest``) at a stable state (:func:`stable`) or at a neutral one: some segments
-    on flat pieces, every other one stiffening (:meth:`neutral`), where fluid moved between
-    the flat ones changes no pressure and fluid moved into a stiffening one raises its
-    pressure, so the flow has nowhere to go. A saddle is balanced and clearly unstable.
+    (to ``flow_rest``) at a stable state (:func:`stable`). A saddle is balanced and clearly
+    unstable.
     """
 
     def __init__(self, numerics: SegmentNumerics) -> None:
@@ -251,18 +249,11 @@ class RedistributionFlow:
         """How fast the flow moves along ``direction`` at ``volumes`` (m, N) [m^3]."""
         return self._forcing_at(self._inside(volumes)) @ direction
 
-    def neutral(self, volumes: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
-        """Per row (m, N): some segments on flat pieces, every other one clearly stiffening."""
-        flat = self.numerics.on_flat_pieces(volumes)
-        return np.any(flat, axis=1) & np.all(
-            flat | (k > self.numerics.tolerances.stable_cofactor), axis=1)
-
-    def at_rest(self, y: FloatArray, force: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
-        """Per row: balanced to ``flow_rest``, stable or neutral."""
+    def at_rest(self, force: FloatArray, k: FloatArray) -> NDArray[np.bool_]:
+        """Per row: balanced to ``flow_rest`` at a stable state."""
         tolerances = self.numerics.tolerances
         balanced = np.max(np.abs(force), axis=1) < tolerances.flow_rest
-        return balanced & (stable(k, tolerances.stable_cofactor)
-                           | self.neutral(y * self.numerics.v_scale, k))
+        return balanced & stable(k, tolerances.stable_cofactor)
 
     def saddle(self, volumes: FloatArray) -> bool:
         """
@@ -283,8 +274,8 @@ class RedistributionFlow:
         The way the flow points along ``along`` on both sides of ``volumes`` (ties as joins).
 
         At a fold the flow points the same way on both sides (the energy along the soft
-        direction is a cubic there). Where it points away on both sides alike, or nowhere
-        (on flat pieces), the end is a pitchfork: identical segments at the same state,
+        direction is a cubic there). Where it points away on both sides alike, or nowhere,
+        the end is a pitchfork: identical segments at the same state,
         where either may take the fluid; the tie is broken as at a join (:func:`base_first`).
         """
         ahead, behind = self.drift(np.stack([volumes + eps * along, volumes - eps * along]),
@@ -338,7 +329,7 @@ class RedistributionFlow:
         y = start / scale_v
         t = 0.0
         for horizon in np.logspace(2, 14, 13):
-            with np.errstate(divide='ignore'):   # a step of zero error (on flat pieces)
+            with np.errstate(divide='ignore'):   # a step of zero error
                 sol = solve_ivp(rhs, (t, horizon), y, method='Radau', jac=jacobian,
                                 rtol=tolerances.flow_rtol, atol=tolerances.flow_atol,
                                 events=leaves_range)
@@ -346,7 +337,7 @@ class RedistributionFlow:
             if sol.status == 1:
                 break
             force = rhs(t, y)[None, :]
-            if self.at_rest(y[None, :], force, self.stiffnesses(y[None, :]))[0]:
+            if self.at_rest(force, self.stiffnesses(y[None, :]))[0]:
                 break
         return np.clip(y * scale_v, lo, hi)
 
@@ -455,9 +446,7 @@ class FlowLandings:
             due = np.array([i for i in due.tolist() if results[i] is None], dtype=np.intp)
             if due.size:
                 force, k = self.flow.forces(y[due])
-                # Or balanced on a plateau (flat pieces), where the flow has nowhere to go:
-                # stepping on only walks it along the plateau by round-off.
-                rest = self.flow.at_rest(y[due], force, k)
+                rest = self.flow.at_rest(force, k)
                 for index in due[rest].tolist():
                     results[index] = Landing(-1, np.clip(y[index] * scale_v, lo, hi), 'rest')
             active = np.array([i for i in active.tolist() if results[i] is None], dtype=np.intp)
@@ -565,35 +554,16 @@ class SnapLandings:
         With its distance; -1 when none is within the landing distance, or when the branch
         the flow leaves (``exclude``) is nearer than any other.
 
-        On a plateau (segments on flat pieces at one pressure) every split of the flat
-        segments' fluid is an equilibrium of the same energy; the map keeps one of them per
-        total (they fill base first), and a flow comes to rest anywhere in the set, or creeps
-        towards a flat's end, where the curve's slope goes to zero. So a flat segment's
-        volume counts as the branch's when it lies on the branch's flat piece, and is as far
-        from it as from the piece when within the landing distance of it at the flat's
-        pressure (to ``plateau_pressure`` of the pressure scale): two identical tables with
-        quantised pressures (flat rows at the same pressures in both) snap onto such sets.
-        A table run up to its limit stretch can make that tolerance as large as a step of
-        its pressures, and the distance then tells a plateau from the one a step away.
+        The distance is the largest of the segments' volume differences.
         """
-        tolerances = self.numerics.tolerances
-        landing = tolerances.landing_distance * self.numerics.v_scale
-        on_flat = tolerances.plateau_pressure * self.numerics.p_scale
+        landing = self.numerics.tolerances.landing_distance * self.numerics.v_scale
         best, best_distance, back = -1, math.inf, math.inf
         for j, other in enumerate(self.branches):
             tol = self.numerics.tol_v
             if not other.lo - tol <= total <= other.hi + tol:
                 continue
             state = self.reader.read(j, np.array([min(max(total, other.lo), other.hi)])).volumes[0]
-            gap = np.abs(state - volumes)
-            if other.flat:
-                for i, piece in enumerate(other.pieces):
-                    if (piece.direction == 0
-                            and piece.v_lo - landing <= volumes[i] <= piece.v_hi + landing
-                            and abs(float(self.numerics.segments[i].pressure(volumes[i]))
-                                    - piece.p_at_lo) <= on_flat):
-                        gap[i] = max(piece.v_lo - volumes[i], volumes[i] - piece.v_hi, 0.0)
-            distance = float(np.max(gap))
+            distance = float(np.max(np.abs(state - volumes)))
             if j == exclude:
                 back = distance
             elif distance < best_distance:

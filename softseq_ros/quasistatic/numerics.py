@@ -280,10 +280,10 @@ class SegmentNumerics:
         turning = (((v_lo > seg.rest_volume) & (volumes == v_lo))
                    | ((v_hi < seg.max_volume) & (volumes == v_hi)))
         k = np.where(turning, 0.0, k)
-        return np.where(sign > 0, np.maximum(k, 0.0), np.where(sign < 0, np.minimum(k, 0.0), 0.0))
+        return np.where(sign > 0, np.maximum(k, 0.0), np.minimum(k, 0.0))
 
     def stiffness(self, config: tuple[Piece, ...], volumes: FloatArray) -> FloatArray:
-        """Scaled dp/dv, clipped to the sign its piece promises (exactly 0 on a flat piece)."""
+        """Scaled dp/dv, clipped to the sign its piece promises."""
         return np.stack([self.piece_stiffness(i, piece, volumes[..., i])
                          for i, piece in enumerate(config)], axis=-1)
 
@@ -299,11 +299,7 @@ class SegmentNumerics:
         if piece.v_hi < seg.max_volume:
             turning |= v == piece.v_hi
         k = np.where(turning, 0.0, k)
-        if piece.direction > 0:
-            return np.maximum(k, 0.0)
-        if piece.direction < 0:
-            return np.minimum(k, 0.0)
-        return np.zeros_like(k)
+        return np.maximum(k, 0.0) if piece.direction > 0 else np.minimum(k, 0.0)
 
     def least_stiffness_per_interval(self, index: int) -> FloatArray | None:
         """
@@ -326,16 +322,6 @@ class SegmentNumerics:
                 least = np.minimum(np.minimum(c, (a * width + b) * width + c), at_vertex)
             self._least_stiffness[index] = least
         return self._least_stiffness[index]
-
-    def on_flat_pieces(self, volumes: FloatArray) -> NDArray[np.bool_]:
-        """Whether each segment's volume (m, N) lies on one of its flat pieces (to tol_v)."""
-        flat = np.zeros(volumes.shape, dtype=bool)
-        for i, pieces in enumerate(self.pieces):
-            for piece in pieces:
-                if piece.direction == 0:
-                    flat[:, i] |= ((volumes[:, i] >= piece.v_lo - self.tol_v)
-                                   & (volumes[:, i] <= piece.v_hi + self.tol_v))
-        return flat
 
     def at_edge(self, volumes: FloatArray) -> bool:
         """Whether a segment's volume is at an end of its model's range (to tol_v)."""

@@ -13,7 +13,7 @@ from typing import NamedTuple, overload
 import numpy as np
 from numpy.typing import NDArray
 
-from softseq_ros.quasistatic.branches import Branch, hermite, plateau_slopes, sample_slopes
+from softseq_ros.quasistatic.branches import Branch, hermite, sample_slopes
 from softseq_ros.quasistatic.numerics import EPS, FloatArray, SegmentNumerics
 
 # Rows read by rows_many in one go.
@@ -105,32 +105,22 @@ class StateReader:
         b = np.empty_like(a)
         pressure = np.empty((index.size, 2))
         knots = np.empty((index.size, 2))
-        flat = np.zeros(index.size, dtype=bool)
         chord = np.zeros(index.size, dtype=bool)
         pieces = np.empty((index.size, n), dtype=np.intp)
-        plateau = np.zeros((index.size, n))
         for branch_index in np.unique(index).tolist():
             rows = np.flatnonzero(index == branch_index)
             branch, at = self.branches[branch_index], interval[rows]
             a[rows], b[rows] = branch.volumes[at], branch.volumes[at + 1]
             pressure[rows] = np.stack([branch.pressure[at], branch.pressure[at + 1]], axis=1)
             knots[rows] = np.stack([branch.total[at], branch.total[at + 1]], axis=1)
-            flat[rows], chord[rows] = branch.flat, branch.rough[at]
+            chord[rows] = branch.rough[at]
             pieces[rows] = numerics.piece_indices(branch.pieces)
-            if branch.flat:
-                plateau[rows] = plateau_slopes(branch)
         segment = np.tile(np.arange(n), 2 * index.size)
         volumes = np.concatenate([a, b])
         stiffness = numerics.element_stiffness(
             segment, np.concatenate([pieces, pieces]).ravel(),
             volumes.ravel()).reshape(volumes.shape)
-        slopes = np.empty((volumes.shape[0], 2 * n + 1))
-        twice = np.concatenate([flat, flat])
-        for is_flat in (False, True):
-            rows = np.flatnonzero(twice == is_flat)
-            if rows.size:
-                slopes[rows] = sample_slopes(numerics, stiffness[rows], volumes[rows], is_flat,
-                                             plateau=np.concatenate([plateau, plateau])[rows])
+        slopes = sample_slopes(numerics, stiffness, volumes)
         values = np.concatenate([volumes, pressure.T.reshape(-1, 1),
                                  numerics.curvatures(volumes)], axis=1)
         m = index.size
@@ -152,15 +142,12 @@ class StateReader:
         above = np.empty(index.size)
         t0, t1 = np.empty(index.size), np.empty(index.size)
         pieces = np.empty((index.size, n), dtype=np.intp)
-        plateau = np.zeros((index.size, n))
         for branch_index in np.unique(index).tolist():
             rows = np.flatnonzero(index == branch_index)
             branch, at = self.branches[branch_index], interval[rows]
             below[rows], above[rows] = branch.pressure[at], branch.pressure[at + 1]
             t0[rows], t1[rows] = branch.total[at], branch.total[at + 1]
             pieces[rows] = numerics.piece_indices(branch.pieces)
-            if branch.flat:
-                plateau[rows] = plateau_slopes(branch)
         return self._polish_rows(pieces, total, below, above, t0, t1)
 
     def rows(self, index: int, total: FloatArray) -> FloatArray:

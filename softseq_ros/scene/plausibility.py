@@ -120,10 +120,11 @@ def rising_problem(segment: 'Segment') -> str | None:
     volume; one whose curve never rises (it falls or stays flat from its first row to its
     last) has no stable state, alone or beside others, and no assembly could start from rest.
     """
+    from softseq_ros.segments.models import NEVER_RISES  # loaded with ``segment`` already
+
     if any(piece.direction > 0 for piece in segment.monotone_pieces()):
         return None
-    return ('its pressure never rises with its volume (it falls or stays level from the '
-            'first row to the last): no state of it is stable')
+    return NEVER_RISES
 
 
 def absolute_problem(pressures: NDArray[np.float64]) -> str | None:

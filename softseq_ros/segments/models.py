@@ -4,7 +4,7 @@ Segment models: each gives pressure, stiffness, stored energy and curvature as f
 A segment is one elastic inflatable actuator. Everything the equilibrium solver needs from it is
 here: ``pressure(v)`` (gauge, Pa), ``stiffness(v) = dp/dv`` (Pa/m^3), ``energy(v)`` (J, the
 integral of p dv from the rest volume) and ``curvature(v)`` (1/m), plus its split into monotone
-pieces (rising, falling or flat stretches of the pressure-volume curve), which the solver
+pieces (rising or falling stretches of the pressure-volume curve), which the solver
 assembles.
 """
 
@@ -31,13 +31,18 @@ TURN_XTOL = 1e-15
 STRETCH_STEP = 1e-6
 
 
+# Why a curve that falls or stays level from its first row to its last is refused.
+NEVER_RISES = ('its pressure never rises with its volume (it falls or stays level from the '
+               'first row to the last): no state of it is stable')
+
+
 class TableError(UserError):
     """A segment table that cannot be used; the message starts with the file name."""
 
 
 @dataclass(frozen=True)
 class Piece:
-    """A stretch [v_lo, v_hi] of a PV curve: pressure rises (+1), falls (-1) or is flat (0)."""
+    """A stretch [v_lo, v_hi] of a PV curve on which the pressure rises (+1) or falls (-1)."""
 
     v_lo: float
     v_hi: float
@@ -126,8 +131,8 @@ class Segment(ABC):
         """Derivative of the curvature with respect to volume, in 1/m per m^3."""
 
     @abstractmethod
-    def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
-        """Volumes where the pressure changes direction, and the flat stretches."""
+    def _turning_volumes(self) -> list[float]:
+        """Volumes where the pressure changes direction."""
 
     def knots(self) -> FloatArray:
         """Volumes where the model is less smooth than elsewhere (a table's rows)."""
@@ -160,24 +165,22 @@ class Segment(ABC):
         return {'name': self.name, 'length_m': exact(self.length), 'model': model, **data}
 
     def monotone_pieces(self) -> list[Piece]:
-        """Split the PV curve into rising, falling and flat pieces, base to top."""
+        """Split the PV curve into rising and falling pieces, base to top."""
         if self._pieces is None:
             self._pieces = self._build_pieces()
         return self._pieces
 
     def _build_pieces(self) -> list[Piece]:
-        turns, flats = self._turning_volumes()
-        edges = sorted({self.rest_volume, self.max_volume, *turns,
-                        *(v for flat in flats for v in flat)})
+        edges = sorted({self.rest_volume, self.max_volume, *self._turning_volumes()})
         pieces: list[Piece] = []
         for lo, hi in zip(edges[:-1], edges[1:]):
             if hi <= lo:
                 continue
             p_lo, p_hi = (float(x) for x in self.pressure([lo, hi]))
-            is_flat = any(f_lo <= lo and hi <= f_hi for f_lo, f_hi in flats)
-            direction = 0 if is_flat or p_hi == p_lo else (1 if p_hi > p_lo else -1)
-            if direction == 0:
-                p_hi = p_lo
+            if p_hi == p_lo:
+                raise ValueError(f'segment {self.name!r}: its pressure is the same at '
+                                 f'{lo:.6g} and {hi:.6g} m^3; a curve needs no flat stretch')
+            direction = 1 if p_hi > p_lo else -1
             if pieces and pieces[-1].direction == direction:
                 last = pieces.pop()
                 lo, p_lo = last.v_lo, last.p_at_lo
@@ -196,8 +199,6 @@ class Segment(ABC):
         vanishes) within ``tolerances.inversion_steps``; ``log`` counts whether it did.
         Pressures outside the piece's range return the nearer end.
         """
-        if piece.direction == 0:
-            raise ValueError('a flat piece has no inverse')
         target = np.asarray(p, dtype=float)
         sign = float(piece.direction)
         ulps = tolerances.round_off_ulps
@@ -296,6 +297,8 @@ class TabulatedSegment(Segment):
         # not by rows that a FEM run on another machine may round otherwise.
         self.design: dict[str, object] | None = None
         self.knot_volumes, self.knot_pressures = dequantised(vol, prs)
+        if self.knot_pressures.size == 2 and self.knot_pressures[0] == self.knot_pressures[1]:
+            raise TableError(f'{where}: column pressure_pa: {NEVER_RISES}')
         self._p = PchipInterpolator(self.knot_volumes, self.knot_pressures, extrapolate=False)
         self._dp = self._p.derivative()
         self._e = self._p.antiderivative()
@@ -378,14 +381,10 @@ class TabulatedSegment(Segment):
         """D(curvature)/dv, in 1/m per m^3."""
         return self._dk(self._clip(v))
 
-    def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
-        volumes = self.knot_volumes
+    def _turning_volumes(self) -> list[float]:
         secant = np.sign(np.diff(self.knot_pressures))
-        turns = [float(volumes[i + 1]) for i in range(secant.size - 1)
-                 if secant[i] != secant[i + 1]]
-        flats = [(float(volumes[i]), float(volumes[i + 1]))
-                 for i in range(secant.size) if secant[i] == 0.0]
-        return turns, flats
+        return [float(self.knot_volumes[i + 1]) for i in range(secant.size - 1)
+                if secant[i] != secant[i + 1]]
 
 
 def dequantised(volumes: FloatArray, pressures: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -476,14 +475,14 @@ class _SmoothSegment(Segment):
 
     _samples = 4097
 
-    def _turning_volumes(self) -> tuple[list[float], list[tuple[float, float]]]:
+    def _turning_volumes(self) -> list[float]:
         grid = self._turn_search_grid()
         slope = self.stiffness(grid)
         turns = []
         for i in np.flatnonzero(np.sign(slope[:-1]) * np.sign(slope[1:]) < 0.0):
             turns.append(brentq(lambda x: float(self.stiffness(x)), grid[i], grid[i + 1],
                                 xtol=TURN_XTOL * self.max_volume, rtol=4 * np.finfo(float).eps))
-        return turns, []
+        return turns
 
     def _turn_search_grid(self) -> FloatArray:
         return np.linspace(self.rest_volume, self.max_volume, self._samples)
