@@ -58,3 +58,20 @@ def test_every_snap_of_a_quick_sweep_set_lands(index):
     result = sweep.run_set(sweep_set)
     assert result['faults'] == [], f'set {index} ({sweep_set.describe()}): {result["faults"]}'
     assert result['snaps'] > 0
+
+
+def test_a_stable_stretch_between_two_unstable_samples_is_assembled_and_landed_on():
+    # Set 40: two different tables in 10 Pa steps. Near 10 kPa one segment rises and the other
+    # falls with stiffnesses that nearly cancel, and the falling table's stiffness, a
+    # quadratic between two of its rows, turns between two samples that are both unstable:
+    # stable from 10000.3 to 10005.8 Pa, between samples at 10000.0 and 10005.9 Pa. A snap's
+    # flow came to rest there, where the map had no branch. The assembly now looks at every
+    # turn of a table's stiffness between two unstable samples, and the stretch is a branch.
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap
+
+    sweep_set = sweep.generate_sets()[40]
+    emap = EquilibriumMap(sweep.segments_of(sweep_set))
+    assert any(10000.0 < b.pressure.min() and b.pressure.max() < 10006.0
+               and b.pressure.max() - b.pressure.min() > 5.0 for b in emap.branches)
+    result = sweep.run_set(sweep_set)
+    assert result['faults'] == [] and result['snaps'] > 0

@@ -33,7 +33,8 @@ FOLD_PRESSURE_XTOL = 1e-14
 FOLD_PRESSURE_RTOL = 1e-15
 # How far inside a configuration's pressure range (a share of the pressure scale) its stability
 # is looked at where its end is not stable: a stable stretch shorter than the samples' spacing
-# can lie against an end where several segments reach a peak or a valley together.
+# can lie against an end where several segments reach a peak or a valley together
+# (Assembly._stable_between_unstable_samples).
 BESIDE_END = 1e-10
 
 
@@ -119,21 +120,21 @@ class _Sampled:
 class Assembly:
     """The stable branches and the whole equilibrium set (for plots) of some segments."""
 
-    def __init__(self, numerics: SegmentNumerics, resolution: int,
-                 also_sampled: tuple[float, ...] = ()) -> None:
+    def __init__(self, numerics: SegmentNumerics, resolution: int) -> None:
         """
         Assemble every configuration's branches at ``resolution`` samples per segment.
 
-        Every rising or falling piece also samples the pressures ``also_sampled`` in its range.
+        Where the samples step over a stable stretch (:meth:`_stable_between_unstable_samples`),
+        every piece also samples the pressures that find it (:attr:`also_sampled`).
         """
         self.numerics = numerics
         self.resolution = int(resolution)
         self.configurations = self._configurations()
-        self.also_sampled = np.array(also_sampled, dtype=float)
+        self.also_sampled = np.empty(0)
         self.grid = self._sample_grid()
-        beside = self._stable_beside_unstable_ends()
-        if beside.size:
-            self.also_sampled = np.unique(np.concatenate([self.also_sampled, beside]))
+        missed = self._stable_between_unstable_samples()
+        if missed.size:
+            self.also_sampled = np.unique(missed)
             self.grid = self._sample_grid()
         # Per configuration, in order: where it is sampled and which samples are stable.
         self._sampled: list[_Sampled] = []
@@ -164,33 +165,50 @@ class Assembly:
             (i, pc): self._piece_samples(i, pc) for config in self.configurations
             for i, pc in enumerate(config)})
 
-    def _stable_beside_unstable_ends(self) -> FloatArray:
+    def _stable_between_unstable_samples(self) -> FloatArray:
         """
-        Pressures just inside range ends where the samples miss a stable stretch.
+        Pressures where a configuration is stable between two of its unstable samples.
 
-        At an end where two or more segments reach a peak or a valley together (identical
-        tables) the end is unstable (every stiffness there 0, or two falling), yet the
-        stretch next to it can be stable for less than the samples' spacing (under 1 Pa next
-        to a peak that three identical stepped tables share). Where a configuration's end
-        sample and the sample next to it are both unstable and the state :data:`BESIDE_END`
-        inside the end is stable, that pressure is sampled too: the stretch is then found
-        like any other, its folds solved on both sides of the sample.
+        The samples can step over a stable stretch shorter than their spacing, in two places:
+
+        - against an end where two or more segments reach a peak or a valley together
+          (identical tables), which is unstable (every stiffness there 0, or two falling),
+          while the stretch next to it can be stable for less than 1 Pa: looked at
+          :data:`BESIDE_END` inside such an end;
+        - where a rising and a falling segment's stiffnesses nearly cancel (D about 0 over
+          several pascals) and a table's stiffness, a quadratic between two of its rows, turns
+          between two samples: looked at every volume where a segment's stiffness is extreme
+          (:meth:`SegmentNumerics.stiffness_extremes`) between two unstable samples.
+
+        Those that are stable are sampled too: the stretch is then found like any other, its
+        folds solved on both sides. Nothing is added where no stretch was missed, so every
+        other map keeps its samples.
         """
         numerics = self.numerics
+        extremes = [np.sort(seg.pressure(numerics.stiffness_extremes(i)))
+                    for i, seg in enumerate(numerics.segments)]
         rows, pressures = [], []
         for config in self.configurations:
             places = self.grid.sample(config)
             if places is None or places.size < 2:
                 continue
-            stiffness, = self.grid.columns(config, places[[0, 1, -2, -1]], ('stiffness',))
-            d = cofactor_sum(stiffness)
+            stiffness, = self.grid.columns(config, places, ('stiffness',))
+            unstable = cofactor_sum(stiffness) <= 0.0
             p = self.grid.p[places]
+            probes = []
             step = min(BESIDE_END * numerics.p_scale, 0.25 * (p[-1] - p[0]))
-            for unstable, inside in ((d[0] <= 0.0 and d[1] <= 0.0, p[0] + step),
-                                     (d[3] <= 0.0 and d[2] <= 0.0, p[-1] - step)):
-                if unstable:
-                    rows.append(numerics.piece_indices(config))
-                    pressures.append(inside)
+            if unstable[0] and unstable[1]:
+                probes.append(p[0] + step)
+            if unstable[-1] and unstable[-2]:
+                probes.append(p[-1] - step)
+            gaps = unstable[:-1] & unstable[1:]
+            if gaps.any():
+                for i, piece in enumerate(config):
+                    found = extremes[i][(extremes[i] > max(p[0], piece.p_min))
+                                        & (extremes[i] < min(p[-1], piece.p_max))]
+                    probes.extend(found[gaps[np.searchsorted(p, found) - 1]].tolist())
+            rows.extend([numerics.piece_indices(config)] * len(probes))
+            pressures.extend(probes)
         if not rows:
             return np.empty(0)
         pressures = np.array(pressures)

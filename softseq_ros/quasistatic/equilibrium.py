@@ -36,7 +36,6 @@ from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.assembly import Assembly, EquilibriumCurve
 from softseq_ros.quasistatic.branch_ends import BranchEnds
 from softseq_ros.quasistatic.branches import Branch
-from softseq_ros.quasistatic.landing import UnplacedLandingError
 from softseq_ros.quasistatic.numerics import FloatArray, SegmentNumerics
 from softseq_ros.quasistatic.sequence import (
     SEQUENCE_TYPES,
@@ -51,11 +50,6 @@ __all__ = ['DomainError', 'EquilibriumCurve', 'EquilibriumMap', 'SEQUENCE_TYPES'
            'SolvedPath', 'State', 'StatePoint', 'StateRows', 'Tracker', 'classify',
            'inflate_and_deflate']
 
-
-# How many landings where no branch was a map samples and assembles again for, at most, and
-# how close (of the pressure scale) a landing must come to one of them to add nothing new.
-MAX_RESAMPLED = 8
-SAME_LANDING = 1e-12
 
 
 class DomainError(UserError):
@@ -149,24 +143,12 @@ class EquilibriumMap:
         self.v_scale = numerics.v_scale
         self.p_scale = numerics.p_scale
         self._tol_v = numerics.tol_v
-        also_sampled: tuple[float, ...] = ()
-        while True:
-            assembly = Assembly(numerics, self.resolution, also_sampled)
-            self.branches: list[Branch] = assembly.branches
-            if not self.branches:
-                raise ValueError('these segments have no stable equilibrium at all')
-            self.reader = StateReader(numerics, self.branches, self.polish)
-            try:
-                BranchEnds(numerics, self.branches, self.reader).connect_all()
-                break
-            except UnplacedLandingError as err:
-                # A stable stretch shorter than the samples' spacing, which the flow found:
-                # assemble again with the pressure where it came to rest sampled.
-                if len(also_sampled) >= MAX_RESAMPLED or any(
-                        abs(err.pressure - p) <= SAME_LANDING * numerics.p_scale
-                        for p in also_sampled):
-                    raise
-                also_sampled += (err.pressure,)
+        assembly = Assembly(numerics, self.resolution)
+        self.branches: list[Branch] = assembly.branches
+        if not self.branches:
+            raise ValueError('these segments have no stable equilibrium at all')
+        self.reader = StateReader(numerics, self.branches, self.polish)
+        BranchEnds(numerics, self.branches, self.reader).connect_all()
         # How many piece configurations the assembly examined, of the product of every
         # segment's piece count (a brute-force enumeration's).
         self.configurations_tried = len(assembly.configurations)

@@ -75,6 +75,7 @@ class SegmentNumerics:
         self.tol_v = tolerances.same_volume * self.v_scale
         self._inverted: dict[tuple[int, int], tuple[FloatArray, FloatArray]] = {}
         self._least_stiffness: dict[int, FloatArray | None] = {}
+        self._stiffness_extremes: dict[int, FloatArray] = {}
         self._piece_ids = [{piece: a for a, piece in enumerate(pieces)} for pieces in self.pieces]
         # Every piece's numbers in one array (6, N, most pieces), for per-element lookups.
         most = max(len(pieces) for pieces in self.pieces)
@@ -322,6 +323,26 @@ class SegmentNumerics:
                 least = np.minimum(np.minimum(c, (a * width + b) * width + c), at_vertex)
             self._least_stiffness[index] = least
         return self._least_stiffness[index]
+
+    def stiffness_extremes(self, index: int) -> FloatArray:
+        """
+        Volumes where a table's stiffness is extreme inside an interval between its rows.
+
+        Its cubic's derivative is a quadratic on each interval, extreme at its vertex when that
+        lies inside. Empty for a closed-form model. Computed once per segment.
+        """
+        if index not in self._stiffness_extremes:
+            cubics = self.segments[index].pressure_cubics()
+            found = np.empty(0)
+            if cubics is not None:
+                breaks, _, slope = cubics
+                a, b = slope[-3], slope[-2]   # a s^2 + b s + c, s in [0, width]
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    vertex = np.where(a != 0.0, -b / (2.0 * a), -1.0)
+                inside = (vertex > 0.0) & (vertex < np.diff(breaks))
+                found = breaks[:-1][inside] + vertex[inside]
+            self._stiffness_extremes[index] = found
+        return self._stiffness_extremes[index]
 
     def at_edge(self, volumes: FloatArray) -> bool:
         """Whether a segment's volume is at an end of its model's range (to tol_v)."""
