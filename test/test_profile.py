@@ -112,10 +112,36 @@ def test_sample_of_an_exact_multiple_has_no_sliver():
     (lambda: Leg.inflate(float('nan')), 'must be finite'),
     (lambda: Leg.deflate(-1e-6), 'must be >= 0'),
     (lambda: PumpProfile(legs=(Leg.inflate(1e-6),)).sample(0.0), 'rate_hz must be > 0'),
+    (lambda: Leg.inflate(1e-6, flow_rate=0.0), 'inflate flow_rate must be > 0'),
+    (lambda: Leg.deflate(0.0, flow_rate=-1e-8), 'deflate flow_rate must be > 0'),
+    (lambda: Leg.inflate(1e-6, flow_rate=float('inf')), 'must be finite'),
+    (lambda: Leg('hold', duration_s=1.0, flow_rate=1e-8), 'takes no flow_rate'),
 ])
 def test_invalid_programmes_are_refused(build, message):
     with pytest.raises(ValueError, match=message.replace('(', r'\(').replace('[', r'\[')):
         build()
+
+
+def test_each_leg_moves_at_its_own_rate_and_the_others_at_the_pumps():
+    # Fill fast (1 mL/s to 20 mL), step slowly through the snaps (0.01 mL/s to 30 mL), hold
+    # 5 s, and empty at the pump's 0.05 mL/s: 20 s, 1000 s, 5 s and 600 s by hand.
+    profile = PumpProfile(legs=(Leg.inflate(20 * ML, flow_rate=1 * ML),
+                                Leg.inflate(30 * ML, flow_rate=0.01 * ML), Leg.hold(5.0),
+                                Leg.deflate(0.0)), flow_rate=0.05 * ML)
+    times, volumes = profile.breakpoints()
+    np.testing.assert_allclose(times, [0.0, 20.0, 1020.0, 1025.0, 1625.0], rtol=1e-13)
+    np.testing.assert_allclose(volumes, [0.0, 20 * ML, 30 * ML, 30 * ML, 0.0], rtol=1e-15)
+    probes = np.array([10.0, 520.0, 1022.0, 1325.0])
+    np.testing.assert_allclose(profile.injected_at(probes), [10 * ML, 25 * ML, 30 * ML, 15 * ML],
+                               rtol=1e-12)
+    flows = [1 * ML, 0.01 * ML, 0.0, -0.05 * ML]
+    assert profile.flow_at(probes).tolist() == flows
+    assert profile.commands_at(probes)[1].tolist() == flows
+    assert [profile.command_at(float(t))[1] for t in probes] == flows
+    # Cycled, the legs keep their rates.
+    twice = PumpProfile(legs=profile.legs, flow_rate=0.05 * ML, cycles=2)
+    assert twice.duration() == pytest.approx(2 * 1625.0, rel=1e-13)
+    assert twice.flow_at(1625.0 + 10.0) == pytest.approx(1 * ML, rel=1e-15)
 
 
 def test_command_at_equals_the_vectorised_volume_and_flow():

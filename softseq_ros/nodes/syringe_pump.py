@@ -112,8 +112,9 @@ class SyringePumpNode(CoreNode):
             **LIMITS['pump.flow_rate_m3_per_s'].bounds())
         self.declare_text(
             'legs', '', 'Programme legs as a YAML list in the scene syntax, e.g. '
-            '[{inflate_to_m3: 5.0e-6}, {hold_s: 2}, {deflate_to_m3: 0.0}]; empty: the '
-            "scene's; " + _LOADED, check=_legs_reason)
+            '[{inflate_to_m3: 5.0e-6, flow_rate_m3_per_s: 1.0e-6}, {hold_s: 2}, '
+            '{deflate_to_m3: 0.0}] (a leg without its own flow_rate_m3_per_s moves at the '
+            "pump's); empty: the scene's; " + _LOADED, check=_legs_reason)
         self.declare_integer('cycles', default.cycles, 'Programme repetitions; ' + _LOADED,
                              **LIMITS['pump.cycles'].bounds())
         self.declare_number(
@@ -295,10 +296,12 @@ class SyringePumpNode(CoreNode):
         reply = load(now, profile)
         if reply.success:
             self._pending = None
+            own = sum(leg.flow_rate is not None for leg in profile.legs)
             self.get_logger().info(
                 f'programme loaded: {len(profile.legs)} legs x {profile.cycles} cycles at '
-                f'{profile.flow_rate * 1e6:.6g} mL/s from {profile.start_injected * 1e6:.6g} mL, '
-                f'{profile.duration():.6g} s')
+                f'{profile.flow_rate * 1e6:.6g} mL/s'
+                + (f' ({own} at their own rates)' if own else '')
+                + f' from {profile.start_injected * 1e6:.6g} mL, {profile.duration():.6g} s')
             if profile.duration() > MAX_RUN_S:
                 self.get_logger().warning(
                     f'the programme runs {profile.duration():.6g} s of rig time, more than '

@@ -286,29 +286,43 @@ def _segments(ctx: Context, value: object) -> tuple[Segment, ...]:
 
 
 LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
+LEG_RATE_KEY = 'flow_rate_m3_per_s'
 
 
 def read_legs(ctx: Context, value: object, key_path: str) -> list[Leg]:
-    """The legs of a pump programme from parsed YAML: a non-empty list of one-key mappings."""
+    """
+    The legs of a pump programme from parsed YAML: a non-empty list of mappings.
+
+    Each names one of :data:`LEG_KEYS`; an inflate or deflate leg may give its own
+    ``flow_rate_m3_per_s`` beside it (the pump's otherwise).
+    """
     items = ctx.sequence(value, key_path)
     if not items:
         raise ctx.error(key_path, 'needs at least one leg')
     legs = []
     for index, item in enumerate(items):
         where = f'{key_path}[{index}]'
-        if isinstance(item, dict) and len(item) != 1:
-            raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}, '
-                                   f'got {len(item)} keys ({", ".join(map(str, item))})')
-        leg = ctx.mapping(item, where, (), LEG_KEYS)
-        if not leg:
+        leg = ctx.mapping(item, where, (), LEG_KEYS + (LEG_RATE_KEY,))
+        actions = [key for key in leg if key != LEG_RATE_KEY]
+        if not actions:
             raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}')
-        (key, amount), = leg.items()
+        if len(actions) != 1:
+            raise ctx.error(where, f'needs exactly one of {", ".join(LEG_KEYS)}, '
+                                   f'got {len(actions)} keys ({", ".join(actions)})')
+        key = actions[0]
         at = join(where, key)
         if key == 'hold_s':
-            legs.append(Leg.hold(ctx.limited(amount, at, 'pump.legs.hold_s')))
+            if LEG_RATE_KEY in leg:
+                raise ctx.error(join(where, LEG_RATE_KEY),
+                                'a hold leg moves nothing: give the rate on an inflate or '
+                                'deflate leg')
+            legs.append(Leg.hold(ctx.limited(leg[key], at, 'pump.legs.hold_s')))
             continue
-        target = ctx.number(amount, at, ge=0.0)
-        legs.append(Leg.inflate(target) if key == 'inflate_to_m3' else Leg.deflate(target))
+        target = ctx.number(leg[key], at, ge=0.0)
+        rate = (ctx.limited(leg[LEG_RATE_KEY], join(where, LEG_RATE_KEY),
+                            'pump.flow_rate_m3_per_s') if LEG_RATE_KEY in leg else None)
+        legs.append(Leg.inflate(target, rate) if key == 'inflate_to_m3'
+                    else Leg.deflate(target, rate))
     return legs
 
 

@@ -49,14 +49,16 @@ class Leg:
     """
     One step of a pump programme.
 
-    ``inflate`` and ``deflate`` move at the pump's flow rate to the injected volume ``to_m3``;
-    ``hold`` keeps the volume for ``duration_s`` seconds. Use the ``inflate``, ``deflate`` and
-    ``hold`` constructors rather than filling the fields by hand.
+    ``inflate`` and ``deflate`` move to the injected volume ``to_m3`` at the leg's own
+    ``flow_rate`` [m^3/s], or at the pump's when it has none; ``hold`` keeps the volume for
+    ``duration_s`` seconds. Use the ``inflate``, ``deflate`` and ``hold`` constructors rather
+    than filling the fields by hand.
     """
 
     action: str
     to_m3: float | None = None
     duration_s: float | None = None
+    flow_rate: float | None = None
 
     def __post_init__(self) -> None:
         """Check that the leg names a known action and carries exactly the value it needs."""
@@ -68,6 +70,8 @@ class Leg:
                 raise ValueError('a hold leg takes duration_s, not to_m3')
             if self.duration_s is None:
                 raise ValueError('a hold leg needs duration_s')
+            if self.flow_rate is not None:
+                raise ValueError('a hold leg moves nothing: it takes no flow_rate')
             duration = _finite(self.duration_s, 'hold duration_s')
             if duration <= 0.0:
                 raise ValueError(f'hold duration_s must be > 0, got {duration}')
@@ -83,16 +87,21 @@ class Leg:
                 # which no segment model covers.
                 raise ValueError(f'{self.action} to_m3 must be >= 0, got {target}')
             object.__setattr__(self, 'to_m3', target)
+            if self.flow_rate is not None:
+                rate = _finite(self.flow_rate, f'{self.action} flow_rate')
+                if rate <= 0.0:
+                    raise ValueError(f'{self.action} flow_rate must be > 0, got {rate}')
+                object.__setattr__(self, 'flow_rate', rate)
 
     @classmethod
-    def inflate(cls, to_m3: float) -> 'Leg':
-        """Inflate to the injected volume ``to_m3`` [m^3]."""
-        return cls('inflate', to_m3=to_m3)
+    def inflate(cls, to_m3: float, flow_rate: float | None = None) -> 'Leg':
+        """Inflate to the injected volume ``to_m3`` [m^3], at ``flow_rate`` [m^3/s] if given."""
+        return cls('inflate', to_m3=to_m3, flow_rate=flow_rate)
 
     @classmethod
-    def deflate(cls, to_m3: float) -> 'Leg':
-        """Deflate to the injected volume ``to_m3`` [m^3]."""
-        return cls('deflate', to_m3=to_m3)
+    def deflate(cls, to_m3: float, flow_rate: float | None = None) -> 'Leg':
+        """Deflate to the injected volume ``to_m3`` [m^3], at ``flow_rate`` [m^3/s] if given."""
+        return cls('deflate', to_m3=to_m3, flow_rate=flow_rate)
 
     @classmethod
     def hold(cls, duration_s: float) -> 'Leg':
@@ -103,8 +112,9 @@ class Leg:
 @dataclass(frozen=True)
 class PumpProfile:
     """
-    A pump programme: ``legs`` repeated ``cycles`` times at ``flow_rate`` [m^3/s].
+    A pump programme: ``legs`` repeated ``cycles`` times.
 
+    Each leg moves at its own flow rate, or at ``flow_rate`` [m^3/s] when it gives none.
     Time 0 is the start of the first leg, where the injected volume is ``start_injected``.
     Raises ValueError when a leg cannot be run from the volume it starts at (an inflate target
     not above it, a deflate target not below it), naming the cycle and leg.
@@ -139,6 +149,7 @@ class PumpProfile:
 
         times = [0.0]
         volumes = [start]
+        rates = []      # per interval between breakpoints: the flow's magnitude (0 on a hold)
         for cycle in range(int(self.cycles)):
             for index, leg in enumerate(legs):
                 where = f'cycle {cycle + 1}, legs[{index}]'
@@ -146,6 +157,7 @@ class PumpProfile:
                 if leg.action == 'hold':
                     times.append(times[-1] + leg.duration_s)
                     volumes.append(now)
+                    rates.append(0.0)
                     continue
                 if leg.action == 'inflate' and not leg.to_m3 > now:
                     raise ValueError(f'{where}: inflate target {leg.to_m3:g} m^3 is not above '
@@ -153,9 +165,13 @@ class PumpProfile:
                 if leg.action == 'deflate' and not leg.to_m3 < now:
                     raise ValueError(f'{where}: deflate target {leg.to_m3:g} m^3 is not below '
                                      f'the injected volume {now:g} m^3 it starts from')
-                times.append(times[-1] + abs(leg.to_m3 - now) / flow)
+                rate = flow if leg.flow_rate is None else leg.flow_rate
+                times.append(times[-1] + abs(leg.to_m3 - now) / rate)
                 volumes.append(leg.to_m3)
+                rates.append(rate)
         object.__setattr__(self, '_times', np.array(times))
+        object.__setattr__(self, '_rates', np.array(rates))
+        object.__setattr__(self, '_rate_list', rates)
         object.__setattr__(self, '_volumes', np.array(volumes))
         object.__setattr__(self, '_time_list', [float(x) for x in times])
         object.__setattr__(self, '_volume_list', [float(x) for x in volumes])
@@ -193,7 +209,7 @@ class PumpProfile:
         inside = (leg_index >= 0) & (leg_index < n_legs)
         safe = np.clip(leg_index, 0, n_legs - 1)
         direction = np.sign(self._volumes[safe + 1] - self._volumes[safe])
-        return np.where(inside, direction * self.flow_rate, 0.0)
+        return np.where(inside, direction * self._rates[safe], 0.0)
 
     def command_at(self, t: float) -> tuple[float, float]:
         """
@@ -210,7 +226,8 @@ class PumpProfile:
             return volumes[-1], 0.0
         t0, t1, v0, v1 = times[leg], times[leg + 1], volumes[leg], volumes[leg + 1]
         volume = v0 + (v1 - v0) * (t - t0) / (t1 - t0) if t1 > t0 else v1
-        flow = self.flow_rate if v1 > v0 else (-self.flow_rate if v1 < v0 else 0.0)
+        rate = self._rate_list[leg]
+        flow = rate if v1 > v0 else (-rate if v1 < v0 else 0.0)
         return volume, flow
 
     def commands_at(self, t: NDArray[np.float64]) -> tuple[NDArray[np.float64],
@@ -233,7 +250,7 @@ class PumpProfile:
             ramp = v0 + (v1 - v0) * (t - t0) / (t1 - t0)
         volume = np.where(inside, np.where(t1 > t0, ramp, v1),
                           np.where(leg < 0, volumes[0], volumes[-1]))
-        rate = self.flow_rate
+        rate = self._rates[safe]
         flow = np.where(inside, np.where(v1 > v0, rate, np.where(v1 < v0, -rate, 0.0)), 0.0)
         return volume, flow
 
@@ -282,8 +299,11 @@ def longest_part(profile: 'PumpProfile', prefix: str = '') -> str:
     if leg.action == 'hold':
         return f'{key}: {spans[longest]:.6g} s'
     moved = abs(float(volumes[longest + 1] - volumes[longest]))
-    return (f'{key}: {moved:.6g} m^3 at {prefix}flow_rate_m3_per_s {profile.flow_rate:g} m^3/s '
-            f'takes {spans[longest]:.6g} s')
+    if leg.flow_rate is None:
+        rate_key, rate = f'{prefix}flow_rate_m3_per_s', profile.flow_rate
+    else:
+        rate_key, rate = f'{prefix}legs[{index}].flow_rate_m3_per_s', leg.flow_rate
+    return f'{key}: {moved:.6g} m^3 at {rate_key} {rate:g} m^3/s takes {spans[longest]:.6g} s'
 
 
 class ProgrammeError(UserError):
