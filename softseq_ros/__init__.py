@@ -45,7 +45,8 @@ def load_scene(scene: 'str | PathLike | Scene') -> 'Scene':
 
 
 def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = None,
-          resolution: int | None = None) -> 'SolvedPath | DynamicPath':
+          resolution: int | None = None,
+          times: 'Sequence[float] | None' = None) -> 'SolvedPath | DynamicPath':
     """
     The scene's path along a history of injected volumes [m^3] from rest (``softseq solve``).
 
@@ -57,12 +58,16 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
     on the way (``events``); ``resolution`` overrides the scene's solver resolution. A scene
     with a ``network`` gives the path in time, a
     :class:`~softseq_ros.dynamic.path.DynamicPath` (the history pushed at the pump's flow rate,
-    row by row; snap-throughs with their durations in ``snaps``).
+    row by row, or with ``times`` [s] at each row's time, holds included; every segment's own
+    pressure beside the syringe's; snap-throughs with their durations in ``snaps``). A
+    quasi-static path depends on the order of the volumes only: ``times`` do not change it.
     """
     import numpy as np
 
     loaded = load_scene(scene)
     history = None if injected is None else np.asarray(injected, dtype=float)
+    if times is not None and history is None:
+        raise ValueError('times come with a history of injected volumes, one time per volume')
     if history is None:
         _check_samples(loaded)
     if loaded.network is not None:
@@ -72,7 +77,8 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
         if history is None:
             return programme_path(loaded.segments, loaded.network, profile,
                                   rate_hz=loaded.pump.rate_hz)
-        return history_path(loaded.segments, loaded.network, history, profile.flow_rate)
+        return history_path(loaded.segments, loaded.network, history, profile.flow_rate,
+                            times=times)
     from softseq_ros.quasistatic.equilibrium import Tracker
     from softseq_ros.quasistatic.reach import check_scene_reach
     from softseq_ros.quasistatic.solve import equilibrium_map

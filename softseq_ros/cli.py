@@ -22,17 +22,18 @@ def _solve(args: argparse.Namespace) -> int:
     from softseq_ros.quasistatic.equilibrium import DomainError
     from softseq_ros.quasistatic.graph import branch_labels
     from softseq_ros.quasistatic.reach import beyond_domain
-    from softseq_ros.quasistatic.solve import read_history, scene_map, write_path
+    from softseq_ros.quasistatic.solve import read_timed_history, scene_map, write_path
     from softseq_ros.scene.loader import load_scene
 
     scene = load_scene(args.scene)
-    history = None if args.path is None else read_history(args.path)
+    times, history = (None, None) if args.path is None else read_timed_history(args.path)
     try:
-        solved = softseq_ros.solve(scene, history)
+        solved = softseq_ros.solve(scene, history, times=times)
     except PathError as err:
         if history is None:
             raise
-        raise PathError(f'{args.path}: injected_m3: {err}') from None
+        raise PathError(f'{args.path}: {err}' if times is not None
+                        else f'{args.path}: injected_m3: {err}') from None
     except DomainError as err:
         if err.row is None or history is None:
             raise
@@ -41,7 +42,7 @@ def _solve(args: argparse.Namespace) -> int:
         raise DomainError(f'{args.path}: injected_m3 in data row {err.row + 1}: {reason}') \
             from None
     if scene.network is not None:
-        return _write_network_path(args, scene, solved)
+        return _write_network_path(args, scene, solved, timed=times is not None)
     write_path(args.out, solved, scene.segment_names)
     emap = scene_map(scene)
     _warn_unconverged('solve', emap)
@@ -53,10 +54,13 @@ def _solve(args: argparse.Namespace) -> int:
         last = int(solved.branch[-1])
         print(f'  ends at {solved.injected[-1] * 1e6:.4g} mL injected on branch {last} '
               f'({branch_labels(emap)[last]}) of softseq graph')
+    if times is not None:
+        print(f'  {args.path}: time_s read; a quasi-static path follows the volumes in order, '
+              'their times do not change it (a scene with a network follows them in time)')
     return 0
 
 
-def _write_network_path(args: argparse.Namespace, scene: Any, path: Any) -> int:
+def _write_network_path(args: argparse.Namespace, scene: Any, path: Any, timed: bool) -> int:
     """``solve`` on a scene with a network: the path in time, and its snap-throughs beside it."""
     from softseq_ros.analysis.text import duration_text
     from softseq_ros.dynamic.events import fold_crossing_line
@@ -75,9 +79,11 @@ def _write_network_path(args: argparse.Namespace, scene: Any, path: Any) -> int:
     write_path(args.out, path, scene.segment_names)
     write_snaps(snaps_out, path.snaps, scene.segment_names)
     write_folds(folds_out, path.folds)
-    print(f'{scene.name}: {path.time_s.size} samples of the network in time, pump at '
-          f'{profile.flow_rate * 1e6:g} mL/s -> {args.out} (snap-throughs: {len(path.snaps)} '
-          f'-> {snaps_out}; fold crossings: {len(path.folds)} -> {folds_out})')
+    pushed = (f'at the times of {args.path}' if timed
+              else f'pump at {profile.flow_rate * 1e6:g} mL/s')
+    print(f'{scene.name}: {path.time_s.size} samples of the network in time, {pushed} -> '
+          f'{args.out} (snap-throughs: {len(path.snaps)} -> {snaps_out}; fold crossings: '
+          f'{len(path.folds)} -> {folds_out})')
     for crossing in path.folds:
         print(f'  {fold_crossing_line(crossing)}')
     for snap in path.snaps:
@@ -471,13 +477,14 @@ def build_parser() -> argparse.ArgumentParser:
                            description='Solve the hardware-encoded equilibrium along a history '
                            'of commanded injected volumes (the history matters).')
     solve.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
-    solve.add_argument('--path', type=Path, help='CSV with a column injected_m3, in order '
-                       "(default: the scene's pump profile at the pump rate; with a network, "
-                       "pushed from row to row at the pump's flow rate)")
+    solve.add_argument('--path', type=Path, help='CSV with a column injected_m3, in order, '
+                       "and optionally time_s (default: the scene's pump profile at the pump "
+                       "rate; with a network, pushed from row to row at the pump's flow rate, "
+                       "or at each row's time_s, holds included)")
     solve.add_argument('--out', type=Path, required=True, help='output CSV file; with a '
-                       'network (docs/dynamic.md) the path in time (time_s first, the channel '
-                       'flows added) and its snap-throughs (start, duration, fluid moved, peak '
-                       'flow) in OUT_snaps.csv beside it')
+                       'network (docs/dynamic.md) the path in time (time_s first, each '
+                       "segment's pressure and the channel flows added) and its snap-throughs "
+                       '(start, duration, fluid moved, peak flow) in OUT_snaps.csv beside it')
     solve.set_defaults(handler=_solve)
 
     classify = sub.add_parser('classify', help="the paper's sequence type of a scene",

@@ -127,6 +127,7 @@ def test_the_columns_are_si_and_the_volumes_keep_the_mass(tmp_path, capsys):
     names = scene.segment_names
     header, rows = read_csv(out)
     assert header == (['time_s', 'injected_m3', 'pressure_pa']
+                      + [f'pressure_{n}_pa' for n in names]
                       + [f'volume_{n}_m3' for n in names]
                       + [f'curvature_{n}_per_m' for n in names]
                       + ['flow_bottom_to_top_m3_per_s', 'event'])
@@ -140,6 +141,9 @@ def test_the_columns_are_si_and_the_volumes_keep_the_mass(tmp_path, capsys):
     # SI: cubic metres (tens of mL are 1e-5 m^3), pascals (a few kPa gauge), m^3/s.
     volumes = np.column_stack([column[f'volume_{n}_m3'] for n in names])
     assert 5e-7 < volumes.min() and volumes.max() < 1e-4
+    # Each segment's own gauge pressure is its curve's at its volume.
+    for n, segment, v in zip(names, scene.segments, volumes.T):
+        np.testing.assert_allclose(column[f'pressure_{n}_pa'], segment.pressure(v), rtol=1e-12)
     assert 1e3 < column['pressure_pa'].max() < 2e4
     flow = column['flow_bottom_to_top_m3_per_s']
     assert np.abs(flow).max() < 1e-4 and np.abs(flow).max() > 2e-7

@@ -532,6 +532,17 @@ class NetworkFlow:
         tip = self.rest_total + injected - others.sum(axis=1)
         return np.column_stack([others, tip])
 
+    def row_pressures(self, volumes: FloatArray) -> FloatArray:
+        """:meth:`pressures` of many states at once: rows of segment volumes (m, N) [m^3]."""
+        pressures = np.empty_like(volumes)
+        for i, (segment, (lo, hi), collapse) in enumerate(zip(self.segments, self._bounds,
+                                                                self._collapse)):
+            v = volumes[:, i]
+            inside = np.asarray(segment.pressure(np.clip(v, lo, hi)), dtype=float)
+            below = float(segment.pressure(lo)) + collapse * (v - lo)
+            pressures[:, i] = np.where(v < lo, below, inside)
+        return pressures
+
     def read_states(self, times: FloatArray, states: FloatArray) -> tuple[
             FloatArray, FloatArray, FloatArray, FloatArray]:
         """
@@ -545,13 +556,7 @@ class NetworkFlow:
         start_t, start_injected = self._origin
         injected = start_injected + self.flow * (times - start_t)
         volumes = self.states_volumes(states, injected)
-        pressures = np.empty_like(volumes)
-        for i, (segment, (lo, hi), collapse) in enumerate(zip(self.segments, self._bounds,
-                                                                self._collapse)):
-            v = volumes[:, i]
-            inside = np.asarray(segment.pressure(np.clip(v, lo, hi)), dtype=float)
-            below = float(segment.pressure(lo)) + collapse * (v - lo)
-            pressures[:, i] = np.where(v < lo, below, inside)
+        pressures = self.row_pressures(volumes)
         flows = np.empty((times.size, len(self.laws)))
         inertial = iter(range(self.n - 1, states.shape[1]))
         for j, law in enumerate(self.laws):

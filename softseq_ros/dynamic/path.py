@@ -68,8 +68,9 @@ class DynamicPath:
     The network's state at the sample times, in time order (one row per sample).
 
     ``pressure`` is the syringe's gauge pressure [Pa] (the base segment's plus the supply
-    line's drop); ``channel_flows[:, j]`` flows from segment j to j + 1 [m^3/s]; ``snap[i]``
-    says a snap-through started after sample i - 1 and by sample i; ``snaps`` are all the
+    line's drop), ``segment_pressure[:, i]`` segment i's own [Pa, gauge];
+    ``channel_flows[:, j]`` flows from segment j to j + 1 [m^3/s]; ``snap[i]`` says a
+    snap-through started after sample i - 1 and by sample i; ``snaps`` are all the
     snap-throughs that ran their course by the last sample; ``peak_reynolds[j]`` is channel
     j's largest Reynolds number over the samples; ``steps`` the integrator's steps.
 
@@ -95,6 +96,7 @@ class DynamicPath:
     steps: int
     drained: str | None = None
     folds: list[FoldCrossing] = field(default_factory=list)
+    segment_pressure: FloatArray = field(default_factory=lambda: np.empty((0, 0)))
 
 
 def programme_schedule(profile: PumpProfile) -> tuple[FlowSchedule, float]:
@@ -132,6 +134,35 @@ def history_schedule(history: ArrayLike, flow_rate: float) -> tuple[FlowSchedule
     moving = steps != 0.0
     starts = np.concatenate([[0.0], row_times[moving]])
     return FlowSchedule(starts, np.sign(steps[moving]) * flow_rate), row_times
+
+
+def timed_history_schedule(times: ArrayLike, history: ArrayLike) -> FlowSchedule:
+    """
+    A history in time: the syringe at ``history[k]`` [m^3] at ``times[k]`` [s], linear between.
+
+    The network is at rest, nothing injected, at time 0; a first row later than 0 is reached
+    by a steady push from there (a first row at time 0 must be at 0 m^3). Times increase
+    strictly; a row at the volume of the one before is a hold.
+    """
+    t = np.asarray(times, dtype=float)
+    volumes = np.asarray(history, dtype=float)
+    if t.ndim != 1 or t.shape != volumes.shape or t.size == 0:
+        raise PathError('a history in time needs as many times as injected volumes, at least one')
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(volumes))) or np.any(volumes < 0.0):
+        raise PathError('times and injected volumes must be finite, the volumes >= 0 m^3')
+    if t[0] < 0.0:
+        raise PathError(f'time_s in data row 1: {t[0]:g} s is before the start at 0 s')
+    if t[0] == 0.0 and volumes[0] != 0.0:
+        raise PathError(f'time_s in data row 1: the network starts at rest at 0 s, so the '
+                        f'first row at 0 s must be at 0 m^3 injected, got {volumes[0]:g} m^3')
+    steps = np.diff(t)
+    if np.any(steps <= 0.0):
+        row = int(np.argmax(steps <= 0.0)) + 2
+        raise PathError(f'time_s in data row {row}: {t[row - 1]:g} s does not come after the '
+                        f'row before ({t[row - 2]:g} s); times must increase')
+    if t[0] > 0.0:
+        t, volumes = np.concatenate([[0.0], t]), np.concatenate([[0.0], volumes])
+    return FlowSchedule(t, np.diff(volumes) / np.diff(t))
 
 
 def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
@@ -212,7 +243,8 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
         if row < samples.size:
             snap[row] = True
     return DynamicPath(samples, injected, pressure, volumes, curvatures, flows, snap, snaps,
-                       [float(x) for x in fluid.peak_reynolds], fluid.steps, drained, folds)
+                       [float(x) for x in fluid.peak_reynolds], fluid.steps, drained, folds,
+                       fluid.row_pressures(volumes))
 
 
 def programme_path(segments: Sequence[Segment], network: NetworkSettings,
@@ -240,9 +272,18 @@ def programme_path(segments: Sequence[Segment], network: NetworkSettings,
 
 
 def history_path(segments: Sequence[Segment], network: NetworkSettings, history: ArrayLike,
-                 flow_rate: float, rtol: float | None = None) -> DynamicPath:
-    """The dynamic path along a volume history pushed at ``flow_rate`` [m^3/s], row by row."""
-    schedule, row_times = history_schedule(history, flow_rate)
+                 flow_rate: float, rtol: float | None = None,
+                 times: ArrayLike | None = None) -> DynamicPath:
+    """
+    The dynamic path along a volume history, row by row.
+
+    Pushed at ``flow_rate`` [m^3/s] from row to row, or, with ``times`` [s], at each row's
+    time (:func:`timed_history_schedule`: holds included).
+    """
+    if times is None:
+        schedule, row_times = history_schedule(history, flow_rate)
+    else:
+        schedule, row_times = timed_history_schedule(times, history), np.asarray(times, float)
     return run_schedule(segments, network, schedule, row_times, rtol)
 
 
@@ -251,17 +292,20 @@ def path_columns(names: Sequence[str]) -> list[str]:
     Column names of a dynamic path's CSV for segments ``names`` (base to tip).
 
     The quasi-static path's columns (``pressure_pa`` is the syringe's gauge pressure here),
-    with the time first and each channel's flow before the event column.
+    with the time first, each segment's own gauge pressure after the syringe's, and each
+    channel's flow before the event column.
     """
     flows = [f'flow_{a}_to_{b}_m3_per_s' for a, b in zip(names[:-1], names[1:])]
-    return (['time_s', 'injected_m3', 'pressure_pa'] + [f'volume_{n}_m3' for n in names]
+    return (['time_s', 'injected_m3', 'pressure_pa'] + [f'pressure_{n}_pa' for n in names]
+            + [f'volume_{n}_m3' for n in names]
             + [f'curvature_{n}_per_m' for n in names] + flows + ['event'])
 
 
 def write_path(out: str | Path, path: DynamicPath, names: Sequence[str]) -> None:
     """One row per sample; ``event`` is ``snap`` where a snap-through started."""
     write_rows(out, path_columns(names), (
-        ((path.time_s[i], path.injected[i], path.pressure[i], *path.volumes[i],
+        ((path.time_s[i], path.injected[i], path.pressure[i], *path.segment_pressure[i],
+          *path.volumes[i],
           *path.curvatures[i], *path.channel_flows[i]), 'snap' if path.snap[i] else '')
         for i in range(path.time_s.size)))
 
