@@ -99,6 +99,8 @@ def test_help_shows_ranges_read_only_and_services(ros_env, tmp_path):
     assert 'autostart: bool, default true, read-only' in text
     for service in SyringePumpNode.SERVICES:
         assert f'~/{service}: ' in text
+    # The quoting a YAML-valued parameter needs on the command line, where a user looks.
+    assert '-p "legs:=\'[{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]\'"' in text
     assert 'subscribes actuator/volumes [sensor_msgs/msg/JointState]' in text
     assert list(tmp_path.iterdir()) == []
 

@@ -43,7 +43,7 @@ from softseq_ros.scene.validation import SceneError
 class ManagedSyringePumpNode(LifecycleNodeMixin, SyringePumpNode):
     """The syringe pump, configured and activated through its lifecycle."""
 
-    HELP_NOTES = (
+    HELP_NOTES = SyringePumpNode.HELP_NOTES + (
         'A managed (lifecycle) node: it starts unconfigured; ros2 lifecycle set /syringe_pump '
         'configure, then activate, start it (~/change_state and ~/get_state, lifecycle_msgs). '
         'Configure builds the pump from its parameters, activate starts its commands, '

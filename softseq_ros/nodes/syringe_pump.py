@@ -87,6 +87,11 @@ class SyringePumpNode(CoreNode):
         'load': 'idle, finished or stopped -> idle with the programme set in the parameters '
         'legs, cycles, flow_rate_m3_per_s, start_injected_m3 (refused while running or held)'}
     PROGRAMME_PARAMETERS = ('legs', 'cycles', 'flow_rate_m3_per_s', 'start_injected_m3')
+    HELP_NOTES = (
+        'legs is YAML text: on the command line it needs quotes of its own inside the '
+        "shell's, or rcl reads it as a list and refuses it: "
+        '-p "legs:=\'[{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]\'". In a parameters '
+        'file it is a string: legs: "[{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]".',)
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare parameters (defaults from the scene), build the core, start the timer."""
