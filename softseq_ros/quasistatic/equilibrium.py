@@ -42,7 +42,7 @@ from softseq_ros.quasistatic.sequence import (
     SOLVED_HYSTERESIS_TOLERANCE,
     sequence_type,
 )
-from softseq_ros.quasistatic.states import StatePoint, StateReader, StateRows
+from softseq_ros.quasistatic.states import SegmentStates, StatePoint, StateReader, StateRows
 from softseq_ros.segments.models import Segment
 from softseq_ros.tolerances import DEFAULT_TOLERANCES, Tolerances
 
@@ -121,24 +121,36 @@ class EquilibriumMap:
     interpolated linearly between the branch's samples. ``tolerances`` are the iterative
     solves' budgets (softseq_ros.tolerances); ``convergence`` logs whether they converged, in
     the assembly and in every read since.
+
+    ``supply`` (softseq_ros.segments.supply): a compliant syringe line, one more member of the
+    equilibrium after the segments. The injected volume is then the piston's displacement,
+    the segments' fluid plus what the line takes up. ``members`` are the segments and the
+    supply; ``segments``, the states read (:attr:`reader`, :meth:`read`, :meth:`curvatures`)
+    and the volume ranges are the segments' alone, while the branches, their stability, the
+    landings and :attr:`member_reader` hold every member.
     """
 
     def __init__(self, segments: Sequence[Segment], resolution: int = 2000,
-                 polish: bool = True, tolerances: Tolerances = DEFAULT_TOLERANCES) -> None:
-        """Assemble the equilibrium set of ``segments`` (base to tip)."""
+                 polish: bool = True, tolerances: Tolerances = DEFAULT_TOLERANCES,
+                 supply: Segment | None = None) -> None:
+        """Assemble the equilibrium set of ``segments`` (base to tip) and the ``supply``."""
         if len(segments) < 2:
             raise ValueError(f'an actuator needs at least 2 segments, got {len(segments)}')
         if resolution < 16:
             raise ValueError(f'resolution must be >= 16, got {resolution}')
-        numerics = SegmentNumerics(segments, tolerances)
+        members = (*segments, *(() if supply is None else (supply,)))
+        numerics = SegmentNumerics(members, tolerances)
+        count = len(segments)
         self.numerics = numerics
         self.tolerances = tolerances
         self.convergence = numerics.convergence
-        self.segments = numerics.segments
+        self.members = tuple(numerics.segments)
+        self.segments = self.members[:count]
+        self.supply = supply
         self.resolution = int(resolution)
         self.polish = bool(polish)
-        self.rest_volumes = numerics.rest_volumes
-        self.max_volumes = numerics.max_volumes
+        self.rest_volumes = numerics.rest_volumes[:count]
+        self.max_volumes = numerics.max_volumes[:count]
         self.total_rest_volume = numerics.total_rest_volume
         self.v_scale = numerics.v_scale
         self.p_scale = numerics.p_scale
@@ -147,8 +159,10 @@ class EquilibriumMap:
         self.branches: list[Branch] = assembly.branches
         if not self.branches:
             raise ValueError('these segments have no stable equilibrium at all')
-        self.reader = StateReader(numerics, self.branches, self.polish)
-        BranchEnds(numerics, self.branches, self.reader).connect_all()
+        self.member_reader = StateReader(numerics, self.branches, self.polish)
+        BranchEnds(numerics, self.branches, self.member_reader).connect_all()
+        self.reader = (self.member_reader if supply is None
+                       else SegmentStates(self.member_reader, count))
         # How many piece configurations the assembly examined, of the product of every
         # segment's piece count (a brute-force enumeration's).
         self.configurations_tried = len(assembly.configurations)
@@ -175,7 +189,8 @@ class EquilibriumMap:
 
     def curvatures(self, volumes: FloatArray) -> FloatArray:
         """Per-segment curvature for volumes (n, N), in 1/m."""
-        return self.numerics.curvatures(volumes)
+        return np.stack([s.curvature(volumes[:, j]) for j, s in enumerate(self.segments)],
+                        axis=1)
 
     def equilibrium_set(self) -> list[EquilibriumCurve]:
         """Every configuration's equilibria, stable and unstable (Fig. 1B / 4B)."""
@@ -250,7 +265,7 @@ class Tracker:
                     f'{edge - emap.total_rest_volume:.6g} m^3)',
                     edge - emap.total_rest_volume, np.array(edge_volumes, dtype=float))
             if end.kind == 'snap':
-                from_v = branch.volumes[-1 if upward else 0]
+                from_v = branch.volumes[-1 if upward else 0, :len(emap.segments)]
                 from_p = float(branch.pressure[-1 if upward else 0])
                 landed = emap.read(end.target, np.array([edge]))
                 events.append(SnapEvent(edge - emap.total_rest_volume, from_v.copy(),

@@ -467,16 +467,17 @@ def _transitions(emap: EquilibriumMap, on_path: dict) -> list[Transition]:
             if kind == SNAP:
                 wanted.setdefault(target, []).append(total)
     pairs = [(index, total) for index, totals in wanted.items() for total in totals]
-    rows = emap.reader.rows_many(np.array([p[0] for p in pairs], dtype=np.intp),
-                                 np.array([p[1] for p in pairs]))
-    n = len(emap.segments)
-    states = {pair: (row[:n], float(row[n])) for pair, row in zip(pairs, rows)}
+    rows = emap.member_reader.rows_many(np.array([p[0] for p in pairs], dtype=np.intp),
+                                        np.array([p[1] for p in pairs]))
+    members, n = len(emap.members), len(emap.segments)
+    states = {pair: (row[:members], float(row[members])) for pair, row in zip(pairs, rows)}
     snaps = [(states[(i, total)][0], states[(target, total)][0])
              for i, _, kind, target, total in ends if kind == SNAP]
-    # Both states of a snap hold the same total volume, so the released energy is the drop
-    # of the segments' stored energy alone (the supply does no work during the snap).
-    energies = iter(stored_energies(emap.segments, np.array([v for pair in snaps
-                                                             for v in pair]))
+    # Both states of a snap hold the same total volume (the piston stands still), so the
+    # released energy is the drop of the members' stored energy: the segments', and a
+    # compliant supply line's (its gas expands into the segments, or is compressed).
+    energies = iter(stored_energies(emap.members, np.array([v for pair in snaps
+                                                            for v in pair]))
                     if snaps else [])
     transitions = []
     for index, direction, kind, target, total in ends:
@@ -489,7 +490,7 @@ def _transitions(emap: EquilibriumMap, on_path: dict) -> list[Transition]:
             released = next(energies) - next(energies)
         transitions.append(Transition(
             index, direction, kind, target, total - emap.total_rest_volume,
-            tuple(float(v) for v in v_before), tuple(float(v) for v in v_after), p_before,
+            tuple(float(v) for v in v_before[:n]), tuple(float(v) for v in v_after[:n]), p_before,
             p_after, moved, released, (index, direction) in on_path))
     return transitions
 
@@ -519,6 +520,10 @@ def nearest_branches(emap: EquilibriumMap, volumes: FloatArray) -> NDArray[np.in
     quasi-static states lie on their branch; a dynamic run's states between equilibria are
     given the branch they are closest to.
     """
+    if emap.supply is not None:
+        # A recorded state names the segments' volumes; the line's share of a total is not
+        # among them.
+        raise ValueError('recorded states are placed on a map without a supply member only')
     volumes = np.atleast_2d(np.asarray(volumes, dtype=float))
     totals = volumes.sum(axis=1)
     lo, hi = emap.injected_range

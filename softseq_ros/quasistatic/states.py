@@ -261,3 +261,40 @@ class StateReader:
         volumes[np.arange(volumes.shape[0]), largest] += total - volumes.sum(axis=1)
         return np.concatenate([volumes, pressure[:, None], numerics.curvatures(volumes)],
                               axis=1)
+
+
+class SegmentStates(StateReader):
+    """
+    The states of a map's segments alone, where the map has one more member (the supply).
+
+    The same rows as the map's own reader, with the member's volume and curvature left out:
+    (v_1..v_N, p, k_1..k_N) for the N segments. The member stays in the map's branches, its
+    stability and its landings (softseq_ros.quasistatic.equilibrium).
+    """
+
+    def __init__(self, states: StateReader, segments: int) -> None:
+        """The rows of ``states`` for its first ``segments`` members."""
+        members = states._n
+        self.numerics = states.numerics
+        self.branches = states.branches
+        self.polish = states.polish
+        self._n = int(segments)
+        self._states = states
+        self._columns = np.r_[0:segments, members, members + 1:members + 1 + segments]
+
+    def rows(self, index: int, total: FloatArray) -> FloatArray:
+        """:meth:`StateReader.rows`, the segments' columns."""
+        return self._states.rows(index, total)[:, self._columns]
+
+    def row(self, index: int, total: float) -> list[float]:
+        """:meth:`StateReader.row`, the segments' columns."""
+        full = self._states.row(index, total)
+        return [full[c] for c in self._columns.tolist()]
+
+    def rows_many(self, index: NDArray[np.intp], total: FloatArray) -> FloatArray:
+        """:meth:`StateReader.rows_many`, the segments' columns."""
+        return self._states.rows_many(index, total)[:, self._columns]
+
+    def rows_per_command(self, index: NDArray[np.intp], total: FloatArray) -> FloatArray:
+        """:meth:`StateReader.rows_per_command`, the segments' columns."""
+        return self._states.rows_per_command(index, total)[:, self._columns]
