@@ -83,7 +83,8 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
     from softseq_ros.quasistatic.reach import check_scene_reach
     from softseq_ros.quasistatic.solve import equilibrium_map
 
-    emap = equilibrium_map(loaded.segments, resolution or loaded.solver.resolution)
+    emap = equilibrium_map(loaded.segments, resolution or loaded.solver.resolution,
+                           loaded.supply)
     if history is None:
         check_scene_reach(loaded, emap)
         _, history = loaded.pump.profile.sample(loaded.pump.rate_hz)

@@ -6,6 +6,7 @@ segment jumps at its own peak, as under pressure control).
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -154,3 +155,49 @@ def test_every_snap_with_a_compliant_line_releases_energy_and_lands_stable(gas):
         assert math.isclose(volumes.sum(), total, rel_tol=1e-12)
         k = np.array([float(m.stiffness(v)) for m, v in zip(emap.members, volumes)])
         assert stable(k[None, :] / emap.numerics.k_scale, 0.0)[0]
+
+
+def supply_scene(folder, **supply):
+    import yaml
+    data = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config'
+                           / 'fig1_asymmetric.yaml').read_text())
+    data['supply'] = supply
+    path = folder / 'air.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_scene_s_supply_line_is_followed_by_solve_classify_and_graph(tmp_path, capsys):
+    import softseq_ros
+    from softseq_ros import cli
+
+    path = supply_scene(tmp_path, trapped_gas_m3=1.0e-5, polytropic_exponent=1.4)
+    scene = load_scene(path)
+    assert scene.supply.gas_volume == 1.0e-5 and scene.supply.exponent == 1.4
+    # Beyond every pressure on the segments' curves.
+    assert scene.supply.max_pressure > max(pc.p_max for s in scene.segments
+                                           for pc in s.monotone_pieces())
+    injected = np.linspace(0.0, 5.0e-5, 201)
+    solved = softseq_ros.solve(path, injected)
+    direct = Tracker(EquilibriumMap(scene.segments, supply=scene.supply)).sweep(injected)
+    np.testing.assert_array_equal(solved.pressure, direct.pressure)
+    ideal = softseq_ros.solve('fig1_asymmetric', injected)
+    # The line takes up some of what the piston pushed: the segments hold less.
+    assert np.all(solved.volumes.sum(axis=1) <= ideal.volumes.sum(axis=1) + 1e-18)
+    assert softseq_ros.classify(path) == 'asymmetric'
+    graph = softseq_ros.graph(path)
+    assert graph.snaps() and all(t.energy_released > 0.0 for t in graph.snaps())
+    assert cli.main(['graph', str(path), '--out', str(tmp_path / 'graph')]) == 0
+    assert (tmp_path / 'graph' / 'graph.png').stat().st_size > 0
+    capsys.readouterr()
+
+
+def test_the_rig_refuses_a_supply_line_it_cannot_record_yet(tmp_path, capsys):
+    from softseq_ros import cli
+
+    path = supply_scene(tmp_path, line_compliance_m3_per_pa=1.0e-9)
+    code = cli.main(['run', str(path), '--out', str(tmp_path / 'bag')])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert f'{path}: supply: the rig (softseq run and the nodes) runs the ideal syringe' in err[0]
+    assert not (tmp_path / 'bag').exists()

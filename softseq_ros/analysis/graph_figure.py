@@ -328,7 +328,8 @@ def _draw_plane(ax: object, graph: TransitionGraph, emap: object) -> list:
         if not stable.all() and not key:
             key.append(Line2D([], [], color=UNSTABLE_COLOUR, ls='--', label='unstable equilibria'))
     for b, branch in zip(graph.branches, emap.branches):
-        dv = (np.asarray(branch.volumes) - rest) * ML
+        # The segments' columns: a supply line is a member of the branches too.
+        dv = (np.asarray(branch.volumes)[:, :rest.size] - rest) * ML
         ax.plot(dv[:, 0], dv[:, 1], color=_PATH_COLOUR if b.default_path else _OTHER_COLOUR,
                 lw=2.2 if b.default_path else 1.6, zorder=2)
         # A branch too short to hold its name here is named in the bars only.

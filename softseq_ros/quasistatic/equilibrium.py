@@ -25,7 +25,7 @@ volume in between lands: a dropped command cannot change the physics. Looking up
 binary search on the branch's samples and a cubic; states next to a fold are solved exactly.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from typing import Sequence
 
@@ -193,8 +193,10 @@ class EquilibriumMap:
                         axis=1)
 
     def equilibrium_set(self) -> list[EquilibriumCurve]:
-        """Every configuration's equilibria, stable and unstable (Fig. 1B / 4B)."""
-        return self._assembly.curves()
+        """Every configuration's equilibria, stable and unstable (Fig. 1B / 4B): the segments'."""
+        count = len(self.segments)
+        return [replace(curve, volumes=curve.volumes[:, :count])
+                for curve in self._assembly.curves()]
 
     def branch_at(self, injected: float, volumes: ArrayLike | None = None) -> int:
         """

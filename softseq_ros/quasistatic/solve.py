@@ -37,19 +37,21 @@ SHARED_MAPS = 8
 _MAPS: OrderedDict[tuple[str, int | None], EquilibriumMap] = OrderedDict()
 
 
-def equilibrium_map(segments: Sequence[Segment],
-                    resolution: int | None = None) -> EquilibriumMap:
+def equilibrium_map(segments: Sequence[Segment], resolution: int | None = None,
+                    supply: Segment | None = None) -> EquilibriumMap:
     """
     The equilibrium map of these segments at this resolution (``None``: the default).
 
-    Assembled once per process (the same segments by their digest): it is the expensive part,
-    and it holds no actuator's state. The :data:`SHARED_MAPS` most recently used are kept.
+    With a ``supply`` line as one more member (softseq_ros.segments.supply). Assembled once
+    per process (the same segments and line by their digest): it is the expensive part, and it
+    holds no actuator's state. The :data:`SHARED_MAPS` most recently used are kept.
     """
-    key = (segments_sha256(segments), resolution)
+    key = (segments_sha256(segments), resolution,
+           None if supply is None else segments_sha256([supply]))
     emap = _MAPS.get(key)
     if emap is None:
-        emap = (EquilibriumMap(segments) if resolution is None
-                else EquilibriumMap(segments, resolution=resolution))
+        emap = (EquilibriumMap(segments, supply=supply) if resolution is None
+                else EquilibriumMap(segments, resolution=resolution, supply=supply))
         _MAPS[key] = emap
         while len(_MAPS) > SHARED_MAPS:
             _MAPS.popitem(last=False)
@@ -60,7 +62,7 @@ def equilibrium_map(segments: Sequence[Segment],
 
 def scene_map(scene: 'Scene') -> EquilibriumMap:
     """The equilibrium map of a scene's segments at the scene's solver resolution."""
-    return equilibrium_map(scene.segments, scene.solver.resolution)
+    return equilibrium_map(scene.segments, scene.solver.resolution, scene.supply)
 
 
 def read_history(path: str | Path) -> NDArray[np.float64]:

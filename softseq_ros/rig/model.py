@@ -41,6 +41,7 @@ from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
+from softseq_ros.scene.validation import SceneError
 from softseq_ros.segments.models import Segment
 from softseq_ros.wire.contract import NS_PER_S
 
@@ -474,8 +475,14 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
     The model a scene asks for, on the process's shared map of its segments.
 
     The fluid network in time when the scene declares one (``network``), else the quasi-static
-    equilibrium.
+    equilibrium. A scene with a ``supply`` line is refused: the rig's bags and their analysis
+    hold the segments' states, and the line's share is not among them yet.
     """
+    if scene.supply is not None:
+        raise SceneError(f'{scene.path if scene.path is not None else "<scene>"}: supply: the '
+                         'rig (softseq run and the nodes) runs the ideal syringe only so far; '
+                         'softseq solve, classify and graph follow the supply line '
+                         '(docs/supply.md)')
     quasistatic = QuasiStaticModel(scene_map(scene),
                                    scene.segment_names)
     if scene.network is None:

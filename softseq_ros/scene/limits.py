@@ -53,6 +53,13 @@ LIMITS: dict[str, Limit] = {
     'camera.image_width_px': Limit(16, 8192),
     'camera.image_height_px': Limit(16, 8192),
     'solver.resolution': Limit(16, 100_000),
+    # The syringe line: trapped air up to a litre, a compliance up to 1e-6 m^3/Pa (a metre of
+    # very soft tubing holds far less), an ambient from 10 kPa to 1 MPa absolute, and a
+    # polytropic exponent from isothermal (1) to beyond any gas's (5/3 for a monatomic one).
+    'supply.trapped_gas_m3': Limit(0.0, 1.0e-3),
+    'supply.line_compliance_m3_per_pa': Limit(0.0, 1.0e-6),
+    'supply.ambient_pa': Limit(1.0e4, 1.0e6),
+    'supply.polytropic_exponent': Limit(1.0, 2.0),
     # A segment from a micrometre to 10 m (the paper's: 0.111 m).
     'segments.length_m': Limit(0.0, 10.0, open_minimum=True),
     # From a gas (air: 1.8e-5 Pa s) to a silicone gum (1e4 Pa s); water: 1e-3 Pa s. Beyond,

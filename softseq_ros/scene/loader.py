@@ -75,6 +75,7 @@ from softseq_ros.scene.validation import (
 )
 from softseq_ros.segments.models import BalloonSegment, LinearSegment, Segment, TabulatedSegment
 from softseq_ros.segments.smoothing import smooth_table
+from softseq_ros.segments.supply import STANDARD_AMBIENT_PA, CompliantSupply
 
 DEFAULT_PUMP_RATE_HZ = 50.0
 DEFAULT_CAMERA_RATE_HZ = 10.0
@@ -132,6 +133,7 @@ class Scene:
     outputs: frozenset[str]
     solver: SolverSettings
     network: NetworkSettings | None = None
+    supply: CompliantSupply | None = None
 
     @property
     def segment_names(self) -> tuple[str, ...]:
@@ -424,6 +426,31 @@ def _outputs(ctx: Context, value: object) -> frozenset[str]:
     return frozenset(names)
 
 
+# The supply line's member reaches this multiple of the highest pressure on any segment's
+# curve: beyond every equilibrium of the segments, so it never ends the domain first.
+SUPPLY_PRESSURE_MARGIN = 2.0
+
+
+def _supply(ctx: Context, value: object, segments: tuple[Segment, ...]) -> CompliantSupply | None:
+    """The ``supply`` block: the syringe line's trapped gas and compliance (docs/supply.md)."""
+    if value is None:
+        return None
+    keys = ('trapped_gas_m3', 'line_compliance_m3_per_pa', 'ambient_pa', 'polytropic_exponent')
+    raw = ctx.mapping(value, 'supply', (), keys)
+    numbers = {key: ctx.limited(raw[key], f'supply.{key}') for key in keys if key in raw}
+    gas = numbers.get('trapped_gas_m3', 0.0)
+    compliance = numbers.get('line_compliance_m3_per_pa', 0.0)
+    if not gas > 0.0 and not compliance > 0.0:
+        raise ctx.error('supply', 'give trapped_gas_m3 or line_compliance_m3_per_pa above 0 '
+                                  '(without both the syringe is ideal: leave the block out)')
+    highest = max(max(abs(pc.p_at_lo), abs(pc.p_at_hi)) for s in segments
+                  for pc in s.monotone_pieces())
+    return CompliantSupply(gas, ambient_pa=numbers.get('ambient_pa', STANDARD_AMBIENT_PA),
+                           polytropic_exponent=numbers.get('polytropic_exponent', 1.0),
+                           line_compliance_m3_per_pa=compliance,
+                           max_pressure_pa=SUPPLY_PRESSURE_MARGIN * highest)
+
+
 def _solver(ctx: Context, value: object) -> SolverSettings:
     if value is None:
         return SolverSettings()
@@ -450,7 +477,7 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     folder = Path(path).parent if path is not None else Path('.')
     ctx = Context(shown, folder)
     raw = ctx.mapping(data, '', ('name', 'segments', 'pump'),
-                      ('description', 'camera', 'outputs', 'solver', 'network'))
+                      ('description', 'camera', 'outputs', 'solver', 'network', 'supply'))
     name = ctx.text(raw['name'], 'name')
     if not SCENE_NAME.match(name):
         raise ctx.error('name', f'must start with a letter or digit and hold only letters, '
@@ -464,9 +491,13 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     outputs = _outputs(ctx, raw.get('outputs'))
     solver = _solver(ctx, raw.get('solver'))
     network = read_network(ctx, raw.get('network'), tuple(s.name for s in segments))
+    supply = _supply(ctx, raw.get('supply'), segments)
+    if supply is not None and network is not None:
+        raise ctx.error('supply', 'a supply line in a scene with a network is not followed in '
+                                  'time yet: give one or the other')
     return Scene(name=name, description=description, network=network,
                  path=Path(path) if path is not None else None, segments=segments, pump=pump,
-                 camera=camera, outputs=outputs, solver=solver)
+                 camera=camera, outputs=outputs, solver=solver, supply=supply)
 
 
 def load_scene(path: str | Path) -> Scene:
