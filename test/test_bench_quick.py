@@ -106,6 +106,12 @@ QUICK = {
         [r'\| 2 \| 4 identical, 100 Pa \| [^|]* \| [1-9]\d* \| [1-9]\d* \| \d+\.\d \| pass \|',
          r'\| 16 \| 3 identical, 10 Pa \| [^|]* \| [1-9]\d* \| [1-9]\d* \| \d+\.\d \| pass \|'],
         ['bench/landing_sweep_results.md']),
+    'bench_supply.py': (
+        ['| scene | supply | sequence type | inflation snaps |'],
+        [r'\| fig1_asymmetric \| ideal syringe \| asymmetric \| \d+\.\d\d mL at ',
+         r'\| fig1_asymmetric \| 1 mL of air \| asymmetric \| \d+\.\d\d mL at \d\.\d{3} kPa, '
+         r'[^|]+ \| [^|]+ \| \d+\.\d+ s \(\d+\.\d\d\) \|'],
+        ['bench/supply_results.md']),
     'bench_fem.py': (
         ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
          '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],
