@@ -1,0 +1,119 @@
+"""
+Segments under pressure control: each one an independent hysteron.
+
+A pressure regulator holds the common pressure p wherever the fluid goes, so the segments no
+longer share a fixed volume: each one sits at p on a rising piece of its own curve (a falling
+piece is unstable alone at a held pressure), whatever the others do. Raised past the top of
+its piece (a peak), a segment jumps at that pressure to the next rising piece that reaches p;
+lowered past the bottom of its piece (a valley), it jumps back to the rising piece below. This
+is the model hysteron theory starts from (each segment flips at its peak pressure and back at
+its valley); the coupling through the shared volume that encodes the paper's sequence is gone.
+:func:`regulated_path` follows a history of gauge pressures so, from rest.
+"""
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from softseq_ros.errors import UserError
+from softseq_ros.segments.models import Piece, Segment
+
+FloatArray = NDArray[np.float64]
+
+
+class PressureDomainError(UserError):
+    """A commanded pressure that some segment's curve does not reach on any rising piece."""
+
+
+@dataclass(frozen=True)
+class Flip:
+    """
+    One segment's jump, on the way to command ``row``.
+
+    At ``pressure`` [Pa], the peak (rising) or valley (falling) it passed, from
+    ``from_volume`` (that end of its piece) to ``to_volume`` [m^3] (the piece it lands on, at
+    the same pressure).
+    """
+
+    row: int
+    segment: int
+    pressure: float
+    from_volume: float
+    to_volume: float
+
+
+@dataclass
+class RegulatedPath:
+    """Per commanded pressure: each segment's volume [m^3] and curvature [1/m], and the flips."""
+
+    pressure: FloatArray
+    volumes: FloatArray
+    curvatures: FloatArray
+    flips: list[Flip] = field(default_factory=list)
+
+    @property
+    def injected(self) -> FloatArray:
+        """What the regulator has let in since rest [m^3]."""
+        return self.volumes.sum(axis=1) - self.volumes[0].sum() if self.volumes.size else \
+            np.empty(0)
+
+
+def _rising(segment: Segment) -> list[Piece]:
+    return [piece for piece in segment.monotone_pieces() if piece.direction > 0]
+
+
+def regulated_path(segments: Sequence[Segment], pressures: ArrayLike) -> RegulatedPath:
+    """
+    Follow gauge pressures [Pa] from rest, each segment on its own rising pieces.
+
+    Every segment starts on its first rising piece. A pressure above the top of a segment's
+    piece moves it up to the first rising piece above that reaches the pressure, one below
+    the bottom of its piece down to the last rising piece below that does (:class:`Flip`
+    each time); a pressure no rising piece of a segment reaches raises
+    :class:`PressureDomainError`, naming the row and the segment.
+    """
+    p = np.asarray(pressures, dtype=float).ravel()
+    if not np.all(np.isfinite(p)):
+        raise PressureDomainError(f'row {int(np.argmax(~np.isfinite(p)))}: a commanded '
+                                  'pressure must be finite')
+    pieces = [_rising(segment) for segment in segments]
+    for segment, rising in zip(segments, pieces):
+        if not rising:
+            raise PressureDomainError(f'segment {segment.name!r} never rises: no state of it is '
+                                      'stable at a held pressure')
+    current = [0] * len(segments)
+    volumes = np.empty((p.size, len(segments)))
+    flips: list[Flip] = []
+    for row, target in enumerate(p.tolist()):
+        for i, (segment, rising) in enumerate(zip(segments, pieces)):
+            at = current[i]
+            if target > rising[at].p_max:
+                above = [k for k in range(at + 1, len(rising))
+                         if rising[k].p_min <= target <= rising[k].p_max]
+                at = above[0] if above else -1
+            elif target < rising[at].p_min:
+                below = [k for k in range(at - 1, -1, -1)
+                         if rising[k].p_min <= target <= rising[k].p_max]
+                at = below[0] if below else -1
+            if at < 0:
+                raise PressureDomainError(
+                    f'row {row}: {target:.6g} Pa is beyond what segment {segment.name!r} '
+                    f'holds on a stable piece ({rising[0].p_min:.6g} to '
+                    f'{max(r.p_max for r in rising):.6g} Pa)')
+            volume = float(segment.invert(rising[at], np.array([target]))[0])
+            if at != current[i]:
+                before = rising[current[i]]
+                # A pressure raised or lowered steadily jumps where it passes the piece's end.
+                up = target > before.p_max
+                edge_p, edge_v = (before.p_max, before.v_hi) if up else (before.p_min,
+                                                                         before.v_lo)
+                landed = float(segment.invert(rising[at], np.array([edge_p]))[0])
+                flips.append(Flip(row, i, edge_p, edge_v, landed))
+                current[i] = at
+            volumes[row, i] = volume
+    curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, i]), dtype=float)
+                                  for i, s in enumerate(segments)]) if p.size else \
+        np.empty((0, len(segments)))
+    return RegulatedPath(p, volumes, curvatures, flips)
