@@ -80,14 +80,18 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
         return history_path(loaded.segments, loaded.network, history, profile.flow_rate,
                             times=times)
     from softseq_ros.quasistatic.equilibrium import Tracker
-    from softseq_ros.quasistatic.reach import check_scene_reach
+    from softseq_ros.quasistatic.reach import check_scene_reach, start_tracker
     from softseq_ros.quasistatic.solve import equilibrium_map
 
     emap = equilibrium_map(loaded.segments, resolution or loaded.solver.resolution,
                            loaded.supply)
     if history is None:
         check_scene_reach(loaded, emap)
-        _, history = loaded.pump.profile.sample(loaded.pump.rate_hz)
+        profile = loaded.pump.profile
+        _, history = profile.sample(loaded.pump.rate_hz)
+        if profile.start_history:
+            # From the state the stated history led to, not from rest.
+            return start_tracker(profile, emap, loaded.segment_names).sweep(history)
     return Tracker(emap).sweep(history)
 
 

@@ -27,11 +27,7 @@ def check_reach(profile: PumpProfile, emap: EquilibriumMap, names: Sequence[str]
     Every cycle after the first starts from the state the one before ended in; once such a
     state comes back the cycles repeat, so the walk stops there (a million cycles cost two).
     """
-    try:
-        tracker = Tracker(emap, injected=profile.start_injected)
-    except DomainError as err:
-        reason = beyond_domain(profile.start_injected, err, emap, names)
-        raise ProgrammeError(f'{prefix}start_injected_m3', reason) from None
+    tracker = start_tracker(profile, emap, names, prefix)
     seen: set[tuple[int, float]] = set()
     for cycle in range(1, profile.cycles + 1):
         for index, leg in enumerate(profile.legs):
@@ -47,6 +43,27 @@ def check_reach(profile: PumpProfile, emap: EquilibriumMap, names: Sequence[str]
         if state in seen:
             return
         seen.add(state)
+
+
+def start_tracker(profile: PumpProfile, emap: EquilibriumMap, names: Sequence[str],
+                  prefix: str = '') -> Tracker:
+    """
+    The state the programme starts from, on a tracker.
+
+    From rest, moved to ``start_injected``, or walked through the programme's
+    ``start_history`` in order. A volume beyond the domain raises :class:`ProgrammeError`
+    naming its key.
+    """
+    tracker = Tracker(emap)
+    steps = ([(f'{prefix}start_history_m3[{i}]', v) for i, v in
+              enumerate(profile.start_history)] if profile.start_history
+             else [(f'{prefix}start_injected_m3', profile.start_injected)])
+    for key, volume in steps:
+        try:
+            tracker.move(volume)
+        except DomainError as err:
+            raise ProgrammeError(key, beyond_domain(volume, err, emap, names)) from None
+    return tracker
 
 
 def beyond_domain(target: float, err: DomainError, emap: EquilibriumMap,

@@ -38,15 +38,19 @@ PUMP_SETTINGS = ('rate_hz', 'flow_rate_m3_per_s', 'legs', 'cycles', 'start_injec
 def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
                  legs: tuple[Leg, ...] | None = None, cycles: int | None = None,
                  start_injected_m3: float | None = None) -> PumpProfile:
-    """The scene's pump programme with any of its parts replaced."""
+    """
+    The scene's pump programme with any of its parts replaced.
+
+    The scene's start history stays where the programme still starts where it ends.
+    """
     default = scene.pump.profile
+    start = default.start_injected if start_injected_m3 is None else start_injected_m3
     try:
         profile = PumpProfile(
             legs=default.legs if legs is None else tuple(legs),
             flow_rate=default.flow_rate if flow_rate_m3_per_s is None else flow_rate_m3_per_s,
-            cycles=default.cycles if cycles is None else cycles,
-            start_injected=(default.start_injected if start_injected_m3 is None
-                            else start_injected_m3))
+            cycles=default.cycles if cycles is None else cycles, start_injected=start,
+            start_history=default.start_history if start == default.start_injected else ())
     except ValueError as err:
         raise SettingError(f'pump programme (legs, cycles, start_injected_m3): {err}') from None
     try:

@@ -475,7 +475,8 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
     The model a scene asks for, on the process's shared map of its segments.
 
     The fluid network in time when the scene declares one (``network``), else the quasi-static
-    equilibrium. A scene with a ``supply`` line is refused: the rig's bags and their analysis
+    equilibrium, at rest or where the programme's ``start_history`` led. A scene with a
+    ``supply`` line is refused: the rig's bags and their analysis
     hold the segments' states, and the line's share is not among them yet.
     """
     if scene.supply is not None:
@@ -485,6 +486,13 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
                          '(docs/supply.md)')
     quasistatic = QuasiStaticModel(scene_map(scene),
                                    scene.segment_names)
+    # A programme that starts from a stated history: the actuator is where it led.
+    for index, volume in enumerate(scene.pump.profile.start_history):
+        try:
+            quasistatic.command(volume, 0)
+        except CommandRefusedError as err:
+            raise SceneError(f'{scene.path if scene.path is not None else "<scene>"}: '
+                             f'pump.start_history_m3[{index}]: {err}') from None
     if scene.network is None:
         return quasistatic
     return DynamicModel(scene.segments, scene.segment_names, scene.network, quasistatic)

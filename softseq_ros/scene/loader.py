@@ -340,12 +340,25 @@ def legs_from_text(text: str, key_path: str = 'legs') -> tuple[Leg, ...]:
 
 def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
     raw = ctx.mapping(value, 'pump', ('legs',),
-                   ('flow_rate_m3_per_s', 'rate_hz', 'cycles', 'start_injected_m3'))
+                   ('flow_rate_m3_per_s', 'rate_hz', 'cycles', 'start_injected_m3',
+                    'start_history_m3'))
     flow = ctx.limited(raw.get('flow_rate_m3_per_s', DEFAULT_FLOW_RATE),
                     'pump.flow_rate_m3_per_s')
     rate = ctx.limited(raw.get('rate_hz', DEFAULT_PUMP_RATE_HZ), 'pump.rate_hz')
     cycles = int(ctx.limited(raw.get('cycles', 1), 'pump.cycles', integer=True))
     start = ctx.number(raw.get('start_injected_m3', 0.0), 'pump.start_injected_m3', ge=0.0)
+    history: tuple[float, ...] = ()
+    if 'start_history_m3' in raw:
+        if 'start_injected_m3' in raw:
+            raise ctx.error('pump.start_history_m3', 'the programme starts where the history '
+                                                    'ends: give start_injected_m3 or this, '
+                                                    'not both')
+        items = ctx.sequence(raw['start_history_m3'], 'pump.start_history_m3')
+        if not items:
+            raise ctx.error('pump.start_history_m3', 'needs at least one injected volume')
+        history = tuple(ctx.number(v, f'pump.start_history_m3[{i}]', ge=0.0)
+                        for i, v in enumerate(items))
+        start = history[-1]
     legs = read_legs(ctx, raw['legs'], 'pump.legs')
     # Walk the programme as the pump will, so a leg that cannot run names its own key. Every
     # cycle after the first starts where the one before ended, so two cycles show them all.
@@ -365,7 +378,7 @@ def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
             now = leg.to_m3
     try:
         profile = PumpProfile(legs=tuple(legs), flow_rate=flow, cycles=cycles,
-                              start_injected=start)
+                              start_injected=start, start_history=history)
     except ValueError as err:
         raise ctx.error('pump', str(err)) from None
     try:
@@ -492,6 +505,9 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     solver = _solver(ctx, raw.get('solver'))
     network = read_network(ctx, raw.get('network'), tuple(s.name for s in segments))
     supply = _supply(ctx, raw.get('supply'), segments)
+    if pump.profile.start_history and network is not None:
+        raise ctx.error('pump.start_history_m3', 'a start state in a scene with a network is '
+                                                'not followed in time yet: start from rest')
     if supply is not None and network is not None:
         raise ctx.error('supply', 'a supply line in a scene with a network is not followed in '
                                   'time yet: give one or the other')

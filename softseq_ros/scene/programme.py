@@ -116,6 +116,8 @@ class PumpProfile:
 
     Each leg moves at its own flow rate, or at ``flow_rate`` [m^3/s] when it gives none.
     Time 0 is the start of the first leg, where the injected volume is ``start_injected``.
+    ``start_history`` (injected volumes [m^3], in order, from rest) is how the actuator got
+    there when not straight from rest: its last volume is ``start_injected``.
     Raises ValueError when a leg cannot be run from the volume it starts at (an inflate target
     not above it, a deflate target not below it), naming the cycle and leg.
     """
@@ -124,6 +126,7 @@ class PumpProfile:
     flow_rate: float = DEFAULT_FLOW_RATE
     cycles: int = 1
     start_injected: float = 0.0
+    start_history: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         """Validate the programme and precompute its breakpoints."""
@@ -146,6 +149,14 @@ class PumpProfile:
         if start < 0.0:
             raise ValueError(f'start_injected must be >= 0, got {start}')
         object.__setattr__(self, 'start_injected', start)
+        history = tuple(_finite(v, f'start_history[{i}]')
+                        for i, v in enumerate(self.start_history))
+        if any(v < 0.0 for v in history):
+            raise ValueError('start_history volumes must be >= 0')
+        if history and history[-1] != start:
+            raise ValueError(f'start_history ends at {history[-1]:g} m^3, not at '
+                             f'start_injected {start:g} m^3')
+        object.__setattr__(self, 'start_history', history)
 
         times = [0.0]
         volumes = [start]
@@ -324,6 +335,11 @@ def leg_key(index: int, leg: Leg, prefix: str = '') -> str:
 
 def check_capacity(profile: PumpProfile, capacity: float, prefix: str = '') -> None:
     """Refuse a start volume or leg beyond ``capacity`` [m^3], what the segments hold."""
+    for index, volume in enumerate(profile.start_history):
+        if volume > capacity:
+            raise ProgrammeError(f'{prefix}start_history_m3[{index}]',
+                                 f'{volume:g} m^3 exceeds what the segments hold '
+                                 f'({capacity:g} m^3 injected)')
     if profile.start_injected > capacity:
         raise ProgrammeError(f'{prefix}start_injected_m3',
                              f'{profile.start_injected:g} m^3 exceeds what the segments hold '
