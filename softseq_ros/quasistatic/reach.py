@@ -16,7 +16,7 @@ import numpy as np
 
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.scene.loader import Scene, SceneError
-from softseq_ros.scene.programme import ProgrammeError, PumpProfile, leg_key
+from softseq_ros.scene.programme import ProgrammeError, PumpProfile, leg_key, leg_targets
 
 
 def check_reach(profile: PumpProfile, emap: EquilibriumMap, names: Sequence[str],
@@ -31,14 +31,13 @@ def check_reach(profile: PumpProfile, emap: EquilibriumMap, names: Sequence[str]
     seen: set[tuple[int, float]] = set()
     for cycle in range(1, profile.cycles + 1):
         for index, leg in enumerate(profile.legs):
-            if leg.action == 'hold':
-                continue
-            try:
-                tracker.move(leg.to_m3)
-            except DomainError as err:
-                in_cycle = f' (cycle {cycle})' if profile.cycles > 1 else ''
-                reason = beyond_domain(leg.to_m3, err, emap, names, in_cycle)
-                raise ProgrammeError(leg_key(index, leg, prefix), reason) from None
+            for volume in leg_targets(leg):
+                try:
+                    tracker.move(volume)
+                except DomainError as err:
+                    in_cycle = f' (cycle {cycle})' if profile.cycles > 1 else ''
+                    reason = beyond_domain(volume, err, emap, names, in_cycle)
+                    raise ProgrammeError(leg_key(index, leg, prefix), reason) from None
         state = (tracker.branch, tracker.total)
         if state in seen:
             return

@@ -45,6 +45,8 @@ from dataclasses import dataclass
 import math
 from pathlib import Path
 
+from softseq_ros.errors import UserError
+from softseq_ros.scene.csv_columns import read_columns
 from softseq_ros.scene.design import (
     SAME_LENGTH_RTOL,
     DesignError,
@@ -287,8 +289,25 @@ def _segments(ctx: Context, value: object) -> tuple[Segment, ...]:
     return tuple(segments)
 
 
-LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s')
+LEG_KEYS = ('inflate_to_m3', 'deflate_to_m3', 'hold_s', 'profile')
 LEG_RATE_KEY = 'flow_rate_m3_per_s'
+PROFILE_COLUMNS = ('time_s', 'injected_m3')
+
+
+def _profile_leg(ctx: Context, value: object, key_path: str) -> Leg:
+    """A ``profile`` leg: a CSV of time_s against injected_m3, relative to the scene's folder."""
+    relative = Path(ctx.text(value, key_path))
+    path = relative if relative.is_absolute() else ctx.folder / relative
+    try:
+        columns = read_columns(path, PROFILE_COLUMNS, ProfileError, 'pump profile')
+        return Leg.profile(columns['time_s'].tolist(), columns['injected_m3'].tolist(),
+                           source=str(path))
+    except ValueError as err:
+        raise ctx.error(key_path, str(err)) from None
+
+
+class ProfileError(UserError):
+    """A pump profile file that cannot be read."""
 
 
 def read_legs(ctx: Context, value: object, key_path: str) -> list[Leg]:
@@ -313,6 +332,12 @@ def read_legs(ctx: Context, value: object, key_path: str) -> list[Leg]:
                                    f'got {len(actions)} keys ({", ".join(actions)})')
         key = actions[0]
         at = join(where, key)
+        if key == 'profile':
+            if LEG_RATE_KEY in leg:
+                raise ctx.error(join(where, LEG_RATE_KEY),
+                                'a profile leg moves at the rates of its own rows')
+            legs.append(_profile_leg(ctx, leg[key], at))
+            continue
         if key == 'hold_s':
             if LEG_RATE_KEY in leg:
                 raise ctx.error(join(where, LEG_RATE_KEY),
@@ -366,6 +391,14 @@ def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
     for cycle in range(1, min(cycles, 2) + 1):
         for index, leg in enumerate(legs):
             if leg.action == 'hold':
+                continue
+            if leg.action == 'profile':
+                if leg.volumes[0] != now:
+                    raise ctx.error(f'pump.legs[{index}].profile',
+                                    f'{leg.source}: the profile starts at {leg.volumes[0]:g} '
+                                    f'm^3, not at the injected volume the leg starts from '
+                                    f'({now:g} m^3{" in cycle 2" if cycle > 1 else ""})')
+                now = leg.volumes[-1]
                 continue
             where = f'pump.legs[{index}].{leg.action}_to_m3'
             in_cycle = f' in cycle {cycle}' if cycles > 1 else ''

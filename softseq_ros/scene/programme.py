@@ -13,13 +13,14 @@ total fluid volume minus the sum of the segments' rest volumes.
 from bisect import bisect_right
 from dataclasses import dataclass
 import math
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.errors import UserError
 
-ACTIONS = ('inflate', 'deflate', 'hold')
+ACTIONS = ('inflate', 'deflate', 'hold', 'profile')
 
 # 0.05 mL/s, the flow rate of the paper's syringe pump.
 DEFAULT_FLOW_RATE = 5.0e-8
@@ -59,12 +60,20 @@ class Leg:
     to_m3: float | None = None
     duration_s: float | None = None
     flow_rate: float | None = None
+    # A profile leg: the injected volume [m^3] at times [s] from the leg's start (the first
+    # at 0), followed linearly between them; ``source`` names where they were read.
+    times: tuple[float, ...] = ()
+    volumes: tuple[float, ...] = ()
+    source: str = ''
 
     def __post_init__(self) -> None:
         """Check that the leg names a known action and carries exactly the value it needs."""
         if self.action not in ACTIONS:
             raise ValueError(f'leg action must be one of {", ".join(ACTIONS)}, '
                              f'got {self.action!r}')
+        if self.action == 'profile':
+            self._check_profile()
+            return
         if self.action == 'hold':
             if self.to_m3 is not None:
                 raise ValueError('a hold leg takes duration_s, not to_m3')
@@ -92,6 +101,33 @@ class Leg:
                 if rate <= 0.0:
                     raise ValueError(f'{self.action} flow_rate must be > 0, got {rate}')
                 object.__setattr__(self, 'flow_rate', rate)
+
+    def _check_profile(self) -> None:
+        where = self.source or 'a profile leg'
+        times = tuple(_finite(t, f'{where}: time_s') for t in self.times)
+        volumes = tuple(_finite(v, f'{where}: injected_m3') for v in self.volumes)
+        if len(times) < 2 or len(times) != len(volumes):
+            raise ValueError(f'{where}: a profile needs at least 2 rows of time_s and '
+                             'injected_m3')
+        if times[0] != 0.0:
+            raise ValueError(f"{where}: time_s starts at 0 s (the leg's start), got "
+                             f'{times[0]:g} s')
+        for row in range(1, len(times)):
+            if not times[row] > times[row - 1]:
+                raise ValueError(f'{where}: time_s in data row {row + 1}: {times[row]:g} s does '
+                                 f'not come after the row before ({times[row - 1]:g} s)')
+        if any(v < 0.0 for v in volumes):
+            raise ValueError(f'{where}: injected_m3 must be >= 0')
+        if self.to_m3 is not None or self.duration_s is not None or self.flow_rate is not None:
+            raise ValueError(f'{where}: a profile leg takes its times and volumes only')
+        object.__setattr__(self, 'times', times)
+        object.__setattr__(self, 'volumes', volumes)
+
+    @classmethod
+    def profile(cls, times: Sequence[float], volumes: Sequence[float],
+                source: str = '') -> 'Leg':
+        """Follow ``volumes`` [m^3] at ``times`` [s] from the leg's start, linearly between."""
+        return cls('profile', times=tuple(times), volumes=tuple(volumes), source=source)
 
     @classmethod
     def inflate(cls, to_m3: float, flow_rate: float | None = None) -> 'Leg':
@@ -169,6 +205,18 @@ class PumpProfile:
                     times.append(times[-1] + leg.duration_s)
                     volumes.append(now)
                     rates.append(0.0)
+                    continue
+                if leg.action == 'profile':
+                    if leg.volumes[0] != now:
+                        raise ValueError(f'{where}: the profile starts at {leg.volumes[0]:g} '
+                                         f'm^3, not at the injected volume {now:g} m^3 it '
+                                         'starts from')
+                    start_t = times[-1]
+                    for t0, t1, v0, v1 in zip(leg.times[:-1], leg.times[1:], leg.volumes[:-1],
+                                              leg.volumes[1:]):
+                        times.append(start_t + t1)
+                        volumes.append(v1)
+                        rates.append(abs(v1 - v0) / (t1 - t0))
                     continue
                 if leg.action == 'inflate' and not leg.to_m3 > now:
                     raise ValueError(f'{where}: inflate target {leg.to_m3:g} m^3 is not above '
@@ -304,10 +352,13 @@ def longest_part(profile: 'PumpProfile', prefix: str = '') -> str:
     if profile.cycles > 1 and spans[longest] < 0.5 * profile.duration():
         per_cycle = float(times[-1] - times[-1 - len(profile.legs)])
         return f'{prefix}cycles: {profile.cycles} cycles of {per_cycle:.6g} s'
-    index = longest % len(profile.legs)
+    # Each leg's first interval among the breakpoints, in a cycle.
+    firsts = np.cumsum([0] + [len(leg.times) - 1 if leg.action == 'profile' else 1
+                              for leg in profile.legs])
+    index = int(np.searchsorted(firsts, longest % firsts[-1], side='right')) - 1
     leg = profile.legs[index]
     key = leg_key(index, leg, prefix)
-    if leg.action == 'hold':
+    if leg.action in ('hold', 'profile'):
         return f'{key}: {spans[longest]:.6g} s'
     moved = abs(float(volumes[longest + 1] - volumes[longest]))
     if leg.flow_rate is None:
@@ -329,7 +380,7 @@ class ProgrammeError(UserError):
 
 def leg_key(index: int, leg: Leg, prefix: str = '') -> str:
     """The key of a leg's value, as a scene or a node parameter spells it."""
-    field = 'hold_s' if leg.action == 'hold' else f'{leg.action}_to_m3'
+    field = {'hold': 'hold_s', 'profile': 'profile'}.get(leg.action, f'{leg.action}_to_m3')
     return f'{prefix}legs[{index}].{field}'
 
 
@@ -345,7 +396,15 @@ def check_capacity(profile: PumpProfile, capacity: float, prefix: str = '') -> N
                              f'{profile.start_injected:g} m^3 exceeds what the segments hold '
                              f'({capacity:g} m^3 injected)')
     for index, leg in enumerate(profile.legs):
-        if leg.action != 'hold' and leg.to_m3 > capacity:
-            raise ProgrammeError(leg_key(index, leg, prefix),
-                                 f'{leg.to_m3:g} m^3 exceeds what the segments hold '
-                                 f'({capacity:g} m^3 injected)')
+        for volume in leg_targets(leg):
+            if volume > capacity:
+                raise ProgrammeError(leg_key(index, leg, prefix),
+                                     f'{volume:g} m^3 exceeds what the segments hold '
+                                     f'({capacity:g} m^3 injected)')
+
+
+def leg_targets(leg: Leg) -> tuple[float, ...]:
+    """The injected volumes [m^3] a leg moves to, in order (none for a hold)."""
+    if leg.action == 'hold':
+        return ()
+    return leg.volumes[1:] if leg.action == 'profile' else (leg.to_m3,)
