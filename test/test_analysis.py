@@ -608,7 +608,7 @@ def test_the_bag_names_its_scene_and_a_scene_with_other_segments_is_refused(asym
     assert result.stderr.strip() == (
         f"softseq report: error: {bag}: recorded by scene 'fast_asymmetric' (segments sha256 "
         f"{recorded[:12]}), not by scene 'fig1_symmetric' (segments sha256 {other[:12]}): "
-        'their segments differ')
+        'their segments (or supply lines) differ')
     assert result.stdout == '' and not out.exists()
     with pytest.raises(SceneMismatchError):
         write_report(bag, out, 'fig1_symmetric', figures=False)

@@ -192,12 +192,24 @@ def test_a_scene_s_supply_line_is_followed_by_solve_classify_and_graph(tmp_path,
     capsys.readouterr()
 
 
-def test_the_rig_refuses_a_supply_line_it_cannot_record_yet(tmp_path, capsys):
-    from softseq_ros import cli
+def test_the_rig_records_a_supply_line_and_its_report_places_the_states(tmp_path):
+    import softseq_ros
+    from softseq_ros.analysis.recording import load_recording
+    from softseq_ros.analysis.report import SceneMismatchError
 
-    path = supply_scene(tmp_path, line_compliance_m3_per_pa=1.0e-9)
-    code = cli.main(['run', str(path), '--out', str(tmp_path / 'bag')])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1
-    assert f'{path}: supply: the rig (softseq run and the nodes) runs the ideal syringe' in err[0]
-    assert not (tmp_path / 'bag').exists()
+    path = supply_scene(tmp_path, trapped_gas_m3=1.0e-5)
+    scene = load_scene(path)
+    result = softseq_ros.run(path, tmp_path / 'bag')
+    recording = load_recording(result.bag)
+    # The piston's volume is the segments' fluid plus what the line holds at the pressure.
+    rest = sum(s.rest_volume for s in scene.segments)
+    held = scene.supply.taken_up(recording.pressure)
+    np.testing.assert_allclose(recording.volumes.sum(axis=1) - rest + held,
+                               recording.state_injected, rtol=0, atol=1e-12 * scene.capacity)
+    assert held.max() > 1e-7
+    metrics, _ = softseq_ros.report(result.bag, scene=path)
+    visited = [stay['branch'] for stay in metrics['branches_visited']]
+    assert len(visited) > 3 and metrics['snap_count'] == len(softseq_ros.graph(path).snaps())
+    # The shipped pair without the line is other physics: refused.
+    with pytest.raises(SceneMismatchError, match='segments \\(or supply lines\\) differ'):
+        softseq_ros.report(result.bag, scene='fig1_asymmetric')

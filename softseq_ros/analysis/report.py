@@ -67,7 +67,7 @@ def check_scene(recording: Recording, scene: object) -> list[str]:
     whatever the names. The same digest under another scene name is the same physics (a
     renamed or copied scene file): a note says so.
     """
-    digest = segments_sha256(scene.segments)
+    digest = segments_sha256(scene.members)
     recorded = recording.scenes
     if not recorded:
         topic = contract.resolve(contract.SCENE.name, recording.namespace)
@@ -76,7 +76,8 @@ def check_scene(recording: Recording, scene: object) -> list[str]:
     if not any(r.segments_sha256 == digest for r in recorded):
         said = ', '.join(_named(r.scene, r.segments_sha256) for r in recorded)
         raise SceneMismatchError(f'{recording.path}: recorded by {said}, not by '
-                                 f'{_named(scene.name, digest)}: their segments differ')
+                                 f'{_named(scene.name, digest)}: their segments (or supply '
+                                 'lines) differ')
     match = next(r for r in recorded if r.segments_sha256 == digest)
     notes = []
     if match.scene != scene.name:
@@ -176,7 +177,8 @@ def recording_metrics(recording: Recording, scene: object | None = None,
         from softseq_ros.quasistatic.graph import visits
 
         # Which stable branches of the scene's transition graph (softseq graph) it went along.
-        metrics['branches_visited'] = visits(emap, recording.state_time_s, recording.volumes)
+        metrics['branches_visited'] = visits(emap, recording.state_time_s, recording.volumes,
+                                             recording.pressure)
         if metrics['sequence_type_of_scene'] != metrics['sequence_type']:
             metrics['warnings'].append(
                 f'the recording reads as {metrics["sequence_type"]}, the scene classifies as '

@@ -510,7 +510,8 @@ def branch_labels(emap: EquilibriumMap) -> list[str]:
             for branch in emap.branches]
 
 
-def nearest_branches(emap: EquilibriumMap, volumes: FloatArray) -> NDArray[np.int64]:
+def nearest_branches(emap: EquilibriumMap, volumes: FloatArray,
+                     pressures: FloatArray | None = None) -> NDArray[np.int64]:
     """
     For each recorded state (segment volumes, one row each), the stable branch nearest to it.
 
@@ -519,13 +520,16 @@ def nearest_branches(emap: EquilibriumMap, volumes: FloatArray) -> NDArray[np.in
     volume). -1 where no branch holds the total (a state outside the map's range). A rig's
     quasi-static states lie on their branch; a dynamic run's states between equilibria are
     given the branch they are closest to.
+
+    With a supply line (``emap.supply``) a state's total is the segments' fluid and what the
+    line holds at the state's gauge pressure (``pressures``, one per row, needed then).
     """
-    if emap.supply is not None:
-        # A recorded state names the segments' volumes; the line's share of a total is not
-        # among them.
-        raise ValueError('recorded states are placed on a map without a supply member only')
     volumes = np.atleast_2d(np.asarray(volumes, dtype=float))
     totals = volumes.sum(axis=1)
+    if emap.supply is not None:
+        if pressures is None:
+            raise ValueError("with a supply line the states' pressures are needed too")
+        totals = totals + emap.supply.taken_up(np.asarray(pressures, dtype=float))
     lo, hi = emap.injected_range
     slack = 1e-9 * max(hi - lo, 1e-300)
     best = np.full(len(totals), np.inf)
@@ -542,9 +546,14 @@ def nearest_branches(emap: EquilibriumMap, volumes: FloatArray) -> NDArray[np.in
     return nearest
 
 
-def visits(emap: EquilibriumMap, time_s: FloatArray, volumes: FloatArray) -> list[dict]:
-    """The branches a recording visited, in order: each stay with its start and end time [s]."""
-    nearest = nearest_branches(emap, volumes)
+def visits(emap: EquilibriumMap, time_s: FloatArray, volumes: FloatArray,
+           pressures: FloatArray | None = None) -> list[dict]:
+    """
+    The branches a recording visited, in order: each stay with its start and end time [s].
+
+    ``pressures`` (gauge) as :func:`nearest_branches` needs them with a supply line.
+    """
+    nearest = nearest_branches(emap, volumes, pressures)
     labels = branch_labels(emap)
     stays: list[dict] = []
     for row, branch in enumerate(nearest):

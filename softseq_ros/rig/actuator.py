@@ -96,8 +96,9 @@ class ActuatorCore:
         self.rate_hz = model.rate_hz
         self.names = tuple(names)
         self.scene_name = scene_name
-        # The digest of the segments the model runs: what this actuator is.
-        self.segments_sha256 = segments_sha256(model.segments)
+        # The digest of the segments (and supply line) the model runs: what this actuator is.
+        # A model of the segments alone need not say its members.
+        self.segments_sha256 = segments_sha256(getattr(model, 'members', model.segments))
         # The channel flows go with the volumes, for a model with channels (none: no topic).
         derived = {'flows'} if model.channel_names and \
             contract.DERIVED_OUTPUTS['flows'] in outputs else set()

@@ -96,6 +96,9 @@ class ActuatorModel(Protocol):
     """What the actuator core needs from a physics model of its segments."""
 
     segments: tuple[Segment, ...]
+    # The segments and any other member of its physics (a supply line): what it is, by digest
+    # (a model without this attribute is its segments alone).
+    members: tuple[Segment, ...]
     rest_volume_m3: float
     rate_hz: float | None
     # The channels between the segments, base to tip (empty: the model has none to report).
@@ -149,6 +152,7 @@ class QuasiStaticModel:
         self.emap = emap
         self.names = tuple(names)
         self.segments = tuple(emap.segments)
+        self.members = tuple(emap.members)
         self.rest_volume_m3 = emap.total_rest_volume
         self.tracker = Tracker(emap)
         self.solves = 0
@@ -343,6 +347,7 @@ class DynamicModel:
         self._turbulent = [tube.friction != LAMINAR for tube in network.channels]
         self._warned = [False] * len(network.channels)
         self.segments = tuple(segments)
+        self.members = self.segments
         self.rest_volume_m3 = self.flow_network.rest_total
         self.rate_hz = network.rate_hz
         self.reach = reach
@@ -475,15 +480,9 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
     The model a scene asks for, on the process's shared map of its segments.
 
     The fluid network in time when the scene declares one (``network``), else the quasi-static
-    equilibrium, at rest or where the programme's ``start_history`` led. A scene with a
-    ``supply`` line is refused: the rig's bags and their analysis
-    hold the segments' states, and the line's share is not among them yet.
+    equilibrium (behind the scene's ``supply`` line, if any), at rest or where the
+    programme's ``start_history`` led.
     """
-    if scene.supply is not None:
-        raise SceneError(f'{scene.path if scene.path is not None else "<scene>"}: supply: the '
-                         'rig (softseq run and the nodes) runs the ideal syringe only so far; '
-                         'softseq solve, classify and graph follow the supply line '
-                         '(docs/supply.md)')
     quasistatic = QuasiStaticModel(scene_map(scene),
                                    scene.segment_names)
     # A programme that starts from a stated history: the actuator is where it led.

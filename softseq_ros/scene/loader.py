@@ -143,6 +143,16 @@ class Scene:
         return tuple(segment.name for segment in self.segments)
 
     @property
+    def members(self) -> tuple[Segment, ...]:
+        """
+        What the physics is made of: the segments, and the supply line when there is one.
+
+        Their digest (softseq_ros.segments.identity.segments_sha256) names the physics a bag
+        was recorded with.
+        """
+        return self.segments + (() if self.supply is None else (self.supply,))
+
+    @property
     def lengths(self) -> tuple[float, ...]:
         """Segment lengths [m], base to tip."""
         return tuple(segment.length for segment in self.segments)
