@@ -81,6 +81,21 @@ def shipped_scene_changed(folder: Path, source: str, name: str, pump: dict, came
     return path
 
 
+def shipped_scene_with(folder: Path, source: str, file_name: str, **sections: object) -> Path:
+    """
+    A shipped scene (``config/SOURCE``) with whole top-level sections set (``pump``,
+    ``camera``, ``network``, ``supply``...), written to ``folder/FILE_NAME``; return its path.
+    """
+    scene = yaml.safe_load((CONFIG / source).read_text(encoding='utf-8'))
+    scene.update(sections)
+    for segment in scene['segments']:
+        if 'table' in segment:
+            segment['table'] = str(CONFIG / segment['table'])
+    path = folder / file_name
+    path.write_text(yaml.safe_dump(scene), encoding='utf-8')
+    return path
+
+
 def fast_asymmetric(folder: Path, name: str, pump_rate_hz: float = 50,
                     camera_rate_hz: float = 10,
                     triggers: tuple[float, ...] = (5.0e-6, 2.5e-5, 4.5e-5),

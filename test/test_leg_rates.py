@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from scenes import shipped_scene_with
 
 import softseq_ros
 from softseq_ros.analysis.recording import load_recording
@@ -15,7 +15,6 @@ from softseq_ros.dynamic.path import programme_schedule
 from softseq_ros.nodes.syringe_pump import parse_legs
 from softseq_ros.scene.loader import load_scene
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
 # Fill fast to 2 mL at 1 mL/s, step slowly to 3 mL at 0.01 mL/s, hold 1 s, empty at the
 # pump's 20 mL/s: 2 s, 100 s, 1 s and 0.15 s.
 LEGS = [{'inflate_to_m3': 2.0e-6, 'flow_rate_m3_per_s': 1.0e-6},
@@ -24,12 +23,9 @@ LEGS = [{'inflate_to_m3': 2.0e-6, 'flow_rate_m3_per_s': 1.0e-6},
 
 
 def stepped_scene(folder: Path) -> Path:
-    scene = yaml.safe_load((CONFIG / 'fig1_none.yaml').read_text())
-    scene['pump'].update(flow_rate_m3_per_s=2.0e-5, rate_hz=50, legs=LEGS)
-    scene['camera'] = {'rate_hz': 1}
-    path = folder / 'stepped.yaml'
-    path.write_text(yaml.safe_dump(scene))
-    return path
+    return shipped_scene_with(folder, 'fig1_none.yaml', 'stepped.yaml',
+                              pump={'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50, 'legs': LEGS},
+                              camera={'rate_hz': 1})
 
 
 def test_a_batch_run_follows_each_leg_s_own_rate(tmp_path):

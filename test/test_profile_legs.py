@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from scenes import shipped_scene_with
 
 import softseq_ros
 from softseq_ros.analysis.recording import load_recording
@@ -16,7 +16,6 @@ from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.programme import Leg, PumpProfile
 from softseq_ros.scene.validation import SceneError
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
 # A fast fill to 20 mL in 2 s, a hold of 8 s, 10 mL more over 50 s.
 ROWS = [(0.0, 0.0), (2.0, 2.0e-5), (10.0, 2.0e-5), (60.0, 3.0e-5)]
 
@@ -24,15 +23,13 @@ ROWS = [(0.0, 0.0), (2.0, 2.0e-5), (10.0, 2.0e-5), (60.0, 3.0e-5)]
 def profile_scene(folder: Path, rows=ROWS, legs=None, network: bool = False) -> Path:
     (folder / 'fill.csv').write_text(
         '# a planned fill\ntime_s,injected_m3\n' + ''.join(f'{t!r},{v!r}\n' for t, v in rows))
-    data = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    data['pump'] = {'flow_rate_m3_per_s': 2.0e-6, 'rate_hz': 10,
-                    'legs': legs or [{'profile': 'fill.csv'}, {'deflate_to_m3': 0.0}]}
-    data['camera'] = {'rate_hz': 1}
-    if network:
-        data['network'] = {'channels': [{'length_m': 0.01, 'radius_m': 5e-4}]}
-    path = folder / 'profile.yaml'
-    path.write_text(yaml.safe_dump(data))
-    return path
+    channels = {'network': {'channels': [{'length_m': 0.01, 'radius_m': 5e-4}]}} if network \
+        else {}
+    return shipped_scene_with(
+        folder, 'fig1_asymmetric.yaml', 'profile.yaml',
+        pump={'flow_rate_m3_per_s': 2.0e-6, 'rate_hz': 10,
+              'legs': legs or [{'profile': 'fill.csv'}, {'deflate_to_m3': 0.0}]},
+        camera={'rate_hz': 1}, **channels)
 
 
 def test_a_profile_leg_is_followed_linearly_between_its_rows():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from scenes import shipped_scene_with
 
 import softseq_ros
 from softseq_ros import cli
@@ -16,18 +16,13 @@ from softseq_ros.quasistatic.solve import scene_map
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.scene.validation import SceneError
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
-
 
 def scene_file(folder: Path, pump: dict, network: bool = False) -> Path:
-    data = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    data['pump'] = {'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50, **pump}
-    data['camera'] = {'rate_hz': 1}
-    if network:
-        data['network'] = {'channels': [{'length_m': 0.01, 'radius_m': 5e-4}]}
-    path = folder / 'start.yaml'
-    path.write_text(yaml.safe_dump(data))
-    return path
+    channels = {'network': {'channels': [{'length_m': 0.01, 'radius_m': 5e-4}]}} if network \
+        else {}
+    return shipped_scene_with(folder, 'fig1_asymmetric.yaml', 'start.yaml',
+                              pump={'flow_rate_m3_per_s': 2.0e-5, 'rate_hz': 50, **pump},
+                              camera={'rate_hz': 1}, **channels)
 
 
 def reversal_branch():

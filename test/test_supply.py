@@ -6,10 +6,10 @@ segment jumps at its own peak, as under pressure control).
 """
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from scenes import shipped_scene_with
 from scipy.integrate import quad
 from scipy.optimize import brentq
 
@@ -158,13 +158,7 @@ def test_every_snap_with_a_compliant_line_releases_energy_and_lands_stable(gas):
 
 
 def supply_scene(folder, **supply):
-    import yaml
-    data = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config'
-                           / 'fig1_asymmetric.yaml').read_text())
-    data['supply'] = supply
-    path = folder / 'air.yaml'
-    path.write_text(yaml.safe_dump(data))
-    return path
+    return shipped_scene_with(folder, 'fig1_asymmetric.yaml', 'air.yaml', supply=supply)
 
 
 def test_a_scene_s_supply_line_is_followed_by_solve_classify_and_graph(tmp_path, capsys):

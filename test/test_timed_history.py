@@ -8,23 +8,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from scenes import shipped_scene_with
 
 import softseq_ros
 from softseq_ros import cli
 from softseq_ros.dynamic.path import timed_history_schedule
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config'
-
 
 def network_scene(folder: Path) -> Path:
     """The Fig. 1 asymmetric pair joined by a 10 mm channel of 0.2 mm radius (slow to settle)."""
-    data = yaml.safe_load((CONFIG / 'fig1_asymmetric.yaml').read_text())
-    data['camera'] = {'rate_hz': 1}
-    data['network'] = {'channels': [{'length_m': 0.01, 'radius_m': 0.2e-3}]}
-    path = folder / 'fig1_network.yaml'
-    path.write_text(yaml.safe_dump(data))
-    return path
+    return shipped_scene_with(folder, 'fig1_asymmetric.yaml', 'fig1_network.yaml',
+                              camera={'rate_hz': 1},
+                              network={'channels': [{'length_m': 0.01, 'radius_m': 0.2e-3}]})
 
 
 def write_history(path: Path, rows: list[tuple[float, float]]) -> Path:
