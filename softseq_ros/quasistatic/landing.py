@@ -466,10 +466,9 @@ class SnapLandings:
     def __init__(self, numerics: SegmentNumerics, branches: list[Branch],
                  reader: StateReader) -> None:
         """Landings on the map's ``branches``; ``reader`` reads their states."""
-        self.numerics = numerics
-        self.branches = branches
-        self.reader = reader
-        self.flow = RedistributionFlow(numerics)
+        self.together = FlowLandings(numerics, branches, reader)
+        self.numerics, self.branches, self.reader = numerics, branches, reader
+        self.flow = self.together.flow
 
     def land(self, ends: list[tuple[int, bool]]) -> list[BranchEnd]:
         """
@@ -487,7 +486,7 @@ class SnapLandings:
             folds.append(branch.volumes[end])
             starts.append(self._flow_start(branch, branch.volumes[end], upward))
             totals.append(float(branch.total[end]))
-        landings = FlowLandings(self.numerics, self.branches, self.reader).land(
+        landings = self.together.land(
             [index for index, _ in ends], np.array(totals), np.array(folds), np.array(starts))
         found = []
         for (index, upward), total, start, fold, landing in zip(ends, totals, starts, folds,
