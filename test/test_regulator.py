@@ -65,6 +65,14 @@ def test_two_balloons_behind_a_regulator_flip_each_at_its_own_peak():
     # Each segment's volume is its own curve's at the common pressure, whatever the other's.
     alone = regulated_path([thin], pressures)
     np.testing.assert_array_equal(path.volumes[:, 0], alone.volumes[:, 0])
+    # What the regulator let in: nothing at 0 Pa, and more at every higher pressure (each
+    # balloon on a rising piece, or jumping to a larger volume).
+    assert path.injected[0] == pytest.approx(0.0, abs=1e-20)
+    assert np.all(np.diff(path.injected) > 0.0)
+    # Counted from rest, also for a history that starts above 0 Pa.
+    later = regulated_path([thin], [1000.0, 2000.0])
+    expected = float(thin.invert(thin.monotone_pieces()[0], np.array([1000.0]))[0])
+    assert later.injected[0] == pytest.approx(expected - thin.rest_volume, rel=1e-12)
 
 
 def test_a_pressure_beyond_the_curves_is_refused_naming_the_segment():

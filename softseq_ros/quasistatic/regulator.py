@@ -52,12 +52,12 @@ class RegulatedPath:
     volumes: FloatArray
     curvatures: FloatArray
     flips: list[Flip] = field(default_factory=list)
+    rest_volume: float = 0.0    # the segments' rest volumes together [m^3]
 
     @property
     def injected(self) -> FloatArray:
         """What the regulator has let in since rest [m^3]."""
-        return self.volumes.sum(axis=1) - self.volumes[0].sum() if self.volumes.size else \
-            np.empty(0)
+        return self.volumes.sum(axis=1) - self.rest_volume
 
 
 def _rising(segment: Segment) -> list[Piece]:
@@ -116,4 +116,5 @@ def regulated_path(segments: Sequence[Segment], pressures: ArrayLike) -> Regulat
     curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, i]), dtype=float)
                                   for i, s in enumerate(segments)]) if p.size else \
         np.empty((0, len(segments)))
-    return RegulatedPath(p, volumes, curvatures, flips)
+    return RegulatedPath(p, volumes, curvatures, flips,
+                         float(sum(segment.rest_volume for segment in segments)))
