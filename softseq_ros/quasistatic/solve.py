@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
-from softseq_ros.scene.csv_columns import read_columns, read_rows, write_rows
+from softseq_ros.scene.csv_columns import read_columns, write_rows
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
 
@@ -77,12 +77,9 @@ def read_timed_history(path: str | Path) -> tuple[NDArray[np.float64] | None, ND
     A history in time is what a dynamic scene follows as it is, holds included
     (softseq_ros.dynamic.path.timed_history_schedule says what it must be).
     """
-    header = read_rows(path, HistoryError, 'volume history', (INJECTED_COLUMN,))[1]
-    if TIME_COLUMN not in header:
-        return None, read_columns(path, (INJECTED_COLUMN,), HistoryError, 'volume history')[
-            INJECTED_COLUMN]
-    columns = read_columns(path, (TIME_COLUMN, INJECTED_COLUMN), HistoryError, 'volume history')
-    return columns[TIME_COLUMN], columns[INJECTED_COLUMN]
+    columns = read_columns(path, (INJECTED_COLUMN,), HistoryError, 'volume history',
+                           optional=(TIME_COLUMN,))
+    return columns.get(TIME_COLUMN), columns[INJECTED_COLUMN]
 
 
 def path_columns(names: Sequence[str]) -> list[str]:

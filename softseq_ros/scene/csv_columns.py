@@ -75,12 +75,13 @@ def numeric_columns(path: str | Path, header: list[str], rows: list[list[str]],
 
 
 def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueError],
-                 what: str) -> dict[str, NDArray[np.float64]]:
+                 what: str, optional: Sequence[str] = ()) -> dict[str, NDArray[np.float64]]:
     """
     The named columns of a CSV file as float arrays, in file order.
 
     ``error`` is the exception class to raise and ``what`` names the file's role in messages
     ("segment table", "volume history"). Values must be finite; at least one row is needed.
+    The ``optional`` columns are read too where the header has them.
     """
     _, header, rows = read_rows(path, error, what, columns)
     missing = [name for name in columns if name not in header]
@@ -89,7 +90,8 @@ def read_columns(path: str | Path, columns: Sequence[str], error: type[ValueErro
                     f'({",".join(header)}); expected {",".join(columns)}')
     if not rows:
         raise error(f'{path}: no rows below the header')
-    return numeric_columns(path, header, rows, columns, error)
+    present = [name for name in optional if name in header]
+    return numeric_columns(path, header, rows, (*columns, *present), error)
 
 
 def write_rows(path: str | Path, header: Sequence[str],
