@@ -188,9 +188,8 @@ class EquilibriumMap:
     # ------------------------------------------------------------------ queries
 
     def curvatures(self, volumes: FloatArray) -> FloatArray:
-        """Per-segment curvature for volumes (n, N), in 1/m."""
-        return np.stack([s.curvature(volumes[:, j]) for j, s in enumerate(self.segments)],
-                        axis=1)
+        """Per-segment curvature for volumes (n, N) of the segments, in 1/m."""
+        return self.numerics.curvatures(volumes)
 
     def equilibrium_set(self) -> list[EquilibriumCurve]:
         """Every configuration's equilibria, stable and unstable (Fig. 1B / 4B): the segments'."""

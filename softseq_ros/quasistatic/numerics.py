@@ -358,9 +358,13 @@ class SegmentNumerics:
         return self._side_by_side.evaluate(volumes, 1, [c[1] for c in self._curve])
 
     def curvatures(self, volumes: FloatArray) -> FloatArray:
-        """Per-segment curvature for volumes (n, N), in 1/m."""
-        return np.stack([s.curvature(volumes[:, j]) for j, s in enumerate(self.segments)],
-                        axis=1)
+        """
+        Per-segment curvature for volumes (n, N), in 1/m.
+
+        Of the first N members: all of them, or the segments alone (a supply line comes last).
+        """
+        return np.stack([s.curvature(volumes[:, j])
+                         for j, s in enumerate(self.segments[:volumes.shape[1]])], axis=1)
 
     def curvature_slopes(self, volumes: FloatArray) -> FloatArray:
         """Per-segment d(curvature)/dv for volumes (n, N), in 1/m per m^3."""
