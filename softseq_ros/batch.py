@@ -420,7 +420,7 @@ class _BatchRun:
         # (a run without snap-throughs still has its events topic).
         for kind in TOPIC_VALUE_TYPES:
             topic = kind.topic
-            if not contract.enabled(topic, self.outputs):
+            if topic.producer not in self.cores or not contract.enabled(topic, self.outputs):
                 continue
             name = contract.resolve(topic.name, self.namespace)
             writer.add_topic(name, topic.type_name, qos_yaml(topic.qos))

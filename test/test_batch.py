@@ -34,8 +34,10 @@ from softseq_ros.wire.values import Notice
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 # A quasi-static scene has no channels: no channel flows.
+# What the rig's own cores publish (no controller's setpoints), without image and flows.
 RECORDED = tuple(contract.resolve(topic.name) for topic in contract.RIG_TOPICS
-                 if topic not in (contract.IMAGE, contract.CHANNEL_FLOWS))
+                 if topic not in (contract.IMAGE, contract.CHANNEL_FLOWS)
+                 and topic.producer in contract.NODE_NAMES)
 START_NS = 1_795_000_000 * 10**9   # 2026-11-18, a fixed date for reproducible bags
 
 

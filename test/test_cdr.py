@@ -150,6 +150,12 @@ def test_the_rig_values_encode_byte_for_byte_as_rclpy_serialises_the_messages():
     cases = [
         (values.PumpCommand(stamp, 2.5e-5, -5e-8),
          header(JointState(name=['syringe'], position=[2.5e-5], velocity=[-5e-8]))),
+        (values.PumpSetpoint(stamp, injected_m3=1.5e-5),
+         header(JointState(name=['syringe'], position=[1.5e-5]))),
+        (values.PumpSetpoint(stamp, flow_m3_per_s=-2e-7),
+         header(JointState(name=['syringe'], velocity=[-2e-7]))),
+        (values.PumpSetpoint(stamp, gauge_pa=5000.0),
+         header(JointState(name=['syringe'], effort=[5000.0]))),
         (values.Pressure(stamp, 110394.25), header(FluidPressure(fluid_pressure=110394.25))),
         (values.SegmentVolumes(stamp, names, [1e-5, 3e-5], 9069.5),
          header(JointState(name=list(names), position=[1e-5, 3e-5], effort=[9069.5] * 2))),

@@ -140,9 +140,15 @@ def _stop(rig):
     return {}
 
 
+def _setpoint_mode(rig):
+    rig.run(0.5)
+    rig.outputs += rig.pump.set_mode(rig.wall[0], True).outputs
+    return {'topic': 'pump/setpoint'}
+
+
 SCENARIOS = {'reset': _reset, 'start': _start, 'hold': _hold, 'silent': _silent,
              'untrusted': _untrusted, 'finished': _finished, 'over_pressure': _over_pressure,
-             'end_stop': _end_stop, 'stop': _stop}
+             'end_stop': _end_stop, 'stop': _stop, 'setpoint_mode': _setpoint_mode}
 
 
 @pytest.mark.parametrize('cause', sorted(REACTIONS))

@@ -60,7 +60,8 @@ def topic_values(outputs, kind):
 def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler():
     for topic in contract.RIG_TOPICS:
         assert not topic.name.startswith('/'), topic.name
-        assert topic.producer in contract.NODE_NAMES
+        # Every topic comes from a rig core, or from a controller outside the rig.
+        assert topic.producer in contract.NODE_NAMES or topic.producer == contract.CONTROLLER
         assert topic.output is None or topic.output in contract.OUTPUT_NAMES \
             or contract.DERIVED_OUTPUTS.get(topic.output) in contract.OUTPUT_NAMES
     # Every topic has exactly one value type, and every consumed topic's value type is one
@@ -69,7 +70,9 @@ def test_contract_names_are_relative_and_every_consumed_topic_reaches_a_handler(
         sorted(topic.name for topic in contract.RIG_TOPICS)
     assert {t.name for t in contract.consumed_by(contract.ACTUATOR)} == {'pump/command'}
     # The pump's relief reads the gauge pressure the actuator computed (no ambient of its own).
-    assert {t.name for t in contract.consumed_by(contract.PUMP)} == {'actuator/volumes'}
+    # Its setpoints come from a controller.
+    assert {t.name for t in contract.consumed_by(contract.PUMP)} == {'actuator/volumes',
+                                                                   'pump/setpoint'}
     assert {t.name for t in contract.consumed_by(contract.CAMERA)} == {
         'actuator/volumes', 'actuator/curvatures'}
     # Every output a scene may list switches some topic on.

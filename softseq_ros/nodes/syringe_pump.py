@@ -13,12 +13,19 @@ repeated ``cycles`` times) comes from the scene unless the parameters give it.
 
 Services (std_srvs/Trigger): ``~/start`` (idle or held -> running), ``~/hold`` (running ->
 held), ``~/stop`` (-> stopped), ``~/reset`` (-> idle at the programme's start volume).
+
+A controller drives the pump instead of the programme (docs/controllers.md): ``~/setpoint_mode``
+(std_srvs/SetBool, true: setpoints, false: back to the programme, which then starts where the
+syringe is) and ``pump/setpoint`` (sensor_msgs/JointState, joint ``syringe``: position = target
+injected volume [m^3], reached at ``flow_rate_m3_per_s``, or velocity = flow [m^3/s]). The relief
+valve, the end stop and the feedback rules act on setpoints as on the programme; a setpoint out
+of range is refused with a warning and counted on /diagnostics.
 """
 
 from typing import Any
 
 from rclpy.node import Parameter
-from std_srvs.srv import Trigger
+from std_srvs.srv import SetBool, Trigger
 
 from softseq_ros.nodes.core_node import CoreNode
 from softseq_ros.nodes.diagnostics import ERROR_LEVEL, OK_LEVEL, WARN_LEVEL, Health, worst
@@ -34,6 +41,7 @@ from softseq_ros.rig.build import (
 from softseq_ros.rig.model import actuator_model
 from softseq_ros.rig.pump import (
     DEFAULT_FEEDBACK_TIMEOUT_S,
+    DEFAULT_MAX_FLOW_M3_PER_S,
     DEFAULT_MAX_PRESSURE_PA,
     IDLE,
     REACTIONS,
@@ -91,7 +99,11 @@ class SyringePumpNode(CoreNode):
         'legs is YAML text: on the command line it needs quotes of its own inside the '
         "shell's, or rcl reads it as a list and refuses it: "
         '-p "legs:=\'[{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]\'". In a parameters '
-        'file it is a string: legs: "[{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]".',)
+        'file it is a string: legs: "[{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]".',
+        '~/setpoint_mode (std_srvs/srv/SetBool): data true hands the pump to a controller on '
+        'pump/setpoint (running, holding its volume until a setpoint comes; refused while '
+        'stopped); false returns to the programme, idle, starting where the syringe is. '
+        'docs/controllers.md has the contract and an example.')
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare parameters (defaults from the scene), build the core, start the timer."""
@@ -137,6 +149,10 @@ class SyringePumpNode(CoreNode):
             'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
             'Hold when no pressure came from the actuator for this long while running '
             '[s, wall clock].', minimum=0.0, open_minimum=True, maximum=3600.0)
+        self.declare_number(
+            'max_flow_m3_per_s', DEFAULT_MAX_FLOW_M3_PER_S,
+            'The fastest flow a setpoint on pump/setpoint may ask for [m^3/s]; faster ones are '
+            'refused.', minimum=0.0, open_minimum=True, maximum=DEFAULT_MAX_FLOW_M3_PER_S)
         self.declare_flag(
             'open_loop', False, 'Run without pressure feedback (no actuator behind the pump): '
             'no relief valve, no feedback timeout.', read_only=True)
@@ -156,7 +172,7 @@ class SyringePumpNode(CoreNode):
         """The core from the parameters, its topics and services (no commands yet)."""
         value = {name: self.get_parameter(name).value for name in (
             'autostart', 'max_pressure_pa', 'feedback_timeout_s', 'open_loop',
-            'max_injected_m3', 'rate_hz')}
+            'max_injected_m3', 'rate_hz', 'max_flow_m3_per_s')}
         self.rate_hz = float(value['rate_hz'])
         profile = self._programme({})
         self._pending = None
@@ -168,11 +184,17 @@ class SyringePumpNode(CoreNode):
             feedback_timeout_s=float(value['feedback_timeout_s']),
             open_loop=value['open_loop'])
         self.core.max_injected_m3 = float(value['max_injected_m3'])
-        # Warnings name the feedback topic as resolved here.
+        self.core.max_flow_m3_per_s = float(value['max_flow_m3_per_s'])
+        # Warnings name the feedback and setpoint topics as resolved here.
         self.connect(self._scene.outputs)
         volumes = self.subscription(contract.VOLUMES)
         if volumes is not None:
             self.core.feedback_topic = volumes.topic_name
+        setpoints = self.subscription(contract.PUMP_SETPOINT)
+        if setpoints is not None:
+            self.core.setpoint_topic = setpoints.topic_name
+        self._pump_services.append(self.create_service(
+            SetBool, '~/setpoint_mode', self._setpoint_mode_service))
         for name in self.SERVICES:
             request = getattr(self, f'_{name}_request', None) or getattr(self.core, name)
             self._pump_services.append(
@@ -211,7 +233,13 @@ class SyringePumpNode(CoreNode):
             'state': core.state, 'reason': core.reason, 'injected_m3': core.volume_m3,
             'max_pressure_pa (gauge)': core.max_pressure_pa,
             'max_injected_m3': core.max_injected_m3,
-            'open_loop': core.open_loop}
+            'open_loop': core.open_loop, 'mode': core.mode,
+            'setpoints_taken': core.setpoints_taken,
+            'setpoints_refused': core.setpoints_refused}
+        if core.setpoint is not None:
+            values['setpoint'] = f'{core.setpoint.kind} {core.setpoint.value:.6g} (SI)'
+        if core.last_refused_setpoint:
+            values['last_refused_setpoint'] = core.last_refused_setpoint
         if self.last_gauge_pa is not None:
             values['gauge_pressure_pa'] = self.last_gauge_pa
             values['relief_margin_pa'] = core.max_pressure_pa - self.last_gauge_pa
@@ -236,6 +264,18 @@ class SyringePumpNode(CoreNode):
             response.success, response.message = reply.success, reply.message
             return response
         return serve
+
+    def _setpoint_mode_service(self, request: SetBool.Request,
+                               response: SetBool.Response) -> SetBool.Response:
+        """~/setpoint_mode: data true follows pump/setpoint, false the programme."""
+        if self._timer is None:
+            response.success = False
+            response.message = 'the pump node is inactive: activate it first (lifecycle)'
+            return response
+        reply = self.core.set_mode(self.now_ns(), bool(request.data))
+        self.send(reply.outputs)
+        response.success, response.message = reply.success, reply.message
+        return response
 
     def start(self) -> tuple[bool, str]:
         """Start (or resume) the programme now, as ~/start does."""
@@ -323,7 +363,8 @@ class SyringePumpNode(CoreNode):
                 self.rate_hz = float(parameter.value)
                 if self._timer is not None:
                     self._timer.timer_period_ns = int(round(1e9 / self.rate_hz))
-            elif parameter.name in ('max_pressure_pa', 'max_injected_m3', 'feedback_timeout_s'):
+            elif parameter.name in ('max_pressure_pa', 'max_injected_m3', 'feedback_timeout_s',
+                                    'max_flow_m3_per_s'):
                 setattr(self.core, parameter.name, float(parameter.value))
 
 

@@ -12,7 +12,12 @@ from softseq_ros.errors import UserError
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.camera import CameraCore
 from softseq_ros.rig.model import ActuatorModel, actuator_model
-from softseq_ros.rig.pump import DEFAULT_FEEDBACK_TIMEOUT_S, DEFAULT_MAX_PRESSURE_PA, PumpCore
+from softseq_ros.rig.pump import (
+    DEFAULT_FEEDBACK_TIMEOUT_S,
+    DEFAULT_MAX_FLOW_M3_PER_S,
+    DEFAULT_MAX_PRESSURE_PA,
+    PumpCore,
+)
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile, check_capacity
@@ -32,7 +37,7 @@ def _unknown(role: str, overrides: dict[str, Any], known: tuple[str, ...]) -> No
 
 PUMP_SETTINGS = ('rate_hz', 'flow_rate_m3_per_s', 'legs', 'cycles', 'start_injected_m3',
                  'autostart', 'max_pressure_pa', 'max_injected_m3', 'feedback_timeout_s',
-                 'open_loop', 'feedback_clock')
+                 'open_loop', 'feedback_clock', 'max_flow_m3_per_s')
 
 
 def pump_profile(scene: Scene, *, flow_rate_m3_per_s: float | None = None,
@@ -104,6 +109,7 @@ def pump_core(scene: Scene, model: ActuatorModel | None = None,
         max_injected_m3=settings.get('max_injected_m3', default_stop),
         feedback_timeout_s=settings.get('feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S),
         open_loop=settings.get('open_loop', False), segment_names=scene.segment_names,
+        max_flow_m3_per_s=settings.get('max_flow_m3_per_s', DEFAULT_MAX_FLOW_M3_PER_S),
         **({'feedback_clock': settings['feedback_clock']} if 'feedback_clock' in settings
            else {}))
     return core, rate_hz

@@ -31,12 +31,20 @@ pump with a pressure sensor:
   actuator died, or the topic is cut), and says why; only ``start`` resumes it. ``open_loop``
   runs without any feedback, for a pump with no actuator behind it.
 
+Setpoint mode (``set_mode``): a controller, not the programme, says where the pump goes, on
+``pump/setpoint`` (a target injected volume, reached at the programme's flow rate, or a signed
+flow). The relief pressure, the end stop, the feedback timeout and untrusted answers act on it
+as on a programme; a setpoint out of range, or one sent in programme mode, is refused with a
+warning and counted. Back in programme mode the pump is idle with its programme starting from
+where the controller left the syringe, so no command jumps.
+
 The feedback timeout is measured on ``feedback_clock`` (default: the monotonic wall clock,
 so that a simulated clock running 1000x faster does not make a healthy actuator look dead;
 None: the driver's own time, as the batch runner wants for reproducible runs).
 """
 
 from collections import deque
+import dataclasses
 from dataclasses import dataclass
 import math
 import time
@@ -44,6 +52,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from softseq_ros.rig.throttle import Throttle
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.wire import contract
 from softseq_ros.wire.values import (
@@ -52,6 +61,7 @@ from softseq_ros.wire.values import (
     Notice,
     Output,
     PumpCommand,
+    PumpSetpoint,
     PumpStatus,
     SegmentVolumes,
 )
@@ -72,6 +82,10 @@ VACUUM_GAUGE_PA = -contract.DEFAULT_AMBIENT_PRESSURE_PA
 
 IDLE, RUNNING, HELD, FINISHED, STOPPED = 'idle', 'running', 'held', 'finished', 'stopped'
 STATES = (IDLE, RUNNING, HELD, FINISHED, STOPPED)
+# Who says where the pump goes: its programme, or a controller's setpoints.
+PROGRAMME, SETPOINT = 'programme', 'setpoint'
+# The fastest flow a setpoint may ask for [m^3/s] by default: the fastest a scene's pump runs.
+DEFAULT_MAX_FLOW_M3_PER_S = 1.0e-3
 
 
 @dataclass(frozen=True)
@@ -90,6 +104,8 @@ REACTIONS: dict[str, Reaction] = {reaction.cause: reaction for reaction in (
     Reaction('start', RUNNING, '', INFO,
              '~/start from idle or held, or the first tick with autostart'),
     Reaction('hold', HELD, '', INFO, '~/hold while running'),
+    Reaction('setpoint_mode', RUNNING, 'following setpoints on {topic}', INFO,
+             '~/setpoint_mode true, from any state but stopped'),
     Reaction('silent', HELD,
              'no pressure from the actuator for {timeout:g} s (feedback_timeout_s){why}; '
              'call ~/start to go on', WARNING,
@@ -133,12 +149,14 @@ class PumpCore:
                  open_loop: bool = False,
                  feedback_clock: Callable[[], int] | None = time.monotonic_ns,
                  segment_names: Sequence[str] | None = None,
-                 feedback_topic: str = contract.VOLUMES.name) -> None:
+                 feedback_topic: str = contract.VOLUMES.name,
+                 max_flow_m3_per_s: float = DEFAULT_MAX_FLOW_M3_PER_S) -> None:
         """
         A pump at rest (idle) at the programme's start volume.
 
         ``segment_names``: the scene's segments, base to tip, that feedback must name (None:
-        not checked); ``feedback_topic``: the topic's name as warnings give it.
+        not checked); ``feedback_topic``: the topic's name as warnings give it;
+        ``max_flow_m3_per_s``: the fastest flow a setpoint may ask for.
         """
         self.profile = profile
         self.autostart = autostart
@@ -167,6 +185,15 @@ class PumpCore:
         self._started = False
         self._out: list[Output] = []
         self.volume_m3 = profile.start_injected
+        self.mode = PROGRAMME
+        self.max_flow_m3_per_s = max_flow_m3_per_s
+        self.setpoint_topic = contract.PUMP_SETPOINT.name
+        self.setpoint: PumpSetpoint | None = None   # the one followed in setpoint mode
+        self._last_tick: int | None = None
+        self.setpoints_taken = 0
+        self.setpoints_refused = 0
+        self.last_refused_setpoint = ''
+        self._setpoint_throttle = Throttle()
 
     # ---------------------------------------------------------------- state machine
 
@@ -219,6 +246,7 @@ class PumpCore:
             self.profile = profile
             self.duration_s = profile.duration()
             self.volume_m3 = profile.start_injected
+        self.mode, self.setpoint = PROGRAMME, None
         self._elapsed_ns = 0
         self._running_since = None
         self._frozen_volume = None
@@ -238,6 +266,70 @@ class PumpCore:
             return self._reply(False, f'cannot load a programme while {self.status}; call '
                                       '~/stop (or wait until it has finished) first')
         return self.reset(now, profile)
+
+    def set_mode(self, now: int, setpoint: bool) -> Reply:
+        """
+        Follow setpoints (``setpoint`` True) or the programme; refused while stopped.
+
+        Into setpoint mode the pump runs, holding its volume until a setpoint comes. Back into
+        programme mode it is idle with its programme starting where the syringe is: refused
+        when the programme cannot start there (a first leg inflating to below it).
+        """
+        if self.state == STOPPED:
+            return self._reply(False, f'cannot change mode while {self.status}; call ~/reset '
+                                      'first (it returns to the programme)')
+        wanted = SETPOINT if setpoint else PROGRAMME
+        if wanted == self.mode:
+            return self._reply(True, f'already in {wanted} mode')
+        if setpoint:
+            self._pause(now)
+            self.mode, self.setpoint, self._last_tick = SETPOINT, None, now
+            self._running_since, self._started = now, True
+            self._last_feedback = self._feedback_time(now)
+            self._last_fault, self._foreign = None, 0
+            self._enter(now, 'setpoint_mode', topic=self.setpoint_topic)
+            return self._reply(True, f'{RUNNING} in setpoint mode')
+        here = self.volume_m3
+        try:
+            profile = dataclasses.replace(self.profile, start_injected=here, start_history=())
+        except ValueError as err:
+            return self._reply(False, f"the programme cannot start from the syringe's "
+                                      f'{here:.6g} m^3 ({err}); load one that can, or stay in '
+                                      'setpoint mode')
+        reply = self.reset(now, profile)
+        return Reply(True, f'{IDLE} in programme mode, the programme starting from {here:.6g} '
+                           'm^3', reply.outputs)
+
+    def take_setpoint(self, value: PumpSetpoint, now: int) -> list[Output]:
+        """Follow ``value`` from the next tick, or refuse it (a warning, counted)."""
+        fault = self._setpoint_fault(value)
+        if fault is not None:
+            self.setpoints_refused += 1
+            self.last_refused_setpoint = fault
+            said = self._setpoint_throttle.admit(value.kind, f'{self.setpoint_topic}: {fault}')
+            return [] if said is None else [Notice(self.role, WARNING, said)]
+        self.setpoints_taken += 1
+        self.setpoint = value
+        return []
+
+    def _setpoint_fault(self, value: PumpSetpoint) -> str | None:
+        """What is wrong with a setpoint here and now, or None."""
+        if self.mode != SETPOINT:
+            return ('setpoint refused: the pump follows its programme; call ~/setpoint_mode '
+                    '(true) first')
+        number, kind = value.value, value.kind
+        if kind == 'pressure':
+            return ('target gauge pressure refused: the supply is a syringe, which is driven '
+                    'by volume; give a target volume (position) or a flow (velocity)')
+        if not math.isfinite(number):
+            return f'{kind} setpoint refused: {number} is not a finite number'
+        if kind == 'volume' and not 0.0 <= number <= self.max_injected_m3:
+            return (f'target injected volume {number:.6g} m^3 refused: outside 0 to '
+                    f'max_injected_m3 {self.max_injected_m3:.6g} m^3')
+        if kind == 'flow' and abs(number) > self.max_flow_m3_per_s:
+            return (f'flow setpoint {number:.6g} m^3/s refused: faster than max_flow_m3_per_s '
+                    f'{self.max_flow_m3_per_s:.6g} m^3/s')
+        return None
 
     def _reply(self, success: bool, message: str) -> Reply:
         return Reply(success, message, self._take())
@@ -288,12 +380,16 @@ class PumpCore:
     def _volume_at(self, now: int) -> float:
         if self._frozen_volume is not None:
             return self._frozen_volume
+        if self.mode == SETPOINT:
+            return self.volume_m3
         return self.profile.command_at(self.run_time_s(now))[0]
 
     # ---------------------------------------------------------------- inputs and ticks
 
-    def handle(self, value: SegmentVolumes, now: int) -> list[Output]:
-        """The actuator's state (its gauge pressure stands for every segment's)."""
+    def handle(self, value: SegmentVolumes | PumpSetpoint, now: int) -> list[Output]:
+        """The actuator's state (its gauge pressure stands for every segment's), or a setpoint."""
+        if type(value) is PumpSetpoint:
+            return self.take_setpoint(value, now)
         names = value.names
         pressures = [value.gauge_pa] * len(names) if names else [value.gauge_pa]
         return self.feedback(now, value.stamp_ns, names, value.volumes_m3, pressures)
@@ -402,7 +498,7 @@ class PumpCore:
         next tick is not plain.
         """
         empty = np.empty(0)
-        if self.state != RUNNING or self._frozen_volume is not None \
+        if self.state != RUNNING or self._frozen_volume is not None or self.mode != PROGRAMME \
                 or (not self.open_loop and self._feedback_clock is not None) \
                 or self._running_since is None:
             return 0, empty, empty
@@ -467,6 +563,8 @@ class PumpCore:
         if self.state == RUNNING and not self.open_loop and self._feedback_lost(now):
             self._pause(now)
             self._enter(now, 'silent', timeout=self.feedback_timeout_s, why=self._silent_why())
+        if self.mode == SETPOINT:
+            return self._follow_setpoint(now)
         run_time = self.run_time_s(now)
         volume, programme_flow = self.profile.command_at(run_time)
         if self._frozen_volume is not None:
@@ -481,6 +579,31 @@ class PumpCore:
                 self._enter(now, 'finished')
             else:
                 flow = programme_flow
+        self.volume_m3 = volume
+        self._sent_command(now)
+        self._out.append(PumpCommand(now, volume, flow))
+        return self._take()
+
+    def _follow_setpoint(self, now: int) -> list[Output]:
+        """The command for ``now`` in setpoint mode: a step towards the setpoint since the last."""
+        last, self._last_tick = self._last_tick, now
+        volume, flow = self.volume_m3, 0.0
+        setpoint = self.setpoint
+        step_s = max(0, now - last) * 1e-9 if last is not None else 0.0
+        if self.state == RUNNING and setpoint is not None and step_s > 0.0:
+            if setpoint.injected_m3 is not None:
+                reach = self.profile.flow_rate * step_s
+                target = setpoint.injected_m3
+                moved = min(target, volume + reach) if target >= volume else \
+                    max(target, volume - reach)
+            else:
+                # An empty syringe gives nothing back: the flow stops at 0 injected.
+                moved = max(0.0, volume + setpoint.flow_m3_per_s * step_s)
+            if moved > self.max_injected_m3:
+                moved = self.volume_m3 = self.max_injected_m3
+                self._stop(now, 'end_stop', limit=self.max_injected_m3)
+            flow = (moved - volume) / step_s if self.state == RUNNING else 0.0
+            volume = moved
         self.volume_m3 = volume
         self._sent_command(now)
         self._out.append(PumpCommand(now, volume, flow))

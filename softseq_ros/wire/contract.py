@@ -21,6 +21,9 @@ PUMP = 'pump'
 ACTUATOR = 'actuator'
 CAMERA = 'camera'
 NODE_NAMES: dict[str, str] = {PUMP: 'syringe_pump', ACTUATOR: 'actuator', CAMERA: 'camera'}
+# A controller closing the loop on the rig (the user's, or the example pressure_hold): it reads
+# the actuator's volumes and gives the pump setpoints. Not one of the rig's own nodes.
+CONTROLLER = 'controller'
 
 FRAME_ID = 'softseq_base'
 DEFAULT_AMBIENT_PRESSURE_PA = 101325.0
@@ -83,6 +86,14 @@ PUMP_COMMAND = Topic(
     # its answer is missing from the recording; a stalled process must not lose any.
     Qos(ANSWER_DEPTH), PUMP, (ACTUATOR,), None,
     'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]')
+# What a controller asks of the pump, taken in its setpoint mode (the pump's ~/setpoint_mode):
+# the same joint as pump/command, so a controller commands the pump as the pump commands the
+# actuator. Reliable and deep enough that a burst of setpoints is not lost before the pump reads.
+PUMP_SETPOINT = Topic(
+    'pump/setpoint', 'sensor_msgs/msg/JointState', Qos(10), CONTROLLER, (PUMP,), None,
+    'joint syringe with exactly one field given: position = target injected volume [m^3] '
+    "(reached at the pump's flow rate), velocity = flow [m^3/s] (signed, + inflates), effort = "
+    'target gauge pressure [Pa] (a pressure supply only); taken in setpoint mode')
 PUMP_STATUS = Topic(
     'pump/status', 'std_msgs/msg/String', Qos(1, latched=True), PUMP, (), None,
     'JSON {"state", "reason", "stamp_ns"}: idle, running, held, finished or stopped')
@@ -95,7 +106,7 @@ PRESSURE = Topic(
 # newest only (a late joiner is sent the publisher's whole history).
 VOLUMES = Topic(
     'actuator/volumes', 'sensor_msgs/msg/JointState', Qos(ANSWER_DEPTH, latched=True),
-    ACTUATOR, (CAMERA, PUMP), 'volumes',
+    ACTUATOR, (CAMERA, PUMP, CONTROLLER), 'volumes',
     'one joint per segment, base to tip: position = volume [m^3], effort = gauge pressure [Pa]',
     consumer_qos=Qos(1, latched=True))
 CURVATURES = Topic(
@@ -138,8 +149,8 @@ IMAGE = Topic(
     'camera/image', 'sensor_msgs/msg/Image', Qos(2, reliable=False), CAMERA, (), 'image',
     'rgb8 side view, rendered only while someone subscribes')
 
-RIG_TOPICS: tuple[Topic, ...] = (PUMP_COMMAND, PUMP_STATUS, PRESSURE, VOLUMES, CURVATURES,
-                                 CHANNEL_FLOWS, EVENTS, SCENE, BACKBONE, SNAPSHOTS,
+RIG_TOPICS: tuple[Topic, ...] = (PUMP_COMMAND, PUMP_SETPOINT, PUMP_STATUS, PRESSURE, VOLUMES,
+                                 CURVATURES, CHANNEL_FLOWS, EVENTS, SCENE, BACKBONE, SNAPSHOTS,
                                  SNAPSHOT_STEPS, MARKERS, IMAGE)
 TOPICS_BY_NAME: dict[str, Topic] = {topic.name: topic for topic in RIG_TOPICS}
 

@@ -38,6 +38,7 @@ from softseq_ros.wire.values import (
     Markers,
     Pressure,
     PumpCommand,
+    PumpSetpoint,
     PumpStatus,
     SceneIdentity,
     SegmentCurvatures,
@@ -283,6 +284,22 @@ def _pump_command(value: PumpCommand) -> bytes:
                                          value.flow_m3_per_s, 0)
 
 
+# A setpoint gives one field: position, velocity or effort, each one value.
+_SETPOINT_SHAPES = {'volume': (1, 0, 0), 'flow': (0, 1, 0), 'pressure': (0, 0, 1)}
+_SETPOINT_PACKS = {kind: joint_state_packer('', _SYRINGE, shape)
+                   for kind, shape in _SETPOINT_SHAPES.items()}
+
+
+def _pump_setpoint(value: PumpSetpoint) -> bytes:
+    sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
+    kind = value.kind
+    pack, block = _SETPOINT_PACKS[kind]
+    fields: list[float] = []
+    for count in _SETPOINT_SHAPES[kind]:
+        fields += [count, value.value] if count else [0]
+    return ENCAPSULATION + pack(sec, nanosec, block, *fields)
+
+
 # Per joint names: a segment state's (pack, block) for volumes (effort = pressure) and
 # for curvatures (positions only); a rig sends one set of names for hours.
 _volume_packers: dict[tuple[str, ...], tuple[Callable[..., bytes], bytes]] = {}
@@ -393,6 +410,7 @@ def _side_image(value: SideImage) -> bytes:
 
 ENCODERS: dict[type, Callable[[Any], bytes]] = {
     PumpCommand: _pump_command,
+    PumpSetpoint: _pump_setpoint,
     PumpStatus: PUMP_STATUS_JSON.encode,
     Pressure: _pressure,
     SegmentVolumes: _volumes,
@@ -519,6 +537,40 @@ def pump_command(msg: Any) -> PumpCommand:
     return PumpCommand(_stamp_ns(msg.header), float(position[0]), flow)
 
 
+SETPOINT_FIELDS = (('position', 'target injected volume [m^3]'),
+                   ('velocity', 'flow [m^3/s]'), ('effort', 'target gauge pressure [Pa]'))
+
+
+def pump_setpoint(msg: Any) -> PumpSetpoint:
+    """
+    A received sensor_msgs/JointState as a setpoint; InputError when it is not one.
+
+    Joint ``syringe``, exactly one of position (target volume), velocity (flow) and effort
+    (target gauge pressure) holding one value. Whether the value is in range is the pump's to
+    say.
+    """
+    names = list(msg.name)
+    if names != [SYRINGE_JOINT]:
+        raise InputError('setpoint name', f'setpoint refused: expected one joint named '
+                                          f'{SYRINGE_JOINT}, got names {names}')
+    given = [(field, getattr(msg, field)) for field, _ in SETPOINT_FIELDS]
+    filled = [(field, values) for field, values in given if len(values)]
+    if len(filled) != 1 or len(filled[0][1]) != 1:
+        sizes = ', '.join(f'{field} {len(values)}' for field, values in given)
+        raise InputError('setpoint shape', 'setpoint refused: give exactly one of position '
+                                           '(target injected volume [m^3]), velocity (flow '
+                                           '[m^3/s]) or effort (target gauge pressure [Pa]), '
+                                           f'one value; got {sizes}')
+    field, values = filled[0]
+    number = float(values[0])
+    stamp = _stamp_ns(msg.header)
+    if field == 'position':
+        return PumpSetpoint(stamp, injected_m3=number)
+    if field == 'velocity':
+        return PumpSetpoint(stamp, flow_m3_per_s=number)
+    return PumpSetpoint(stamp, gauge_pa=number)
+
+
 def pressure(msg: Any) -> Pressure:
     """A received sensor_msgs/FluidPressure."""
     return Pressure(_stamp_ns(msg.header), float(msg.fluid_pressure))
@@ -544,6 +596,7 @@ def channel_flows(msg: Any) -> ChannelFlows:
 
 DECODERS: dict[str, Callable[[Any], TopicValue]] = {
     PumpCommand.topic.name: pump_command,
+    PumpSetpoint.topic.name: pump_setpoint,
     Pressure.topic.name: pressure,
     SegmentVolumes.topic.name: segment_volumes,
     SegmentCurvatures.topic.name: segment_curvatures,

@@ -28,6 +28,34 @@ class PumpCommand:
 
 
 @dataclass(slots=True)
+class PumpSetpoint:
+    """
+    A controller's setpoint for the pump, one of three (None: not given).
+
+    A target injected volume [m^3], a signed flow [m^3/s] or a target gauge pressure [Pa].
+    """
+
+    topic: ClassVar[Topic] = contract.PUMP_SETPOINT
+    stamp_ns: int
+    injected_m3: float | None = None
+    flow_m3_per_s: float | None = None
+    gauge_pa: float | None = None
+
+    @property
+    def kind(self) -> str:
+        """'volume', 'flow' or 'pressure': which field it gives."""
+        if self.injected_m3 is not None:
+            return 'volume'
+        return 'flow' if self.flow_m3_per_s is not None else 'pressure'
+
+    @property
+    def value(self) -> float:
+        """The number it gives, in SI units."""
+        given = (self.injected_m3, self.flow_m3_per_s, self.gauge_pa)
+        return next(value for value in given if value is not None)
+
+
+@dataclass(slots=True)
 class PumpStatus:
     """The pump's state (idle, running, held, finished, stopped) and why, since ``stamp_ns``."""
 
@@ -195,10 +223,10 @@ class Notice:
     text: str
 
 
-TOPIC_VALUE_TYPES = (PumpCommand, PumpStatus, Pressure, SegmentVolumes, SegmentCurvatures,
-                     ChannelFlows, SnapThrough, SceneIdentity, Backbone, Snapshot, SnapshotStep,
-                     Markers, SideImage)
-TopicValue = (PumpCommand | PumpStatus | Pressure | SegmentVolumes | SegmentCurvatures
-              | ChannelFlows | SnapThrough | SceneIdentity | Backbone | Snapshot | SnapshotStep
-              | Markers | SideImage)
+TOPIC_VALUE_TYPES = (PumpCommand, PumpSetpoint, PumpStatus, Pressure, SegmentVolumes,
+                     SegmentCurvatures, ChannelFlows, SnapThrough, SceneIdentity, Backbone,
+                     Snapshot, SnapshotStep, Markers, SideImage)
+TopicValue = (PumpCommand | PumpSetpoint | PumpStatus | Pressure | SegmentVolumes
+              | SegmentCurvatures | ChannelFlows | SnapThrough | SceneIdentity | Backbone
+              | Snapshot | SnapshotStep | Markers | SideImage)
 Output = TopicValue | Notice
