@@ -458,7 +458,10 @@ def test_two_namespaced_rigs_run_side_by_side_without_crosstalk(context, tmp_pat
                              got[f'{namespace}/actuator/curvatures'])
         # Every answer in a namespace answers a command of that namespace's pump.
         stamps = {stamp_ns(c.header) for c in commands}
-        assert all(stamp_ns(m.header) in stamps for m in got[f'{namespace}/actuator/volumes'])
+        # The actuator may say its rest state once, before any command came: it answers none.
+        strays = [m for m in got[f'{namespace}/actuator/volumes']
+                  if stamp_ns(m.header) not in stamps]
+        assert len(strays) <= 1 and all(not any(m.effort) for m in strays)
         peaks.append(max(c.position[0] for c in commands))
     # Each rig followed its own programme: never past its own top, and near it. The pump
     # samples its programme on wall-clock ticks (100 Hz); on a loaded machine a tick may come

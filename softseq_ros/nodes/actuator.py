@@ -8,7 +8,8 @@ lists (default: the scene's): ``actuator/pressure`` (absolute: gauge +
 ``ambient_pressure_pa``), ``actuator/volumes`` (position = volumes, effort = gauge pressure),
 ``actuator/curvatures`` and one JSON object per snap-through on ``actuator/events``, each
 stamped with the command it answers; once at start, latched, ``actuator/scene``: which scene's
-segments it runs (name and digest).
+segments it runs (name and digest); and once it knows it starts at rest and no command came
+yet, its rest state, so a controller or camera that starts first sees it.
 
 Commands faster than it answers (softseq_ros.rig.intake): while it keeps up it answers every
 ``pump/command`` in order; once far behind it takes the waiting ones without answering, answers
@@ -217,19 +218,25 @@ class ActuatorNode(CoreNode):
         now = time.monotonic()
         if self._resume_heard is not None and now >= self._resume_settle:
             if self._resume_from_heard():
-                self._end_resume()
+                self._end_resume(resumed=True)
                 return
         if now >= self._resume_deadline:
             # Starting at rest is the normal case and says nothing; a resume warns itself.
-            _, notices = self.core.resume_from_file()
+            resumed, notices = self.core.resume_from_file()
             self.send(notices)
-            self._end_resume()
+            self._end_resume(resumed)
 
-    def _end_resume(self) -> None:
+    def _end_resume(self, resumed: bool) -> None:
         self.destroy_timer(self._resume_timer)
         # Destroyed before the first publication, so the node never hears itself.
         self.destroy_subscription(self._resume_subscription)
-        self.send(self.core.end_wait(self.now_ns()))
+        now = self.now_ns()
+        answers = self.core.end_wait(now)
+        if not resumed and not any(type(value) is not Notice for value in answers):
+            # At rest and no command came while waiting: the rest state is said once,
+            # latched, for a controller or camera that starts first.
+            answers += self.core.announce(now)
+        self.send(answers)
 
     def destroy_node(self) -> None:
         """

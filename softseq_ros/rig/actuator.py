@@ -126,6 +126,15 @@ class ActuatorCore:
         """What the actuator says once at start: which scene's segments it runs."""
         return [SceneIdentity(now, self.scene_name, self.names, self.segments_sha256)]
 
+    def announce(self, now: int) -> list[Output]:
+        """
+        The state now, said before any command is answered (a node says it once at start).
+
+        On the latched volumes topic, so a controller or camera started first, or later, sees
+        where the actuator is (at rest, or where it resumed) before the pump moves.
+        """
+        return self._outputs(now, [])
+
     # ---------------------------------------------------------------- commands
 
     def handle(self, value: PumpCommand, now: int) -> list[Output]:
