@@ -38,6 +38,7 @@ setup(
             'managed_syringe_pump = softseq_ros.nodes.entry:managed_syringe_pump',
             'actuator = softseq_ros.nodes.entry:actuator',
             'camera = softseq_ros.nodes.entry:camera',
+            'pressure_hold = softseq_ros.nodes.entry:pressure_hold',
             'recorder = softseq_ros.nodes.entry:recorder',
             'sim_clock = softseq_ros.nodes.entry:sim_clock',
             'rig = softseq_ros.nodes.entry:rig',

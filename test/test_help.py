@@ -15,6 +15,7 @@ from rclpy.parameter import Parameter
 
 from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.camera import CameraNode
+from softseq_ros.nodes.pressure_hold import PressureHoldNode
 from softseq_ros.nodes.recorder import Recorder
 from softseq_ros.nodes.sim_clock import SimClockNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
@@ -29,6 +30,7 @@ EXECUTABLES = {
     'syringe_pump': [SyringePumpNode],
     'actuator': [ActuatorNode],
     'camera': [CameraNode],
+    'pressure_hold': [PressureHoldNode],
     'recorder': [Recorder],
     'sim_clock': [SimClockNode],
     'rig': [SyringePumpNode, ActuatorNode, CameraNode],
@@ -81,8 +83,9 @@ def test_help_lists_what_the_node_declares_and_starts_nothing(script, context, r
             assert f'\n  {name}: ' in section, f'{script} --help: parameter {name} missing'
     if script != 'recorder':
         for node_class in EXECUTABLES[script]:
-            role = next((role for role, name in contract.NODE_NAMES.items()
-                         if name == node_class.NODE_NAME), None)
+            role = getattr(node_class, 'ROLE', None) or next(
+                (role for role, name in contract.NODE_NAMES.items()
+                 if name == node_class.NODE_NAME), None)
             produced = [t for t in contract.RIG_TOPICS + (contract.CLOCK,)
                         if t.producer in (role, node_class.NODE_NAME)]
             assert produced

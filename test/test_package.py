@@ -24,7 +24,7 @@ PACKAGE = 'softseq_ros'
 VENV_BIN = Path(sys.prefix) / 'bin'
 # The executables the README promises to ROS users.
 DOCUMENTED_EXECUTABLES = {'softseq', 'syringe_pump', 'actuator', 'camera', 'recorder',
-                          'sim_clock', 'rig', 'managed_syringe_pump'}
+                          'sim_clock', 'rig', 'managed_syringe_pump', 'pressure_hold'}
 # Top-level modules that exist only with a ROS install (or the ROS wheels).
 ROS_MODULES = {
     'rclpy', 'rcl_interfaces', 'rosidl_runtime_py', 'ament_index_python', 'builtin_interfaces',

@@ -47,6 +47,11 @@ def camera() -> None:
     _run('camera')
 
 
+def pressure_hold() -> None:
+    """The ``pressure_hold`` executable (the example controller)."""
+    _run('pressure_hold')
+
+
 def recorder() -> None:
     """The ``recorder`` executable."""
     _run('recorder')

@@ -188,8 +188,10 @@ def _parameters_help(node_class: Callable[..., Node], several: bool) -> list[str
 
 
 def _topics_help(node_class: Callable[..., Node]) -> list[str]:
-    role = next((role for role, node_name in contract.NODE_NAMES.items()
-                 if node_name == getattr(node_class, 'NODE_NAME', None)), None)
+    # A rig node's role is its name's in the contract; a controller says its own.
+    role = getattr(node_class, 'ROLE', None) or next(
+        (role for role, node_name in contract.NODE_NAMES.items()
+         if node_name == getattr(node_class, 'NODE_NAME', None)), None)
     topics = [('publishes', topic) for topic in contract.RIG_TOPICS + (contract.CLOCK,)
               if topic.producer in (role, getattr(node_class, 'NODE_NAME', None))]
     if hasattr(node_class, 'DIAGNOSTIC_TASK'):
