@@ -37,11 +37,16 @@ __all__ = ['classify', 'graph', 'load_recording', 'load_scene', 'report', 'run',
 
 
 def load_scene(scene: 'str | PathLike | Scene') -> 'Scene':
-    """A validated scene from a YAML file or a shipped scene's name (a Scene is returned as is)."""
+    """
+    A validated scene from a YAML file or a shipped scene's name (a Scene is returned as is).
+
+    A ``pump.start_branch`` is looked up in the transition graph of the process's shared map.
+    """
+    from softseq_ros.quasistatic.solve import segments_graph
     from softseq_ros.scene.loader import Scene
     from softseq_ros.scene.loader import load_scene as _load
 
-    return scene if isinstance(scene, Scene) else _load(scene)
+    return scene if isinstance(scene, Scene) else _load(scene, segments_graph)
 
 
 def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = None,

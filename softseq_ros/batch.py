@@ -25,10 +25,10 @@ from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
 from softseq_ros.progress import is_terminal, write_progress
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
-from softseq_ros.rig.model import ActuatorModel, CommandBlock
+from softseq_ros.rig.model import ActuatorModel, CommandBlock, load_rig_scene
 from softseq_ros.rig.pump import FINISHED, HELD, STOPPED
 from softseq_ros.rig.routing import Router
-from softseq_ros.scene.loader import Scene, load_scene
+from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import (
     MAX_RUN_BYTES,
     MAX_RUN_MESSAGES,
@@ -297,7 +297,7 @@ class _BatchRun:
         bag would hold more than ``MAX_RUN_MESSAGES`` messages or ``MAX_RUN_BYTES`` bytes, is
         refused here (LongRunError), before anything is written, unless ``allow_long``.
         """
-        self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
+        self.scene = scene if isinstance(scene, Scene) else load_rig_scene(scene)
         self.out = Path(out)
         self.wrap = wrap
         overrides = overrides or {}

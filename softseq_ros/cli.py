@@ -23,9 +23,8 @@ def _solve(args: argparse.Namespace) -> int:
     from softseq_ros.quasistatic.graph import branch_labels
     from softseq_ros.quasistatic.reach import beyond_domain
     from softseq_ros.quasistatic.solve import read_timed_history, scene_map, write_path
-    from softseq_ros.scene.loader import load_scene
 
-    scene = load_scene(args.scene)
+    scene = softseq_ros.load_scene(args.scene)
     times, history = (None, None) if args.path is None else read_timed_history(args.path)
     try:
         solved = softseq_ros.solve(scene, history, times=times)
@@ -115,9 +114,8 @@ def _classify(args: argparse.Namespace) -> int:
     import softseq_ros
     from softseq_ros.analysis.robustness import robustness_lines, scene_features
     from softseq_ros.quasistatic.solve import scene_map
-    from softseq_ros.scene.loader import load_scene
 
-    scene = load_scene(args.scene)
+    scene = softseq_ros.load_scene(args.scene)
     verdict = softseq_ros.classify(scene)
     emap = scene_map(scene)
     _warn_unconverged('classify', emap)
@@ -135,12 +133,11 @@ def _graph(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.graph_figure import check_figure_size, plot_graph
     from softseq_ros.quasistatic.graph import write_graph_json
     from softseq_ros.quasistatic.solve import scene_map
-    from softseq_ros.scene.loader import load_scene
 
     if args.reversals is not None and args.reversals < 0:
         raise UserError(f'--reversals must be >= 0, got {args.reversals}')
     style = _figure_style(args)
-    scene = load_scene(args.scene)
+    scene = softseq_ros.load_scene(args.scene)
     graph = softseq_ros.graph(scene)
     # Before anything is written: a figure of too many branches exhausted the memory after
     # graph.json was written.
@@ -259,7 +256,7 @@ def _compare(args: argparse.Namespace) -> int:
     _figure_style(args)   # an unusable --style, --width or --dpi is refused before reading
     scene = None
     if args.scene is not None:
-        from softseq_ros.scene.loader import load_scene
+        from softseq_ros import load_scene
 
         scene = load_scene(args.scene)
     metrics_a, metrics_b, table = compare_bags(args.a, args.b, args.namespace_a,
@@ -314,6 +311,7 @@ def _library(args: argparse.Namespace) -> int:
 
 
 def _rates(args: argparse.Namespace) -> int:
+    from softseq_ros import load_scene
     from softseq_ros.analysis.rates import (
         MAX_SAMPLES_PER_LEG,
         RatesError,
@@ -327,7 +325,6 @@ def _rates(args: argparse.Namespace) -> int:
     )
     from softseq_ros.errors import check_output_folder
     from softseq_ros.parallel import scheduler_option
-    from softseq_ros.scene.loader import load_scene
 
     def numbers(option: str, text: str) -> list[float]:
         try:

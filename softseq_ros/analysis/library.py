@@ -111,9 +111,10 @@ def library_entries(source: str | os.PathLike, length_m: float | None = None,
     if length_m is not None and not (math.isfinite(length_m) and length_m > 0.0):
         raise LibraryError(f'--length-m: must be a finite length > 0 (m), got {length_m}')
     if path.is_file():
+        from softseq_ros.quasistatic.solve import segments_graph
         from softseq_ros.scene.loader import load_scene
 
-        scene = load_scene(path)
+        scene = load_scene(path, segments_graph)
         return [Entry(s.name, None, s.length, str(path), i) for i, s in enumerate(scene.segments)]
     if not path.is_dir():
         raise LibraryError(f'{path}: neither a folder of segment tables nor a scene file')
@@ -159,9 +160,10 @@ def _segment(entry: Entry) -> object:
         from softseq_ros.scene.tables import read_table
 
         return read_table(entry.table, entry.name, entry.length_m)
+    from softseq_ros.quasistatic.solve import segments_graph
     from softseq_ros.scene.loader import load_scene
 
-    return load_scene(entry.scene).segments[entry.index]
+    return load_scene(entry.scene, segments_graph).segments[entry.index]
 
 
 def assemble(entries: tuple[Entry, ...]) -> dict:

@@ -390,9 +390,10 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     reference = load_reference(reference_file) if reference_file is not None else None
     scene = emap = None
     if scene_name is not None:
+        from softseq_ros.quasistatic.solve import segments_graph
         from softseq_ros.scene.loader import load_scene
 
-        scene = load_scene(scene_name)
+        scene = load_scene(scene_name, segments_graph)
     recording = load_recording(bag, namespace)
     if reference is not None:
         check_reference_segments(reference_file, reference, recording.segment_names)

@@ -35,8 +35,9 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
 from softseq_ros.errors import UserError
+from softseq_ros.rig.model import load_rig_scene
 from softseq_ros.scene.limits import Limit
-from softseq_ros.scene.loader import Scene, load_scene
+from softseq_ros.scene.loader import Scene
 from softseq_ros.wire.contract import OUTPUT_NAMES
 
 
@@ -454,7 +455,7 @@ class ParameterNode(Node):
         name = self.declare_text(
             'scene', 'paper', 'Scene file path or shipped scene name; it gives the defaults '
             'of the other parameters.', read_only=True)
-        return load_scene(name)
+        return load_rig_scene(name)
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         for parameter in parameters:

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
+from softseq_ros.quasistatic.graph import TransitionGraph, transition_graph
 from softseq_ros.scene.csv_columns import read_columns, write_rows
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
@@ -63,6 +64,17 @@ def equilibrium_map(segments: Sequence[Segment], resolution: int | None = None,
 def scene_map(scene: 'Scene') -> EquilibriumMap:
     """The equilibrium map of a scene's segments at the scene's solver resolution."""
     return equilibrium_map(scene.segments, scene.solver.resolution, scene.supply)
+
+
+def segments_graph(segments: Sequence[Segment], resolution: int | None = None,
+                   supply: Segment | None = None) -> TransitionGraph:
+    """
+    The transition graph of these segments, on the process's shared :func:`equilibrium_map`.
+
+    What a scene is loaded with (``load_scene(path, segments_graph)``) to find the branch its
+    ``pump.start_branch`` names, numbered as ``softseq graph`` numbers them.
+    """
+    return transition_graph(equilibrium_map(segments, resolution, supply))
 
 
 def read_history(path: str | Path) -> NDArray[np.float64]:

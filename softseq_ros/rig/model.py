@@ -27,6 +27,7 @@ actuator of the same scene share it.
 
 from dataclasses import dataclass
 import math
+from pathlib import Path
 from typing import Protocol, Sequence
 
 import numpy as np
@@ -37,8 +38,8 @@ from softseq_ros.dynamic.network import laminar_range_warning
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
-from softseq_ros.quasistatic.solve import scene_map
-from softseq_ros.scene.loader import Scene
+from softseq_ros.quasistatic.solve import scene_map, segments_graph
+from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.scene.validation import SceneError
@@ -473,6 +474,16 @@ class DynamicModel:
     def check_programme(self, scene: Scene, profile: PumpProfile) -> None:
         """The quasi-static reach of the programme."""
         self.reach.check_programme(scene, profile)
+
+
+def load_rig_scene(path: str | Path) -> Scene:
+    """
+    A scene file (or shipped scene name) for the rig's cores.
+
+    The rig's drivers know no physics, this seam does: a ``pump.start_branch`` is looked up in
+    the transition graph of the process's shared map, the one the actuator's model runs on.
+    """
+    return load_scene(path, segments_graph)
 
 
 def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':

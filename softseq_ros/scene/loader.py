@@ -22,7 +22,7 @@ publish. Every quantity is SI and every key that carries a unit says so in its s
       flow_rate_m3_per_s: 5.0e-8
       rate_hz: 50.0
       cycles: 1
-      start_injected_m3: 0.0
+      start_injected_m3: 0.0          # or start_history_m3: [...], or start_branch: N
       legs: [{inflate_to_m3: 6.5e-5}, {hold_s: 10}, {deflate_to_m3: 0.0}]
     camera:                           # optional, all keys optional
       rate_hz: 10.0
@@ -44,6 +44,7 @@ Every mistake raises ``SceneError`` with one line ``<file>: <key path>: <what is
 from dataclasses import dataclass
 import math
 from pathlib import Path
+from typing import Callable, Protocol, Sequence
 
 from softseq_ros.errors import UserError
 from softseq_ros.scene.csv_columns import read_columns
@@ -86,6 +87,33 @@ DEFAULT_IMAGE_SIZE_PX = (640, 480)
 
 _MODELS = ('table', 'design', 'linear', 'balloon')
 _NUMBER = (int, float)
+
+
+class BranchReach(Protocol):
+    """How a volume history from rest reaches a branch (quasistatic.graph.Reach)."""
+
+    reversals: int | None        # None: no history reaches the branch
+    history: tuple[float, ...]   # injected volumes [m^3], from rest, ending on the branch
+    reason: str
+
+
+class BranchGraph(Protocol):
+    """What the loader reads of a transition graph (quasistatic.graph.TransitionGraph)."""
+
+    branches: Sequence[object]
+
+    def history_to(self, target: int) -> BranchReach:
+        """One shortest volume history from rest onto branch ``target``, or why none."""
+
+
+# The transition graph of segments at a solver resolution behind a supply line, numbered as
+# `softseq graph` numbers it (softseq_ros.quasistatic.solve.segments_graph). The scene layer
+# knows no solver, so whoever reads a scene that may name a branch hands this in.
+GraphOf = Callable[[tuple[Segment, ...], int | None, CompliantSupply | None], BranchGraph]
+
+_START_BRANCH_KEY = 'pump.start_branch'
+_NETWORK_START = ('a start state in a scene with a network is not followed in time yet: '
+                  'start from rest')
 
 
 @dataclass(frozen=True)
@@ -373,14 +401,27 @@ def legs_from_text(text: str, key_path: str = 'legs') -> tuple[Leg, ...]:
     return tuple(read_legs(Context('', Path('.')), parse_yaml(text, key_path), key_path))
 
 
-def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
+def _pump(ctx: Context, value: object, capacity: float,
+          history_onto: Callable[[int], tuple[float, ...]]) -> PumpSettings:
+    """
+    The ``pump`` block; ``history_onto(branch)`` is the volume history a ``start_branch`` names.
+
+    The programme starts from rest at ``start_injected_m3``, or where ``start_history_m3`` or
+    the history onto ``start_branch`` leads: its legs are checked from there.
+    """
     raw = ctx.mapping(value, 'pump', ('legs',),
                    ('flow_rate_m3_per_s', 'rate_hz', 'cycles', 'start_injected_m3',
-                    'start_history_m3'))
+                    'start_history_m3', 'start_branch'))
     flow = ctx.limited(raw.get('flow_rate_m3_per_s', DEFAULT_FLOW_RATE),
                     'pump.flow_rate_m3_per_s')
     rate = ctx.limited(raw.get('rate_hz', DEFAULT_PUMP_RATE_HZ), 'pump.rate_hz')
     cycles = int(ctx.limited(raw.get('cycles', 1), 'pump.cycles', integer=True))
+    if 'start_branch' in raw:
+        given = [key for key in ('start_injected_m3', 'start_history_m3') if key in raw]
+        if given:
+            raise ctx.error(_START_BRANCH_KEY,
+                            f'the programme starts on the branch: give {given[0]} or this, '
+                            'not both')
     start = ctx.number(raw.get('start_injected_m3', 0.0), 'pump.start_injected_m3', ge=0.0)
     history: tuple[float, ...] = ()
     if 'start_history_m3' in raw:
@@ -393,6 +434,9 @@ def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
             raise ctx.error('pump.start_history_m3', 'needs at least one injected volume')
         history = tuple(ctx.number(v, f'pump.start_history_m3[{i}]', ge=0.0)
                         for i, v in enumerate(items))
+        start = history[-1]
+    if 'start_branch' in raw:
+        history = history_onto(ctx.integer(raw['start_branch'], _START_BRANCH_KEY, ge=0))
         start = history[-1]
     legs = read_legs(ctx, raw['legs'], 'pump.legs')
     # Walk the programme as the pump will, so a leg that cannot run names its own key. Every
@@ -429,6 +473,38 @@ def _pump(ctx: Context, value: object, capacity: float) -> PumpSettings:
     except ProgrammeError as err:
         raise ctx.error(err.key, err.reason) from None
     return PumpSettings(profile=profile, rate_hz=rate)
+
+
+def _history_onto_branch(ctx: Context, branch: int, graph_of: GraphOf | None,
+                         segments: tuple[Segment, ...], solver: SolverSettings,
+                         supply: CompliantSupply | None,
+                         network: NetworkSettings | None) -> tuple[float, ...]:
+    """
+    The graph's shortest volume history from rest onto ``branch`` (``pump.start_branch``).
+
+    It ends halfway between where it enters the branch and the end of the branch it moves
+    towards (TransitionGraph.history_to, graph.json's ``history_injected_m3``): inside the
+    branch, away from the joins and snaps at its ends. The graph is that of the scene's own
+    map (its solver resolution and supply line), as ``softseq graph`` numbers it.
+    """
+    if network is not None:
+        raise ctx.error(_START_BRANCH_KEY, _NETWORK_START)
+    if graph_of is None:
+        raise ctx.error(_START_BRANCH_KEY,
+                        'names a branch of the transition graph, which this reader of scenes '
+                        'cannot build: load the scene with softseq_ros.load_scene')
+    graph = graph_of(segments, solver.resolution, supply)
+    count = len(graph.branches)
+    if branch >= count:
+        numbers = '0' if count == 1 else f'0 to {count - 1}'
+        raise ctx.error(_START_BRANCH_KEY,
+                        f'branch {branch} does not exist: the graph of this scene has {count} '
+                        f'branch{"" if count == 1 else "es"} ({numbers}), see softseq graph')
+    reach = graph.history_to(branch)
+    if reach.reversals is None:
+        raise ctx.error(_START_BRANCH_KEY,
+                        f'{reach.reason}; a programme cannot start there, see softseq graph')
+    return tuple(reach.history)
 
 
 def _camera(ctx: Context, value: object, pump: PumpProfile) -> CameraSettings:
@@ -522,12 +598,15 @@ def _solver(ctx: Context, value: object) -> SolverSettings:
 # Entry points
 
 
-def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
+def scene_from_dict(data: object, path: str | Path | None = None,
+                    graph_of: GraphOf | None = None) -> Scene:
     """
     Build a scene from already parsed YAML.
 
     ``path`` is the scene file the data came from: it names the file in errors and table paths
-    are relative to its folder (the current folder when ``path`` is None).
+    are relative to its folder (the current folder when ``path`` is None). ``graph_of`` builds
+    the transition graph a ``pump.start_branch`` is looked up in; without it such a scene is
+    refused.
     """
     shown = str(path) if path is not None else '<scene>'
     folder = Path(path).parent if path is not None else Path('.')
@@ -542,15 +621,19 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
     description = ' '.join(ctx.text(description, 'description').split()) if description else ''
     segments = _segments(ctx, raw['segments'])
     capacity = sum(segment.max_volume - segment.rest_volume for segment in segments)
-    pump = _pump(ctx, raw['pump'], capacity)
-    camera = _camera(ctx, raw.get('camera'), pump.profile)
-    outputs = _outputs(ctx, raw.get('outputs'))
+    # Before the pump: a start branch is looked up on the map these three settle.
     solver = _solver(ctx, raw.get('solver'))
     network = read_network(ctx, raw.get('network'), tuple(s.name for s in segments))
     supply = _supply(ctx, raw.get('supply'), segments)
+
+    def history_onto(branch: int) -> tuple[float, ...]:
+        return _history_onto_branch(ctx, branch, graph_of, segments, solver, supply, network)
+
+    pump = _pump(ctx, raw['pump'], capacity, history_onto)
+    camera = _camera(ctx, raw.get('camera'), pump.profile)
+    outputs = _outputs(ctx, raw.get('outputs'))
     if pump.profile.start_history and network is not None:
-        raise ctx.error('pump.start_history_m3', 'a start state in a scene with a network is '
-                                                'not followed in time yet: start from rest')
+        raise ctx.error('pump.start_history_m3', _NETWORK_START)
     if supply is not None and network is not None:
         raise ctx.error('supply', 'a supply line in a scene with a network is not followed in '
                                   'time yet: give one or the other')
@@ -559,11 +642,12 @@ def scene_from_dict(data: object, path: str | Path | None = None) -> Scene:
                  camera=camera, outputs=outputs, solver=solver, supply=supply)
 
 
-def load_scene(path: str | Path) -> Scene:
+def load_scene(path: str | Path, graph_of: GraphOf | None = None) -> Scene:
     """
     Load and validate a scene file, or a shipped scene by its bare name (``paper``).
 
-    Raises SceneError with one line ``<file>: <key path>: <problem>``.
+    ``graph_of`` as :func:`scene_from_dict` takes it. Raises SceneError with one line
+    ``<file>: <key path>: <problem>``.
     """
     resolved = scene_path(path)
-    return scene_from_dict(read_yaml(resolved, str(resolved)), resolved)
+    return scene_from_dict(read_yaml(resolved, str(resolved)), resolved, graph_of)
