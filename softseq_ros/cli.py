@@ -24,6 +24,8 @@ def _solve(args: argparse.Namespace) -> int:
     from softseq_ros.quasistatic.reach import beyond_domain
     from softseq_ros.quasistatic.solve import read_timed_history, scene_map, write_path
 
+    if args.pressure_path is not None:
+        return _solve_regulated(args)
     scene = softseq_ros.load_scene(args.scene)
     times, history = (None, None) if args.path is None else read_timed_history(args.path)
     try:
@@ -56,6 +58,38 @@ def _solve(args: argparse.Namespace) -> int:
     if times is not None:
         print(f'  {args.path}: time_s read; a quasi-static path follows the volumes in order, '
               'their times do not change it (a scene with a network follows them in time)')
+    return 0
+
+
+def _solve_regulated(args: argparse.Namespace) -> int:
+    """``solve --pressure-path``: the segments behind an ideal regulator, independent hysterons."""
+    import softseq_ros
+    from softseq_ros.quasistatic.regulator import PressureDomainError, regulated_path
+    from softseq_ros.quasistatic.solve import read_pressure_history, write_regulated_path
+
+    if args.path is not None:
+        raise UserError('give --path (volumes, a syringe) or --pressure-path (pressures, a '
+                        'regulator), not both')
+    scene = softseq_ros.load_scene(args.scene)
+    for key, block in (('network', scene.network), ('supply', scene.supply)):
+        if block is not None:
+            raise UserError(f'{args.scene}: {key}: a regulator holds the pressure at the '
+                            f"segments, so the syringe's {key} is not on its path: give "
+                            f'--pressure-path a scene without a {key}')
+    pressures = read_pressure_history(args.pressure_path)
+    try:
+        solved = regulated_path(scene.segments, pressures)
+    except PressureDomainError as err:
+        raise PressureDomainError(f'{args.pressure_path}: gauge_pa: {err}') from None
+    names = scene.segment_names
+    write_regulated_path(args.out, solved, names)
+    print(f'{scene.name}: {pressures.size} regulated gauge pressures solved (each segment an '
+          f'independent hysteron) -> {args.out} (flips: {len(solved.flips)})')
+    for flip in solved.flips:
+        way = 'up past its peak' if flip.to_volume > flip.from_volume else 'down past its valley'
+        print(f'  row {flip.row + 1}: {names[flip.segment]} flips {way} at '
+              f'{flip.pressure * 1e-3:.4f} kPa, {flip.from_volume * 1e6:.4f} -> '
+              f'{flip.to_volume * 1e6:.4f} mL')
     return 0
 
 
@@ -138,6 +172,8 @@ def _graph(args: argparse.Namespace) -> int:
         raise UserError(f'--reversals must be >= 0, got {args.reversals}')
     style = _figure_style(args)
     scene = softseq_ros.load_scene(args.scene)
+    if args.regulator:
+        return _regulated_graph(args, scene, style)
     graph = softseq_ros.graph(scene)
     # Before anything is written: a figure of too many branches exhausted the memory after
     # graph.json was written.
@@ -164,6 +200,36 @@ def _graph(args: argparse.Namespace) -> int:
     if args.reversals is not None:
         within = sum(c is not None and c <= args.reversals for c in least.values())
         print(f'  {within} of {len(graph.branches)} branches within {args.reversals} reversals')
+    return 0
+
+
+def _regulated_graph(args: argparse.Namespace, scene: Any, style: Any) -> int:
+    """``graph --regulator``: the states and flips of the segments as independent hysterons."""
+    import json
+
+    from softseq_ros.analysis.graph_figure import plot_hysteron_graph
+    from softseq_ros.quasistatic.regulator import hysteron_graph
+
+    if args.reversals is not None:
+        raise UserError('--reversals counts volume reversals of a syringe; with --regulator '
+                        'every state is listed with the flips that reach it')
+    graph = hysteron_graph(scene.segments)
+    out = args.out if args.out is not None else Path('bags') / f'graph_{scene.name}_regulator'
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'graph.json').write_text(json.dumps(graph.to_dict(), indent=1) + '\n')
+    plot_hysteron_graph(graph, out / 'graph.png', style=style)
+    print(f'{scene.name} behind a pressure regulator: {len(graph.states)} stable states, '
+          f'{sum(f.target is not None for f in graph.flips)} flips -> {out / "graph.json"}, '
+          f'{out / "graph.png"}')
+    names = graph.names
+    for state in graph.states:
+        print(f'  state {state.index} (pieces {state.label}): {state.p_low * 1e-3:.4f} to '
+              f'{state.p_high * 1e-3:.4f} kPa')
+        for flip in (f for f in graph.flips if f.source == state.index):
+            where = ('beyond every stable piece' if flip.target is None
+                     else f'to state {flip.target}')
+            print(f'    {"up" if flip.up else "down"} at {flip.pressure * 1e-3:.4f} kPa: '
+                  f'{" and ".join(names[i] for i in flip.segments)} {where}')
     return 0
 
 
@@ -478,6 +544,10 @@ def build_parser() -> argparse.ArgumentParser:
                        "and optionally time_s (default: the scene's pump profile at the pump "
                        "rate; with a network, pushed from row to row at the pump's flow rate, "
                        "or at each row's time_s, holds included)")
+    solve.add_argument('--pressure-path', type=Path, help='CSV with a column gauge_pa [Pa], in '
+                       'order: the segments behind an ideal pressure regulator instead of the '
+                       'syringe, each an independent hysteron (docs/supply.md); writes each '
+                       "row's volumes and what the regulator let in, and the flips")
     solve.add_argument('--out', type=Path, required=True, help='output CSV file; with a '
                        'network (docs/dynamic.md) the path in time (time_s first, each '
                        "segment's pressure and the channel flows added) and its snap-throughs "
@@ -678,6 +748,10 @@ def build_parser() -> argparse.ArgumentParser:
     graph.add_argument('--reversals', type=int, metavar='K', help='mark the branches a '
                        'history from rest with at most K reversals reaches (default: any '
                        'number)')
+    graph.add_argument('--regulator', action='store_true', help='the segments behind an '
+                       'ideal pressure regulator instead of the syringe: each an independent '
+                       'hysteron; every stable state (each segment on a rising piece) and the '
+                       'pressures where they flip')
     _figure_options(graph)
     graph.set_defaults(handler=_graph)
 

@@ -32,6 +32,7 @@ from softseq_ros.analysis.recording import DEFLATION, INFLATION
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.graph import INFLATION as GRAPH_INFLATION
 from softseq_ros.quasistatic.graph import JOIN, SNAP, GraphBranch, TransitionGraph
+from softseq_ros.quasistatic.regulator import HysteronGraph
 
 # The most stable branches graph.png draws. The figure has a row of bars per branch at most,
 # and its height, so its pixels and memory, grow with the rows: three segments of 16 folds
@@ -350,3 +351,51 @@ def _draw_plane(ax: object, graph: TransitionGraph, emap: object) -> list:
     ax.set_ylim(0, limit * 1.02 or 1.0)
     ax.grid(alpha=0.2)
     return key + [Line2D([], [], color='0.8', lw=0.5, label=f'total volume, every {step:g} mL')]
+
+
+def plot_hysteron_graph(graph: HysteronGraph, out: Path, svg: bool = False,
+                        style: FigureStyle = PAPER) -> list[Path]:
+    """
+    The states behind a regulator as bars over the gauge pressure each holds at, and the flips.
+
+    Each state (each segment's rising piece, base to tip) is a bar from its highest valley to
+    its lowest peak; a flip is an arrow at its pressure from the state it leaves to the one it
+    lands in, up (blue) or down (vermillion, dashed); one into no state ends at a cross.
+    """
+    with style.context():
+        from matplotlib import rcParams
+        from matplotlib.lines import Line2D
+
+        width = style.size(PAGE_IN, 1.0)[0]
+        type_in = rcParams['font.size'] / 72
+        rows = len(graph.states)
+        height = max(2.4 * type_in * (rows + 1.5), 1.2) + 4.0 * type_in
+        fig, axes = new_figure(width, height, margins={
+            'left': 4.2 * type_in / width, 'right': 0.99, 'bottom': 4.0 * type_in / height,
+            'top': 1 - 0.05 / height})
+        ax = axes[0, 0]
+        for state in graph.states:
+            ax.barh(state.index, (state.p_high - state.p_low) * 1e-3, left=state.p_low * 1e-3,
+                    height=0.36, color=_PATH_COLOUR, lw=0.8, zorder=2)
+            ax.text(state.p_low * 1e-3, state.index + 0.22, f'{state.index}: {state.label}',
+                    fontsize='small', va='bottom', ha='left', zorder=4, bbox=_GROUND)
+        for flip in graph.flips:
+            x = flip.pressure * 1e-3
+            look = STYLE[INFLATION if flip.up else DEFLATION]
+            if flip.target is None:
+                ax.plot([x], [flip.source], marker='x', color=look['color'], zorder=3)
+                continue
+            ax.annotate('', xy=(x, flip.target), xytext=(x, flip.source), zorder=3,
+                        arrowprops={'arrowstyle': '->', 'color': look['color'],
+                                    'ls': '-' if flip.up else '--', 'lw': 0.9})
+        ax.set_xlabel('gauge pressure [kPa]')
+        ax.set_yticks([])
+        ax.set_ylim(-0.8, rows - 0.2)
+        handles = [Line2D([], [], color=STYLE[INFLATION]['color'],
+                          label='flip up, past a peak'),
+                   Line2D([], [], color=STYLE[DEFLATION]['color'], ls='--',
+                          label='flip down, past a valley')]
+        legend_below(fig, handles, 2)
+        style.title(ax, f'Behind a pressure regulator: {rows} stable states (state: '
+                    f'{" | ".join(graph.names)} rising piece)')
+        return save_figure(fig, out, svg, style)

@@ -118,3 +118,117 @@ def regulated_path(segments: Sequence[Segment], pressures: ArrayLike) -> Regulat
         np.empty((0, len(segments)))
     return RegulatedPath(p, volumes, curvatures, flips,
                          float(sum(segment.rest_volume for segment in segments)))
+
+
+@dataclass(frozen=True)
+class HysteronState:
+    """
+    One stable state under a regulator: each segment's rising piece (``pieces``, indices).
+
+    It holds for every pressure from ``p_low`` to ``p_high`` [Pa] (the highest valley and the
+    lowest peak of its pieces); ``label`` names each segment's piece, e.g. ``0/1``.
+    """
+
+    index: int
+    pieces: tuple[int, ...]
+    p_low: float
+    p_high: float
+
+    @property
+    def label(self) -> str:
+        """Each segment's rising piece, base to tip, as ``0/1/0``."""
+        return '/'.join(str(k) for k in self.pieces)
+
+
+@dataclass(frozen=True)
+class HysteronFlip:
+    """
+    Leaving state ``source`` at ``pressure`` [Pa]: the ``segments`` that jump.
+
+    Raised past a peak (``up``) or lowered past a valley, they land in ``target`` (None: a
+    pressure no rising piece of some segment reaches, the end of the domain).
+    """
+
+    source: int
+    up: bool
+    pressure: float
+    segments: tuple[int, ...]
+    target: int | None
+
+
+@dataclass
+class HysteronGraph:
+    """The states and flips of segments under pressure control, from rest (state 0)."""
+
+    names: tuple[str, ...]
+    states: list[HysteronState]
+    flips: list[HysteronFlip]
+
+    def to_dict(self) -> dict:
+        """The graph as graph.json holds it (SI: gauge pressures in Pa)."""
+        return {
+            'supply': 'pressure regulator (independent hysterons)',
+            'segments': list(self.names),
+            'states': [{'index': s.index, 'label': s.label, 'pieces': list(s.pieces),
+                        'gauge_pa_low': s.p_low, 'gauge_pa_high': s.p_high}
+                       for s in self.states],
+            'flips': [{'from': f.source, 'to': f.target,
+                       'direction': 'up' if f.up else 'down', 'gauge_pa': f.pressure,
+                       'segments': [self.names[i] for i in f.segments]}
+                      for f in self.flips]}
+
+
+def hysteron_graph(segments: Sequence[Segment]) -> HysteronGraph:
+    """
+    Every state a pressure history from rest reaches, and the flips between them.
+
+    From a state, raising the pressure flips the segments whose piece peaks lowest, at that
+    peak, each onto its first rising piece above that reaches it; lowering flips those whose
+    piece bottoms highest, at that valley, each onto its last rising piece below that reaches
+    it (what :func:`regulated_path` does row by row). Segments peaking at the same pressure
+    flip together. The states are numbered in the order they are first reached.
+    """
+    pieces = [_rising(segment) for segment in segments]
+    for segment, rising in zip(segments, pieces):
+        if not rising:
+            raise PressureDomainError(f'segment {segment.name!r} never rises: no state of it is '
+                                      'stable at a held pressure')
+
+    def bounds(state: tuple[int, ...]) -> tuple[float, float]:
+        return (max(rising[k].p_min for rising, k in zip(pieces, state)),
+                min(rising[k].p_max for rising, k in zip(pieces, state)))
+
+    def landing(i: int, at: int, pressure: float, up: bool) -> int | None:
+        rising = pieces[i]
+        order = range(at + 1, len(rising)) if up else range(at - 1, -1, -1)
+        return next((k for k in order if rising[k].p_min <= pressure <= rising[k].p_max), None)
+
+    rest = tuple(0 for _ in segments)
+    index = {rest: 0}
+    states = [HysteronState(0, rest, *bounds(rest))]
+    flips: list[HysteronFlip] = []
+    queue = [rest]
+    while queue:
+        state = queue.pop(0)
+        low, high = bounds(state)
+        for up in (True, False):
+            edge = high if up else low
+            ends = [rising[k].p_max if up else rising[k].p_min
+                    for rising, k in zip(pieces, state)]
+            jumping = tuple(i for i, end in enumerate(ends) if end == edge)
+            landed = [landing(i, state[i], edge, up) for i in jumping]
+            if not up and all(k is None for k in landed) and edge <= bounds(rest)[0]:
+                continue    # below the rest state's valley: nothing to lower into
+            target: int | None = None
+            if all(k is not None for k in landed):
+                moved = list(state)
+                for i, k in zip(jumping, landed):
+                    moved[i] = k
+                new = tuple(moved)
+                if new not in index:
+                    index[new] = len(states)
+                    states.append(HysteronState(len(states), new, *bounds(new)))
+                    queue.append(new)
+                target = index[new]
+            flips.append(HysteronFlip(index[state], up, float(edge), jumping, target))
+    return HysteronGraph(tuple(s.name for s in segments), states, flips)

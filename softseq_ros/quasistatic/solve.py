@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, SolvedPath
 from softseq_ros.quasistatic.graph import TransitionGraph, transition_graph
+from softseq_ros.quasistatic.regulator import RegulatedPath
 from softseq_ros.scene.csv_columns import read_columns, write_rows
 from softseq_ros.segments.identity import segments_sha256
 from softseq_ros.segments.models import Segment
@@ -105,3 +106,30 @@ def write_path(path: str | Path, solved: SolvedPath, names: Sequence[str]) -> No
     write_rows(path, path_columns(names), (
         ((solved.injected[i], solved.pressure[i], *solved.volumes[i], *solved.curvatures[i]),
          'snap' if solved.snap[i] else '') for i in range(solved.injected.size)))
+
+
+GAUGE_COLUMN = 'gauge_pa'
+
+
+def read_pressure_history(path: str | Path) -> NDArray[np.float64]:
+    """Regulated gauge pressures [Pa], in order, from the ``gauge_pa`` column of a CSV file."""
+    return read_columns(path, (GAUGE_COLUMN,), HistoryError, 'pressure history',
+                        optional=(TIME_COLUMN,))[GAUGE_COLUMN]
+
+
+def regulated_columns(names: Sequence[str]) -> list[str]:
+    """Column names of a regulated-path CSV for segments ``names`` (base to tip)."""
+    return ([GAUGE_COLUMN, 'injected_m3'] + [f'volume_{n}_m3' for n in names]
+            + [f'curvature_{n}_per_m' for n in names] + ['event'])
+
+
+def write_regulated_path(path: str | Path, solved: RegulatedPath,
+                         names: Sequence[str]) -> None:
+    """One row per regulated pressure: gauge, let in, volumes, curvatures, the flips on the way."""
+    flipped: dict[int, list[str]] = {}
+    for flip in solved.flips:
+        flipped.setdefault(flip.row, []).append(f'flip {names[flip.segment]}')
+    injected = solved.injected
+    write_rows(path, regulated_columns(names), (
+        ((solved.pressure[i], injected[i], *solved.volumes[i], *solved.curvatures[i]),
+         ' '.join(flipped.get(i, ()))) for i in range(solved.pressure.size)))
