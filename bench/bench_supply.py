@@ -1,6 +1,6 @@
 """
-The paper scene and the Fig. 1 asymmetric pair behind an ideal syringe and behind 1 mL and 10 mL
-of trapped air: sequence type, snap-throughs and the map's speed, in one run.
+The paper scene and the Fig. 1 asymmetric pair behind an ideal syringe, behind 1 mL and 10 mL
+of trapped air and behind a pressure regulator: sequence type, snap-throughs and speed, in one run.
 
     python bench/bench_supply.py [--quick] [--out FILE]
 
@@ -8,16 +8,28 @@ Each scene is loaded as shipped and given a ``supply`` block (isothermal air at 
 line compliance); per case it prints the sequence type (``softseq classify``), the snaps of an
 inflation over the whole range and back (injected volume and pressure where each starts) and
 the time to assemble the map and its transition graph, as a ratio to the ideal syringe's in the
-same run (best of 3). The full mode writes the table to ``bench/supply_results.md`` (or
-``--out``); ``--quick`` (the Fig. 1 pair, ideal and 1 mL, once each) prints it and writes
-nothing.
+same run (best of 3). Behind the regulator the segments are independent hysterons
+(softseq_ros.quasistatic.regulator): the pressure rises from 0 to just below where a segment
+has no stable piece left (or its highest stable pressure) and back, and the flips are its
+snaps; its time is that of the graph of hysterons.
+
+Two speed checks follow, as ratios in the same run: the batch run of the paper scene
+(``softseq run``, the whole rig into a bag) behind each line against the ideal syringe's, and
+the map and graph of the three-segment scenes behind each supply (the promise: under 2 s).
+
+The full mode writes the tables to ``bench/supply_results.md`` (or ``--out``); ``--quick``
+(the Fig. 1 pair, ideal, 1 mL and the regulator, once each, and the three-segment graphs)
+prints them and writes nothing.
 """
 
 import argparse
 from dataclasses import replace
 from pathlib import Path
 import sys
+import tempfile
 import time
+
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -28,10 +40,15 @@ from softseq_ros.quasistatic.equilibrium import (  # noqa: E402
     inflate_and_deflate,
 )
 from softseq_ros.quasistatic.graph import transition_graph  # noqa: E402
+from softseq_ros.quasistatic.regulator import hysteron_graph, regulated_path  # noqa: E402
 from softseq_ros.scene.loader import load_scene, scene_from_dict  # noqa: E402
 
 SCENES = ('paper', 'fig1_asymmetric')
 AIR_M3 = (None, 1.0e-6, 1.0e-5)
+REGULATOR = 'regulator'
+THREE_SEGMENTS = ('three_segments', 'three_nested_loops')
+# Pressure samples of the regulator's ramp up and down.
+RAMP_SAMPLES = 4001
 REPEATS = 3
 RESULTS = REPO / 'bench' / 'supply_results.md'
 
@@ -69,6 +86,73 @@ def row(name: str, air: float | None, baseline: float | None,
             f'{snaps_text(deflation)} | {best:.3f} s ({ratio}) |', best)
 
 
+def regulator_row(name: str, baseline: float, repeats: int = REPEATS) -> str:
+    """The scene's segments behind a regulator: the flips of a pressure ramp up and down."""
+    scene = load_scene(name)
+    best = float('inf')
+    for _ in range(repeats):
+        start = time.perf_counter()
+        graph = hysteron_graph(scene.segments)
+        best = min(best, time.perf_counter() - start)
+    ends = [f.pressure for f in graph.flips if f.up and f.target is None]
+    top = (1.0 - 1e-9) * min(ends) if ends else max(s.p_high for s in graph.states)
+    ramp = np.linspace(0.0, top, RAMP_SAMPLES)
+    path = regulated_path(scene.segments, np.concatenate([ramp, ramp[::-1]]))
+    names = scene.segment_names
+
+    def flips(up: bool) -> str:
+        return ', '.join(f'{names[f.segment]} at {f.pressure / 1e3:.3f} kPa'
+                         for f in path.flips if (f.to_volume > f.from_volume) == up) or 'none'
+    kind = 'independent hysterons' if path.flips else 'none'
+    return (f'| {name} | pressure regulator | {kind} | {flips(True)} | {flips(False)} | '
+            f'{best:.4f} s ({best / baseline:.2f}) |')
+
+
+def batch_rows(repeats: int) -> list[str]:
+    """The paper scene's batch run behind each line, as a ratio to the ideal syringe's."""
+    import softseq_ros
+
+    lines = ['| supply | batch run of the paper scene | ratio to the ideal syringe |',
+             '|---|---|---|']
+    print('\n'.join(lines), flush=True)
+    baseline = None
+    with tempfile.TemporaryDirectory() as folder:
+        for air in AIR_M3:
+            scene = with_air('paper', air)
+            best = float('inf')
+            for attempt in range(repeats):
+                start = time.perf_counter()
+                softseq_ros.run(scene, Path(folder) / f'{air}_{attempt}', start_time_ns=0)
+                best = min(best, time.perf_counter() - start)
+            baseline = best if baseline is None else baseline
+            supply = 'ideal syringe' if air is None else f'{air * 1e6:g} mL of air'
+            lines.append(f'| {supply} | {best:.3f} s | {best / baseline:.2f} |')
+            print(lines[-1], flush=True)
+    return lines
+
+
+def three_segment_rows(repeats: int) -> list[str]:
+    """The map and graph of three segments behind each supply (the promise: under 2 s)."""
+    lines = ['| scene | supply | map and graph | under 2 s |', '|---|---|---|---|']
+    print('\n'.join(lines), flush=True)
+    for name in THREE_SEGMENTS:
+        for air in (*AIR_M3, REGULATOR):
+            best = float('inf')
+            for _ in range(repeats):
+                start = time.perf_counter()
+                if air == REGULATOR:
+                    hysteron_graph(load_scene(name).segments)
+                else:
+                    scene = with_air(name, air)
+                    transition_graph(EquilibriumMap(scene.segments, supply=scene.supply))
+                best = min(best, time.perf_counter() - start)
+            supply = ('pressure regulator' if air == REGULATOR else 'ideal syringe'
+                      if air is None else f'{air * 1e6:g} mL of air')
+            lines.append(f'| {name} | {supply} | {best:.3f} s | {"yes" if best < 2.0 else "no"} |')
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='two cases once; write nothing')
@@ -78,13 +162,22 @@ def main(argv: list[str] | None = None) -> int:
              'map and graph (ratio to the ideal syringe) |', '|---|---|---|---|---|---|']
     print('\n'.join(lines), flush=True)
     scenes, airs = (('fig1_asymmetric',), AIR_M3[:2]) if args.quick else (SCENES, AIR_M3)
+    repeats = 1 if args.quick else REPEATS
     for name in scenes:
         baseline = None
         for air in airs:
-            text, seconds = row(name, air, baseline, 1 if args.quick else REPEATS)
+            text, seconds = row(name, air, baseline, repeats)
             baseline = seconds if baseline is None else baseline
             lines.append(text)
             print(text, flush=True)
+        lines.append(regulator_row(name, baseline, repeats))
+        print(lines[-1], flush=True)
+    lines.append('')
+    print(flush=True)
+    if not args.quick:
+        lines += batch_rows(repeats) + ['']
+        print(flush=True)
+    lines += three_segment_rows(repeats)
     out = args.out or (None if args.quick else RESULTS)
     if out is not None:
         out.write_text('\n'.join(lines) + '\n', encoding='utf-8')
