@@ -12,6 +12,7 @@ clock, or ``start_time_ns`` for reproducible bags), so a batch bag is dated like
 """
 
 from dataclasses import dataclass, field
+import math
 import os
 from pathlib import Path
 import time
@@ -285,7 +286,8 @@ class _BatchRun:
                  start_time_ns: int | None = None, namespace: str = '/',
                  wrap: Callable[[str, Stage], Stage] | None = None,
                  model: ActuatorModel | None = None, allow_long: bool = False,
-                 by_blocks: bool = True) -> None:
+                 by_blocks: bool = True, controller: Any = None,
+                 controlled_s: float | None = None) -> None:
         """
         Load the scene (unless given loaded) and build the cores; ``out`` must not exist.
 
@@ -316,6 +318,16 @@ class _BatchRun:
         self.camera = camera_core(self.scene, **overrides.get(contract.CAMERA, {}))
         self.cores = {contract.PUMP: self.pump, contract.ACTUATOR: self.actuator,
                       contract.CAMERA: self.camera}
+        # A controller drives the pump by setpoints for ``controlled_s`` of rig time instead of
+        # its programme; every value between them is routed like any other core's.
+        if (controller is None) != (controlled_s is None):
+            raise ValueError('controller and controlled_s go together: a controller drives '
+                             'the pump for controlled_s seconds of rig time')
+        if controlled_s is not None and not (math.isfinite(controlled_s) and controlled_s > 0):
+            raise ValueError(f'controlled_s: must be a finite time > 0 s, got {controlled_s}')
+        self.controlled_s = controlled_s
+        if controller is not None:
+            self.cores[contract.CONTROLLER] = controller
         self.outputs = self.actuator.outputs | self.camera.outputs
         self.progress = progress
         self.log = log
@@ -329,13 +341,19 @@ class _BatchRun:
         self._router = Router(self.cores, lambda: self._now_ns)
         self._channels: dict[type, _Channel] = {}
         self._blocks: _Blocks | None = None
-        # Blocks of instants unless asked not to, or a hook changes a per-message stage.
-        self.by_blocks = by_blocks and not self._changed_stages
+        # Blocks of instants unless asked not to, a hook changes a per-message stage or a
+        # controller reads every answer.
+        self.by_blocks = by_blocks and not self._changed_stages and controller is None
         self.warnings: list[str] = []
+
+    @property
+    def duration_s(self) -> float:
+        """The rig time the run lasts: the programme's, or the controller's."""
+        return self.pump.duration_s if self.controlled_s is None else self.controlled_s
 
     def estimate(self) -> tuple[float, float]:
         """About how many messages and bytes the run's bag will hold (from rates and sizes)."""
-        duration = self.pump.duration_s
+        duration = self.duration_s
         segments = len(self.scene.segments)
         answers = self.pump_rate_hz + (self.actuator.rate_hz or 0.0)
         frames = self.camera.rate_hz or 0.0
@@ -363,7 +381,7 @@ class _BatchRun:
 
     def _check_length(self, allow_long: bool) -> None:
         profile = self.pump.profile  # the scene's, or the one an override gave
-        duration = profile.duration()
+        duration = self.duration_s
         where = f'{self.scene.path or self.scene.name}: '
         insist = 'shorten the programme, or insist with --allow-long (allow_long=True)'
         if duration > MAX_RUN_S and not allow_long:
@@ -460,10 +478,13 @@ class _BatchRun:
                  (self.camera, self.camera.rate_hz))
         clocks = [[start, order, core, round(NS_PER_S / rate)]
                   for order, (core, rate) in enumerate(rates) if rate is not None]
-        duration = pump.duration_s
+        duration = self.duration_s
+        end = None if self.controlled_s is None else start + round(duration * NS_PER_S)
         next_report = wall_start + PROGRESS_PERIOD_S
         # The actuator names its scene first, then the pump gives its status.
         self._record(router.run(self.actuator.begin(start) + pump.begin(start)))
+        if end is not None:
+            self._record(router.run(pump.set_mode(start, True).outputs))
         blocks = self._blocks
         while True:
             clock = min(clocks)
@@ -482,7 +503,8 @@ class _BatchRun:
             self._now_ns = now
             self._record(router.run(core.tick(now)))
             clock[0] = now + period
-            if core is pump and pump.state in (FINISHED, STOPPED, HELD):
+            if core is pump and (pump.state in (FINISHED, STOPPED, HELD)
+                                 or (end is not None and now >= end)):
                 if pump.state == HELD:
                     self._held_for_good()
                 # Every other core shows the last state once more, at the pump's last instant.
@@ -521,7 +543,8 @@ def run(scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
         start_time_ns: int | None = None, namespace: str = '/',
         wrap: Callable[[str, Stage], Stage] | None = None,
         model: ActuatorModel | None = None, allow_long: bool = False,
-        by_blocks: bool = True) -> BatchResult:
+        by_blocks: bool = True, controller: Any = None,
+        controlled_s: float | None = None) -> BatchResult:
     """
     Run the rig (pump, actuator, camera) on the scene's programme into the bag ``out``.
 
@@ -555,10 +578,17 @@ def run(scene: 'Scene | str | os.PathLike', out: str | os.PathLike, *,
     A run longer than :data:`~softseq_ros.scene.programme.MAX_RUN_S` of rig time, or whose bag
     would hold more than ``MAX_RUN_MESSAGES`` messages or ``MAX_RUN_BYTES`` bytes, is refused
     before anything is written (LongRunError), unless ``allow_long``.
+
+    ``controller`` (a controller core, e.g. softseq_ros.rig.controller.PressureHold) drives
+    the pump by its setpoints instead of the programme, for ``controlled_s`` seconds of rig
+    time: the pump is put in setpoint mode at the start, the controller reads every answer of
+    the actuator, and its setpoints are in the bag (``pump/setpoint``), every instant one core
+    at a time.
     """
     return _BatchRun(scene, out, overrides=overrides, progress=progress, log=log,
                      start_time_ns=start_time_ns, namespace=namespace, wrap=wrap, model=model,
-                     allow_long=allow_long, by_blocks=by_blocks).run()
+                     allow_long=allow_long, by_blocks=by_blocks, controller=controller,
+                     controlled_s=controlled_s).run()
 
 
 __all__ = ['BLOCK_STAGES', 'STAGES', 'STEP_STAGES', 'BatchResult', 'LongRunError', 'qos_yaml',

@@ -271,3 +271,20 @@ def test_a_setpoint_message_that_is_not_one_is_refused_with_what_is_wrong():
                       (JointState(name=['syringe'], effort=[1.0, 2.0]), 'effort 2')):
         with pytest.raises(InputError, match=said.replace('[', r'\[').replace(']', r'\]')):
             pump_setpoint(msg)
+
+
+def test_the_batch_runner_hosts_the_same_controller_and_records_its_setpoints(tmp_path):
+    import softseq_ros
+    from softseq_ros.bag.reader import read_bag
+
+    result = softseq_ros.run('paper', tmp_path / 'held', start_time_ns=0,
+                             controller=PressureHold(5.0e3), controlled_s=25.0)
+    assert result.sim_duration_s == pytest.approx(25.0)
+    assert result.pump_state == RUNNING and not result.warnings
+    assert result.message_counts['/pump/setpoint'] > 1000
+    gauges = [(m.log_time_ns, m.msg.effort[0])
+              for m in read_bag(tmp_path / 'held', ['/actuator/volumes'])]
+    late = [p for stamp, p in gauges if stamp >= 20e9]
+    assert late and max(abs(p - 5.0e3) for p in late) < 0.01 * 5.0e3
+    with pytest.raises(ValueError, match='go together'):
+        softseq_ros.run('paper', tmp_path / 'x', controller=PressureHold(5.0e3))
