@@ -35,6 +35,12 @@ MAX_NETWORK_RATE_HZ = 1.0e4
 LAMINAR, BLASIUS = 'laminar', 'blasius'
 FRICTION_LAWS = (LAMINAR, BLASIUS)
 TUBE_KEYS = ('length_m', 'radius_m', 'inertance', 'minor_loss', 'friction')
+# A scene's compliant supply line (its ``supply`` block) is followed in time through the supply
+# tube: joined to the fed segment without one, the line would sit at that segment's pressure at
+# every instant, a constraint instead of an equation in time, and one with no solution where the
+# segment passes a fold of its curve faster than the line can follow.
+NO_SUPPLY_TUBE = ('a compliant supply needs a supply tube between the line and the fed '
+                  'segment: give network.supply (its length_m and radius_m)')
 
 
 @dataclass(frozen=True)
