@@ -12,12 +12,14 @@ tolerance tightens instead of depending on where the steps fall:
 - a segment's volume crossing a level (the end of its curve, the volume where its collapse
   reaches vacuum, a fold of its curve): the root of a cubic (:func:`first_beyond`,
   :func:`crossings`);
-- the exchange between the segments, half of sum_i |dv_i/dt| less the pump's |Q|: a
-  piecewise quadratic (the pieces end where a rate changes sign); a snap-through is an
-  episode where it exceeds SNAP_EXCHANGE_PER_FLOW |Q| (:class:`SnapWatcher`), whose start and
-  end are roots, whose fluid moved is the exchange's integral (piecewise cubic), whose 10 % and
-  90 % times invert that integral, and whose peak is found where the quadratic peaks (its value
-  there from the equations themselves, at the state the step's cubic gives);
+- the exchange between the segments, half of sum_i |dv_i/dt| less the pump's |Q| (behind a
+  compliant supply line the line is one more member, its ds/dt in the sum, as it is in the
+  quasi-static equilibrium): a piecewise quadratic (the pieces end where a rate changes
+  sign); a snap-through is an episode where it exceeds SNAP_EXCHANGE_PER_FLOW |Q|
+  (:class:`SnapWatcher`), whose start and end are roots, whose fluid moved is the exchange's
+  integral (piecewise cubic), whose 10 % and 90 % times invert that integral, and whose peak
+  is found where the quadratic peaks (its value there from the equations themselves, at the
+  state the step's cubic gives);
 - each channel's peak flow (for its Reynolds number): a quadratic's largest magnitude.
 
 Unlike event location that tests a function's sign at the step points (scipy's solve_ivp
