@@ -26,6 +26,7 @@ import softseq_ros
 from softseq_ros import cli
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import tube_law
+from softseq_ros.dynamic.path import FlowSchedule, run_schedule
 from softseq_ros.quasistatic.equilibrium import EquilibriumMap, Tracker
 from softseq_ros.rig.model import DynamicModel, actuator_model
 from softseq_ros.scene.loader import SceneError, load_scene
@@ -183,6 +184,57 @@ def test_pumped_at_a_steady_flow_the_segment_lags_the_quasi_static_pressure_by_q
     assert supply_flow == pytest.approx(pump * C_SEGMENT / total, rel=1e-6)
     # The line and the segment fill together: no fluid moves between them beyond the pump's.
     assert not flow.exchanging
+
+
+def test_with_the_tube_s_inertance_the_line_and_the_segment_ring_as_a_series_rlc_circuit():
+    # The supply tube's flow becomes a state: L_s dq_s/dt = p_s - p - R q_s. With
+    # C = C_s C_seg / (C_s + C_seg), d = p_s - p obeys d' = -q_s / C, so after a step d0 into
+    # the line d = d0 exp(-a t) (cos w t + a / w sin w t) and q_s = d0 / (L w) exp(-a t)
+    # sin w t, a = R / (2 L), w = sqrt(1 / (L C) - a^2): held to 1e-6 of d0 (and of the
+    # flow's scale) over three periods; it overshoots (damping ratio 0.18).
+    tube = Tube(length_m=0.1, radius_m=1.0e-3, inertance=True)
+    law = tube_law(tube, Fluid())
+    series = C_LINE * C_SEGMENT / (C_LINE + C_SEGMENT)
+    decay = law.resistance / (2.0 * law.inertance)
+    omega = math.sqrt(1.0 / (law.inertance * series) - decay ** 2)
+    assert 0.1 < decay * math.sqrt(law.inertance * series) < 0.3
+    flow = behind_a_line(compliance_line(), tube=tube)
+    step = 2.0 * ML
+    flow.inject_now(step)
+    start = step / C_LINE
+    gaps = []
+    for t in np.linspace(0.02, 3.0, 150) * 2.0 * math.pi / omega:
+        flow.advance(t)
+        _, line_pressure, supply_flow = flow.line_state()
+        gap = line_pressure - float(flow.pressures(flow.volumes())[0])
+        envelope = math.exp(-decay * t)
+        expected = start * envelope * (math.cos(omega * t) + decay / omega * math.sin(omega * t))
+        assert gap == pytest.approx(expected, abs=1e-6 * start)
+        scale = start / (law.inertance * omega)
+        assert supply_flow == pytest.approx(scale * envelope * math.sin(omega * t),
+                                            abs=1e-6 * scale)
+        gaps.append(gap)
+    assert min(gaps) < -0.5 * start
+
+
+def test_the_channels_peak_flows_count_the_supply_tube_s_flow_into_the_fed_segment():
+    # A channel's flow within a step is found by mass from the segments' rates and what enters
+    # the fed segment: behind a line that is the supply tube's flow, not the pump's. Pumped
+    # at 1 mL/s to 10 mL, the channel's flow rises onto its steady value, the top's share of
+    # the tube's flow, Q (1 - C_s / (C_s + C_1 + C_2)) C_2 / (C_1 + C_2) = 0.5 mL/s, so its peak
+    # Reynolds number is that flow's: to 1e-9 (measured 5e-12). The pump's flow in the tube's
+    # place would make it a third more (the line takes up a quarter of the pump's flow).
+    pair = [LinearSegment('bottom', 0.1, REST, 1.0e10, 50.0 * ML),
+            LinearSegment('top', 0.1, REST, 5.0e9, 50.0 * ML)]
+    network = NetworkSettings(Fluid(), SUPPLY_TUBE, (Tube(0.1, 1.0e-3),), rtol=1e-10)
+    times = np.linspace(0.0, 10.0, 201)
+    flow = NetworkFlow(pair, network, line=compliance_line())
+    flow.set_flow(1.0e-6)
+    _, _, flows, _ = flow.read_states(times, flow.advance_through(times))
+    steady = 1.0e-6 * (1.0 - C_LINE / (C_LINE + 3.0e-10)) * 2.0 / 3.0
+    assert np.max(np.abs(flows[:, 0])) == pytest.approx(steady, rel=1e-9)
+    reynolds = tube_law(Tube(0.1, 1.0e-3), Fluid()).reynolds(steady)
+    assert flow.peak_reynolds[0] == pytest.approx(reynolds, rel=1e-9)
 
 
 def test_as_the_line_stiffens_the_path_converges_to_the_network_without_one_at_first_order():
@@ -428,3 +480,12 @@ def test_a_line_drawn_beyond_vacuum_is_refused_at_the_located_instant():
     assert pressure == pytest.approx(-line.ambient, rel=1e-9)
     assert 1.0 < flow.t < 1.01
     assert flow.volumes()[0] > REST + 3.0 * ML
+    # Along a schedule (softseq solve) the path ends at the last sample before it, saying why,
+    # as it does where a segment's own suction passes vacuum.
+    schedule = FlowSchedule(np.array([0.0, 5.0, 6.0, 6.005]), np.array([1.0e-6, 0.0, -1.0e-3]))
+    path = run_schedule([linear_segment()], NetworkSettings(Fluid(), SUPPLY_TUBE, ()),
+                        schedule, np.concatenate([np.linspace(0.0, 6.0, 61),
+                                                  np.linspace(6.0001, 6.005, 50)]), line=line)
+    assert 'the supply line draws a suction beyond vacuum' in path.drained
+    assert 6.0 < path.time_s[-1] < 6.005
+    assert path.line_pressure[-1] > -line.ambient

@@ -10,6 +10,11 @@ drop ``L_j dq_j/dt + R_j q_j + a_j q_j |q_j|`` (softseq_ros.dynamic.network). So
     mass: v_tip = (rest volumes) + (injected volume) - (the other volumes),
 
 which keeps the sum of the volumes equal to the injected volume to round-off at every instant.
+Behind a compliant supply line (a scene's ``supply``: trapped gas and the line's compliance,
+softseq_ros.segments.supply) the pump pushes Q into the line instead, which holds s at its
+pressure p_s(s), and the supply tube carries q_s from it into segment f, driven by p_s - p_f:
+ds/dt = Q - q_s and q_s replaces Q above; s (and q_s, when the tube's inertia counts) joins
+the state, and the tip's volume is the injected volume less s and the others'.
 A channel without inertance carries the flow its pressure drop drives at once; one with it
 has its flow as a state. The state (the volumes but the tip's, the inertial flows) is stiff
 where the channels are short and wide, so it is integrated by scipy's Radau (implicit,
@@ -698,6 +703,8 @@ class NetworkFlow:
         ``states``: rows of :meth:`advance_through`; ``volumes``: their segment volumes
         (:meth:`states_volumes`). Only behind a compliant line (``line``).
         """
+        if self.line is None:
+            raise ValueError('this network has no compliant supply line')
         held = states[:, self._line_at]
         pressure = np.array([self._line_pressure_of(s) for s in held.tolist()])
         if self._supply_inertial:
