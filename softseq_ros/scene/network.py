@@ -10,7 +10,8 @@ resistance, inertance, minor losses) is computed in softseq_ros.dynamic.network.
 
     network:
       fluid: {viscosity_pa_s: 1.0e-3, density_kg_per_m3: 998.0}   # water at 20 C
-      supply: {length_m: 0.5, radius_m: 0.8e-3}      # optional: syringe to the fed segment
+      supply: {length_m: 0.5, radius_m: 0.8e-3}      # syringe to the fed segment: optional,
+                                                    # but needed behind a scene's supply line
       feeds: bottom                                 # the segment the syringe feeds: the base
       channels:                                     # base to tip, one per neighbouring pair
         - {length_m: 0.01, radius_m: 0.25e-3, inertance: false, minor_loss: 0.0,
