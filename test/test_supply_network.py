@@ -401,6 +401,25 @@ def test_solve_writes_the_line_s_state_and_the_volumes_keep_the_mass(fig1_behind
     assert abs(float(balance + snaps['supply_exchanged_m3'])) < 1e-12 * scene.capacity
 
 
+def test_a_resumed_dynamic_model_finds_the_line_s_fluid_by_mass(fig1_behind_air):
+    # The rig saves the injected volume and the segments' volumes; the line's fluid is what
+    # the segments do not hold of the injected volume, so a resumed model's line is at the
+    # pressure it had (its law of that fluid alone), to round-off.
+    scene, _ = fig1_behind_air
+    model = actuator_model(scene)
+    for k in range(1, 51):
+        model.command(k * 0.2 * ML, k * 100_000_000)
+    before = model.state()
+    held = model.flow_network.line_state()[0]
+    assert held > 1e-8
+    resumed = actuator_model(scene)
+    resumed.resume(**model.saved())
+    after = resumed.state()
+    assert after.volumes == before.volumes
+    assert after.pressure == pytest.approx(before.pressure, rel=1e-9)
+    assert resumed.flow_network.line_state()[0] == pytest.approx(held, rel=1e-9)
+
+
 def test_the_rig_runs_a_network_behind_a_line_and_its_report_places_the_states(tmp_path):
     from softseq_ros.analysis.recording import load_recording
     from softseq_ros.analysis.report import SceneMismatchError
