@@ -81,9 +81,9 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
         profile = loaded.pump.profile
         if history is None:
             return programme_path(loaded.segments, loaded.network, profile,
-                                  rate_hz=loaded.pump.rate_hz)
+                                  rate_hz=loaded.pump.rate_hz, line=loaded.supply)
         return history_path(loaded.segments, loaded.network, history, profile.flow_rate,
-                            times=times)
+                            times=times, line=loaded.supply)
     from softseq_ros.quasistatic.equilibrium import Tracker
     from softseq_ros.quasistatic.reach import check_scene_reach, start_tracker
     from softseq_ros.quasistatic.solve import equilibrium_map

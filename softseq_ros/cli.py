@@ -110,7 +110,7 @@ def _write_network_path(args: argparse.Namespace, scene: Any, path: Any, timed: 
     profile = scene.pump.profile
     snaps_out, folds_out = snaps_file(args.out), folds_file(args.out)
     write_path(args.out, path, scene.segment_names)
-    write_snaps(snaps_out, path.snaps, scene.segment_names)
+    write_snaps(snaps_out, path.snaps, scene.segment_names, line=scene.supply is not None)
     write_folds(folds_out, path.folds)
     pushed = (f'at the times of {args.path}' if timed
               else f'pump at {profile.flow_rate * 1e6:g} mL/s')

@@ -179,7 +179,8 @@ def rate_point(point: RatePoint) -> dict:
     row: dict[str, Any] = {'flow_rate_m3_per_s': point.flow_rate_m3_per_s,
                            'channel_radius_m': point.channel_radius_m, 'refused': ''}
     try:
-        path = programme_path(scene.segments, scene.network, profile, times=times)
+        path = programme_path(scene.segments, scene.network, profile, times=times,
+                              line=scene.supply)
     except NetworkDomainError as err:
         # One point of the map out of reach (the pump outruns the channel and fills the base
         # past its curve) says so in its row; the others still run.

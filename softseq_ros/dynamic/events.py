@@ -12,12 +12,14 @@ tolerance tightens instead of depending on where the steps fall:
 - a segment's volume crossing a level (the end of its curve, the volume where its collapse
   reaches vacuum, a fold of its curve): the root of a cubic (:func:`first_beyond`,
   :func:`crossings`);
-- the exchange between the segments, half of sum_i |dv_i/dt| less the pump's |Q|: a
-  piecewise quadratic (the pieces end where a rate changes sign); a snap-through is an
-  episode where it exceeds SNAP_EXCHANGE_PER_FLOW |Q| (:class:`SnapWatcher`), whose start and
-  end are roots, whose fluid moved is the exchange's integral (piecewise cubic), whose 10 % and
-  90 % times invert that integral, and whose peak is found where the quadratic peaks (its value
-  there from the equations themselves, at the state the step's cubic gives);
+- the exchange between the segments, half of sum_i |dv_i/dt| less the pump's |Q| (behind a
+  compliant supply line the line is one more member, its ds/dt in the sum, as it is in the
+  quasi-static equilibrium): a piecewise quadratic (the pieces end where a rate changes
+  sign); a snap-through is an episode where it exceeds SNAP_EXCHANGE_PER_FLOW |Q|
+  (:class:`SnapWatcher`), whose start and end are roots, whose fluid moved is the exchange's
+  integral (piecewise cubic), whose 10 % and 90 % times invert that integral, and whose peak
+  is found where the quadratic peaks (its value there from the equations themselves, at the
+  state the step's cubic gives);
 - each channel's peak flow (for its Reynolds number): a quadratic's largest magnitude.
 
 Unlike event location that tests a function's sign at the step points (scipy's solve_ivp
@@ -156,7 +158,10 @@ class StepCurve:
 
     Segment i holds ``starts[i] + q0 x + q1 x^2 + q2 x^3`` ([m^3]) at t = t_old + h x, x in
     [0, 1], with ``cubics[i] = (q0, q1, q2)``; ``flow`` is the pump's flow in the step,
-    ``feed`` the segment it enters and ``injected`` the injected volume at the step's start.
+    ``feed`` the segment the syringe feeds and ``injected`` the injected volume at the step's
+    start. Behind a compliant supply line the pump pushes into the line, which holds
+    ``line_start`` plus ``line_cubic`` in x, and the supply tube passes the rest on to the fed
+    segment (None: no line, the pump's flow enters the fed segment).
     """
 
     t_old: float
@@ -166,6 +171,8 @@ class StepCurve:
     flow: float
     feed: int
     injected: float
+    line_start: float | None = None
+    line_cubic: tuple[float, float, float] | None = None
 
     def injected_at(self, x: float) -> float:
         """The injected volume [m^3] at ``x``."""
@@ -183,14 +190,38 @@ class StepCurve:
         """The segments' volumes [m^3] at ``x``."""
         return [_cubic(s, q, x) for s, q in zip(self.starts, self.cubics)]
 
+    def line_held(self, x: float) -> float:
+        """The fluid [m^3] the supply line holds at ``x`` (a step behind a compliant line)."""
+        return _cubic(self.line_start, self.line_cubic, x)
+
     def rates(self) -> list[tuple[float, float, float]]:
         """Each segment's dv_i/dt [m^3/s] as (a, b, c): a + b x + c x^2."""
         h = self.h
         return [(q0 / h, 2.0 * q1 / h, 3.0 * q2 / h) for q0, q1, q2 in self.cubics]
 
+    def member_rates(self) -> list[tuple[float, float, float]]:
+        """The segments' rates and, behind a compliant line, the line's ds/dt last."""
+        rates = self.rates()
+        if self.line_cubic is not None:
+            q0, q1, q2 = self.line_cubic
+            h = self.h
+            rates.append((q0 / h, 2.0 * q1 / h, 3.0 * q2 / h))
+        return rates
+
     def channel_flows(self) -> list[tuple[float, float, float]]:
         """Each channel's flow [m^3/s] towards the tip as a quadratic, by mass."""
         flows, carried = [], (0.0, 0.0, 0.0)
+        if self.line_cubic is not None:
+            # What enters the fed segment is the supply tube's flow, the pump's less what the
+            # line takes up: Q - ds/dt.
+            line = self.member_rates()[-1]
+            fed = (self.flow - line[0], -line[1], -line[2])
+            for i, (a, b, c) in enumerate(self.rates()[:-1]):
+                entering = fed if i == self.feed else (0.0, 0.0, 0.0)
+                carried = (carried[0] + entering[0] - a, carried[1] + entering[1] - b,
+                           carried[2] + entering[2] - c)
+                flows.append(carried)
+            return flows
         for i, (a, b, c) in enumerate(self.rates()[:-1]):
             pumped = self.flow if i == self.feed else 0.0
             carried = (carried[0] + pumped - a, carried[1] - b, carried[2] - c)
@@ -263,6 +294,11 @@ class DynamicSnap:
     what the pump pushed; volumes and pressures (gauge, at the segment the pump feeds) before
     and after; ``exchanged_m3``: per segment, the fluid it gained from the others (negative:
     gave), its volume's change less the pump's push into it.
+
+    Behind a compliant supply line the line is one more member (the pump pushes into it, not
+    into the fed segment): ``exchanged_line_m3`` is what the line gained from the segments
+    beyond the pump's push (negative: its gas expanded into them), and the fluid moved counts
+    its share; None without a line.
     """
 
     injected: float
@@ -277,6 +313,7 @@ class DynamicSnap:
     to_pressure: float
     exchanged_m3: list[float] = field(default_factory=list)
     peak_s: float = math.nan
+    exchanged_line_m3: float | None = None
 
     def giving(self) -> list[int]:
         """The segments (indices) that gave fluid to the others."""
@@ -290,7 +327,12 @@ class DynamicSnap:
 
 
 def exchange_flow(volume_rates: Sequence[float], supply_flow: float) -> float:
-    """Fluid moving between the segments beyond the pump's flow [m^3/s]."""
+    """
+    Fluid moving between the members beyond the pump's flow [m^3/s].
+
+    ``volume_rates``: every member's rate, the segments' and, behind a compliant line, the
+    line's; ``supply_flow``: the pump's flow into them all.
+    """
     return 0.5 * max(sum(abs(r) for r in volume_rates) - abs(supply_flow), 0.0)
 
 
@@ -304,6 +346,7 @@ class _Episode:
     pressure: float
     fresh: bool
     first_exchange: float
+    line_held: float | None
     # (t at x = 0, h, lo, hi, (a, b, c) of the exchange in x, integral before lo [m^3])
     pieces: list[tuple[float, float, float, float, tuple[float, float, float], float]] = \
         field(default_factory=list)
@@ -347,7 +390,7 @@ class SnapWatcher:
             return []
         flow = abs(curve.flow)
         threshold = SNAP_EXCHANGE_PER_FLOW * flow
-        rates = curve.rates()
+        rates = curve.member_rates()
         if self._episode is None:
             # Nothing under way and no exchange anywhere near the threshold: the usual step.
             bound = sum(_largest_magnitude(a, b, c, lo, hi) for a, b, c in rates)
@@ -392,8 +435,9 @@ class SnapWatcher:
         if episode is None:
             injected, volumes, pressure = state_at(curve, lo)
             a, b, c = exchange
+            line_held = None if curve.line_cubic is None else curve.line_held(lo)
             episode = self._episode = _Episode(curve.time(lo), injected, volumes, pressure,
-                                               fresh, a + b * lo + c * lo * lo)
+                                               fresh, a + b * lo + c * lo * lo, line_held)
         episode.pieces.append((curve.t_old, curve.h, lo, hi, exchange, episode.moved))
         episode.moved += curve.h * _integral(exchange, lo, hi)
         peak, where = quadratic_extreme(*exchange, lo, hi)
@@ -417,11 +461,17 @@ class SnapWatcher:
         injected, volumes, pressure = state_at(curve, x)
         pumped = injected - episode.injected
         exchanged = [after - before for after, before in zip(volumes, episode.volumes)]
-        exchanged[curve.feed] -= pumped
+        line_exchanged = None
+        if episode.line_held is None:
+            exchanged[curve.feed] -= pumped
+        else:
+            # The pump pushed into the line: what the line gained beyond that came from the
+            # segments (the segments' own changes are all exchange).
+            line_exchanged = curve.line_held(x) - episode.line_held - pumped
         t10, t90 = (_time_at_share(episode, share * total) for share in (0.1, 0.9))
         snap = DynamicSnap(episode.injected, episode.start_s, curve.time(x), t90 - t10, total,
                            episode.peak, episode.volumes, volumes, episode.pressure, pressure,
-                           exchanged, episode.peak_s)
+                           exchanged, episode.peak_s, line_exchanged)
         self.found.append(snap)
         return snap
 

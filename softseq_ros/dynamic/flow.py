@@ -10,6 +10,11 @@ drop ``L_j dq_j/dt + R_j q_j + a_j q_j |q_j|`` (softseq_ros.dynamic.network). So
     mass: v_tip = (rest volumes) + (injected volume) - (the other volumes),
 
 which keeps the sum of the volumes equal to the injected volume to round-off at every instant.
+Behind a compliant supply line (a scene's ``supply``: trapped gas and the line's compliance,
+softseq_ros.segments.supply) the pump pushes Q into the line instead, which holds s at its
+pressure p_s(s), and the supply tube carries q_s from it into segment f, driven by p_s - p_f:
+ds/dt = Q - q_s and q_s replaces Q above; s (and q_s, when the tube's inertia counts) joins
+the state, and the tip's volume is the injected volume less s and the others'.
 A channel without inertance carries the flow its pressure drop drives at once; one with it
 has its flow as a state. The state (the volumes but the tip's, the inertial flows) is stiff
 where the channels are short and wide, so it is integrated by scipy's Radau (implicit,
@@ -57,8 +62,9 @@ from softseq_ros.dynamic.integrators import (
 )
 from softseq_ros.dynamic.network import TubeLaw, tube_law
 from softseq_ros.errors import UserError
-from softseq_ros.scene.network import NetworkSettings
+from softseq_ros.scene.network import NO_SUPPLY_TUBE, NetworkSettings
 from softseq_ros.segments.models import Segment
+from softseq_ros.segments.supply import CompliantSupply
 
 FloatArray = NDArray[np.float64]
 # Absolute tolerances: this share of the volume scale for a volume, of the volume scale per
@@ -102,13 +108,17 @@ class NetworkFlow:
     """The network's state in time: volumes, channel flows, and the supply flow now."""
 
     def __init__(self, segments: Sequence[Segment], network: NetworkSettings,
-                 rtol: float | None = None, integrator: str = 'radau') -> None:
+                 rtol: float | None = None, integrator: str = 'radau',
+                 line: CompliantSupply | None = None) -> None:
         """
         At rest at time 0, no supply flow; ``rtol`` overrides the network's tolerance.
 
         ``integrator``: one of softseq_ros.dynamic.integrators.METHODS ('radau', the default,
-        or 'scipy-radau').
+        or 'scipy-radau'). ``line``: the syringe line's trapped gas and compliance (a scene's
+        ``supply``), between the piston and the supply tube, which the network then needs.
         """
+        if line is not None and network.supply is None:
+            raise ValueError(NO_SUPPLY_TUBE)
         if len(network.channels) != len(segments) - 1:
             raise ValueError(f'{len(segments)} segments need {len(segments) - 1} channels, got '
                              f'{len(network.channels)}')
@@ -131,13 +141,21 @@ class NetworkFlow:
         self.rest_total = float(self.rest.sum())
         self.v_scale = float(np.sum(self.full - self.rest))
         self.rtol = float(network.rtol if rtol is None else rtol)
-        size = self.n - 1 + len(self.inertial)
+        # The line: the fluid it holds after the volumes and the inertial channels' flows, then
+        # the supply tube's flow when its inertia counts (else the tube carries the flow its
+        # drop drives at once).
+        self.line = line
+        self._line_pressure_of = None if line is None else line.line_pressure
+        self._line_at = self.n - 1 + len(self.inertial)
+        self._supply_inertial = line is not None and self.supply.inertance > 0.0
+        self._line_size = 0 if line is None else 1 + int(self._supply_inertial)
+        size = self._line_at + self._line_size
         self.atol = np.full(size, self.rtol * ATOL_SHARE * self.v_scale)
         self.t = 0.0
         self.injected = 0.0
         self.flow = 0.0
         self._y_pending = False
-        self.y = np.concatenate([self.rest[:-1], np.zeros(len(self.inertial))])
+        self.y = np.concatenate([self.rest[:-1], np.zeros(len(self.inertial) + self._line_size)])
         self.peak_reynolds = [0.0] * len(self.laws)
         self.steps = 0
         self.snaps = SnapWatcher(self.v_scale)
@@ -160,6 +178,12 @@ class NetworkFlow:
                        for pressure, (lo, _), collapse in zip(self._pressure_of, self._bounds,
                                                               self._collapse)]
         self._folds = [segment_folds(s) for s in self.segments]
+        # Nor does the line draw a suction beyond vacuum (absolute zero at its ambient): a line
+        # of compliance alone can reach it, the fluid it holds then C times that suction; gas
+        # expands without bound short of it (no level).
+        self._line_lower = -math.inf
+        if line is not None and line.gas_volume == 0.0:
+            self._line_lower = -line.compliance * line.ambient
         # Whether the last watched step had fluid moving between the segments (a transient).
         self.exchanging = False
         # The integrator's last step as the segments' volume cubics, how far it has been
@@ -185,7 +209,10 @@ class NetworkFlow:
 
     def _volume_list(self, state: list[float], injected: float) -> list[float]:
         others = state[:self.n - 1]
-        return others + [self.rest_total + injected - sum(others)]
+        tip = self.rest_total + injected - sum(others)
+        if self.line is not None:
+            tip -= state[self._line_at]
+        return others + [tip]
 
     def pressures(self, volumes: FloatArray) -> FloatArray:
         """
@@ -230,6 +257,9 @@ class NetworkFlow:
     def _balance(self, t: float, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray,
                                                               FloatArray]:
         """Volumes, pressures, channel flows and the state's rates at time ``t``."""
+        if self.line is not None:
+            volumes, pressures, flows, _, _, rates = self._line_balance(t, y.tolist())
+            return np.array(volumes), np.array(pressures), np.array(flows), np.array(rates)
         state = y.tolist()
         volumes = self._volume_list(state, self._injected_at(t))
         pressures = self._pressure_list(volumes)
@@ -266,7 +296,65 @@ class NetworkFlow:
             rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
         return np.array(rates)
 
+    def _line_balance(self, t: float, state: list[float]) -> tuple[
+            list[float], list[float], list[float], float, float, list[float]]:
+        """
+        Volumes, pressures, channel flows, line pressure, supply flow and rates behind a line.
+
+        At time ``t``. The piston pushes Q into the line, which holds s at gauge pressure
+        p_s(s) (softseq_ros.segments.supply); the supply tube carries q_s from the line into
+        the fed segment, driven by p_s - p_f:
+
+            ds/dt = Q - q_s,   dv_i/dt = [i = f] q_s + q_(i-1) - q_i,
+            L_s dq_s/dt = p_s - p_f - drop_s(q_s)   (or q_s = drop_s^-1(p_s - p_f) at once),
+
+        and the tip's volume from mass, the injected volume less the line's fluid and the
+        others' (so the segments and the line hold what the piston pushed, to round-off).
+        """
+        last = self.n - 1
+        others = state[:last]
+        held = state[self._line_at]
+        volumes = others + [self.rest_total + self._injected_at(t) - sum(others) - held]
+        pressures = self._pressure_list(volumes)
+        flows = self._flow_list(state, pressures)
+        line_pressure = self._line_pressure_of(held)
+        feed_drop = line_pressure - pressures[self.feed]
+        supply_flow = (state[self._line_at + 1] if self._supply_inertial
+                       else self._supply_flow(feed_drop))
+        rates = [(flows[i - 1] if i else 0.0) - flows[i] for i in range(last)]
+        if self.feed < last:
+            rates[self.feed] += supply_flow
+        for j in self.inertial:
+            law = self.laws[j]
+            rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
+        rates.append(self.flow - supply_flow)
+        if self._supply_inertial:
+            rates.append((feed_drop - self.supply.drop(supply_flow)) / self.supply.inertance)
+        return volumes, pressures, flows, line_pressure, supply_flow, rates
+
+    def _line_rates(self, t: float, y: FloatArray) -> FloatArray:
+        """The state's rates behind a compliant line (what the integrator asks for)."""
+        return np.array(self._line_balance(t, y.tolist())[5])
+
+    def _line_rate_of_one(self, t: float, held: float) -> float:
+        """One segment behind a line and a tube without inertance: ds/dt on a float."""
+        start_t, start_injected = self._origin
+        volume = self.rest_total + (start_injected + self.flow * (t - start_t)) - held
+        fed = self._pressure_list([volume])[0]
+        return self.flow - self._supply_flow(self._line_pressure_of(held) - fed)
+
+    def _supply_flow(self, drop: float) -> float:
+        """The supply tube's flow [m^3/s] from the line into the fed segment at ``drop`` [Pa]."""
+        if not math.isfinite(drop):
+            # A line of gas alone asked to hold its own volume (an integrator's trial stage):
+            # no flow answers it, and the integrator shortens the step.
+            return math.nan
+        return self.supply.flow(drop)
+
     def _new_solver(self) -> Integrator:
+        if self.line is not None:
+            return new_integrator(self.integrator, self._line_rates, self._line_rate_of_one,
+                                  self.t, self.y, self.t + HORIZON_S, self.rtol, self.atol)
         return new_integrator(self.integrator, self._rates, self._rate_of_one, self.t, self.y,
                               self.t + HORIZON_S, self.rtol, self.atol)
 
@@ -302,7 +390,10 @@ class NetworkFlow:
         self._materialise()
         self._end_integration()
         self.y = self.y.copy()
-        if self.feed < self.n - 1:
+        if self.line is not None:
+            # The piston pushes into the line; the supply tube passes it on in time.
+            self.y[self._line_at] += volume
+        elif self.feed < self.n - 1:
             # The tip's volume follows from the injected volume by mass.
             self.y[self.feed] += volume
         self.injected += volume
@@ -312,10 +403,18 @@ class NetworkFlow:
             self._restart_watch()
 
     def set_volumes(self, volumes: Sequence[float], injected: float) -> None:
-        """Put the segments at ``volumes`` at rest (no channel flow): a resume."""
+        """
+        Put the segments at ``volumes`` at rest (no channel flow): a resume.
+
+        Behind a compliant line, the line holds what the segments do not of ``injected``.
+        """
         self._end_integration()
+        line_state = []
+        if self.line is not None:
+            held = float(injected) - float(np.sum(np.asarray(volumes, dtype=float) - self.rest))
+            line_state = [held] + [0.0] * int(self._supply_inertial)
         self.y = np.concatenate([np.asarray(volumes[:-1], dtype=float),
-                                 np.zeros(len(self.inertial))])
+                                 np.zeros(len(self.inertial)), line_state])
         self.injected = float(injected)
         self._origin = (self.t, self.injected)
         self._now = None
@@ -406,21 +505,30 @@ class NetworkFlow:
         """The last step's continuous solution (its collocation cubic), as segment volumes."""
         if isinstance(solver, ScalarRadau):
             t_old, h, start, cubic = solver.sol
-            starts, cubics = [start], [cubic]
+            state_starts, state_cubics = [start], [cubic]
         else:
             if self._dense is _PENDING:
                 self._dense = StepInterpolant(solver.dense_output())
             dense = self._dense
             t_old, h = dense.dense.t_old, dense.dense.h
-            starts = dense.start[:self.n - 1]
-            cubics = [tuple(row) for row in dense.rows[:self.n - 1]]
-        # The tip's volume by mass: the rest volumes and what was injected, less the others.
+            state_starts, state_cubics = dense.start, dense.rows
+        starts = state_starts[:self.n - 1]
+        cubics = [tuple(row) for row in state_cubics[:self.n - 1]]
+        # The tip's volume by mass: the rest volumes and what was injected, less the others
+        # (and less what the line holds).
         injected = self._injected_at(t_old)
         tip_start = self.rest_total + injected - sum(starts)
         tip = (self.flow * h - sum(q[0] for q in cubics), -sum(q[1] for q in cubics),
                -sum(q[2] for q in cubics))
+        if self.line is None:
+            return StepCurve(t_old, h, (*starts, tip_start), (*cubics, tip), self.flow,
+                             self.feed, injected)
+        line_start = state_starts[self._line_at]
+        line_cubic = tuple(state_cubics[self._line_at])
+        tip_start -= line_start
+        tip = tuple(q - s for q, s in zip(tip, line_cubic))
         return StepCurve(t_old, h, (*starts, tip_start), (*cubics, tip), self.flow, self.feed,
-                         injected)
+                         injected, line_start, line_cubic)
 
     def _first_exit(self, curve: StepCurve) -> tuple[float, str]:
         """The first instant in a step where a segment leaves its range (inf: none), and why."""
@@ -431,6 +539,11 @@ class NetworkFlow:
                 x = first_beyond(start, cubic, 0.0, 1.0, level, sign)
                 if x is not None and curve.time(x) < first:
                     first, why = curve.time(x), f'{kind} {i}'
+        if curve.line_cubic is not None and self._line_lower > -math.inf:
+            x = first_beyond(curve.line_start, curve.line_cubic, 0.0, 1.0, self._line_lower,
+                             -1.0)
+            if x is not None and curve.time(x) < first:
+                first, why = curve.time(x), 'vacuum line'
         return first, why
 
     def _refuse_at_exit(self) -> None:
@@ -450,11 +563,16 @@ class NetworkFlow:
         self._origin = (self.t, self.injected)
         self._now = None
         kind, i = self._leaves_why.split()
-        segment = self.segments[int(i)]
-        volume = curve.volumes(x)[int(i)]
         self._solver = None
         self._curve = None
         self._leaves_at = math.inf
+        if i == 'line':
+            raise NetworkDomainError(
+                f'the supply line draws a suction beyond vacuum at {t:.6g} s '
+                f'({curve.line_held(x):.6g} m^3 held, injected {self.injected:.6g} m^3): the '
+                'syringe draws faster than the supply tube lets the fluid follow', located=True)
+        segment = self.segments[int(i)]
+        volume = curve.volumes(x)[int(i)]
         if kind == 'end':
             raise NetworkDomainError(
                 f'segment {segment.name} passes the end of its curve at {t:.6g} s '
@@ -530,6 +648,8 @@ class NetworkFlow:
         """All segment volumes (rows) of states (rows) at injected volumes (mass: the tip's)."""
         others = states[:, :self.n - 1]
         tip = self.rest_total + injected - others.sum(axis=1)
+        if self.line is not None:
+            tip = tip - states[:, self._line_at]
         return np.column_stack([others, tip])
 
     def row_pressures(self, volumes: FloatArray) -> FloatArray:
@@ -568,9 +688,29 @@ class NetworkFlow:
                 flows[:, j] = drops / law.resistance
             else:
                 flows[:, j] = [law.flow(d) for d in drops.tolist()]
+        if self.line is not None:
+            # The piston pushes on the line: the syringe's pressure is the line's.
+            return injected, volumes, flows, self.read_line(states, volumes)[1]
         syringe = pressures[:, self.feed] + (self.supply.drop(self.flow)
                                              if self.supply is not None else 0.0)
         return injected, volumes, flows, syringe
+
+    def read_line(self, states: FloatArray, volumes: FloatArray) -> tuple[
+            FloatArray, FloatArray, FloatArray]:
+        """
+        The line's fluid [m^3], its gauge pressure [Pa] and the supply tube's flow [m^3/s].
+
+        ``states``: rows of :meth:`advance_through`; ``volumes``: their segment volumes
+        (:meth:`states_volumes`). Only behind a compliant line (``line``).
+        """
+        if self.line is None:
+            raise ValueError('this network has no compliant supply line')
+        held = states[:, self._line_at]
+        pressure = np.array([self._line_pressure_of(s) for s in held.tolist()])
+        if self._supply_inertial:
+            return held, pressure, states[:, self._line_at + 1]
+        drops = pressure - self.row_pressures(volumes)[:, self.feed]
+        return held, pressure, np.array([self._supply_flow(d) for d in drops.tolist()])
 
     def take_snaps(self) -> list[DynamicSnap]:
         """The snap-throughs completed since the last call."""
@@ -603,12 +743,29 @@ class NetworkFlow:
         rates = [solver.f] if isinstance(solver, ScalarRadau) else solver.f.tolist()
         self._note_exchange(rates)
 
-    def _note_exchange(self, rates: list[float]) -> None:
-        """Whether fluid moves between the segments at an instant (a transient runs)."""
-        # The tip's rate from mass: the pump's flow less the others'.
+    def _member_rates(self, rates: list[float], flow: float) -> list[float]:
+        """
+        How fast each member's fluid changes [m^3/s], from the state's rates at a pump flow.
+
+        The segments' volumes, the tip's from mass (the pump's flow less the others'), and
+        behind a compliant line, last, the line's fluid: the line is a member the pump feeds,
+        as in the quasi-static equilibrium, so fluid the line gives a segment faster than the
+        pump refills it (its gas expanding into a snapping segment) is exchange, and the
+        exchange beyond the pump's own flow is counted on them all
+        (softseq_ros.dynamic.events.exchange_flow).
+        """
         volume_rates = rates[:self.n - 1]
-        volume_rates.append(self.flow - sum(volume_rates))
-        exchange = exchange_flow(volume_rates, self.flow)
+        if self.line is None:
+            volume_rates.append(flow - sum(volume_rates))
+            return volume_rates
+        line_rate = rates[self._line_at]
+        volume_rates.append(flow - sum(volume_rates) - line_rate)
+        volume_rates.append(line_rate)
+        return volume_rates
+
+    def _note_exchange(self, rates: list[float]) -> None:
+        """Whether fluid moves between the members at an instant (a transient runs)."""
+        exchange = exchange_flow(self._member_rates(rates, self.flow), self.flow)
         self.exchanging = exchange > max(QUIET_SHARE_OF_FLOW * abs(self.flow),
                                          float(self.atol[0]))
 
@@ -645,9 +802,9 @@ class NetworkFlow:
         if self._dense is _PENDING:
             self._dense = StepInterpolant(self._solver.dense_output())
         t = curve.time(x)
-        rates = self._rates(t, np.asarray(self._dense(t), dtype=float)).tolist()[:self.n - 1]
-        rates.append(curve.flow - sum(rates))
-        return exchange_flow(rates, curve.flow)
+        rates_of = self._rates if self.line is None else self._line_rates
+        rates = rates_of(t, np.asarray(self._dense(t), dtype=float)).tolist()
+        return exchange_flow(self._member_rates(rates, curve.flow), curve.flow)
 
     def _state_at(self, curve: StepCurve, x: float) -> tuple[float, list[float], float]:
         """Injected volume, volumes and the fed segment's gauge pressure at ``x`` in a step."""
@@ -707,9 +864,30 @@ class NetworkFlow:
         return np.array(self.now()[2])
 
     def syringe_pressure(self) -> float:
-        """The gauge pressure [Pa] at the syringe: the fed segment's plus the supply line's."""
+        """
+        The gauge pressure [Pa] at the syringe: the fed segment's plus the supply line's drop.
+
+        Behind a compliant line, the line's own (the piston pushes on it).
+        """
+        if self.line is not None:
+            return self.line_state()[1]
         fed = self.now()[1][self.feed]
         return fed + (self.supply.drop(self.flow) if self.supply is not None else 0.0)
+
+    def line_state(self) -> tuple[float, float, float]:
+        """
+        The line's fluid [m^3], gauge pressure [Pa] and supply tube's flow [m^3/s] now.
+
+        Behind a compliant line only; the flow is the one into the fed segment.
+        """
+        if self.line is None:
+            raise ValueError('this network has no compliant supply line')
+        state = self._state_list()
+        held = state[self._line_at]
+        pressure = self._line_pressure_of(held)
+        if self._supply_inertial:
+            return held, pressure, state[self._line_at + 1]
+        return held, pressure, self._supply_flow(pressure - self.now()[1][self.feed])
 
 
 def _mean_stiffness(segment: Segment) -> float:

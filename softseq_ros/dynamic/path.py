@@ -31,6 +31,7 @@ from softseq_ros.scene.csv_columns import write_rows
 from softseq_ros.scene.network import NetworkSettings
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.segments.models import Segment
+from softseq_ros.segments.supply import CompliantSupply
 
 FloatArray = NDArray[np.float64]
 
@@ -67,8 +68,9 @@ class DynamicPath:
     """
     The network's state at the sample times, in time order (one row per sample).
 
-    ``pressure`` is the syringe's gauge pressure [Pa] (the base segment's plus the supply
-    line's drop), ``segment_pressure[:, i]`` segment i's own [Pa, gauge];
+    ``pressure`` is the syringe's gauge pressure [Pa] (the fed segment's plus the supply
+    line's drop; behind a compliant line, the line's), ``segment_pressure[:, i]`` segment i's
+    own [Pa, gauge];
     ``channel_flows[:, j]`` flows from segment j to j + 1 [m^3/s]; ``snap[i]`` says a
     snap-through started after sample i - 1 and by sample i; ``snaps`` are all the
     snap-throughs that ran their course by the last sample; ``peak_reynolds[j]`` is channel
@@ -82,6 +84,10 @@ class DynamicPath:
     pulled a suction beyond vacuum while the others still held fluid the channels had not yet
     let through (softseq_ros.dynamic.flow: a collapse short of that is followed), so the rows
     end at the last sample before it.
+
+    Behind a compliant supply line (a scene's ``supply``), per sample: ``line_volume`` the
+    fluid the line holds [m^3], ``line_pressure`` its gauge pressure [Pa] and
+    ``supply_flow`` the supply tube's flow into the fed segment [m^3/s]; None without a line.
     """
 
     time_s: FloatArray
@@ -97,6 +103,9 @@ class DynamicPath:
     drained: str | None = None
     folds: list[FoldCrossing] = field(default_factory=list)
     segment_pressure: FloatArray = field(default_factory=lambda: np.empty((0, 0)))
+    line_volume: FloatArray | None = None
+    line_pressure: FloatArray | None = None
+    supply_flow: FloatArray | None = None
 
 
 def programme_schedule(profile: PumpProfile) -> tuple[FlowSchedule, float]:
@@ -167,13 +176,14 @@ def timed_history_schedule(times: ArrayLike, history: ArrayLike) -> FlowSchedule
 
 def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
                  schedule: FlowSchedule, sample_times: ArrayLike,
-                 rtol: float | None = None) -> DynamicPath:
+                 rtol: float | None = None, line: CompliantSupply | None = None) -> DynamicPath:
     """
     Integrate the network along ``schedule`` and read its state at ``sample_times`` [s].
 
     The sample times must be >= 0 and in order; each leg's flow is set exactly at its start,
     so a sample at a leg's boundary sees the flow of the leg that starts there. ``rtol``
-    overrides the network's tolerance. A segment pushed beyond its curve raises
+    overrides the network's tolerance; ``line`` is the syringe line's trapped gas and
+    compliance (a scene's ``supply``). A segment pushed beyond its curve raises
     :class:`softseq_ros.dynamic.flow.NetworkDomainError` (a UserError).
     """
     samples = np.asarray(sample_times, dtype=float)
@@ -181,9 +191,11 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
         raise PathError('at least one sample time is needed')
     if not np.all(np.isfinite(samples)) or samples[0] < 0.0 or np.any(np.diff(samples) < 0.0):
         raise PathError('sample times must be finite, >= 0 s and in order')
-    fluid = NetworkFlow(segments, network, rtol=rtol)
+    fluid = NetworkFlow(segments, network, rtol=rtol, line=line)
     n, channels = len(fluid.segments), len(fluid.laws)
     volumes = np.empty((samples.size, n))
+    # The line's fluid, pressure and the supply tube's flow (columns), behind a line.
+    line_rows = np.empty((samples.size, 3 if line is not None else 0))
     flows = np.empty((samples.size, channels))
     pressure = np.empty(samples.size)
     injected = np.empty(samples.size)
@@ -230,10 +242,13 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
         rows = slice(i, i + states.shape[0])
         injected[rows], volumes[rows], flows[rows], pressure[rows] = fluid.read_states(
             times[:states.shape[0]], states)
+        if line is not None:
+            line_rows[rows] = np.column_stack(fluid.read_line(states, volumes[rows]))
         if drained is not None:
             break
         i = stop
     samples, volumes, flows = samples[:reached], volumes[:reached], flows[:reached]
+    line_rows = line_rows[:reached]
     pressure, injected = pressure[:reached], injected[:reached]
     curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, k]), dtype=float)
                                   for k, s in enumerate(fluid.segments)])
@@ -242,19 +257,24 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
         row = int(np.searchsorted(samples, found.start_s, side='left'))
         if row < samples.size:
             snap[row] = True
-    return DynamicPath(samples, injected, pressure, volumes, curvatures, flows, snap, snaps,
+    path = DynamicPath(samples, injected, pressure, volumes, curvatures, flows, snap, snaps,
                        [float(x) for x in fluid.peak_reynolds], fluid.steps, drained, folds,
                        fluid.row_pressures(volumes))
+    if line is not None:
+        path.line_volume, path.line_pressure, path.supply_flow = line_rows.T.copy()
+    return path
 
 
 def programme_path(segments: Sequence[Segment], network: NetworkSettings,
                    profile: PumpProfile, times: ArrayLike | None = None,
-                   rate_hz: float | None = None, rtol: float | None = None) -> DynamicPath:
+                   rate_hz: float | None = None, rtol: float | None = None,
+                   line: CompliantSupply | None = None) -> DynamicPath:
     """
     The dynamic path along a pump programme, at ``times`` [s] or at ``rate_hz`` [Hz].
 
     Times are on the programme's clock (0 at the start of its first leg); by default the
-    programme is sampled as the pump publishes it (``rate_hz``, its end included).
+    programme is sampled as the pump publishes it (``rate_hz``, its end included). ``line``:
+    the syringe line behind the network (:func:`run_schedule`).
     """
     schedule, lead = programme_schedule(profile)
     if times is None:
@@ -262,7 +282,7 @@ def programme_path(segments: Sequence[Segment], network: NetworkSettings,
             raise PathError('give the sample times or the rate to sample at')
         times, _ = profile.sample(rate_hz)
     path = run_schedule(segments, network, schedule, np.asarray(times, dtype=float) + lead,
-                        rtol)
+                        rtol, line)
     if lead > 0.0:
         path.time_s = path.time_s - lead
         path.snaps = [replace(s, start_s=s.start_s - lead, end_s=s.end_s - lead,
@@ -273,40 +293,54 @@ def programme_path(segments: Sequence[Segment], network: NetworkSettings,
 
 def history_path(segments: Sequence[Segment], network: NetworkSettings, history: ArrayLike,
                  flow_rate: float, rtol: float | None = None,
-                 times: ArrayLike | None = None) -> DynamicPath:
+                 times: ArrayLike | None = None,
+                 line: CompliantSupply | None = None) -> DynamicPath:
     """
     The dynamic path along a volume history, row by row.
 
     Pushed at ``flow_rate`` [m^3/s] from row to row, or, with ``times`` [s], at each row's
-    time (:func:`timed_history_schedule`: holds included).
+    time (:func:`timed_history_schedule`: holds included). ``line``: the syringe line behind
+    the network (:func:`run_schedule`).
     """
     if times is None:
         schedule, row_times = history_schedule(history, flow_rate)
     else:
         schedule, row_times = timed_history_schedule(times, history), np.asarray(times, float)
-    return run_schedule(segments, network, schedule, row_times, rtol)
+    return run_schedule(segments, network, schedule, row_times, rtol, line)
 
 
-def path_columns(names: Sequence[str]) -> list[str]:
+# Behind a compliant supply line: the line's gauge pressure, the fluid it holds and the supply
+# tube's flow into the fed segment. Named apart from the per-segment columns (which start with
+# pressure_, volume_, curvature_ and flow_), so no segment's name can make a column twice.
+LINE_COLUMNS = ['supply_pressure_pa', 'supply_volume_m3', 'supply_flow_m3_per_s']
+
+
+def path_columns(names: Sequence[str], line: bool = False) -> list[str]:
     """
     Column names of a dynamic path's CSV for segments ``names`` (base to tip).
 
     The quasi-static path's columns (``pressure_pa`` is the syringe's gauge pressure here),
     with the time first, each segment's own gauge pressure after the syringe's, and each
-    channel's flow before the event column.
+    channel's flow before the event column; behind a compliant supply line (``line``),
+    LINE_COLUMNS after the channels' flows.
     """
     flows = [f'flow_{a}_to_{b}_m3_per_s' for a, b in zip(names[:-1], names[1:])]
     return (['time_s', 'injected_m3', 'pressure_pa'] + [f'pressure_{n}_pa' for n in names]
             + [f'volume_{n}_m3' for n in names]
-            + [f'curvature_{n}_per_m' for n in names] + flows + ['event'])
+            + [f'curvature_{n}_per_m' for n in names] + flows
+            + (LINE_COLUMNS if line else []) + ['event'])
 
 
 def write_path(out: str | Path, path: DynamicPath, names: Sequence[str]) -> None:
     """One row per sample; ``event`` is ``snap`` where a snap-through started."""
-    write_rows(out, path_columns(names), (
+    line = path.line_volume is not None
+    line_rows = (np.column_stack([path.line_pressure, path.line_volume, path.supply_flow])
+                 if line else np.empty((path.time_s.size, 0)))
+    write_rows(out, path_columns(names, line), (
         ((path.time_s[i], path.injected[i], path.pressure[i], *path.segment_pressure[i],
           *path.volumes[i],
-          *path.curvatures[i], *path.channel_flows[i]), 'snap' if path.snap[i] else '')
+          *path.curvatures[i], *path.channel_flows[i], *line_rows[i]),
+         'snap' if path.snap[i] else '')
         for i in range(path.time_s.size)))
 
 
@@ -316,18 +350,22 @@ def snaps_file(out: str | Path) -> Path:
     return out.with_name(f'{out.stem}_snaps.csv')
 
 
-def snap_columns(names: Sequence[str]) -> list[str]:
+def snap_columns(names: Sequence[str], line: bool = False) -> list[str]:
     """
     Column names of the snap-throughs' CSV for segments ``names`` (base to tip).
 
     Numbers, then ``giving`` and ``taking``: the names of the segments that gave and took the
     fluid, separated by spaces. ``exchanged_<name>_m3`` is what a segment gained from the
-    others (its volume's change less the pump's push into it; negative: it gave).
+    others (its volume's change less the pump's push into it; negative: it gave). Behind a
+    compliant supply line (``line``) the pump pushes into the line, and
+    ``supply_exchanged_m3``, after the segments', is what the line gained from them beyond
+    that push (negative: its gas expanded into them).
     """
     return (['start_s', 'end_s', 'injected_m3', 'duration_s', 'fluid_moved_m3',
              'peak_exchange_m3_per_s', 'peak_s', 'from_pressure_pa', 'to_pressure_pa']
             + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names]
-            + [f'exchanged_{n}_m3' for n in names] + ['giving', 'taking'])
+            + [f'exchanged_{n}_m3' for n in names]
+            + (['supply_exchanged_m3'] if line else []) + ['giving', 'taking'])
 
 
 def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str]]) -> None:
@@ -339,12 +377,14 @@ def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str
         writer.writerows(rows)
 
 
-def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[str]) -> None:
-    """One row per snap-through (the header alone when there was none)."""
-    _write_table(out, snap_columns(names), ([repr(float(x)) for x in (
+def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[str],
+                line: bool = False) -> None:
+    """One row per snap-through (the header alone when there was none); ``line``: behind one."""
+    _write_table(out, snap_columns(names, line), ([repr(float(x)) for x in (
         snap.start_s, snap.end_s, snap.injected, snap.duration_s, snap.fluid_moved_m3,
         snap.peak_exchange_m3_per_s, snap.peak_s, snap.from_pressure, snap.to_pressure,
-        *snap.from_volumes, *snap.to_volumes, *snap.exchanged_m3)]
+        *snap.from_volumes, *snap.to_volumes, *snap.exchanged_m3,
+        *([snap.exchanged_line_m3] if line else []))]
         + [' '.join(names[i] for i in snap.giving()), ' '.join(names[i] for i in snap.taking())]
         for snap in snaps))
 

@@ -44,6 +44,7 @@ from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.scene.validation import SceneError
 from softseq_ros.segments.models import Segment
+from softseq_ros.segments.supply import CompliantSupply
 from softseq_ros.wire.contract import NS_PER_S
 
 
@@ -337,18 +338,23 @@ class DynamicModel:
     (softseq_ros.dynamic.events.DynamicSnap) is reported when it has run its course. Its reach
     and end stop are the quasi-static ones (``reach``): a transient may still carry a segment
     past its curve, which is refused then.
+
+    Behind a compliant supply line (``line``, a scene's ``supply``) the piston pushes into the
+    line, whose pressure is the syringe's, and the supply tube passes the fluid on in time.
     """
 
     def __init__(self, segments: Sequence[Segment], names: Sequence[str],
-                 network: NetworkSettings, reach: QuasiStaticModel) -> None:
+                 network: NetworkSettings, reach: QuasiStaticModel,
+                 line: CompliantSupply | None = None) -> None:
         """At rest; the clock starts at the first command or tick."""
-        self.flow_network = NetworkFlow(segments, network)
+        self.flow_network = NetworkFlow(segments, network, line=line)
         self.names = tuple(names)
         self.channel_names = channel_names(self.names)
         self._turbulent = [tube.friction != LAMINAR for tube in network.channels]
         self._warned = [False] * len(network.channels)
         self.segments = tuple(segments)
-        self.members = self.segments
+        # The line is part of the physics a bag names (its digest), as quasi-statically.
+        self.members = self.segments + (() if line is None else (line,))
         self.rest_volume_m3 = self.flow_network.rest_total
         self.rate_hz = network.rate_hz
         self.reach = reach
@@ -448,11 +454,8 @@ class DynamicModel:
     def state(self) -> ModelState:
         """Pressure at the syringe (gauge), segment volumes and curvatures now."""
         network = self.flow_network
-        volumes, pressures, _ = network.now()
-        supply = network.supply
-        pressure = pressures[network.feed] + (supply.drop(network.flow) if supply is not None
-                                              else 0.0)
-        return FlowState(pressure, list(volumes),
+        volumes, _, _ = network.now()
+        return FlowState(network.syringe_pressure(), list(volumes),
                          [float(s.curvature(v)) for s, v in zip(self.segments, volumes)])
 
     def saved(self) -> dict[str, object]:
@@ -505,4 +508,5 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
                              f'pump.start_history_m3[{index}]: {err}') from None
     if scene.network is None:
         return quasistatic
-    return DynamicModel(scene.segments, scene.segment_names, scene.network, quasistatic)
+    return DynamicModel(scene.segments, scene.segment_names, scene.network, quasistatic,
+                        scene.supply)

@@ -55,7 +55,7 @@ from softseq_ros.scene.design import (
     design_path,
     load_design,
 )
-from softseq_ros.scene.network import NetworkSettings, read_network
+from softseq_ros.scene.network import NO_SUPPLY_TUBE, NetworkSettings, read_network
 from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.scene.paths import scene_path
 from softseq_ros.scene.plausibility import segment_problem
@@ -634,9 +634,8 @@ def scene_from_dict(data: object, path: str | Path | None = None,
     outputs = _outputs(ctx, raw.get('outputs'))
     if pump.profile.start_history and network is not None:
         raise ctx.error('pump.start_history_m3', _NETWORK_START)
-    if supply is not None and network is not None:
-        raise ctx.error('supply', 'a supply line in a scene with a network is not followed in '
-                                  'time yet: give one or the other')
+    if supply is not None and network is not None and network.supply is None:
+        raise ctx.error('network.supply', NO_SUPPLY_TUBE)
     return Scene(name=name, description=description, network=network,
                  path=Path(path) if path is not None else None, segments=segments, pump=pump,
                  camera=camera, outputs=outputs, solver=solver, supply=supply)

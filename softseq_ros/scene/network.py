@@ -10,7 +10,8 @@ resistance, inertance, minor losses) is computed in softseq_ros.dynamic.network.
 
     network:
       fluid: {viscosity_pa_s: 1.0e-3, density_kg_per_m3: 998.0}   # water at 20 C
-      supply: {length_m: 0.5, radius_m: 0.8e-3}      # optional: syringe to the fed segment
+      supply: {length_m: 0.5, radius_m: 0.8e-3}      # syringe to the fed segment: optional,
+                                                    # but needed behind a scene's supply line
       feeds: bottom                                 # the segment the syringe feeds: the base
       channels:                                     # base to tip, one per neighbouring pair
         - {length_m: 0.01, radius_m: 0.25e-3, inertance: false, minor_loss: 0.0,
@@ -35,6 +36,12 @@ MAX_NETWORK_RATE_HZ = 1.0e4
 LAMINAR, BLASIUS = 'laminar', 'blasius'
 FRICTION_LAWS = (LAMINAR, BLASIUS)
 TUBE_KEYS = ('length_m', 'radius_m', 'inertance', 'minor_loss', 'friction')
+# A scene's compliant supply line (its ``supply`` block) is followed in time through the supply
+# tube: joined to the fed segment without one, the line would sit at that segment's pressure at
+# every instant, a constraint instead of an equation in time, and one with no solution where the
+# segment passes a fold of its curve faster than the line can follow.
+NO_SUPPLY_TUBE = ('a compliant supply needs a supply tube between the line and the fed '
+                  'segment: give network.supply (its length_m and radius_m)')
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ STANDARD_AMBIENT_PA = 101325.0
 # Newton steps on s(p) = v for a line with both gas and compliance (quadratic convergence from
 # a start below the root, then monotone from above: a handful reach round-off).
 INVERSION_STEPS = 60
+EPSILON = float(np.finfo(float).eps)
 
 
 class CompliantSupply(Segment):
@@ -135,6 +136,44 @@ class CompliantSupply(Segment):
             step = (self.taken_up(p) - s) / self.taken_up_slope(p)
             p = np.maximum(p - step, 0.0)
             if np.all(np.abs(step) <= 4.0 * np.finfo(float).eps * np.maximum(p, 1e-300)):
+                break
+        return p
+
+    def line_pressure(self, s: float) -> float:
+        """
+        Gauge pressure [Pa] at which the line holds ``s`` [m^3], on plain floats, unbounded.
+
+        What the network in time follows (softseq_ros.dynamic.flow): its transients are not
+        bounded by the member's range. A pump that outruns the supply tube compresses the line
+        beyond ``max_volume``; one that withdraws faster than the tube lets the fluid back
+        draws it below its ambient state, where the gas expands (its gauge pressure tends to
+        -p_a, absolute zero, as s falls without bound) and the line's swelling turns to
+        shrinking (-s / C). Within the member's range it is :meth:`pressure`, to round-off.
+        Gas alone cannot take up its own volume: at s >= V_g the pressure is infinite (nan,
+        which the integrator refuses as a step it must shorten).
+        """
+        if self.compliance == 0.0:
+            if s >= self.gas_volume:
+                return math.nan
+            return self.ambient * math.expm1(-self.exponent * math.log1p(-s / self.gas_volume))
+        if self.gas_volume == 0.0:
+            return s / self.compliance
+        # s(p) rises and is concave on (-p_a, inf), so Newton's iteration from below the root
+        # rises monotonically onto it. From below: for s >= 0 the tangent at 0 lies above the
+        # curve, so s / s'(0) is short of the root; for s < 0 the root has C p < 0, so the gas
+        # alone would need less pressure to take up s: its exact inverse is short of the root.
+        if s >= 0.0:
+            p = s / (self.gas_volume / (self.exponent * self.ambient) + self.compliance)
+        else:
+            p = self.ambient * math.expm1(-self.exponent * math.log1p(-s / self.gas_volume))
+        for _ in range(INVERSION_STEPS):
+            relative = math.log1p(p / self.ambient)
+            taken = self.gas_volume * -math.expm1(-relative / self.exponent) + self.compliance * p
+            slope = self.gas_volume / (self.exponent * self.ambient) * math.exp(
+                -(1.0 / self.exponent + 1.0) * relative) + self.compliance
+            step = (taken - s) / slope
+            p -= step
+            if abs(step) <= 4.0 * EPSILON * abs(p):
                 break
         return p
 
