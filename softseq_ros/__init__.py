@@ -27,7 +27,7 @@ if _typing.TYPE_CHECKING:
 
     from softseq_ros.analysis.recording import load_recording  # noqa: F401 - for type checkers
     from softseq_ros.batch import run  # noqa: F401 - for type checkers
-    from softseq_ros.dynamic.path import DynamicPath
+    from softseq_ros.dynamic.path import DynamicPath, StartState
     from softseq_ros.quasistatic.equilibrium import SolvedPath
     from softseq_ros.quasistatic.graph import TransitionGraph
     from softseq_ros.scene.loader import Scene
@@ -81,7 +81,8 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
         profile = loaded.pump.profile
         if history is None:
             return programme_path(loaded.segments, loaded.network, profile,
-                                  rate_hz=loaded.pump.rate_hz, line=loaded.supply)
+                                  rate_hz=loaded.pump.rate_hz, line=loaded.supply,
+                                  start=_network_start(loaded))
         return history_path(loaded.segments, loaded.network, history, profile.flow_rate,
                             times=times, line=loaded.supply)
     from softseq_ros.quasistatic.equilibrium import Tracker
@@ -98,6 +99,19 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
             # From the state the stated history led to, not from rest.
             return start_tracker(profile, emap, loaded.segment_names).sweep(history)
     return Tracker(emap).sweep(history)
+
+
+def _network_start(scene: 'Scene') -> 'StartState | None':
+    """Where a programme with a start history starts, at rest: the balanced state it led to."""
+    from softseq_ros.dynamic.path import StartState
+    from softseq_ros.quasistatic.reach import start_tracker
+    from softseq_ros.quasistatic.solve import scene_map
+
+    profile = scene.pump.profile
+    if not profile.start_history:
+        return None
+    state = start_tracker(profile, scene_map(scene), scene.segment_names).state
+    return StartState(profile.start_injected, tuple(float(v) for v in state.volumes))
 
 
 def _check_samples(scene: 'Scene') -> None:

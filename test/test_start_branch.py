@@ -111,12 +111,15 @@ def test_a_bad_start_branch_is_refused_in_one_line_naming_it(tmp_path, pump, wor
     assert ': pump.start_branch: ' in message and words in message
 
 
-def test_a_start_branch_with_a_network_is_refused(tmp_path):
+def test_a_start_branch_with_a_network_starts_in_time_on_the_branch(tmp_path):
     path = scene_file(tmp_path, 'fig1_asymmetric', {'start_branch': 3, 'legs': HOLD},
                       network={'channels': [{'length_m': 0.01, 'radius_m': 5e-4}]})
-    with pytest.raises(SceneError, match='pump.start_branch: a start state in a scene with a '
-                                         'network is not followed in time yet'):
-        softseq_ros.load_scene(path)
+    scene = softseq_ros.load_scene(path)
+    history = transition_graph(scene_map(scene)).history_to(3).history
+    assert scene.pump.profile.start_history == tuple(history)
+    solved = softseq_ros.solve(scene)
+    emap = scene_map(scene)
+    assert nearest_branches(emap, solved.volumes[:1])[0] == 3
 
 
 def test_a_branch_no_history_reaches_is_refused(tmp_path):

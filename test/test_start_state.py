@@ -92,8 +92,28 @@ def test_a_start_history_beyond_the_domain_is_refused_before_anything_runs(tmp_p
     assert not (tmp_path / 'bag').exists()
 
 
-def test_a_start_history_with_a_network_is_refused(tmp_path):
-    with pytest.raises(SceneError, match='start_history_m3: a start state in a scene with a '
-                                         'network is not followed in time yet'):
-        load_scene(scene_file(tmp_path, {'start_history_m3': [3.0e-5, 1.0e-5],
-                                         'legs': [{'hold_s': 1.0}]}, network=True))
+def test_a_start_history_with_a_network_starts_at_rest_where_it_led(tmp_path):
+    from softseq_ros.quasistatic.equilibrium import Tracker
+    from softseq_ros.rig.model import actuator_model
+
+    _, history = reversal_branch()
+    scene = load_scene(scene_file(tmp_path, {'start_history_m3': list(history),
+                                             'legs': [{'hold_s': 2.0}]}, network=True))
+    # The balanced state the history leads to, walked by hand on the quasi-static map.
+    tracker = Tracker(scene_map(scene))
+    for volume in history:
+        tracker.move(volume)
+    expected = np.asarray(tracker.state.volumes)
+    scale = scene_map(scene).v_scale
+    # In time: at rest there, no fluid moving between the segments, and it stays there.
+    path = softseq_ros.solve(scene)
+    assert path.injected[0] == pytest.approx(history[-1], rel=1e-15)
+    np.testing.assert_allclose(path.volumes[0], expected, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(path.volumes[-1], expected, rtol=0, atol=1e-9 * scale)
+    assert np.max(np.abs(path.channel_flows)) < 1e-9 * scale
+    # The rig's model, and the batch rig's first answer, start there too.
+    np.testing.assert_allclose(actuator_model(scene).state().volumes, expected, rtol=0,
+                               atol=1e-12 * scale)
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
+    first = load_recording(result.bag).volumes[0]
+    np.testing.assert_allclose(first, expected, rtol=0, atol=1e-12 * scale)

@@ -108,15 +108,25 @@ class DynamicPath:
     supply_flow: FloatArray | None = None
 
 
-def programme_schedule(profile: PumpProfile) -> tuple[FlowSchedule, float]:
+@dataclass(frozen=True)
+class StartState:
+    """A balanced state the network starts from at rest: what is injected and where it sits."""
+
+    injected_m3: float
+    volumes_m3: tuple[float, ...]
+
+
+def programme_schedule(profile: PumpProfile,
+                       from_rest: bool = True) -> tuple[FlowSchedule, float]:
     """
     The flow schedule of a pump programme, and the programme's time 0 on the schedule's clock.
 
     A programme that starts with fluid already injected is reached first at the pump's flow
-    rate from rest (so the offset is that ramp's duration; 0 otherwise).
+    rate from rest (so the offset is that ramp's duration; 0 otherwise), unless it starts
+    where it is (``from_rest`` False: the network already holds that fluid, at rest).
     """
     times, volumes = profile.breakpoints()
-    lead = profile.start_injected / profile.flow_rate
+    lead = profile.start_injected / profile.flow_rate if from_rest else 0.0
     flows = np.diff(volumes) / np.diff(times)
     if lead > 0.0:
         times = np.concatenate([[-lead], times])
@@ -176,9 +186,13 @@ def timed_history_schedule(times: ArrayLike, history: ArrayLike) -> FlowSchedule
 
 def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
                  schedule: FlowSchedule, sample_times: ArrayLike,
-                 rtol: float | None = None, line: CompliantSupply | None = None) -> DynamicPath:
+                 rtol: float | None = None, line: CompliantSupply | None = None,
+                 start: StartState | None = None) -> DynamicPath:
     """
     Integrate the network along ``schedule`` and read its state at ``sample_times`` [s].
+
+    The network starts at rest with nothing injected, or at rest in ``start`` (the injected
+    volume and the segments' volumes of a balanced state, as a history left it).
 
     The sample times must be >= 0 and in order; each leg's flow is set exactly at its start,
     so a sample at a leg's boundary sees the flow of the leg that starts there. ``rtol``
@@ -192,6 +206,8 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
     if not np.all(np.isfinite(samples)) or samples[0] < 0.0 or np.any(np.diff(samples) < 0.0):
         raise PathError('sample times must be finite, >= 0 s and in order')
     fluid = NetworkFlow(segments, network, rtol=rtol, line=line)
+    if start is not None:
+        fluid.set_volumes(start.volumes_m3, start.injected_m3)
     n, channels = len(fluid.segments), len(fluid.laws)
     volumes = np.empty((samples.size, n))
     # The line's fluid, pressure and the supply tube's flow (columns), behind a line.
@@ -268,21 +284,23 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
 def programme_path(segments: Sequence[Segment], network: NetworkSettings,
                    profile: PumpProfile, times: ArrayLike | None = None,
                    rate_hz: float | None = None, rtol: float | None = None,
-                   line: CompliantSupply | None = None) -> DynamicPath:
+                   line: CompliantSupply | None = None,
+                   start: StartState | None = None) -> DynamicPath:
     """
     The dynamic path along a pump programme, at ``times`` [s] or at ``rate_hz`` [Hz].
 
     Times are on the programme's clock (0 at the start of its first leg); by default the
     programme is sampled as the pump publishes it (``rate_hz``, its end included). ``line``:
-    the syringe line behind the network (:func:`run_schedule`).
+    the syringe line behind the network (:func:`run_schedule`); ``start``: the state the
+    programme starts from, at rest (where its start history led), instead of a push from rest.
     """
-    schedule, lead = programme_schedule(profile)
+    schedule, lead = programme_schedule(profile, from_rest=start is None)
     if times is None:
         if rate_hz is None:
             raise PathError('give the sample times or the rate to sample at')
         times, _ = profile.sample(rate_hz)
     path = run_schedule(segments, network, schedule, np.asarray(times, dtype=float) + lead,
-                        rtol, line)
+                        rtol, line, start)
     if lead > 0.0:
         path.time_s = path.time_s - lead
         path.snaps = [replace(s, start_s=s.start_s - lead, end_s=s.end_s - lead,

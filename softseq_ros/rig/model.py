@@ -508,5 +508,9 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
                              f'pump.start_history_m3[{index}]: {err}') from None
     if scene.network is None:
         return quasistatic
-    return DynamicModel(scene.segments, scene.segment_names, scene.network, quasistatic,
-                        scene.supply)
+    dynamic = DynamicModel(scene.segments, scene.segment_names, scene.network, quasistatic,
+                           scene.supply)
+    if scene.pump.profile.start_history:
+        # At rest where the history led: a balanced state, no fluid moving between segments.
+        dynamic.resume(scene.pump.profile.start_injected, quasistatic.state().volumes)
+    return dynamic

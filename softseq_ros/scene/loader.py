@@ -112,9 +112,6 @@ class BranchGraph(Protocol):
 GraphOf = Callable[[tuple[Segment, ...], int | None, CompliantSupply | None], BranchGraph]
 
 _START_BRANCH_KEY = 'pump.start_branch'
-_NETWORK_START = ('a start state in a scene with a network is not followed in time yet: '
-                  'start from rest')
-
 
 @dataclass(frozen=True)
 class PumpSettings:
@@ -487,8 +484,6 @@ def _history_onto_branch(ctx: Context, branch: int, graph_of: GraphOf | None,
     branch, away from the joins and snaps at its ends. The graph is that of the scene's own
     map (its solver resolution and supply line), as ``softseq graph`` numbers it.
     """
-    if network is not None:
-        raise ctx.error(_START_BRANCH_KEY, _NETWORK_START)
     if graph_of is None:
         raise ctx.error(_START_BRANCH_KEY,
                         'names a branch of the transition graph, which this reader of scenes '
@@ -632,8 +627,6 @@ def scene_from_dict(data: object, path: str | Path | None = None,
     pump = _pump(ctx, raw['pump'], capacity, history_onto)
     camera = _camera(ctx, raw.get('camera'), pump.profile)
     outputs = _outputs(ctx, raw.get('outputs'))
-    if pump.profile.start_history and network is not None:
-        raise ctx.error('pump.start_history_m3', _NETWORK_START)
     if supply is not None and network is not None and network.supply is None:
         raise ctx.error('network.supply', NO_SUPPLY_TUBE)
     return Scene(name=name, description=description, network=network,
