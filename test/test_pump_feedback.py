@@ -247,17 +247,19 @@ def test_pressures_that_do_not_match_the_joints_are_no_feedback(scene):
     assert rig.pump.reason.startswith('actuator/volumes: 1 pressures (effort) for 2 joints; ')
 
 
-@pytest.mark.parametrize('gauge', [math.inf, 1.0e300, 100.001e3])
+@pytest.mark.parametrize('over', [math.inf, 1.0e300, 1.00001])
 @pytest.mark.parametrize('as_answer', [True, False], ids=['answer', 'anyone'])
-def test_a_pressure_above_the_limit_stops_whoever_says_it(scene, gauge, as_answer):
+def test_a_pressure_above_the_limit_stops_whoever_says_it(scene, over, as_answer):
     # +inf is an over-pressure (the relief's reaction: stopped), not a missing reading.
     rig = Rig(scene)
+    limit = rig.pump.max_pressure_pa
+    gauge = over * limit
     rig.run(0.5)
     command = rig.tick(0.6)
     rig.hear(command.stamp_ns if as_answer else 12345, gauge=gauge)
     assert rig.pump.state == 'stopped'
     assert rig.pump.reason == REACTIONS['over_pressure'].reason.format(gauge=gauge,
-                                                                       limit=100.0e3)
+                                                                       limit=limit)
     # Nothing moves any more, even with good answers.
     rig.run(3.0)
     assert rig.pump.state == 'stopped' and rig.tick(3.1).flow_m3_per_s == 0.0
@@ -446,3 +448,21 @@ def test_a_replay_of_the_actuators_answers_keeps_no_pump_running_once_it_died(co
     assert reason.startswith('no pressure from the actuator for 2 s (feedback_timeout_s); the ')
     assert "messages on /lab/actuator/volumes in that time answered none of the pump's " \
         'commands' in reason
+
+
+def test_the_relief_by_default_is_half_again_the_highest_pressure_the_segments_hold():
+    from softseq_ros.scene.csv_columns import read_columns
+    from softseq_ros.scene.validation import SceneError
+
+    scene = load_scene('paper')
+    # The highest pressure row of the paper's tables, read straight from the files.
+    highest = 0.0
+    for segment in scene.segments:
+        table = Path(scene.path).parent / 'segments' / f'paper_{segment.name}.csv'
+        highest = max(highest, float(read_columns(table, ('pressure_pa',), SceneError,
+                                                  'segment table')['pressure_pa'].max()))
+    pump, _ = pump_core(scene)
+    assert pump.max_pressure_pa == pytest.approx(1.5 * highest, rel=1e-9)
+    assert 10e3 < pump.max_pressure_pa < 40e3       # not the 100 kPa of before
+    # Given, it is taken as given.
+    assert pump_core(scene, max_pressure_pa=5.0e3)[0].max_pressure_pa == 5.0e3

@@ -32,8 +32,10 @@ from softseq_ros.nodes.diagnostics import ERROR_LEVEL, OK_LEVEL, WARN_LEVEL, Hea
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig.build import (
+    RELIEF_MARGIN,
     SettingError,
     check_programme,
+    default_max_pressure_pa,
     end_stop,
     pump_core,
     pump_profile,
@@ -42,7 +44,6 @@ from softseq_ros.rig.model import actuator_model
 from softseq_ros.rig.pump import (
     DEFAULT_FEEDBACK_TIMEOUT_S,
     DEFAULT_MAX_FLOW_M3_PER_S,
-    DEFAULT_MAX_PRESSURE_PA,
     IDLE,
     REACTIONS,
     STOPPED,
@@ -142,8 +143,10 @@ class SyringePumpNode(CoreNode):
             'autostart', True, 'Start running at the first tick (else wait for ~/start).',
             read_only=True)
         self.declare_number(
-            'max_pressure_pa', DEFAULT_MAX_PRESSURE_PA,
-            'Stop when the actuator gauge pressure exceeds this [Pa].', minimum=0.0,
+            'max_pressure_pa', default_max_pressure_pa(scene),
+            'Stop when the actuator gauge pressure exceeds this [Pa] (default: '
+            f"{RELIEF_MARGIN:g} x the highest pressure on the scene's segment curves, plus "
+            "the supply tube's drop at the programme's fastest flow).", minimum=0.0,
             open_minimum=True)
         self.declare_number(
             'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
@@ -207,6 +210,11 @@ class SyringePumpNode(CoreNode):
         self._timer = self.create_timer(1.0 / self.rate_hz, self.tick)
         if self.core.state == IDLE:
             self.send(self.core.begin(self.now_ns()))
+        core = self.core
+        self.get_logger().info(
+            f'relief at {core.max_pressure_pa * 1e-3:.4g} kPa gauge (max_pressure_pa), end stop '
+            f'at {core.max_injected_m3 * 1e6:.4g} mL injected (max_injected_m3)'
+            + ('; open loop: no relief' if core.open_loop else ''))
         if self.core.duration_s > MAX_RUN_S:
             # A rig may run for days, so this is said, not refused (softseq run refuses it).
             self.get_logger().warning(

@@ -66,8 +66,8 @@ from softseq_ros.wire.values import (
     SegmentVolumes,
 )
 
-# Gauge pressure above which the pump stops by default: several times the highest pressure
-# of the shipped segment models (about 20 kPa), far below what the silicone survives.
+# Gauge pressure above which a pump core built without a scene stops; one built from a scene
+# (softseq_ros.rig.build) takes a relief from the scene's curves instead.
 DEFAULT_MAX_PRESSURE_PA = 100.0e3
 # An actuator answers every command within milliseconds; two seconds of silence while the
 # pump pushes fluid is a dead or disconnected actuator.

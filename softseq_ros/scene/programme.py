@@ -243,6 +243,10 @@ class PumpProfile:
         """Times [s] and injected volumes [m^3] at the start and at the end of every leg."""
         return self._times.copy(), self._volumes.copy()
 
+    def max_flow_rate(self) -> float:
+        """The fastest the programme moves the syringe [m^3/s], in either direction."""
+        return max(self._rate_list, default=self.flow_rate)
+
     def max_injected(self) -> float:
         """Largest injected volume the programme reaches [m^3]."""
         return float(self._volumes.max())
