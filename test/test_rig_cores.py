@@ -102,12 +102,14 @@ def test_pump_programme_hold_stop_and_safety(tmp_path):
     pump, rate = pump_core(load_scene(write_scene(tmp_path)), autostart=False, open_loop=True)
     assert rate == 100.0
     statuses = [v.state for v in topic_values(pump.begin(0), PumpStatus)]
+    last = []
 
     def tick_at(seconds):
+        """The command in force after a tick (a pump at rest may only repeat it later)."""
         outputs = pump.tick(int(round(seconds * 1e9)))
         statuses.extend(v.state for v in topic_values(outputs, PumpStatus))
-        cmd, = topic_values(outputs, PumpCommand)
-        return cmd.injected_m3, cmd.flow_m3_per_s
+        last.extend(topic_values(outputs, PumpCommand))
+        return last[-1].injected_m3, last[-1].flow_m3_per_s
 
     def request(reply):
         statuses.extend(v.state for v in topic_values(reply.outputs, PumpStatus))
@@ -124,9 +126,10 @@ def test_pump_programme_hold_stop_and_safety(tmp_path):
     # 1.5 s of run time up (until 4.0 s), then down at the same rate.
     assert tick_at(4.5) == pytest.approx((3.0e-5 - 0.5 * flow, -flow), rel=1e-12)
     # Safety: a gauge pressure above the limit stops the pump where it is.
-    assert pump.handle(state_at(99.0e3), 4_500_000_000) == []
+    limit = pump.max_pressure_pa
+    assert pump.handle(state_at(0.99 * limit), 4_500_000_000) == []
     assert pump.state == 'running'
-    stopped = pump.handle(state_at(101.0e3), 4_500_000_000)
+    stopped = pump.handle(state_at(1.01 * limit), 4_500_000_000)
     assert pump.state == 'stopped' and 'max_pressure_pa' in pump.reason
     warning, status = stopped
     assert warning.level == WARNING and status.state == 'stopped'
@@ -191,8 +194,10 @@ def test_pump_holds_when_the_actuator_falls_silent_and_goes_on_only_when_asked(t
     status, = topic_values(held, PumpStatus)
     assert status.state == 'held' and 'no pressure from the actuator for 2 s' in status.reason
     assert [n.level for n in held if type(n) is Notice] == [WARNING]
-    # Held: the volume stays where it was, with no flow, even when the actuator is back.
-    command, = topic_values(tick(6.0), PumpCommand)
+    # Held: the volume stays where it was, with no flow, even when the actuator is back
+    # (said again by the heartbeat, a second after the hold).
+    assert topic_values(tick(6.0), PumpCommand) == []
+    command, = topic_values(tick(6.5), PumpCommand)
     assert command.flow_m3_per_s == 0.0 and command.injected_m3 >= volumes[-1]
     assert pump.state == 'held'
     assert pump.start(int(6.5e9)).success and pump.state == 'running'
@@ -204,6 +209,28 @@ def test_pump_holds_when_the_actuator_falls_silent_and_goes_on_only_when_asked(t
         wall[0] = second * 10**9
         free.tick(wall[0])
     assert free.state == 'running'
+
+
+def test_a_pump_at_rest_repeats_its_command_once_a_second_and_says_every_change_at_once(
+        tmp_path):
+    pump, _ = pump_core(load_scene(write_scene(tmp_path)), autostart=False, open_loop=True)
+    pump.begin(0)
+
+    def commands(seconds):
+        return topic_values(pump.tick(int(round(seconds * 1e9))), PumpCommand)
+
+    # Idle: the first tick says where it is, then once a second (HEARTBEAT_S), not at 100 Hz.
+    assert len(commands(0.0)) == 1
+    assert [len(commands(0.01 * k)) for k in range(1, 100)] == [0] * 99
+    assert len(commands(1.0)) == 1
+    # Running: every tick.
+    pump.start(int(1.0e9))
+    assert [len(commands(1.0 + 0.01 * k)) for k in range(1, 50)] == [1] * 49
+    # Held: the tick of the change says it, then the heartbeat again.
+    pump.hold(int(1.5e9))
+    assert len(commands(1.5)) == 1
+    assert [len(commands(1.5 + 0.01 * k)) for k in range(1, 100)] == [0] * 99
+    assert len(commands(2.5)) == 1
 
 
 def test_core_settings_are_checked_with_their_names(tmp_path):

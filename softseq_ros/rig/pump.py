@@ -2,9 +2,11 @@
 The syringe pump's core: its programme, its run/hold/stop state machine and its safety limits.
 
 The commanded volume is the programme evaluated at the *run time*: the time since the start
-minus the time spent held, so a hold pauses the programme and ``start`` resumes it. Every
-``tick`` commands the current volume, also when idle, held or stopped (with flow 0), so the
-actuator and a late recorder always see where the pump is.
+minus the time spent held, so a hold pauses the programme and ``start`` resumes it. While
+running, every ``tick`` commands the current volume. While idle, held, finished or stopped
+(flow 0) a tick commands only what changed, or the same volume again once
+:data:`HEARTBEAT_S` has passed, so the actuator and a late recorder still see where the pump is
+and a recording of a pump left alone does not grow at the command rate.
 
 States: ``idle`` (not started), ``running``, ``held`` (paused; ``start`` resumes),
 ``finished`` (the programme is over), ``stopped`` (only ``reset`` leaves it). Every change is a
@@ -69,6 +71,8 @@ from softseq_ros.wire.values import (
 # Gauge pressure above which a pump core built without a scene stops; one built from a scene
 # (softseq_ros.rig.build) takes a relief from the scene's curves instead.
 DEFAULT_MAX_PRESSURE_PA = 100.0e3
+# How often a pump that is not running repeats its unchanged command [s].
+HEARTBEAT_S = 1.0
 # An actuator answers every command within milliseconds; two seconds of silence while the
 # pump pushes fluid is a dead or disconnected actuator.
 DEFAULT_FEEDBACK_TIMEOUT_S = 2.0
@@ -186,6 +190,7 @@ class PumpCore:
         self._out: list[Output] = []
         self.volume_m3 = profile.start_injected
         self.mode = PROGRAMME
+        self._last_command: PumpCommand | None = None
         self.max_flow_m3_per_s = max_flow_m3_per_s
         self.setpoint_topic = contract.PUMP_SETPOINT.name
         self.setpoint: PumpSetpoint | None = None   # the one followed in setpoint mode
@@ -580,9 +585,7 @@ class PumpCore:
             else:
                 flow = programme_flow
         self.volume_m3 = volume
-        self._sent_command(now)
-        self._out.append(PumpCommand(now, volume, flow))
-        return self._take()
+        return self._command(now, volume, flow)
 
     def _follow_setpoint(self, now: int) -> list[Output]:
         """The command for ``now`` in setpoint mode: a step towards the setpoint since the last."""
@@ -605,6 +608,16 @@ class PumpCore:
             flow = (moved - volume) / step_s if self.state == RUNNING else 0.0
             volume = moved
         self.volume_m3 = volume
+        return self._command(now, volume, flow)
+
+    def _command(self, now: int, volume: float, flow: float) -> list[Output]:
+        """The tick's outputs: its command, unless a pump at rest would only repeat itself."""
+        last = self._last_command
+        if self.state != RUNNING and not self._out and last is not None \
+                and (volume, flow) == (last.injected_m3, last.flow_m3_per_s) \
+                and now - last.stamp_ns < HEARTBEAT_S * 1e9:
+            return []
         self._sent_command(now)
-        self._out.append(PumpCommand(now, volume, flow))
+        command = self._last_command = PumpCommand(now, volume, flow)
+        self._out.append(command)
         return self._take()

@@ -85,7 +85,8 @@ PUMP_COMMAND = Topic(
     # Deep: a command the actuator's queue drops is skipped physics-wise (the jump rule), but
     # its answer is missing from the recording; a stalled process must not lose any.
     Qos(ANSWER_DEPTH), PUMP, (ACTUATOR,), None,
-    'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]')
+    'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]; at the '
+    'pump rate while running, else on a change and once a second')
 # What a controller asks of the pump, taken in its setpoint mode (the pump's ~/setpoint_mode):
 # the same joint as pump/command, so a controller commands the pump as the pump commands the
 # actuator. Reliable and deep enough that a burst of setpoints is not lost before the pump reads.
