@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+import softseq_ros
 from softseq_ros import cli
 from softseq_ros.quasistatic.equilibrium import Tracker
 from softseq_ros.quasistatic.solve import equilibrium_map, scene_map, write_path
@@ -165,3 +166,17 @@ def test_a_negative_history_row_is_refused_in_one_line(tmp_path, capsys):
                      '--out', str(tmp_path / 'out.csv')]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'history.csv: injected_m3:' in err[0] and '>= 0' in err[0]
+
+
+@pytest.mark.parametrize('name', ['paper', 'fig1_asymmetric'])
+def test_the_shipped_dynamic_variants_are_their_scenes_with_a_network(name):
+    from softseq_ros.segments.identity import segments_sha256
+
+    still, moving = load_scene(name), load_scene(f'{name}_dynamic')
+    # The same segments, programme and camera: only the network differs.
+    assert segments_sha256(moving.segments) == segments_sha256(still.segments)
+    assert moving.pump == still.pump and moving.camera == still.camera
+    assert still.network is None and moving.network is not None
+    assert moving.network.supply is not None and len(moving.network.channels) == 1
+    # Pumped as slowly as the paper's rig, the sequence in time is the quasi-static one.
+    assert softseq_ros.classify(moving) == softseq_ros.classify(still)
