@@ -37,6 +37,7 @@ publish. Every quantity is SI and every key that carries a unit says so in its s
     network:                          # optional: time in the physics (scene/network.py)
       channels: [{length_m: 0.01, radius_m: 0.25e-3}]   # one per neighbouring pair
 
+Every key with its unit, default and range: docs/scene_reference.md (softseq_ros.scene.reference).
 Every mistake raises ``SceneError`` with one line ``<file>: <key path>: <what is wrong>``, e.g.
 ``config/x.yaml: segments[1].length_m: must be > 0, got -0.1``.
 """
