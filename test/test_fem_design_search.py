@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
+import softseq_ros
 from softseq_ros.fem.design_grid import cell_design, ensure_tables, grid_axes, grid_designs
 from softseq_ros.fem.design_interpolation import SegmentFamily
 from softseq_ros.fem.design_problem import load_problem
@@ -90,7 +91,8 @@ def _corner_pairs(cache: Path, problem_path: Path) -> dict[tuple[str, str], dict
     return out
 
 
-def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, capsys):
+def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, capsys,
+                                                                   monkeypatch, tmp_path):
     from softseq_ros.cli import main
 
     folder, cache, _, _ = library
@@ -130,6 +132,28 @@ def test_a_target_is_met_and_the_best_design_verified_by_direct_fem(library, cap
     assert (f'the search meshed its grid tables at grid.element_size_m {grid_mm:g} mm; the '
             f'design files keep their own mesh ({top.mesh.element_size_m * 1e3:g} mm)'
             in printed)
+    # A scene of the best design, with how to run it: its tables first, at their own mesh.
+    scene_file = out / f'{problem["name"]}_best.yaml'
+    assert f'a scene of the best design: {scene_file}' in printed
+    assert f'softseq fem {out / best["designs"]["top"]}' in printed
+    assert f'softseq run {scene_file}' in printed
+    from softseq_ros.scene.loader import load_scene
+    from softseq_ros.scene.validation import SceneError
+
+    monkeypatch.setenv('SOFTSEQ_FEM_CACHE', str(tmp_path / 'fem'))
+    with pytest.raises(SceneError, match=r'no FEM table of this design .* make it once with '
+                                         r'`softseq fem '):
+        load_scene(scene_file)
+    # With its tables made (here: the verification's, the same pair at the grid's mesh), it
+    # runs as it is.
+    problem_spec = load_problem(_problem(folder))
+    for segment in problem_spec.segments:
+        verified = cell_design(problem_spec, segment, problem_spec.materials[0],
+                               best['parameters'][segment.name])
+        target = cache_path(load_design(out / best['designs'][segment.name]))
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(cache_path(verified, cache), target)
+    assert softseq_ros.classify(load_scene(scene_file)) == 'partial'
 
 
 def test_the_corners_are_announced_before_they_run_and_the_grid_reuses_them(library):

@@ -4,7 +4,12 @@ from pathlib import Path
 import time
 from typing import Any
 
-from softseq_ros.fem.design_output import numbers_text, values_text, write_result_files
+from softseq_ros.fem.design_output import (
+    numbers_text,
+    values_text,
+    write_best_scene,
+    write_result_files,
+)
 from softseq_ros.fem.design_problem import load_problem
 from softseq_ros.fem.design_reach import reach_text
 from softseq_ros.fem.design_search import search
@@ -59,4 +64,11 @@ def run_design_command(args: Any) -> int:
           f'{problem.element_size_m * 1e3:g} mm; the design files keep their own mesh '
           f'({", ".join(f"{size * 1e3:g} mm" for size in meshes)}): softseq fem on a design '
           'file computes its table at that resolution')
+    scene = write_best_scene(result, Path(out))
+    if scene is not None:
+        designs = [Path(out) / f'{problem.name}_1_{segment.name}.yaml'
+                   for segment in problem.segments]
+        print(f'a scene of the best design: {scene}; to run it, make its tables once '
+              f'({" and ".join(f"softseq fem {design}" for design in designs)}), then '
+              f'softseq run {scene}')
     return 0 if result.verified else 1

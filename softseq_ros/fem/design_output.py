@@ -76,3 +76,42 @@ def write_result_files(result: SearchResult, out: Path) -> list[Path]:
                     + yaml.safe_dump(summary, sort_keys=False))
     written.append(path)
     return written
+
+
+def write_best_scene(result: SearchResult, out: Path,
+                     flow_rate_m3_per_s: float = 5.0e-8) -> Path | None:
+    """
+    A runnable scene of the best design into ``out`` (None when nothing was ranked).
+
+    Its segments name the design files written beside it (``design:``), so their tables are
+    `softseq fem`'s of those files, at their own mesh; the pump inflates to the target's
+    ``max_injected_m3`` at 0.05 mL/s (the paper's rig), holds 10 s and deflates to 0.
+    """
+    import yaml
+
+    if not result.ranked:
+        return None
+    problem = result.problem
+    best = result.ranked[0]
+    designs = [f'{problem.name}_1_{segment.name}.yaml' for segment in problem.segments]
+    # A varied length is the design file's too: the scene must give the same.
+    lengths = [values.get('length_m', segment.design.geometry.length_m)
+               for segment, values in zip(problem.segments, best.values)]
+    name = f'{problem.name}_best'
+    commands = ' && '.join(f'softseq fem {out / design}' for design in designs)
+    data = {
+        'name': name,
+        'description': f'the best design softseq design found for {problem.name}: predicted '
+                       f'{numbers_text(best.metrics, problem.target)}',
+        'segments': [{'name': segment.name, 'length_m': length, 'design': design}
+                     for segment, length, design in zip(problem.segments, lengths, designs)],
+        'pump': {'flow_rate_m3_per_s': flow_rate_m3_per_s, 'rate_hz': 50.0,
+                 'legs': [{'inflate_to_m3': problem.target.max_injected_m3}, {'hold_s': 10.0},
+                          {'deflate_to_m3': 0.0}]},
+    }
+    path = out / f'{name}.yaml'
+    path.write_text(f'# Written by softseq design: the best design of {problem.name} as a scene.\n'
+                    f'# Its tables come from the design files beside it, at their own mesh:\n'
+                    f'#   {commands}\n#   softseq run {path}\n'
+                    + yaml.safe_dump(data, sort_keys=False))
+    return path
