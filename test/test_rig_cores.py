@@ -219,18 +219,19 @@ def test_a_pump_at_rest_repeats_its_command_once_a_second_and_says_every_change_
     def commands(seconds):
         return topic_values(pump.tick(int(round(seconds * 1e9))), PumpCommand)
 
-    # Idle: the first tick says where it is, then once a second (HEARTBEAT_S), not at 100 Hz.
-    assert len(commands(0.0)) == 1
-    assert [len(commands(0.01 * k)) for k in range(1, 100)] == [0] * 99
-    assert len(commands(1.0)) == 1
+    # Idle: the first tick says where it is (twice: a new volume), then once a second
+    # (HEARTBEAT_S), not at 100 Hz.
+    assert [len(commands(0.01 * k)) for k in range(0, 2)] == [1, 1]
+    assert [len(commands(0.01 * k)) for k in range(2, 101)] == [0] * 99
+    assert len(commands(1.01)) == 1
     # Running: every tick.
-    pump.start(int(1.0e9))
-    assert [len(commands(1.0 + 0.01 * k)) for k in range(1, 50)] == [1] * 49
-    # Held: the tick of the change says it, then the heartbeat again.
-    pump.hold(int(1.5e9))
-    assert len(commands(1.5)) == 1
-    assert [len(commands(1.5 + 0.01 * k)) for k in range(1, 100)] == [0] * 99
-    assert len(commands(2.5)) == 1
+    pump.start(int(1.01e9))
+    assert [len(commands(1.01 + 0.01 * k)) for k in range(1, 50)] == [1] * 49
+    # Held between two ticks: the next says the new volume, and once more, then the heartbeat.
+    pump.hold(int(1.505e9))
+    assert [len(commands(1.51 + 0.01 * k)) for k in range(0, 2)] == [1, 1]
+    assert [len(commands(1.51 + 0.01 * k)) for k in range(2, 101)] == [0] * 99
+    assert len(commands(2.52)) == 1
 
 
 def test_core_settings_are_checked_with_their_names(tmp_path):

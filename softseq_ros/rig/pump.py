@@ -4,9 +4,9 @@ The syringe pump's core: its programme, its run/hold/stop state machine and its 
 The commanded volume is the programme evaluated at the *run time*: the time since the start
 minus the time spent held, so a hold pauses the programme and ``start`` resumes it. While
 running, every ``tick`` commands the current volume. While idle, held, finished or stopped
-(flow 0) a tick commands only what changed, or the same volume again once
-:data:`HEARTBEAT_S` has passed, so the actuator and a late recorder still see where the pump is
-and a recording of a pump left alone does not grow at the command rate.
+(flow 0) a tick commands only what changed (a new volume twice), or the same volume again
+once :data:`HEARTBEAT_S` has passed, so the actuator and a late recorder still see where the
+pump is and a recording of a pump left alone does not grow at the command rate.
 
 States: ``idle`` (not started), ``running``, ``held`` (paused; ``start`` resumes),
 ``finished`` (the programme is over), ``stopped`` (only ``reset`` leaves it). Every change is a
@@ -191,6 +191,7 @@ class PumpCore:
         self.volume_m3 = profile.start_injected
         self.mode = PROGRAMME
         self._last_command: PumpCommand | None = None
+        self._settled = False       # the last command repeated the volume of the one before
         self.max_flow_m3_per_s = max_flow_m3_per_s
         self.setpoint_topic = contract.PUMP_SETPOINT.name
         self.setpoint: PumpSetpoint | None = None   # the one followed in setpoint mode
@@ -611,12 +612,19 @@ class PumpCore:
         return self._command(now, volume, flow)
 
     def _command(self, now: int, volume: float, flow: float) -> list[Output]:
-        """The tick's outputs: its command, unless a pump at rest would only repeat itself."""
+        """
+        The tick's outputs: its command, unless a pump at rest would only repeat itself.
+
+        The first command at a volume is said twice: a listener that takes the rate of the
+        last two commands as the pump's (an actuator in time does) learns at once that the
+        pump stands, instead of a heartbeat later.
+        """
         last = self._last_command
-        if self.state != RUNNING and not self._out and last is not None \
+        if self.state != RUNNING and not self._out and last is not None and self._settled \
                 and (volume, flow) == (last.injected_m3, last.flow_m3_per_s) \
                 and now - last.stamp_ns < HEARTBEAT_S * 1e9:
             return []
+        self._settled = last is not None and volume == last.injected_m3
         self._sent_command(now)
         command = self._last_command = PumpCommand(now, volume, flow)
         self._out.append(command)
