@@ -258,3 +258,20 @@ def test_compare_lays_both_bags_transients_over_each_other(fast, slow, quasi_sta
     assert (out / 'compare_transients.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     assert write_transients_overlay(quasi_static, quasi_static, tmp_path / 'none') == []
     assert not (tmp_path / 'none').exists()
+
+
+def test_the_summary_metrics_and_transients_count_the_same_snaps_in_time(fast, tmp_path):
+    # In time a snap is an exchange over many states, no jump between two commands: the
+    # summary's snap-through lines and metrics.json's snaps are the actuator's events too.
+    _, bag = fast
+    metrics, summary = write_report(bag, tmp_path / 'report')
+    events = events_in(bag)
+    assert metrics['snap_count'] == len(metrics['transients']['snaps']) == len(events) >= 1
+    for snap, event in zip(metrics['snaps'], events):
+        assert snap['injected_m3'] == event['injected_m3']
+        assert snap['fluid_moved_m3'] == event['fluid_moved_m3']
+        assert snap['to_volumes_m3'] == event['to_volumes_m3']
+        assert f'snap-through at {snap["injected_m3"] * 1e6:.3f} mL' in summary
+    assert 'snap-throughs: none' not in summary
+    written = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
+    assert written['snap_count'] == len(events)

@@ -164,14 +164,22 @@ def _shares(u: FloatArray, volumes: FloatArray, snaps: list[float]) -> tuple[Flo
     return middle[keep], share[keep]
 
 
-def analyse(trace: Trace, v_range: float | None = None) -> dict:
-    """Sequence type, switch, snaps, hysteresis and plateau of a trace (first cycle)."""
+def analyse(trace: Trace, v_range: float | None = None,
+            snaps: list[dict] | None = None) -> dict:
+    """
+    Sequence type, switch, snaps, hysteresis and plateau of a trace (first cycle).
+
+    ``snaps``: the recording's own snap-throughs when it says them (a recording in time: the
+    actuator's events, each an exchange of fluid that takes time, which the states between
+    two commands do not show as a jump); otherwise they are found in the volumes.
+    """
     up, down = trace.legs()
     u_all = trace.injected
     v_range = float(v_range if v_range else max(np.ptp(u_all), 1e-300))
     cycle = slice(up.start, (down or up).stop)
-    snaps = detect_snaps(Trace(u_all[cycle], trace.pressure[cycle], trace.volumes[cycle],
-                               trace.sign[cycle]), v_range)
+    if snaps is None:
+        snaps = detect_snaps(Trace(u_all[cycle], trace.pressure[cycle], trace.volumes[cycle],
+                                   trace.sign[cycle]), v_range)
     u_up, cols_up = monotone_leg(u_all[up], np.column_stack([trace.pressure[up],
                                                           trace.volumes[up]]), True)
     p_up, v_up = cols_up[:, 0], cols_up[:, 1:]

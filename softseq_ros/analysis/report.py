@@ -34,7 +34,12 @@ from softseq_ros.analysis.metrics import (
 )
 from softseq_ros.analysis.recording import CUT_SHORT, Recording, load_recording
 from softseq_ros.analysis.text import duration_text, millijoules_text
-from softseq_ros.analysis.transients import Transients, analyse_transients
+from softseq_ros.analysis.transients import (
+    Transients,
+    analyse_transients,
+    is_dynamic,
+    timed_snaps,
+)
 from softseq_ros.errors import UserError, write_text, writing
 from softseq_ros.segments.identity import segments_sha256, short
 from softseq_ros.wire import contract
@@ -192,6 +197,24 @@ def recording_metrics(recording: Recording, scene: object | None = None,
     return metrics
 
 
+def _snaps_in_time(recording: Recording) -> list[dict] | None:
+    """
+    The snap-throughs the actuator said, for a recording in time (None: quasi-static).
+
+    As the volumes' analysis gives them, so that the summary, metrics.json and the transients
+    count the same ones: in time a snap is an exchange of fluid over many states, not a jump
+    between two commands. A run's events are those of its span (Recording.runs).
+    """
+    if not is_dynamic(recording):
+        return None
+    return [{'injected_m3': snap.injected, 'direction': snap.direction,
+             'fluid_moved_m3': snap.fluid_moved,
+             'from_volumes_m3': list(snap.from_volumes), 'to_volumes_m3': list(snap.to_volumes),
+             'from_pressure_pa': snap.from_pressure, 'to_pressure_pa': snap.to_pressure,
+             'start_time_s': snap.start_s, 'duration_s': snap.duration_s}
+            for snap in timed_snaps(recording)]
+
+
 def pump_end(recording: Recording) -> dict | None:
     """
     How the pump's programme ended in this run: its last status, when, and where.
@@ -210,7 +233,7 @@ def pump_end(recording: Recording) -> dict | None:
 def run_metrics(recording: Recording) -> dict:
     """The numbers of one run of a recording (first cycle), SI units, gauge pressures."""
     try:
-        result = analyse(recording_trace(recording))
+        result = analyse(recording_trace(recording), snaps=_snaps_in_time(recording))
     except TraceError as err:
         where = f' (run {recording.run})' if recording.run_span_s else ''
         raise TraceError(f'{recording.path}{where}: {err}') from None

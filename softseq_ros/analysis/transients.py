@@ -59,6 +59,8 @@ class TimedSnap:
     volume_change: tuple[float, ...]   # per segment, after less before [m^3]
     giving: tuple[str, ...] | None = None   # the segments that gave the fluid (None: unsaid)
     taking: tuple[str, ...] | None = None   # the segments that took it
+    from_volumes: tuple[float, ...] = ()    # per segment, at its start and end [m^3]
+    to_volumes: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -196,7 +198,9 @@ def timed_snaps(recording: Recording) -> list[TimedSnap]:
             float(event['to_pressure_pa']), _window(times, row, start, duration),
             tuple(float(after) - float(before) for before, after in
                   zip(event['from_volumes_m3'], event['to_volumes_m3'])),
-            _names(event.get('giving_segments')), _names(event.get('taking_segments'))))
+            _names(event.get('giving_segments')), _names(event.get('taking_segments')),
+            tuple(float(v) for v in event['from_volumes_m3']),
+            tuple(float(v) for v in event['to_volumes_m3'])))
     return snaps
 
 
