@@ -275,3 +275,36 @@ def test_the_summary_metrics_and_transients_count_the_same_snaps_in_time(fast, t
     assert 'snap-throughs: none' not in summary
     written = json.loads((tmp_path / 'report' / 'metrics.json').read_text())
     assert written['snap_count'] == len(events)
+
+
+@pytest.mark.parametrize('snaps', [1, 4, 7])
+def test_the_transients_figure_fits_a_page_with_its_key_below_every_curve(fast, tmp_path,
+                                                                         monkeypatch, snaps):
+    from dataclasses import replace
+
+    from figure_checks import capture_figures, laid_out, png_dpi
+
+    from softseq_ros.analysis import figures
+    from softseq_ros.analysis.figures import PAGE_IN, PAPER, plot_transients
+    from softseq_ros.analysis.transients import analyse_transients, transient_windows
+
+    _, bag = fast
+    recording = load_recording(bag)
+    found = analyse_transients(recording)
+    window = transient_windows(recording, found, 1, 400)[0]
+    # As many snaps as a busy run has (the same one again, numbered on).
+    windows = [replace(window, snap=replace(window.snap, number=k + 1)) for k in range(snaps)]
+    drawn = capture_figures(monkeypatch, figures)
+    out = tmp_path / 'transients.png'
+    with PAPER.context():
+        plot_transients(windows, recording.segment_names, ('bottom_to_top',), out)
+    pixels = laid_out(out)
+    assert pixels.shape[1] / png_dpi(out)[0] <= PAGE_IN + 0.05
+    fig, = drawn
+    # One key, the figure's, under the panels: none inside an axes, on the curves.
+    assert not [ax for ax in fig.axes if ax.get_legend() is not None]
+    assert len(fig.legends) == 1
+    key_top = fig.legends[0].get_window_extent().y1
+    renderer = fig.canvas.get_renderer()
+    assert all(key_top <= ax.get_tightbbox(renderer).y0 + 1.0
+               for ax in fig.axes if ax.get_visible())

@@ -635,6 +635,10 @@ def plot_overlay(recordings: list[tuple[str, Recording]], out: Path, svg: bool =
     return save_figure(fig, out, svg, style)
 
 
+# A snap's panels take this many inches of a page's width; more snaps than fit wrap onto rows.
+TRANSIENT_PANEL_IN = 2.25
+
+
 def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ...],
                     channel_names: tuple[str, ...], out: Path, svg: bool = False,
                     style: FigureStyle = PAPER) -> list[Path]:
@@ -642,49 +646,78 @@ def plot_transients(windows: list[TransientWindow], segment_names: tuple[str, ..
     Each snap in time: gauge pressure and channel flow above, segment volumes below.
 
     Time runs from the snap's start; dashed: the quasi-static volumes at the same injected
-    volume (when the scene was given).
+    volume (when the scene was given). As many snaps side by side as a page holds, the rest
+    on rows below; one key under all of them, so that no legend sits on a curve.
     """
+    from matplotlib.lines import Line2D
+
     count = len(windows)
-    width, height = style.size(2.3 * count + 0.4, 3.8)
-    # Fixed margins in inches, whatever the number of panels: room for both y labels.
-    fig, axes = new_figure(width, height, 2, count,
-                           {'left': 0.6 / width, 'right': 1 - 0.55 / width, 'top': 0.9,
-                            'bottom': 0.1, 'wspace': 0.75}, sharex='col')
-    for column, window in enumerate(windows):
+    # As few rows as the page needs, the snaps spread evenly over them.
+    rows = -(-count // max(1, int(PAGE_IN // TRANSIENT_PANEL_IN)))
+    columns = -(-count // rows)
+    width, height = style.size(TRANSIENT_PANEL_IN * columns + 0.4, 3.4 * rows + 0.3)
+    # Per row of snaps: pressure, volumes, and a gap for the x label and the next titles.
+    ratios = [1.0, 1.0, 0.42] * rows
+    fig, axes = new_figure(width, height, 3 * rows, columns,
+                           {'left': 0.6 / width, 'right': 1 - 0.6 / width,
+                            'top': 1 - 0.35 / height, 'bottom': 0.02, 'wspace': 0.55,
+                            'hspace': 0.12}, gridspec_kw={'height_ratios': ratios})
+    for gap in axes[2::3].ravel():
+        gap.set_visible(False)
+    flows_drawn = quasi_static_drawn = False
+    for number, window in enumerate(windows):
+        row, column = divmod(number, columns)
         snap = window.snap
         # Short snaps read in ms, long ones in s.
         scale, unit = (1e3, 'ms') if snap.window_s[1] - snap.window_s[0] < 2.0 else (1.0, 's')
-        top, bottom = axes[0, column], axes[1, column]
-        top.plot(window.time_s * scale, window.pressure * KPA, 'k-', lw=1.3,
-                 label='gauge pressure (syringe)')
+        top, bottom = axes[3 * row, column], axes[3 * row + 1, column]
+        top.sharex(bottom)
+        top.tick_params(labelbottom=False)
+        top.plot(window.time_s * scale, window.pressure * KPA, 'k-', lw=1.3)
         if window.flow.size:
+            flows_drawn = True
             flow_axis = top.twinx()
-            for j, name in enumerate(channel_names):
+            for j in range(len(channel_names)):
                 flow_axis.plot(window.flow_time_s * scale, window.flow[:, j] * ML, '-', lw=1.1,
-                               color=f'C{j + 3}', label=f'flow {name}')
-            flow_axis.set_ylabel('channel flow, towards the tip [mL/s]', fontsize=8)
+                               color=f'C{j + 3}')
+            if column == columns - 1 or number == count - 1:
+                flow_axis.set_ylabel('channel flow to the tip [mL/s]', fontsize=8)
             flow_axis.tick_params(labelsize=7)
-            flow_axis.legend(fontsize=6, loc='lower right')
-        for j, name in enumerate(segment_names):
+        for j in range(len(segment_names)):
             colour = SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)]
             bottom.plot(window.time_s * scale, window.volumes[:, j] * ML, '-', lw=1.4,
-                        color=colour, label=name)
+                        color=colour)
             if window.quasi_static_volumes is not None:
+                quasi_static_drawn = True
                 bottom.plot(window.time_s * scale, window.quasi_static_volumes[:, j] * ML, '--',
-                            lw=1.0, color=colour, label=f'{name}, quasi-static')
+                            lw=1.0, color=colour)
         for ax in (top, bottom):
             ax.axvline(0.0, color='0.5', lw=0.8, ls=':')
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=7)
         top.set_title(f'snap {snap.number} ({snap.direction}) at {snap.injected * ML:.2f} mL\n'
                       f'10-90 %: {duration_text(snap.duration_s)}', fontsize=8)
-        top.legend(fontsize=6, loc='upper right')
-        bottom.legend(fontsize=6)
         bottom.set_xlabel(f"time from the snap's start [{unit}]", fontsize=8)
-    axes[0, 0].set_ylabel(GAUGE, fontsize=8)
-    axes[1, 0].set_ylabel('segment volume, total [mL]', fontsize=8)
+        if column == 0:
+            top.set_ylabel(GAUGE, fontsize=8)
+            bottom.set_ylabel('segment volume [mL]', fontsize=8)
+    for number in range(count, rows * columns):
+        row, column = divmod(number, columns)
+        axes[3 * row, column].set_visible(False)
+        axes[3 * row + 1, column].set_visible(False)
+    handles = [Line2D([], [], color='k', lw=1.3, label='gauge pressure at the syringe')]
+    if flows_drawn:
+        handles += [Line2D([], [], color=f'C{j + 3}', lw=1.1, label=f'flow {name}')
+                    for j, name in enumerate(channel_names)]
+    handles += [Line2D([], [], color=SEGMENT_COLOURS[j % len(SEGMENT_COLOURS)], lw=1.4,
+                       label=name) for j, name in enumerate(segment_names)]
+    if quasi_static_drawn:
+        handles.append(Line2D([], [], color='0.3', ls='--', lw=1.0,
+                              label='quasi-static at the same injected volume'))
+    handles.append(Line2D([], [], color='0.5', ls=':', lw=0.8, label="the snap's start"))
+    legend_below(fig, handles, ncol=min(len(handles), 3))
     if not style.paper:
-        fig.suptitle('Snap-throughs in time (dotted: start; dashed: quasi-static)', fontsize=10)
+        fig.suptitle('Snap-throughs in time', fontsize=10)
     return save_figure(fig, out, svg, style)
 
 
