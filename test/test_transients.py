@@ -308,3 +308,38 @@ def test_the_transients_figure_fits_a_page_with_its_key_below_every_curve(fast, 
     renderer = fig.canvas.get_renderer()
     assert all(key_top <= ax.get_tightbbox(renderer).y0 + 1.0
                for ax in fig.axes if ax.get_visible())
+
+
+def test_the_shapes_mark_where_one_segment_ends_and_the_next_begins(tmp_path, monkeypatch):
+    from figure_checks import capture_figures
+
+    from softseq_ros.analysis import figures
+    from softseq_ros.analysis.figures import PAPER, plot_shapes, segment_joints
+
+    # Two segments of three chords each: the joint is the fourth point.
+    backbone = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.1], [3.0, 0.3], [4.0, 0.7],
+                         [5.0, 1.2], [6.0, 2.0]])
+    np.testing.assert_array_equal(segment_joints(backbone, 2), [[3.0, 0.3]])
+    assert segment_joints(backbone[:6], 2).shape == (0, 2)     # no such layout: none
+    data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+    data['pump'].update({'flow_rate_m3_per_s': 5e-6, 'rate_hz': 20,
+                         'legs': [{'inflate_to_m3': 4e-5}, {'deflate_to_m3': 0.0}]})
+    data['camera'] = {'rate_hz': 1, 'trigger_injected_m3': [1e-5, 3e-5]}
+    scene_file = tmp_path / 'steps.yaml'
+    scene_file.write_text(yaml.safe_dump(data))
+    recording = load_recording(run(scene_file, tmp_path / 'bag'))
+    drawn = capture_figures(monkeypatch, figures)
+    with PAPER.context():
+        plot_shapes(recording, tmp_path / 'shapes.png')
+    fig, = drawn
+    inflation = fig.axes[0]
+    assert 'segment joint' in [text.get_text() for text in inflation.get_legend().get_texts()]
+    # One white dot per snapshot of the panel, at its backbone's joint.
+    shots = [s for s in recording.snapshots if s.direction == 'inflation']
+    dots = [line for line in inflation.get_lines()
+            if line.get_marker() == 'o' and line.get_markerfacecolor() == 'white'
+            and len(line.get_xdata())]
+    assert len(dots) == len(shots) >= 1
+    for line, shot in zip(dots, shots):
+        joint = segment_joints(shot.points, len(recording.segment_names))[0]
+        assert line.get_xdata()[0] == pytest.approx(joint[0] * 1e3)

@@ -478,6 +478,20 @@ def nice_step(raw: float) -> float:
     return float(10 * exponent)
 
 
+def segment_joints(points: FloatArray, count: int) -> FloatArray:
+    """
+    Where each segment of a camera backbone ends and the next begins: (count - 1, 2) x, z [m].
+
+    The backbone holds 1 + count x k points, k per segment (softseq_ros.segments.kinematics);
+    empty when it has no such layout (a foreign camera's).
+    """
+    intervals = len(points) - 1
+    if count < 2 or intervals < count or intervals % count:
+        return np.zeros((0, 2))
+    per_segment = intervals // count
+    return np.asarray(points[per_segment:intervals:per_segment][:count - 1, :2], dtype=float)
+
+
 def plot_shapes(recording: Recording, out: Path, svg: bool = False,
                 experiment: object | None = None, style: FigureStyle = PAPER) -> list[Path]:
     """
@@ -501,6 +515,7 @@ def plot_shapes(recording: Recording, out: Path, svg: bool = False,
     measured = {(t['step'], t['direction'], t['injected_m3']): t['experiment_tip_m']
                 for t in (tip_errors(experiment, recording.snapshots) if experiment else [])}
     count = len(recording.segment_names)
+    joined = False
     for ax, direction in zip(axes[0], (INFLATION, DEFLATION)):
         shots = [s for s in recording.snapshots if s.direction == direction]
         for shot in shots:
@@ -511,10 +526,19 @@ def plot_shapes(recording: Recording, out: Path, svg: bool = False,
             ax.plot(shot.points[:, 0] * MM, shot.points[:, 1] * MM, '-', lw=1.6,
                     color=shade, label=label)
             ax.plot(*(shot.tip * MM), 'o', ms=3, color=shade)
+            joints = segment_joints(shot.points, count)
+            if joints.size:
+                joined = True
+                ax.plot(joints[:, 0] * MM, joints[:, 1] * MM, 'o', ms=3.2, mfc='white',
+                        mec=shade, mew=0.9, zorder=3)
             tip = measured.get((shot.step, shot.direction, shot.injected))
             if tip is not None:
                 ax.plot(tip[0] * MM, tip[1] * MM, 'o', ms=6, mfc='none', mew=1.0,
                         color=shade)
+        if joined and direction == INFLATION:
+            # Named once, in the first panel's key.
+            ax.plot([], [], 'o', ms=3.2, mfc='white', mec='0.3', mew=0.9,
+                    label='segment joint')
         ax.plot([0], [0], 'ks', ms=5)
         ax.set_xlabel('x [mm]')
         ax.set_aspect('equal', adjustable='box')
@@ -528,6 +552,7 @@ def plot_shapes(recording: Recording, out: Path, svg: bool = False,
     if measured:
         axes[0, 1].text(0.98, 0.98, "open circles: the experiment's tip", ha='right',
                         va='top', fontsize=6.5, transform=axes[0, 1].transAxes)
+
     _square_limits(axes[0, 0], recording, list(measured.values()))
     style.title(axes[0, 0], 'Tentacle shape at the camera steps')
     return save_figure(fig, out, svg, style)
