@@ -60,18 +60,19 @@ def _recorded(bag: Path, topic: str) -> list[bytes]:
 
 # ------------------------------------------------------------------------ softseq play --remap
 
-@pytest.mark.ros
-def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_env):
-    # rcl took each FROM:=TO of --remap for a remap rule of its own: it warned that the syntax
-    # is deprecated and mapped the player's new names back, so a swap was silently undone.
+COMMAND, VOLUMES = '/pump/command', '/actuator/volumes'
+SWAP = ('--remap', f'{COMMAND}:={VOLUMES}', '--remap', f'{VOLUMES}:={COMMAND}')
+
+
+def _heard_while(context, play) -> dict[str, list[bytes]]:
+    """What a listener on /pump/command and /actuator/volumes hears while ``play()`` runs."""
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
 
     from softseq_ros.testing import spinning
 
-    command, volumes = '/pump/command', '/actuator/volumes'
     listener = Node('swap_listener', context=context)
-    got: dict[str, list[bytes]] = {command: [], volumes: []}
+    got: dict[str, list[bytes]] = {COMMAND: [], VOLUMES: []}
     lock = threading.Lock()
     for topic in got:
         def keep(data, topic=topic) -> None:
@@ -80,19 +81,70 @@ def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_en
         listener.create_subscription(JointState, topic, keep, QoSProfile(depth=10000),
                                      raw=True)
     with spinning(context, listener):
-        result = softseq('play', str(small_bag), '--rate', '20', '--topics', command, volumes,
-                         '--wait-for-subscribers', '30', '--remap', f'{command}:={volumes}',
-                         '--remap', f'{volumes}:={command}', env=ros_env)
-        expected = {command: _recorded(small_bag, volumes), volumes: _recorded(small_bag, command)}
+        expected = play()
         deadline = time.monotonic() + 15
         while time.monotonic() < deadline and any(
                 len(got[t]) < len(expected[t]) for t in got):
             time.sleep(0.05)
+    return got
+
+
+def _swapped(bag: Path) -> dict[str, list[bytes]]:
+    return {COMMAND: _recorded(bag, VOLUMES), VOLUMES: _recorded(bag, COMMAND)}
+
+
+@pytest.mark.ros
+def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_env):
+    # rcl took each FROM:=TO of --remap for a remap rule of its own: it warned that the syntax
+    # is deprecated and mapped the player's new names back, so a swap was silently undone.
+    results = []
+
+    def play() -> dict[str, list[bytes]]:
+        results.append(softseq('play', str(small_bag), '--rate', '20', '--topics', COMMAND,
+                               VOLUMES, '--wait-for-subscribers', '30', *SWAP, env=ros_env))
+        return _swapped(small_bag)
+
+    got = _heard_while(context, play)
+    result, = results
     assert result.returncode == 0, result.stderr
-    assert got == expected              # each recorded topic under the other's name
+    assert got == _swapped(small_bag)       # each recorded topic under the other's name
     # rcl saw no remap rule: it warned on each that the syntax is deprecated.
     assert 'remap' not in result.stderr.lower() and 'deprecated' not in result.stderr, \
         result.stderr
+
+
+PLAY_WITH_ITS_COMMAND_LINE = """
+import sys
+from softseq_ros.nodes.player import parse_remaps, play
+words = sys.argv[2:]
+remaps = parse_remaps([words[i + 1] for i, word in enumerate(words) if word == '--remap'])
+play(sys.argv[1], rate=20.0, topics=['/pump/command', '/actuator/volumes'], wait_s=30.0,
+     args=sys.argv, remap=remaps)
+"""
+
+
+@pytest.mark.ros
+def test_a_command_line_handed_to_play_gives_rcl_none_of_its_remap_words(context, small_bag,
+                                                                         ros_env, tmp_path):
+    # play(args=sys.argv) passed the whole command line to rclpy.init: rcl took the FROM:=TO
+    # words for its own remap rules and undid the player's swap. Its --ros-args still reach
+    # rcl (a log level here).
+    script = tmp_path / 'player.py'
+    script.write_text(PLAY_WITH_ITS_COMMAND_LINE)
+    results = []
+
+    def play() -> dict[str, list[bytes]]:
+        results.append(subprocess.run(
+            [sys.executable, str(script), str(small_bag), *SWAP, '--ros-args', '--log-level',
+             'warn'], capture_output=True, text=True, timeout=TIMEOUT_S,
+            stdin=subprocess.DEVNULL, env=ros_env))
+        return _swapped(small_bag)
+
+    got = _heard_while(context, play)
+    result, = results
+    assert result.returncode == 0, result.stderr
+    assert got == _swapped(small_bag)
+    assert 'deprecated' not in result.stderr, result.stderr
 
 
 @pytest.mark.ros
@@ -104,6 +156,37 @@ def test_two_topics_of_different_types_onto_one_name_are_refused_in_one_line(sma
     assert '/x would carry /actuator/pressure (sensor_msgs/msg/FluidPressure) and ' \
         '/pump/command (sensor_msgs/msg/JointState)' in line
     assert '--remap /actuator/pressure:=/x --remap /pump/command:=x' in line
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('topic, owner', [
+    ('/rosout', "the player's log (rcl_interfaces/msg/Log)"),
+    ('/parameter_events', "the player's parameter events (rcl_interfaces/msg/ParameterEvent)"),
+])
+def test_a_topic_remapped_onto_a_topic_of_the_players_node_is_refused_in_one_line(
+        small_bag, ros_env, topic, owner):
+    # The player's node publishes on these itself: rclpy's traceback from create_publisher
+    # ("incompatible type"), exit 1.
+    line = one_line(softseq('play', str(small_bag), '--remap', f'/pump/command:={topic}',
+                            env=ros_env), 'play')
+    assert line == (f'softseq play: error: --remap /pump/command:={topic}: {topic} would carry '
+                    f'{owner} and /pump/command (sensor_msgs/msg/JointState); a topic has one '
+                    'type')
+
+
+def test_a_recorded_topic_of_another_type_on_the_players_log_is_refused_naming_the_bag(
+        tmp_path):
+    from std_msgs.msg import String
+
+    from softseq_ros.nodes.player import BagPlayer, PlayError
+
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, flush_period_s=None) as writer:
+        writer.add_topic('/rosout', 'std_msgs/msg/String')
+        writer.write('/rosout', serialize(String(data='a log line')), 1_700_000_000_000_000_000)
+    with pytest.raises(PlayError, match=rf"^{bag}: /rosout would carry the player's log "
+                       r'\(rcl_interfaces/msg/Log\) and /rosout \(std_msgs/msg/String\)'):
+        BagPlayer(str(bag))
 
 
 def test_a_recorded_clock_of_another_type_is_refused_with_clock(tmp_path):
