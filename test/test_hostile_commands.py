@@ -25,6 +25,7 @@ from sensor_msgs.msg import JointState
 import softseq_ros
 from softseq_ros import cli
 from softseq_ros.bag.forms import serialize
+from softseq_ros.bag.recovery import recover
 from softseq_ros.bag.writer import BagWriter
 
 TIMEOUT_S = 120
@@ -276,6 +277,104 @@ def test_sigterm_during_recovers_read_back_exits_143_and_loses_nothing(tmp_path,
     assert cli.main(['recover', str(bag)]) == 0
     with Reader(bag) as reader:
         assert sum(1 for _ in reader.messages()) == 200
+
+
+# softseq recover, with a pause at one step of the recovery: it says where it is and waits for
+# a line on stdin, so the test's signal arrives there. A stop the recovery holds (it acts once
+# the step is over) lets the pause end when the line comes.
+RECOVER_WITH_A_PAUSE = """
+import os, sys
+from softseq_ros import cli
+from softseq_ros.bag import recovery
+
+step, bag = sys.argv[1:]
+
+def pause():
+    print('at', step, flush=True)
+    sys.stdin.readline()
+
+def before(function):
+    def paused(*args, **kwargs):
+        pause()
+        return function(*args, **kwargs)
+    return paused
+
+if step == 'copy':
+    copy, copied = recovery._Copier.copy, []
+    def copy_pausing(self, record):
+        copied.append(record)
+        if len(copied) == 100:
+            pause()
+        return copy(self, record)
+    recovery._Copier.copy = copy_pausing
+elif step == 'rename':
+    replace = os.replace
+    def replace_pausing(source, target):
+        replace(source, target)
+        if str(target).endswith('.truncated'):
+            pause()
+    os.replace = replace_pausing
+elif step == 'mcap_read_back':
+    recovery._verify_file = before(recovery._verify_file)
+elif step == 'rosbags_read_back':
+    recovery._verify = before(recovery._verify)
+sys.exit(cli.main(['recover', bag]))
+"""
+
+
+def _killed_recording(folder: Path, messages: int = 2000) -> tuple[Path, bytes]:
+    """A bag cut in its last chunks without metadata.yaml, as a SIGKILL leaves it."""
+    bag = folder / 'bag'
+    with BagWriter(bag, flush_period_s=None) as writer:
+        writer.add_topic('/actuator/volumes', 'sensor_msgs/msg/JointState')
+        for i in range(messages):
+            msg = JointState()
+            msg.position = [1e-6 * i]
+            writer.write('/actuator/volumes', serialize(msg), 1_700_000_000_000_000_000 + i)
+            if i % 100 == 99:
+                writer.flush()
+    (bag / 'metadata.yaml').unlink()
+    path = bag / 'bag_0.mcap'
+    path.write_bytes(path.read_bytes()[:path.stat().st_size * 4 // 5])
+    return bag, path.read_bytes()
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+@pytest.mark.parametrize('step', ['copy', 'mcap_read_back', 'rename', 'rosbags_read_back'])
+def test_a_signal_at_any_step_of_recover_exits_128_plus_it_and_leaves_nothing_worse(
+        tmp_path, step, signum):
+    # A stop while the recovered copy was written or read back left the copy behind
+    # (bag_0.mcap.recovering); one between setting the original aside and the copy taking its
+    # name left the bag without its .mcap file.
+    bag, original = _killed_recording(tmp_path)
+    reference = tmp_path / 'reference'
+    reference.mkdir()
+    (reference / 'bag_0.mcap').write_bytes(original)
+    intact = recover(reference).message_count
+    script = tmp_path / 'recover.py'
+    script.write_text(RECOVER_WITH_A_PAUSE)
+    child = subprocess.Popen([sys.executable, str(script), step, str(bag)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline() == f'at {step}\n', child.stderr.read()
+        child.send_signal(signum)
+        out, err = child.communicate('\n', timeout=TIMEOUT_S)
+    finally:
+        child.kill()
+    assert child.returncode == 128 + signum, err
+    stopped = 'interrupted' if signum == signal.SIGINT else 'terminated'
+    assert err == f'softseq recover: {stopped}\n'
+    # Nothing worse than before: no half-written file, the bag's .mcap in its place, the
+    # original's bytes kept, and the next recover completes.
+    names = sorted(p.name for p in bag.iterdir())
+    assert not [name for name in names if name.endswith(('.recovering', '.tmp'))], names
+    assert 'bag_0.mcap' in names
+    kept = bag / ('bag_0.mcap.truncated' if 'bag_0.mcap.truncated' in names else 'bag_0.mcap')
+    assert kept.read_bytes() == original
+    assert recover(bag).message_count == intact
+    with Reader(bag) as reader:
+        assert sum(1 for _ in reader.messages()) == intact
 
 
 # ---------------------------------------------------------------------------- softseq info

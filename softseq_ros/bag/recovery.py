@@ -48,6 +48,7 @@ from mcap.records import (
 from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 
 from softseq_ros.errors import file_kind
+from softseq_ros.stopping import HeldSignals
 
 from .layout import MCAP_MAGIC, METADATA_FILE, file_order
 from .writer import (
@@ -615,13 +616,15 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
 
     Every chunk's CRC is checked. A complete .mcap (summary intact, every chunk valid, the
     statistics counting what was read, every channel counted described) only gets its
-    metadata.yaml rewritten. Otherwise the
-    schemas, channels and messages of the intact chunks are written into a temporary file
-    beside it, fsynced, and only then does the damaged file become ``<name>.truncated`` and
-    the new one take its name, so the only full copy is never overwritten or deleted before
-    its replacement is on disk. A recovery that was cut short (killed, disk full) is simply
-    run again: it reads the damaged original it kept, any number of times. ``keep_damaged``
-    False removes the damaged original once the recovered bag is complete and read back.
+    metadata.yaml rewritten. Otherwise the schemas, channels and messages of the intact
+    chunks are written into a temporary file beside it, fsynced and read back, and only then
+    does the damaged file become ``<name>.truncated`` and the new one take its name, so the
+    only full copy is never overwritten or deleted before its replacement is on disk. A
+    recovery that was cut short (killed, disk full) is simply run again: it reads the damaged
+    original it kept, any number of times; one stopped by SIGINT or SIGTERM leaves no copy
+    behind and never a bag without its file (the renames hold the stop until both are done).
+    ``keep_damaged`` False removes the damaged original once the recovered bag is complete
+    and read back.
     A bag split into several files has each file recovered so (the files a writer closed
     are complete; the last one it wrote is the one cut short), and one metadata.yaml lists
     them all; a last file that holds nothing yet (the writer died right after opening it)
@@ -654,7 +657,9 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
                 path.unlink(missing_ok=True)
     metadata = directory / METADATA_FILE
     previous_metadata = metadata.read_bytes() if metadata.is_file() else None
-    write_metadata_yaml(directory, _information_from_summary([r.mcap_path for r in results]))
+    information = _information_from_summary([r.mcap_path for r in results])
+    with HeldSignals():   # never a metadata.yaml.tmp left beside the bag
+        write_metadata_yaml(directory, information)
     total = sum(r.message_count for r in results)
     try:
         _verify(directory, total)
@@ -663,7 +668,8 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
             raise
         # Only metadata.yaml was written, and rosbags cannot read the bag through it: the bag
         # is left as it was.
-        _put_back(metadata, previous_metadata)
+        with HeldSignals():
+            _put_back(metadata, previous_metadata)
         raise BagWriterError(f'{err}; nothing written or moved') from None
     if not keep_damaged:
         for result in results:
@@ -713,30 +719,33 @@ def _recover_file(directory: Path, path: Path, original: Path | None) -> Recover
     temporary = path.with_name(path.name + RECOVERING_SUFFIX)
     temporary.unlink(missing_ok=True)   # left by a recovery that was killed
     scan = _Scan(source, 0)
+    # Until the copy takes the bag file's name, a refusal, a failure or a stop (SIGINT,
+    # SIGTERM) leaves nothing of it behind.
     try:
-        copier = _copy_intact(source, directory, temporary, path.name, scan)
-    except (OSError, BagWriterError) as err:
-        temporary.unlink(missing_ok=True)
-        if isinstance(err, NothingToRecoverError):
-            raise
-        reason = err.strerror if isinstance(err, OSError) and err.strerror else err
-        raise BagWriterError(f'{directory}: cannot write the recovered bag ({reason}); '
-                             f'{source.name} is untouched') from None
-    kept = copier.writer.message_count
-    try:
+        try:
+            copier = _copy_intact(source, directory, temporary, path.name, scan)
+        except (OSError, BagWriterError) as err:
+            if isinstance(err, NothingToRecoverError):
+                raise
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else err
+            raise BagWriterError(f'{directory}: cannot write the recovered bag ({reason}); '
+                                 f'{source.name} is untouched') from None
+        kept = copier.writer.message_count
         _verify_file(directory, temporary, kept)
         _refuse_fewer_than_a_plain_read(source, scan, copier)
         # Checked again at the last moment: a file being written is never moved aside.
         _refuse_if_in_use(directory, path)
-    except BagWriterError:
+    except BaseException:
         temporary.unlink(missing_ok=True)
         raise
     damaged = path.with_name(path.name + DAMAGED_SUFFIX)
-    if original is None:
-        os.replace(path, damaged)
+    # A stop between the two renames would leave the bag without its file: it acts after both.
+    with HeldSignals():
+        if original is None:
+            os.replace(path, damaged)
+            _sync_directory(directory)
+        os.replace(temporary, path)
         _sync_directory(directory)
-    os.replace(temporary, path)
-    _sync_directory(directory)
     summary = scan.summary
     dropped = list(scan.dropped)
     dropped.extend(DroppedRange(0, scan.size, 'messages', why, count)
