@@ -17,6 +17,7 @@ import textwrap
 import threading
 
 from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -398,26 +399,39 @@ def test_play_stopped_by_a_signal_exits_as_run_does(context, rig_bag, ros_env, s
     assert stderr.strip().splitlines() == [f'softseq play: {word}']
 
 
+@pytest.mark.parametrize('record', ['chunk', 'message_index'])
 @pytest.mark.parametrize('change', [+1, -1])
-def test_a_damaged_record_length_loses_only_its_chunk_when_the_summary_is_intact(tmp_path,
-                                                                                change):
+def test_a_damaged_record_length_loses_nothing_when_the_summary_is_intact(tmp_path, record,
+                                                                          change):
     directory = tmp_path / 'bag'
     _bag_of_chunks(directory, 'zstd')
     path = directory / 'bag_0.mcap'
     chunks = _chunks(path)
     start, length, _ = chunks[2]
-    # The third chunk's length field says more than it holds (running over the next chunk)
-    # or less (ending inside its own records): the walk loses its footing there.
+    # The length field of the third chunk, or of the message index after it, says more than
+    # the record holds (running over the next chunk) or less (ending inside the record): the
+    # walk loses its footing there.
+    at = start if record == 'chunk' else start + length
     data = bytearray(path.read_bytes())
-    wrong = (chunks[4][0] - start if change > 0 else length // 2) - 9
-    data[start + 1:start + 9] = wrong.to_bytes(8, 'little')
+    assert data[at] == (Opcode.CHUNK if record == 'chunk' else Opcode.MESSAGE_INDEX)
+    held = int.from_bytes(data[at + 1:at + 9], 'little')
+    wrong = chunks[4][0] - at - 9 if change > 0 else held // 2
+    data[at + 1:at + 9] = wrong.to_bytes(8, 'little')
     path.write_bytes(bytes(data))
 
     result = softseq('recover', str(directory))
 
+    # mcap's indexed reader reads every chunk by its index in the intact summary: so does the
+    # recovery. A chunk is read to the end its index gives; past another record, the walk
+    # resumes at the next indexed chunk.
     assert result.returncode == 0, result.stderr
-    assert 'dropped: ' in result.stdout and '50 messages' in result.stdout
-    kept = [i for i in range(300) if not 100 <= i < 150]
+    if record == 'chunk':
+        assert 'nothing in the file dropped' in result.stdout
+        assert f'the length field of the chunk at byte {start} disagrees with its index' \
+            in result.stdout
+    else:
+        assert f'dropped damaged records at bytes {at}-{chunks[3][0]}, 0 messages' \
+            in result.stdout
     assert [bytes(m.data) for m in _read_with_crcs(path)] == \
-        [serialize(_volumes(i)) for i in kept]
-    assert len(_rosbags_messages(directory)) == len(kept)
+        [serialize(_volumes(i)) for i in range(300)]
+    assert len(_rosbags_messages(directory)) == 300

@@ -25,6 +25,7 @@ from sensor_msgs.msg import JointState
 import softseq_ros
 from softseq_ros import cli
 from softseq_ros.bag.forms import serialize
+from softseq_ros.bag.recovery import recover
 from softseq_ros.bag.writer import BagWriter
 
 TIMEOUT_S = 120
@@ -60,18 +61,19 @@ def _recorded(bag: Path, topic: str) -> list[bytes]:
 
 # ------------------------------------------------------------------------ softseq play --remap
 
-@pytest.mark.ros
-def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_env):
-    # rcl took each FROM:=TO of --remap for a remap rule of its own: it warned that the syntax
-    # is deprecated and mapped the player's new names back, so a swap was silently undone.
+COMMAND, VOLUMES = '/pump/command', '/actuator/volumes'
+SWAP = ('--remap', f'{COMMAND}:={VOLUMES}', '--remap', f'{VOLUMES}:={COMMAND}')
+
+
+def _heard_while(context, play) -> dict[str, list[bytes]]:
+    """What a listener on /pump/command and /actuator/volumes hears while ``play()`` runs."""
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
 
     from softseq_ros.testing import spinning
 
-    command, volumes = '/pump/command', '/actuator/volumes'
     listener = Node('swap_listener', context=context)
-    got: dict[str, list[bytes]] = {command: [], volumes: []}
+    got: dict[str, list[bytes]] = {COMMAND: [], VOLUMES: []}
     lock = threading.Lock()
     for topic in got:
         def keep(data, topic=topic) -> None:
@@ -80,19 +82,70 @@ def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_en
         listener.create_subscription(JointState, topic, keep, QoSProfile(depth=10000),
                                      raw=True)
     with spinning(context, listener):
-        result = softseq('play', str(small_bag), '--rate', '20', '--topics', command, volumes,
-                         '--wait-for-subscribers', '30', '--remap', f'{command}:={volumes}',
-                         '--remap', f'{volumes}:={command}', env=ros_env)
-        expected = {command: _recorded(small_bag, volumes), volumes: _recorded(small_bag, command)}
+        expected = play()
         deadline = time.monotonic() + 15
         while time.monotonic() < deadline and any(
                 len(got[t]) < len(expected[t]) for t in got):
             time.sleep(0.05)
+    return got
+
+
+def _swapped(bag: Path) -> dict[str, list[bytes]]:
+    return {COMMAND: _recorded(bag, VOLUMES), VOLUMES: _recorded(bag, COMMAND)}
+
+
+@pytest.mark.ros
+def test_remap_swaps_two_topics_and_never_reaches_rcl(context, small_bag, ros_env):
+    # rcl took each FROM:=TO of --remap for a remap rule of its own: it warned that the syntax
+    # is deprecated and mapped the player's new names back, so a swap was silently undone.
+    results = []
+
+    def play() -> dict[str, list[bytes]]:
+        results.append(softseq('play', str(small_bag), '--rate', '20', '--topics', COMMAND,
+                               VOLUMES, '--wait-for-subscribers', '30', *SWAP, env=ros_env))
+        return _swapped(small_bag)
+
+    got = _heard_while(context, play)
+    result, = results
     assert result.returncode == 0, result.stderr
-    assert got == expected              # each recorded topic under the other's name
+    assert got == _swapped(small_bag)       # each recorded topic under the other's name
     # rcl saw no remap rule: it warned on each that the syntax is deprecated.
     assert 'remap' not in result.stderr.lower() and 'deprecated' not in result.stderr, \
         result.stderr
+
+
+PLAY_WITH_ITS_COMMAND_LINE = """
+import sys
+from softseq_ros.nodes.player import parse_remaps, play
+words = sys.argv[2:]
+remaps = parse_remaps([words[i + 1] for i, word in enumerate(words) if word == '--remap'])
+play(sys.argv[1], rate=20.0, topics=['/pump/command', '/actuator/volumes'], wait_s=30.0,
+     args=sys.argv, remap=remaps)
+"""
+
+
+@pytest.mark.ros
+def test_a_command_line_handed_to_play_gives_rcl_none_of_its_remap_words(context, small_bag,
+                                                                         ros_env, tmp_path):
+    # play(args=sys.argv) passed the whole command line to rclpy.init: rcl took the FROM:=TO
+    # words for its own remap rules and undid the player's swap. Its --ros-args still reach
+    # rcl (a log level here).
+    script = tmp_path / 'player.py'
+    script.write_text(PLAY_WITH_ITS_COMMAND_LINE)
+    results = []
+
+    def play() -> dict[str, list[bytes]]:
+        results.append(subprocess.run(
+            [sys.executable, str(script), str(small_bag), *SWAP, '--ros-args', '--log-level',
+             'warn'], capture_output=True, text=True, timeout=TIMEOUT_S,
+            stdin=subprocess.DEVNULL, env=ros_env))
+        return _swapped(small_bag)
+
+    got = _heard_while(context, play)
+    result, = results
+    assert result.returncode == 0, result.stderr
+    assert got == _swapped(small_bag)
+    assert 'deprecated' not in result.stderr, result.stderr
 
 
 @pytest.mark.ros
@@ -104,6 +157,37 @@ def test_two_topics_of_different_types_onto_one_name_are_refused_in_one_line(sma
     assert '/x would carry /actuator/pressure (sensor_msgs/msg/FluidPressure) and ' \
         '/pump/command (sensor_msgs/msg/JointState)' in line
     assert '--remap /actuator/pressure:=/x --remap /pump/command:=x' in line
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('topic, owner', [
+    ('/rosout', "the player's log (rcl_interfaces/msg/Log)"),
+    ('/parameter_events', "the player's parameter events (rcl_interfaces/msg/ParameterEvent)"),
+])
+def test_a_topic_remapped_onto_a_topic_of_the_players_node_is_refused_in_one_line(
+        small_bag, ros_env, topic, owner):
+    # The player's node publishes on these itself: rclpy's traceback from create_publisher
+    # ("incompatible type"), exit 1.
+    line = one_line(softseq('play', str(small_bag), '--remap', f'/pump/command:={topic}',
+                            env=ros_env), 'play')
+    assert line == (f'softseq play: error: --remap /pump/command:={topic}: {topic} would carry '
+                    f'{owner} and /pump/command (sensor_msgs/msg/JointState); a topic has one '
+                    'type')
+
+
+def test_a_recorded_topic_of_another_type_on_the_players_log_is_refused_naming_the_bag(
+        tmp_path):
+    from std_msgs.msg import String
+
+    from softseq_ros.nodes.player import BagPlayer, PlayError
+
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, flush_period_s=None) as writer:
+        writer.add_topic('/rosout', 'std_msgs/msg/String')
+        writer.write('/rosout', serialize(String(data='a log line')), 1_700_000_000_000_000_000)
+    with pytest.raises(PlayError, match=rf"^{bag}: /rosout would carry the player's log "
+                       r'\(rcl_interfaces/msg/Log\) and /rosout \(std_msgs/msg/String\)'):
+        BagPlayer(str(bag))
 
 
 def test_a_recorded_clock_of_another_type_is_refused_with_clock(tmp_path):
@@ -193,6 +277,104 @@ def test_sigterm_during_recovers_read_back_exits_143_and_loses_nothing(tmp_path,
     assert cli.main(['recover', str(bag)]) == 0
     with Reader(bag) as reader:
         assert sum(1 for _ in reader.messages()) == 200
+
+
+# softseq recover, with a pause at one step of the recovery: it says where it is and waits for
+# a line on stdin, so the test's signal arrives there. A stop the recovery holds (it acts once
+# the step is over) lets the pause end when the line comes.
+RECOVER_WITH_A_PAUSE = """
+import os, sys
+from softseq_ros import cli
+from softseq_ros.bag import recovery
+
+step, bag = sys.argv[1:]
+
+def pause():
+    print('at', step, flush=True)
+    sys.stdin.readline()
+
+def before(function):
+    def paused(*args, **kwargs):
+        pause()
+        return function(*args, **kwargs)
+    return paused
+
+if step == 'copy':
+    copy, copied = recovery._Copier.copy, []
+    def copy_pausing(self, record):
+        copied.append(record)
+        if len(copied) == 100:
+            pause()
+        return copy(self, record)
+    recovery._Copier.copy = copy_pausing
+elif step == 'rename':
+    replace = os.replace
+    def replace_pausing(source, target):
+        replace(source, target)
+        if str(target).endswith('.truncated'):
+            pause()
+    os.replace = replace_pausing
+elif step == 'mcap_read_back':
+    recovery._verify_file = before(recovery._verify_file)
+elif step == 'rosbags_read_back':
+    recovery._verify = before(recovery._verify)
+sys.exit(cli.main(['recover', bag]))
+"""
+
+
+def _killed_recording(folder: Path, messages: int = 2000) -> tuple[Path, bytes]:
+    """A bag cut in its last chunks without metadata.yaml, as a SIGKILL leaves it."""
+    bag = folder / 'bag'
+    with BagWriter(bag, flush_period_s=None) as writer:
+        writer.add_topic('/actuator/volumes', 'sensor_msgs/msg/JointState')
+        for i in range(messages):
+            msg = JointState()
+            msg.position = [1e-6 * i]
+            writer.write('/actuator/volumes', serialize(msg), 1_700_000_000_000_000_000 + i)
+            if i % 100 == 99:
+                writer.flush()
+    (bag / 'metadata.yaml').unlink()
+    path = bag / 'bag_0.mcap'
+    path.write_bytes(path.read_bytes()[:path.stat().st_size * 4 // 5])
+    return bag, path.read_bytes()
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+@pytest.mark.parametrize('step', ['copy', 'mcap_read_back', 'rename', 'rosbags_read_back'])
+def test_a_signal_at_any_step_of_recover_exits_128_plus_it_and_leaves_nothing_worse(
+        tmp_path, step, signum):
+    # A stop while the recovered copy was written or read back left the copy behind
+    # (bag_0.mcap.recovering); one between setting the original aside and the copy taking its
+    # name left the bag without its .mcap file.
+    bag, original = _killed_recording(tmp_path)
+    reference = tmp_path / 'reference'
+    reference.mkdir()
+    (reference / 'bag_0.mcap').write_bytes(original)
+    intact = recover(reference).message_count
+    script = tmp_path / 'recover.py'
+    script.write_text(RECOVER_WITH_A_PAUSE)
+    child = subprocess.Popen([sys.executable, str(script), step, str(bag)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline() == f'at {step}\n', child.stderr.read()
+        child.send_signal(signum)
+        out, err = child.communicate('\n', timeout=TIMEOUT_S)
+    finally:
+        child.kill()
+    assert child.returncode == 128 + signum, err
+    stopped = 'interrupted' if signum == signal.SIGINT else 'terminated'
+    assert err == f'softseq recover: {stopped}\n'
+    # Nothing worse than before: no half-written file, the bag's .mcap in its place, the
+    # original's bytes kept, and the next recover completes.
+    names = sorted(p.name for p in bag.iterdir())
+    assert not [name for name in names if name.endswith(('.recovering', '.tmp'))], names
+    assert 'bag_0.mcap' in names
+    kept = bag / ('bag_0.mcap.truncated' if 'bag_0.mcap.truncated' in names else 'bag_0.mcap')
+    assert kept.read_bytes() == original
+    assert recover(bag).message_count == intact
+    with Reader(bag) as reader:
+        assert sum(1 for _ in reader.messages()) == intact
 
 
 # ---------------------------------------------------------------------------- softseq info

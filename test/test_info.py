@@ -11,14 +11,17 @@ from pathlib import Path
 import shutil
 
 from mcap.reader import make_reader
-from mcap.records import Message
+from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 import pytest
 from rosbags.rosbag2 import Reader
 from scenes import fast_asymmetric
+from std_msgs.msg import Float64
 
 import softseq_ros
 from softseq_ros import cli
+from softseq_ros.bag.forms import serialize
+from softseq_ros.bag.writer import BagWriter
 from softseq_ros.scene.loader import load_scene
 from softseq_ros.segments.identity import segments_sha256
 
@@ -151,3 +154,70 @@ def test_info_refuses_a_damaged_or_foreign_bag_in_one_line(made, tmp_path, capsy
     code, out, err = _info(tmp_path / 'nowhere', capsys)
     assert code == 2
     assert err == f'softseq info: error: {tmp_path / "nowhere"}: no such bag folder\n'
+
+
+def _two_topic_bag(folder: Path, messages: int) -> Path:
+    """A closed bag of ``messages`` messages on /a and /b, the second topic every third one."""
+    with BagWriter(folder, flush_period_s=None, chunk_size=4096) as writer:
+        writer.add_topic('/a', 'std_msgs/msg/Float64')
+        writer.add_topic('/b', 'std_msgs/msg/Float64')
+        for i in range(messages):
+            writer.write('/b' if i % 3 == 2 else '/a', serialize(Float64(data=float(i))),
+                         START_NS + 1000 * i)
+    return folder
+
+
+def _mcap_counts(bag: Path) -> dict[str, int]:
+    """Messages per topic that mcap's stream reader reads in the bag's file, to where it stops."""
+    counts: dict[str, int] = {}
+    topics = {}
+    try:
+        for record in StreamReader(io.BytesIO(next(bag.glob('*.mcap')).read_bytes())).records:
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Message):
+                counts[topics[record.channel_id]] = counts.get(topics[record.channel_id], 0) + 1
+    except Exception:  # noqa: S110 - a cut tail ends the reading
+        pass
+    return counts
+
+
+@pytest.mark.parametrize('case', ['more_than_it_says', 'fewer_than_it_says', 'cut_short'])
+def test_info_shows_the_scans_counts_and_what_metadata_yaml_says_where_they_disagree(
+        tmp_path, capsys, case):
+    # A metadata.yaml written at an earlier flush beside a file that has grown since, or one
+    # of a longer recording beside a file that holds fewer: info showed metadata.yaml's counts
+    # (a complete bag), or the scan's without a word of metadata.yaml (a file cut short).
+    held, said = {'more_than_it_says': (300, 90), 'fewer_than_it_says': (90, 300),
+                  'cut_short': (300, 300)}[case]
+    bag = _two_topic_bag(tmp_path / 'bag', held)
+    other = _two_topic_bag(tmp_path / 'other', said)
+    (bag / 'metadata.yaml').write_bytes((other / 'metadata.yaml').read_bytes()
+                                        .replace(b'other_0.mcap', b'bag_0.mcap'))
+    if case == 'cut_short':
+        mcap = bag / 'bag_0.mcap'
+        mcap.write_bytes(mcap.read_bytes()[:mcap.stat().st_size * 2 // 3])
+    expected = _mcap_counts(bag)
+    assert sum(expected.values()) != said
+
+    code, out, err = _info(bag, capsys)
+
+    assert code == 0, err
+    assert _field(out, 'Messages') == str(sum(expected.values()))
+    assert _field(out, 'Counts') == (f'from a scan of the .mcap files; metadata.yaml '
+                                     f'disagrees: it says {said} messages')
+    for topic, count in expected.items():
+        assert f'Topic: {topic} | Type: std_msgs/msg/Float64 | Count: {count} |' in out
+
+
+def test_info_says_where_its_counts_come_from(tmp_path, capsys):
+    bag = _two_topic_bag(tmp_path / 'bag', 300)
+    code, out, err = _info(bag, capsys)
+    assert code == 0, err
+    assert _field(out, 'Messages') == '300'
+    assert _field(out, 'Counts') == 'from metadata.yaml (the .mcap files hold as many)'
+    (bag / 'metadata.yaml').unlink()
+    code, out, err = _info(bag, capsys)
+    assert code == 0, err
+    assert _field(out, 'Messages') == '300'
+    assert _field(out, 'Counts') == 'from a scan of the .mcap files (no metadata.yaml)'

@@ -8,11 +8,18 @@ writes a complete bag from it.
 What is kept is checked: every chunk is decompressed and its records' CRC
 (``uncompressed_crc``) compared, also in a file that looks complete, and a chunk that fails is
 dropped whole and reported with its byte range and, where an index says so, its message count.
-The bag written is read back before the recovery reports success: with mcap's reader, CRCs
-checked, and with rosbags (an independent reader). A file with nothing in it to recover (empty,
-the magic bytes alone, the magic followed by something that is not an MCAP header) is refused,
-and so is a bag whose writer still holds its lock (:mod:`softseq_ros.bag.writer`): a file
-being written is never moved or replaced.
+The file written is read back with mcap's reader (CRCs checked) before it takes the bag
+file's name, and the whole bag with rosbags (an independent reader) before the recovery reports
+success.
+
+A recovery never makes a bag less readable than it was: a file is only replaced by one that
+holds at least the messages mcap's own readers read in it (CRCs checked, up to where they
+stop); one that would hold fewer (messages without a schema, or of an encoding a rosbag2 bag
+cannot carry) is refused and left as it was, and a metadata.yaml that rosbags cannot read the
+bag through is not left behind. A file with nothing in it to recover (empty, the magic bytes
+alone, the magic followed by something that is not an MCAP header) is refused, and so is a bag
+whose writer still holds its lock (:mod:`softseq_ros.bag.writer`): a file being written is
+never moved or replaced.
 """
 
 import bisect
@@ -41,9 +48,12 @@ from mcap.records import (
 from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 
 from softseq_ros.errors import file_kind
+from softseq_ros.stopping import HeldSignals
 
-from .layout import MCAP_MAGIC, file_order
+from .layout import MCAP_MAGIC, METADATA_FILE, file_order
 from .writer import (
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
     BagWriter,
     BagWriterError,
     bag_information,
@@ -109,6 +119,10 @@ class BagInUseError(BagWriterError):
     """A bag whose writer still holds its lock: it is being written."""
 
 
+class RecoveryRefusedError(BagWriterError):
+    """A recovery that would keep fewer messages than a plain read of the file gives."""
+
+
 def _bag_files(directory: Path) -> list[tuple[Path, Path | None]]:
     """
     Each .mcap path of the bag (perhaps missing) with an earlier recovery's damaged original.
@@ -163,6 +177,25 @@ class _Summary:
     message_count: int | None
     schemas: dict[int, Schema]
     channels: dict[int, Channel]
+    channel_message_counts: dict[int, int] = field(default_factory=dict)
+
+    @property
+    def describes_its_channels(self) -> bool:
+        """
+        True when every channel the statistics count messages on is in the summary.
+
+        A writer may leave the channels and schemas out of its summary (``repeatChannels`` and
+        ``repeatSchemas`` false in mcap's writers): metadata.yaml cannot be made from it, and
+        readers that go by the summary (rosbags) find no topic in the file.
+        """
+        if self.message_count and not self.channels:
+            return False
+        for channel_id, count in self.channel_message_counts.items():
+            channel = self.channels.get(channel_id)
+            if count and (channel is None or channel.schema_id != 0
+                          and channel.schema_id not in self.schemas):
+                return False
+        return True
 
 
 @dataclass
@@ -176,12 +209,24 @@ class _Scan:
     messages: int = 0
     reached_data_end: bool = False
     stop_reason: str = ''
+    # Offsets of a second MCAP magic and header in the data section (a writer started twice
+    # on one file): the records after it are read on, but mcap's readers stop there.
+    restarts: list[int] = field(default_factory=list)
+    # Offsets of chunks whose length field disagreed with their index, read by the index.
+    mended: list[int] = field(default_factory=list)
 
     @property
     def intact(self) -> bool:
-        """Nothing dropped, the data section ends, and the summary counts what was read."""
-        return (self.reached_data_end and not self.dropped and self.summary is not None
-                and self.summary.message_count == self.messages)
+        """
+        Nothing dropped, the data section ends, and the summary counts and describes it.
+
+        Only such a file is kept as it is (readers can read it as it stands); any other is
+        rewritten from what was read.
+        """
+        return (self.reached_data_end and not self.dropped and not self.restarts
+                and not self.mended and self.summary is not None
+                and self.summary.message_count == self.messages
+                and self.summary.describes_its_channels)
 
 
 def _nothing(path: Path, why: str) -> NothingToRecoverError:
@@ -241,7 +286,9 @@ def _read_summary(stream: BinaryIO, size: int) -> _Summary | None:
     return _Summary(start=start, chunk_offsets=sorted(chunk_indexes),
                     chunk_indexes=chunk_indexes,
                     message_count=statistics.message_count if statistics else None,
-                    schemas=schemas, channels=channels)
+                    schemas=schemas, channels=channels,
+                    channel_message_counts=dict(statistics.channel_message_counts)
+                    if statistics else {})
 
 
 def _indexed_messages(stream: BinaryIO, index: ChunkIndex | None) -> int | None:
@@ -292,6 +339,11 @@ def _intact_records(path: Path, scan: _Scan, parse: bool = True) -> Iterator[Any
         first = True
         while offset < data_end:
             head = stream.read(_RECORD_HEAD.size)
+            if not first and head == MCAP_MAGIC + bytes([Opcode.HEADER]):
+                scan.restarts.append(offset)
+                offset += len(MCAP_MAGIC)
+                stream.seek(offset)
+                continue
             problem = None
             record = None
             end = offset
@@ -299,6 +351,13 @@ def _intact_records(path: Path, scan: _Scan, parse: bool = True) -> Iterator[Any
                 problem = 'a record cut short'
             else:
                 opcode, length = _RECORD_HEAD.unpack(head)
+                index = scan.summary.chunk_indexes.get(offset) if scan.summary else None
+                if index is not None and opcode == Opcode.CHUNK \
+                        and index.chunk_length != _RECORD_HEAD.size + length:
+                    # The chunk's length field is damaged, its index (in a summary whose CRC
+                    # holds) is not: mcap's indexed reader reads the chunk so, and so does this.
+                    scan.mended.append(offset)
+                    length = index.chunk_length - _RECORD_HEAD.size
                 end = offset + _RECORD_HEAD.size + length
                 if end > size:
                     problem = (f'a record (opcode 0x{opcode:02x}) of {length} bytes runs past '
@@ -371,9 +430,24 @@ def _intact_records(path: Path, scan: _Scan, parse: bool = True) -> Iterator[Any
 
 
 def _stop_reason(scan: _Scan) -> str:
+    reason = scan.stop_reason
     if scan.reached_data_end and scan.summary is None:
-        return 'read to the end; the summary section is missing or fails its CRC (rebuilt)'
-    return scan.stop_reason
+        reason = 'read to the end; the summary section is missing or fails its CRC (rebuilt)'
+    elif scan.reached_data_end and scan.summary.message_count is None:
+        reason = 'read to the end; the summary section has no statistics (rebuilt)'
+    elif scan.reached_data_end and not scan.summary.describes_its_channels:
+        reason = 'read to the end; the summary section does not describe every channel (rebuilt)'
+    if scan.mended:
+        reason += (f'; the length field of the chunk at {_bytes_at(scan.mended)} disagrees with '
+                   'its index (read by the index)')
+    if scan.restarts:
+        reason += (f'; a second MCAP magic and header at {_bytes_at(scan.restarts)} (a writer '
+                   'started twice on the file) skipped')
+    return reason
+
+
+def _bytes_at(offsets: list[int]) -> str:
+    return ('byte ' if len(offsets) == 1 else 'bytes ') + ', '.join(map(str, offsets))
 
 
 def _messages_between(stream: BinaryIO, summary: _Summary | None, start: int,
@@ -456,6 +530,38 @@ def _verify_file(directory: Path, path: Path, expected: int, *, mcap_read: bool 
                              f'({path.name}: {type(err).__name__}: {err})') from None
 
 
+def _plain_read_count(path: Path, summary: _Summary | None) -> int:
+    """
+    Messages mcap's own readers read in ``path``, CRCs checked, up to where they stop.
+
+    The stream reader, and where an intact summary indexes the chunks the indexed reader too
+    (it reads the chunks it can reach by their index): the more of the two. A chunk that fails
+    its CRC stops them, as it is dropped by the recovery.
+    """
+    from mcap.reader import make_reader
+    from mcap.stream_reader import StreamReader
+
+    streamed = 0
+    with open(path, 'rb') as stream:
+        try:
+            for record in StreamReader(stream, validate_crcs=True).records:
+                streamed += isinstance(record, Message)
+        except Exception:  # noqa: BLE001, S110 - where the reader stops is what it reads
+            pass
+    # The stream reader can also end without a fault short of the end: a length field that
+    # runs over the next chunks makes it skip them.
+    if summary is None or not summary.chunk_offsets:
+        return streamed
+    indexed = 0
+    with open(path, 'rb') as stream:
+        try:
+            for _ in make_reader(stream, validate_crcs=True).iter_messages():
+                indexed += 1
+        except Exception:  # noqa: BLE001, S110 - likewise
+            pass
+    return max(streamed, indexed)
+
+
 def _verify(directory: Path, expected: int) -> None:
     """Read the whole bag back with rosbags (an independent reader, through metadata.yaml)."""
     try:
@@ -509,20 +615,27 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
     Make a readable bag of a directory whose writer died (SIGKILL, power loss, full disk).
 
     Every chunk's CRC is checked. A complete .mcap (summary intact, every chunk valid, the
-    statistics counting what was read) only gets its metadata.yaml rewritten. Otherwise the
-    schemas, channels and messages of the intact chunks are written into a temporary file
-    beside it, fsynced, and only then does the damaged file become ``<name>.truncated`` and
-    the new one take its name, so the only full copy is never overwritten or deleted before
-    its replacement is on disk. A recovery that was cut short (killed, disk full) is simply
-    run again: it reads the damaged original it kept, any number of times. ``keep_damaged``
-    False removes the damaged original once the recovered bag is complete and read back.
+    statistics counting what was read, every channel counted described) only gets its
+    metadata.yaml rewritten. Otherwise the schemas, channels and messages of the intact
+    chunks are written into a temporary file beside it, fsynced and read back, and only then
+    does the damaged file become ``<name>.truncated`` and the new one take its name, so the
+    only full copy is never overwritten or deleted before its replacement is on disk. A
+    recovery that was cut short (killed, disk full) is simply run again: it reads the damaged
+    original it kept, any number of times; one stopped by SIGINT or SIGTERM leaves no copy
+    behind and never a bag without its file (the renames hold the stop until both are done).
+    ``keep_damaged`` False removes the damaged original once the recovered bag is complete
+    and read back.
     A bag split into several files has each file recovered so (the files a writer closed
     are complete; the last one it wrote is the one cut short), and one metadata.yaml lists
     them all; a last file that holds nothing yet (the writer died right after opening it)
     is set aside as ``<name>.truncated`` and left out.
 
     Refused (nothing written, nothing moved): a bag whose writer still holds its lock
-    (:class:`BagInUseError`), and a file with nothing to recover (:class:`NothingToRecoverError`).
+    (:class:`BagInUseError`), a file with nothing to recover (:class:`NothingToRecoverError`),
+    and a file whose recovery would hold fewer messages than mcap's readers read in it, or
+    whose messages a rosbag2 bag cannot carry (:class:`RecoveryRefusedError`; the files of a
+    split bag are recovered one after the other, so those before such a file are already
+    recovered).
     """
     directory = Path(directory)
     if not directory.is_dir():
@@ -542,9 +655,22 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
                 _sync_directory(directory)
             else:
                 path.unlink(missing_ok=True)
-    write_metadata_yaml(directory, _information_from_summary([r.mcap_path for r in results]))
+    metadata = directory / METADATA_FILE
+    previous_metadata = metadata.read_bytes() if metadata.is_file() else None
+    information = _information_from_summary([r.mcap_path for r in results])
+    with HeldSignals():   # never a metadata.yaml.tmp left beside the bag
+        write_metadata_yaml(directory, information)
     total = sum(r.message_count for r in results)
-    _verify(directory, total)
+    try:
+        _verify(directory, total)
+    except BagWriterError as err:
+        if any(not r.was_complete for r in results):
+            raise
+        # Only metadata.yaml was written, and rosbags cannot read the bag through it: the bag
+        # is left as it was.
+        with HeldSignals():
+            _put_back(metadata, previous_metadata)
+        raise BagWriterError(f'{err}; nothing written or moved') from None
     if not keep_damaged:
         for result in results:
             if result.damaged_copy is not None:
@@ -562,6 +688,20 @@ def recover(directory: str | os.PathLike, *, keep_damaged: bool = True) -> Recov
         None if None in expected else sum(expected))
 
 
+def _put_back(path: Path, content: bytes | None) -> None:
+    """``path`` as it was before: ``content``, or no file at all (None)."""
+    if content is None:
+        path.unlink(missing_ok=True)
+    else:
+        temporary = path.with_name(path.name + '.tmp')
+        with open(temporary, 'wb') as stream:
+            stream.write(content)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temporary, path)
+    _sync_directory(path.parent)
+
+
 def _recover_file(directory: Path, path: Path, original: Path | None) -> RecoveryResult:
     """One .mcap file of the bag made whole (metadata.yaml is the caller's)."""
     if path.exists():
@@ -572,45 +712,93 @@ def _recover_file(directory: Path, path: Path, original: Path | None) -> Recover
                 raise
             scan = None   # a cut-short recovery's output: the damaged original is read instead
         if scan is not None and scan.intact:
+            _refuse_channels_a_bag_cannot_carry(path, scan.summary)
             _verify_file(directory, path, scan.messages, mcap_read=False)
             return RecoveryResult(path, scan.messages, True, original, 'complete file')
     source = original if original is not None else path
     temporary = path.with_name(path.name + RECOVERING_SUFFIX)
     temporary.unlink(missing_ok=True)   # left by a recovery that was killed
     scan = _Scan(source, 0)
+    # Until the copy takes the bag file's name, a refusal, a failure or a stop (SIGINT,
+    # SIGTERM) leaves nothing of it behind.
     try:
-        writer = _copy_intact(source, directory, temporary, path.name, scan)
-    except (OSError, BagWriterError) as err:
+        try:
+            copier = _copy_intact(source, directory, temporary, path.name, scan)
+        except (OSError, BagWriterError) as err:
+            if isinstance(err, NothingToRecoverError):
+                raise
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else err
+            raise BagWriterError(f'{directory}: cannot write the recovered bag ({reason}); '
+                                 f'{source.name} is untouched') from None
+        kept = copier.writer.message_count
+        _verify_file(directory, temporary, kept)
+        _refuse_fewer_than_a_plain_read(source, scan, copier)
+        # Checked again at the last moment: a file being written is never moved aside.
+        _refuse_if_in_use(directory, path)
+    except BaseException:
         temporary.unlink(missing_ok=True)
-        if isinstance(err, NothingToRecoverError):
-            raise
-        reason = err.strerror if isinstance(err, OSError) and err.strerror else err
-        raise BagWriterError(f'{directory}: cannot write the recovered bag ({reason}); '
-                             f'{source.name} is untouched') from None
-    # Checked again at the last moment: a file being written is never moved aside.
-    _refuse_if_in_use(directory, path)
+        raise
     damaged = path.with_name(path.name + DAMAGED_SUFFIX)
-    if original is None:
-        os.replace(path, damaged)
+    # A stop between the two renames would leave the bag without its file: it acts after both.
+    with HeldSignals():
+        if original is None:
+            os.replace(path, damaged)
+            _sync_directory(directory)
+        os.replace(temporary, path)
         _sync_directory(directory)
-    os.replace(temporary, path)
-    _sync_directory(directory)
-    _verify_file(directory, path, writer.message_count)
     summary = scan.summary
     dropped = list(scan.dropped)
-    orphans = scan.messages - writer.message_count
-    if orphans:
-        # Messages intact in themselves whose channel record was in a part dropped, and that
-        # no intact summary describes: without their type they cannot be written.
-        dropped.append(DroppedRange(0, scan.size, 'messages', 'their channel record was in a '
-                                    'dropped part of the file', orphans))
-    return RecoveryResult(path, writer.message_count, False, damaged, _stop_reason(scan),
-                          tuple(dropped),
+    dropped.extend(DroppedRange(0, scan.size, 'messages', why, count)
+                   for why, count in copier.skipped.items())
+    return RecoveryResult(path, kept, False, damaged, _stop_reason(scan), tuple(dropped),
                           summary.message_count if summary is not None else None)
 
 
+def _refuse_channels_a_bag_cannot_carry(path: Path, summary: _Summary) -> None:
+    """RecoveryRefusedError naming the channels of a complete file metadata.yaml cannot list."""
+    unwritable = {}
+    for channel_id, count in summary.channel_message_counts.items():
+        channel = summary.channels.get(channel_id)
+        if count and channel is not None:
+            why = _unwritable(channel, summary.schemas.get(channel.schema_id))
+            if why is not None:
+                unwritable[why] = unwritable.get(why, 0) + count
+    if unwritable:
+        why = '; '.join(f'{count} messages: {why}' for why, count in unwritable.items())
+        raise RecoveryRefusedError(f'{path}: a rosbag2 bag cannot carry some of its messages '
+                                   f'({why}); nothing written or moved')
+
+
+def _unwritable(channel: Channel, schema: Schema | None) -> str | None:
+    """Why a rosbag2 bag cannot carry the messages of ``channel``; None when it can."""
+    if channel.schema_id == 0:
+        return f'{channel.topic} has no schema'
+    if schema is None:
+        return f'the schema of {channel.topic} was in a dropped part of the file'
+    if channel.message_encoding != MESSAGE_ENCODING or schema.encoding != SCHEMA_ENCODING:
+        return (f'{channel.topic} holds {channel.message_encoding or "unnamed"} messages of a '
+                f'{schema.encoding or "unnamed"} schema, not {MESSAGE_ENCODING} of '
+                f'{SCHEMA_ENCODING}')
+    try:
+        schema.data.decode('utf-8')
+    except UnicodeDecodeError:
+        return f'the {SCHEMA_ENCODING} schema of {channel.topic} is not UTF-8 text'
+    return None
+
+
+def _refuse_fewer_than_a_plain_read(source: Path, scan: _Scan, copier: '_Copier') -> None:
+    """RecoveryRefusedError when mcap's readers read more messages in ``source`` than were kept."""
+    # Read even when every message the walk found is kept: the walk is what is checked here.
+    kept, plain = copier.writer.message_count, _plain_read_count(source, scan.summary)
+    if kept < plain:
+        why = '; '.join(f'{count} messages: {why}' for why, count in copier.skipped.items())
+        raise RecoveryRefusedError(
+            f'{source}: a recovery would keep {kept} of the {plain} messages that mcap reads in '
+            f'it ({why or "it reads further into the file"}); nothing written or moved')
+
+
 def _copy_intact(source: Path, directory: Path, temporary: Path, final_name: str,
-                 scan: _Scan) -> BagWriter:
+                 scan: _Scan) -> '_Copier':
     """Write what is intact in ``source`` into ``temporary`` (closed and fsynced on return)."""
     records = _intact_records(source, scan)
     # The first record read decides whether there is anything at all, before a file is made.
@@ -623,17 +811,25 @@ def _copy_intact(source: Path, directory: Path, temporary: Path, final_name: str
             copier.copy(record)
     finally:
         copier.writer.close()
-    return copier.writer
+    return copier
 
 
 class _Copier:
-    """Schemas, channels and messages into the recovered bag, each message's topic first."""
+    """
+    Schemas, channels and messages into the recovered bag, each message's topic first.
+
+    A message the bag cannot hold is counted in ``skipped`` under the reason: its channel
+    record lost with a dropped part, a channel without a schema, or one whose messages are not
+    CDR of a ros2msg definition (a rosbag2 bag would label them as such and mislead readers).
+    """
 
     def __init__(self, writer: BagWriter, scan: _Scan) -> None:
         self.writer = writer
         self.scan = scan
         self.schemas: dict[int, Schema] = {}
         self.topics_by_channel: dict[int, str] = {}
+        self.unwritable: dict[int, str] = {}    # channel id: why its messages are not kept
+        self.skipped: dict[str, int] = {}       # why: messages not kept
 
     def copy(self, record: Any) -> None:
         if isinstance(record, Schema):
@@ -642,20 +838,27 @@ class _Copier:
             self._channel(record)
         elif isinstance(record, Message):
             topic = self.topics_by_channel.get(record.channel_id)
-            if topic is None and self.scan.summary is not None:
+            if topic is None and self.scan.summary is not None \
+                    and record.channel_id not in self.unwritable:
                 # Its channel record went with a dropped chunk; the intact summary has it.
                 channel = self.scan.summary.channels.get(record.channel_id)
                 if channel is not None:
                     self._channel(channel)
                     topic = self.topics_by_channel.get(record.channel_id)
-            if topic is not None:
+            if topic is None:
+                why = self.unwritable.get(
+                    record.channel_id, 'their channel record was in a dropped part of the file')
+                self.skipped[why] = self.skipped.get(why, 0) + 1
+            else:
                 self.writer.write(topic, record.data, record.log_time, record.publish_time)
 
     def _channel(self, record: Channel) -> None:
         schema = self.schemas.get(record.schema_id)
         if schema is None and self.scan.summary is not None:
             schema = self.scan.summary.schemas.get(record.schema_id)
-        if schema is None:
+        why = _unwritable(record, schema)
+        if why is not None:
+            self.unwritable[record.id] = why
             return
         if record.topic not in self.writer.topics:
             self.writer.add_topic_with_definition(

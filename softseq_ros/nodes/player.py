@@ -12,7 +12,8 @@ the recording.
 As ``ros2 bag play`` does, a replay can start ``start_offset_s`` into the bag, publish a topic
 under another name (``remap``: recorded name -> new name, the player's own mapping of the
 recorded names, applied all at once, so ``A:=B`` with ``B:=A`` swaps two topics; it never
-reaches rcl, and two topics of different types under one name are refused), take the QoS of
+reaches rcl, and two topics of different types under one name are refused, the node's own
+/rosout and /parameter_events counted), take the QoS of
 some topics from an overrides file (``ros2 bag play --qos-profile-overrides-path``'s YAML:
 recorded topic name -> history, depth, reliability, durability, deadline, lifespan,
 liveliness, liveliness_lease_duration, avoid_ros_namespace_conventions; a regular file of
@@ -76,6 +77,12 @@ CLOCK_TYPE = contract.CLOCK.type_name
 SIGNAL_POLL_S = 0.05
 # rclpy's TimeSource subscribes to /clock with this QoS.
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+# Topics the player's node publishes on by itself, whatever the bag holds: rcl's log and
+# rclpy's parameter events. A played topic of another type under one of these names fails in
+# create_publisher.
+NODE_TOPICS = {'/rosout': ("the player's log", 'rcl_interfaces/msg/Log'),
+               '/parameter_events': ("the player's parameter events",
+                                     'rcl_interfaces/msg/ParameterEvent')}
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 1: ReliabilityPolicy.RELIABLE,
                 'best_effort': ReliabilityPolicy.BEST_EFFORT, 2: ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {'transient_local': DurabilityPolicy.TRANSIENT_LOCAL,
@@ -144,19 +151,22 @@ def _check_one_type_per_name(bag: BagArrays, topics: list[str], remap: Mapping[s
 
     The names are those after ``remap`` (the player's own mapping, applied to the recorded
     names at once, so ``A:=B`` with ``B:=A`` swaps them); with ``clock`` the player also
-    publishes rosgraph_msgs/msg/Clock on /clock.
+    publishes rosgraph_msgs/msg/Clock on /clock, and its node always publishes on
+    :data:`NODE_TOPICS`. The error names the options that put the topics there, or the bag.
     """
-    placed: dict[str, tuple[str, str]] = {}
+    placed: dict[str, tuple[str, str]] = dict(NODE_TOPICS)
     if clock:
         placed[CLOCK_TOPIC] = ('the bag time of --clock', CLOCK_TYPE)
     for topic in topics:
         name, type_name = _resolved(remap.get(topic, topic)), bag.channels[topic].type_name
         other, other_type = placed.setdefault(name, (topic, type_name))
         if other_type != type_name:
-            said = ' '.join(f'--remap {source}:={target}' for source, target in remap.items()
-                            if _resolved(target) == name) or '--clock'
-            raise PlayError(f'{said}: {name} would carry {other} ({other_type}) and {topic} '
-                            f'({type_name}); a topic has one type')
+            said = [f'--remap {source}:={target}' for source, target in remap.items()
+                    if _resolved(target) == name]
+            if clock and name == CLOCK_TOPIC:
+                said.append('--clock')
+            raise PlayError(f'{" ".join(said) or bag.path}: {name} would carry {other} '
+                            f'({other_type}) and {topic} ({type_name}); a topic has one type')
 
 
 # A QoS duration is an int64 of nanoseconds in rcl (rcl_duration_t).
@@ -524,6 +534,29 @@ class BagPlayer(Node):
         return result
 
 
+def rcl_arguments(args: list[str] | None) -> list[str]:
+    """
+    What rcl is given of a command line: its program name and its ``--ros-args`` sections.
+
+    rcl takes any FROM:=TO word outside ``--ros-args`` for a remap rule of its own (warning
+    that the syntax is deprecated) and applies it to the names the player chose, which undid
+    a swap: the words of ``--remap`` are the player's alone, and so is the rest of its
+    command line.
+    """
+    if not args:
+        return ['softseq']
+    kept = [args[0]]
+    in_ros_args = False
+    for word in args[1:]:
+        if word == '--ros-args':
+            in_ros_args = True
+        if in_ros_args:
+            kept.append(word)
+        if word == '--':
+            in_ros_args = False
+    return kept
+
+
 def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
          topics: list[str] | None = None, wait_s: float = 0.0,
          args: list[str] | None = None, held: HeldSignals | None = None, *,
@@ -535,7 +568,9 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
     A stop signal ends the replay between two messages; once the node and the context are
     closed, KeyboardInterrupt (SIGINT) or TerminatedError (SIGTERM) is raised. ``held`` is a
     caller's :class:`HeldSignals` already in force (one that also covered the import of this
-    module); without one, the signals are held from here on.
+    module); without one, the signals are held from here on. ``args`` is a command line (a
+    caller's ``sys.argv``): rcl is given its program name and its ``--ros-args`` sections
+    only (:func:`rcl_arguments`).
     """
     if held is None:
         with HeldSignals() as own:
@@ -551,10 +586,7 @@ def play(bag: str, rate: float = 1.0, loop: bool = False, clock: bool = False,
 
     held.check()
     context = rclpy.Context()
-    # Never the command line (rclpy's default): rcl would take a FROM:=TO word of --remap for
-    # a remap rule of its own, apply it to the names the player chose (undoing a swap) and
-    # warn that the syntax is deprecated. --remap is the player's alone.
-    rclpy.init(args=['softseq'] if args is None else args, context=context)
+    rclpy.init(args=rcl_arguments(args), context=context)
     player = None
     try:
         player = BagPlayer(bag, rate=rate, loop=loop, clock=clock, topics=topics,
