@@ -199,20 +199,23 @@ def recording_metrics(recording: Recording, scene: object | None = None,
 
 def _snaps_in_time(recording: Recording) -> list[dict] | None:
     """
-    The snap-throughs the actuator said, for a recording in time (None: quasi-static).
+    The snap-throughs the actuator said, for a recording in time (None: found in the volumes).
 
     As the volumes' analysis gives them, so that the summary, metrics.json and the transients
     count the same ones: in time a snap is an exchange of fluid over many states, not a jump
     between two commands. A run's events are those of its span (Recording.runs).
     """
-    if not is_dynamic(recording):
+    said = timed_snaps(recording) if is_dynamic(recording) else []
+    if not said:
+        # Nothing said in time (an actuator that reports no events, or exchanges too fast
+        # against the pump for its watcher): the jumps the volumes show, as quasi-statically.
         return None
     return [{'injected_m3': snap.injected, 'direction': snap.direction,
              'fluid_moved_m3': snap.fluid_moved,
              'from_volumes_m3': list(snap.from_volumes), 'to_volumes_m3': list(snap.to_volumes),
              'from_pressure_pa': snap.from_pressure, 'to_pressure_pa': snap.to_pressure,
              'start_time_s': snap.start_s, 'duration_s': snap.duration_s}
-            for snap in timed_snaps(recording)]
+            for snap in said]
 
 
 def pump_end(recording: Recording) -> dict | None:

@@ -32,15 +32,13 @@ from softseq_ros.nodes.diagnostics import ERROR_LEVEL, OK_LEVEL, WARN_LEVEL, Hea
 from softseq_ros.nodes.parameters import NodeConfigError
 from softseq_ros.nodes.runner import run_node
 from softseq_ros.rig.build import (
-    RELIEF_MARGIN,
     SettingError,
     check_programme,
-    default_max_pressure_pa,
     end_stop,
     pump_core,
     pump_profile,
 )
-from softseq_ros.rig.model import actuator_model
+from softseq_ros.rig.model import RELIEF_MARGIN, actuator_model, default_max_pressure_pa
 from softseq_ros.rig.pump import (
     DEFAULT_FEEDBACK_TIMEOUT_S,
     DEFAULT_MAX_FLOW_M3_PER_S,

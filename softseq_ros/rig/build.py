@@ -8,11 +8,10 @@ both build the same cores from the same scene the same way.
 from pathlib import Path
 from typing import Any
 
-from softseq_ros.dynamic.network import tube_law
 from softseq_ros.errors import UserError
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.camera import CameraCore
-from softseq_ros.rig.model import ActuatorModel, actuator_model
+from softseq_ros.rig.model import ActuatorModel, actuator_model, default_max_pressure_pa
 from softseq_ros.rig.pump import (
     DEFAULT_FEEDBACK_TIMEOUT_S,
     DEFAULT_MAX_FLOW_M3_PER_S,
@@ -33,29 +32,6 @@ def _unknown(role: str, overrides: dict[str, Any], known: tuple[str, ...]) -> No
     if extra:
         raise SettingError(f'{role}: unknown setting(s) {", ".join(extra)}; expected some of '
                            f'{", ".join(known)}')
-
-
-# The relief's margin over the highest gauge pressure the scene's segments can balance (plus the
-# supply tube's steady drop at the programme's fastest flow): a rig 50 % beyond anything its
-# segments hold is blocked or broken, and a real pump's relief is set so.
-RELIEF_MARGIN = 1.5
-
-
-def default_max_pressure_pa(scene: Scene) -> float:
-    """
-    The pump's relief by default [Pa, gauge], from the scene's own curves.
-
-    :data:`RELIEF_MARGIN` times the highest pressure on any segment's curve, with a network
-    plus its supply tube's steady drop at the programme's fastest flow. The paper's segments
-    reach 15.6 kPa, so 23 kPa, where a fixed 100 kPa let a blocked line go six times past them.
-    """
-    highest = max(max(piece.p_max for piece in segment.monotone_pieces())
-                  for segment in scene.segments)
-    drop = 0.0
-    network = scene.network
-    if network is not None and network.supply is not None:
-        drop = tube_law(network.supply, network.fluid).drop(scene.pump.profile.max_flow_rate())
-    return RELIEF_MARGIN * (max(highest, 0.0) + drop)
 
 
 PUMP_SETTINGS = ('rate_hz', 'flow_rate_m3_per_s', 'legs', 'cycles', 'start_injected_m3',

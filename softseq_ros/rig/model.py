@@ -34,7 +34,7 @@ import numpy as np
 
 from softseq_ros.dynamic.events import fold_crossing_line
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
-from softseq_ros.dynamic.network import laminar_range_warning
+from softseq_ros.dynamic.network import laminar_range_warning, tube_law
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
@@ -477,6 +477,29 @@ class DynamicModel:
     def check_programme(self, scene: Scene, profile: PumpProfile) -> None:
         """The quasi-static reach of the programme."""
         self.reach.check_programme(scene, profile)
+
+
+# The relief's margin over the highest gauge pressure the scene's segments can balance (plus the
+# supply tube's steady drop at the programme's fastest flow): a rig 50 % beyond anything its
+# segments hold is blocked or broken, and a real pump's relief is set so.
+RELIEF_MARGIN = 1.5
+
+
+def default_max_pressure_pa(scene: Scene) -> float:
+    """
+    The pump's relief by default [Pa, gauge], from the scene's own curves.
+
+    :data:`RELIEF_MARGIN` times the highest pressure on any segment's curve, with a network
+    plus its supply tube's steady drop at the programme's fastest flow. The paper's segments
+    reach 15.6 kPa, so 23 kPa, where a fixed 100 kPa let a blocked line go six times past them.
+    """
+    highest = max(max(piece.p_max for piece in segment.monotone_pieces())
+                  for segment in scene.segments)
+    drop = 0.0
+    network = scene.network
+    if network is not None and network.supply is not None:
+        drop = tube_law(network.supply, network.fluid).drop(scene.pump.profile.max_flow_rate())
+    return RELIEF_MARGIN * (max(highest, 0.0) + drop)
 
 
 def load_rig_scene(path: str | Path) -> Scene:
