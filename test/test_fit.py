@@ -8,10 +8,18 @@ from the raw rows must be the noise put in.
 """
 
 
+import json
+from pathlib import Path
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
+from softseq_ros import cli
+from softseq_ros.scene.tables import read_inflation, read_table
 from softseq_ros.segments.fit import (
+    FIT_LAWS,
     FitError,
     Inflation,
     estimate_noise_std,
@@ -182,3 +190,97 @@ def test_a_too_short_or_falling_inflation_is_refused_in_one_line():
     volume[5] = volume[4]
     with pytest.raises(FitError, match='short.csv: volume_m3 must rise strictly'):
         Inflation(volume, np.linspace(0.0, 1e3, 20), 'short.csv')
+
+
+# ---------------------------------------------------------------------------------------------
+# softseq fit
+
+
+def write_inflation(path: Path, inflation: Inflation, header='volume_m3,pressure_pa') -> Path:
+    rows = '\n'.join(f'{v!r},{p!r}' for v, p in zip(inflation.volume.tolist(),
+                                                     inflation.pressure.tolist()))
+    path.write_text(f'# a synthetic inflation: Gent on a sphere, 1 % noise\n{header}\n{rows}\n')
+    return path
+
+
+@pytest.fixture
+def gent_tables(tmp_path):
+    material, stretch, _ = TRUTHS['gent']
+    return [write_inflation(tmp_path / f'inflation_{k}.csv', measured(material, stretch, k)[0])
+            for k in range(2)]
+
+
+def test_the_command_writes_the_fit_the_segment_table_and_the_figure(gent_tables, tmp_path):
+    out = tmp_path / 'fit'
+    done = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'fit', *map(str, gent_tables),
+                           '--radius-m', str(RADIUS), '--thickness-m', str(THICKNESS),
+                           '--bootstrap', '20', '--out', str(out)],
+                          capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[0].endswith(
+        f'gent chosen by AICc -> {out / "fit.json"}, {out / "segment.csv"}, {out / "fit.png"}')
+    assert (out / 'fit.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # Strict JSON (no NaN), every law with its intervals, and the noise of each file.
+    report = json.loads((out / 'fit.json').read_text(), parse_constant=pytest.fail)
+    assert report['chosen_law'] == 'gent' and report['criterion'] == 'AICc'
+    assert set(report['laws']) == set(FIT_LAWS)
+    assert [i['source'] for i in report['inflations']] == list(map(str, gent_tables))
+    jm = report['laws']['gent']['parameters']['jm']
+    assert jm['ci95'][0] < 20.0 < jm['ci95'][1]
+    assert jm['bootstrap_ci95'][0] < jm['value'] < jm['bootstrap_ci95'][1]
+    assert report['laws']['gent']['parameters']['shear_modulus_pa']['fitted'] is False
+    # The table reads back as a segment through the project's reader, its length from its
+    # comment lines, its curve the fitted law's.
+    text = (out / 'segment.csv').read_text()
+    assert '# length_m: 0.02\n' in text and f'# noise_std_pa: {report["noise_std_pa"]:.6g}' in text
+    segment = read_table(out / 'segment.csv', length=0.02)
+    fitted = fit_sphere([read_inflation(path) for path in gent_tables], radius=RADIUS,
+                        laws=['gent'], bootstrap=0).best
+    volume = np.linspace(segment.rest_volume, segment.max_volume, 37)
+    assert np.allclose(segment.pressure(volume), fitted.pressure(volume),
+                       rtol=2e-3, atol=1e-3 * float(np.max(segment.pressures)))
+    assert segment.rest_volume == pytest.approx(REST)
+
+
+def refusal(capsys, *argv):
+    code = cli.main(['fit', *map(str, argv)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count('\n') == 1 and err.startswith('softseq fit: error: '), err
+    return err
+
+
+def test_the_commands_refusals_are_one_line_and_exit_2(gent_tables, tmp_path, capsys):
+    out = tmp_path / 'out'
+    err = refusal(capsys, tmp_path / 'missing.csv', '--out', out)
+    assert 'missing.csv: cannot read the measured inflation (No such file or directory)' in err
+    material, stretch, _ = TRUTHS['gent']
+    inflation = measured(material, stretch, 0)[0]
+    wrong = write_inflation(tmp_path / 'wrong.csv', inflation, 'volume_m3,pressure_kpa')
+    assert 'wrong.csv: no column pressure_pa in the header' in refusal(capsys, wrong, '--out', out)
+    short = write_inflation(tmp_path / 'short.csv',
+                            Inflation(inflation.volume[:12], inflation.pressure[:12]))
+    short.write_text('\n'.join(short.read_text().splitlines()[:8]) + '\n')
+    assert 'short.csv: 6 rows are too few to fit: at least 10' in refusal(
+        capsys, short, '--out', out)
+    in_ml = write_inflation(tmp_path / 'in_ml.csv', Inflation(inflation.volume * 1e6,
+                                                              inflation.pressure))
+    assert 'is it in mL?' in refusal(capsys, in_ml, '--radius-m', RADIUS, '--out', out)
+    for option, value, words in (('--radius-m', '-1', '--radius-m: must be a finite length > 0'),
+                                 ('--laws', 'gent,yeoh', '--laws: unknown law yeoh'),
+                                 ('--bootstrap', '-5', '--bootstrap: a number of resamples')):
+        assert words in refusal(capsys, gent_tables[0], option, value, '--out', out)
+    assert not out.exists()
+
+
+def test_an_out_folder_under_a_file_is_refused_before_any_fit(gent_tables, tmp_path, capsys,
+                                                              monkeypatch):
+    import softseq_ros.segments.fit as fit_module
+
+    def no_fit(*_args, **_kwargs):
+        raise AssertionError('the fit ran before the output folder was checked')
+
+    monkeypatch.setattr(fit_module, 'fit_sphere', no_fit)
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('')
+    err = refusal(capsys, gent_tables[0], '--out', blocker / 'fit')
+    assert f'--out {blocker / "fit"}: {blocker} is a regular file, not a folder' in err
