@@ -180,6 +180,9 @@ class SphereLaw:
     in Pa; then the shape parameters). ``positive``: which are fitted as logarithms (they
     cannot change sign: an interval of a positive quantity stays positive). ``shape_starts``:
     values of the one shape parameter tried for a start, the moduli solved linearly for each.
+    ``locked``: where the law has no pressure at the stretches given (past Gent's locking
+    stretch), None where it has one everywhere; the material's own ``max_stretch`` says the
+    same, at the cost of a polynomial's roots on every call of a fit.
     """
 
     name: str
@@ -188,6 +191,7 @@ class SphereLaw:
     positive: tuple[bool, ...]
     shape_starts: tuple[float, ...]
     build: Callable[[Sequence[float]], Material]
+    locked: Callable[[Sequence[float], FloatArray], NDArray[np.bool_]] | None = None
 
     def material(self, groups: Sequence[float], thickness_over_radius: float = 1.0) -> Material:
         """The law with moduli = groups over ``thickness_over_radius`` (H / R)."""
@@ -207,7 +211,8 @@ SPHERE_LAWS = {
                                (False, False), (), lambda g: MooneyRivlin(g[0], g[1])),
     # Jm from nearly rigid chains to nearly neo-Hookean; alpha over what rubbers show.
     'gent': SphereLaw('gent', ('shear_modulus_h_over_r_pa', 'jm'), 1, (True, True),
-                      tuple(np.geomspace(0.3, 3e3, 41)), lambda g: Gent(g[0], g[1])),
+                      tuple(np.geomspace(0.3, 3e3, 41)), lambda g: Gent(g[0], g[1]),
+                      lambda g, lam: 2.0 * lam**2 + lam**-4 - 3.0 >= g[1]),
     'ogden': SphereLaw('ogden', ('mu_h_over_r_pa', 'alpha'), 1, (True, True),
                        tuple(np.geomspace(0.2, 20.0, 41)), lambda g: Ogden((g[0],), (g[1],))),
 }
@@ -447,8 +452,10 @@ class _LawModel:
         lam = sphere_stretch(volume, self.rest_volume(internal))
         with np.errstate(all='ignore'):
             pressure = sphere_pressure(material, lam)
+        if self.law.locked is None:
+            return pressure
         # Past a locking stretch (Gent) the law has no pressure: no step may go there.
-        return np.where(lam < material.max_stretch, pressure, np.inf)
+        return np.where(self.law.locked(self.groups(internal), lam), np.inf, pressure)
 
     def residuals(self, internal: FloatArray, pressure: FloatArray) -> FloatArray:
         return (self.curve(internal, self.problem.volume) - pressure) / self.problem.sigma
@@ -472,10 +479,10 @@ class _LawModel:
             # One material per modulus, the others 0: the columns of the linear problem.
             units = [self.law.build([float(i == m) for i in range(self.law.moduli)]
                                     + shape_values) for m in range(self.law.moduli)]
-            limit = min(material.max_stretch for material in units)
             for rest in rests:
                 lam = sphere_stretch(problem.volume, rest)
-                if lam.max() >= limit:
+                if self.law.locked is not None and np.any(
+                        self.law.locked([1.0, *shape_values], lam)):
                     continue
                 design = np.column_stack([sphere_pressure(m, lam) for m in units]) \
                     * weight[:, None]
