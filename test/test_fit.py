@@ -9,6 +9,7 @@ from the raw rows must be the noise put in.
 
 
 import json
+import math
 from pathlib import Path
 import subprocess
 import sys
@@ -181,6 +182,21 @@ def test_more_inflations_of_one_segment_narrow_the_intervals():
     ratio = (four.estimates['c2_h_over_r_pa'].standard_error
              / one.estimates['c2_h_over_r_pa'].standard_error)
     assert ratio == pytest.approx(0.5, rel=0.25)
+
+
+def test_a_shape_parameter_the_data_cannot_see_gets_an_interval_without_end(tmp_path):
+    # Gent fitted to a neo-Hookean balloon: Jm has no upper limit the curve shows (this
+    # seed's fit ends at Jm = 1.6e6, its spread on the logarithm overflowing an exponential).
+    from softseq_ros.analysis.fit_outputs import write_fit_outputs
+
+    inflation, _ = measured(NeoHookean(300e3), 3.0, seed=546)
+    fit = fit_sphere([inflation], radius=RADIUS, laws=['neo_hookean', 'gent'], bootstrap=0)
+    jm = fit.laws['gent'].estimates['jm']
+    assert jm.value > 1e5 and jm.interval[1] == math.inf and jm.interval[0] < 1.0
+    assert fit.chosen == 'neo_hookean'
+    write_fit_outputs(fit, tmp_path)
+    report = json.loads((tmp_path / 'fit.json').read_text(), parse_constant=pytest.fail)
+    assert report['laws']['gent']['parameters']['jm']['ci95'][1] is None
 
 
 def test_a_too_short_or_falling_inflation_is_refused_in_one_line():

@@ -66,6 +66,8 @@ MAD_TO_STD = 1.482602
 # the noise is taken as at least this share of the inflation's largest pressure.
 NOISE_FLOOR = 1e-9
 CONFIDENCE = 0.95
+# Half an interval on a logarithm beyond this (a factor e^700) is an interval without end.
+MAX_LOG_SPREAD = 700.0
 BOOTSTRAP_RESAMPLES = 200
 # The fit stops when a step changes the cost or the parameters by less than this share.
 FIT_TOLERANCE = 1e-10
@@ -552,8 +554,11 @@ def _interval(value: float, spread: float, positive: bool,
     ``spread``: the standard deviation of the quantity, or of its logarithm when positive.
     """
     if positive:
-        half = quantile * spread
-        return abs(value) * spread, value * math.exp(-half), value * math.exp(half)
+        # A quantity the data do not fix (Gent's Jm far beyond the stretches measured) has a
+        # spread whose exponential overflows: its interval is open to infinity.
+        half = min(quantile * spread, MAX_LOG_SPREAD)
+        return (abs(value) * spread, value * math.exp(-half),
+                value * math.exp(half) if half < MAX_LOG_SPREAD else math.inf)
     return spread, value - quantile * spread, value + quantile * spread
 
 
