@@ -412,7 +412,8 @@ def information_criteria(chi_square: float, rows: int, parameters: int) -> tuple
     law shares (the weights' logarithms) is left out: only differences mean something.
     """
     k = parameters + 1
-    fit_term = rows * math.log(chi_square / rows)
+    # A law through every row exactly (synthetic rows) would have no logarithm.
+    fit_term = rows * math.log(max(chi_square, 1e-300) / rows)
     aicc = fit_term + 2.0 * k + (2.0 * k * (k + 1) / (rows - k - 1) if rows > k + 1
                                  else math.inf)
     return aicc, fit_term + k * math.log(rows)
