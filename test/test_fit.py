@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from softseq_ros import cli
+from softseq_ros.analysis.robustness import segment_noise
 from softseq_ros.scene.tables import read_inflation, read_table
 from softseq_ros.segments.fit import (
     FIT_LAWS,
@@ -159,6 +160,19 @@ def test_a_fitted_law_is_a_balloon_segment_with_the_fitted_curve():
     assert balloon.material.mu == pytest.approx(fit.estimates['shear_modulus_pa'].value)
 
 
+def test_the_curves_standard_error_holds_the_true_curve_as_often_as_it_claims():
+    material, stretch, _ = TRUTHS['gent']
+    volume, pressure = true_curve(material, stretch)
+    at = volume[[5, 20, 60]]   # on the rise, at the peak and on the stiffening
+    held = np.zeros(at.size, dtype=int)
+    for seed in range(TRIALS):
+        inflation, _ = measured(material, stretch, seed)
+        fit = fit_law('gent', [inflation], radius=RADIUS)
+        error = fit.pressure_standard_error(at)
+        held += np.abs(fit.pressure(at) - pressure[[5, 20, 60]]) <= 1.96 * error
+    assert np.all(held >= LEAST_HELD), held
+
+
 def test_the_bootstrap_is_seeded_and_agrees_with_the_jacobian_intervals():
     material, stretch, truth = TRUTHS['ogden']
     inflation, _ = measured(material, stretch, seed=2)
@@ -248,7 +262,8 @@ def test_the_command_writes_the_fit_the_segment_table_and_the_figure(gent_tables
     # The table reads back as a segment through the project's reader, its length from its
     # comment lines, its curve the fitted law's.
     text = (out / 'segment.csv').read_text()
-    assert '# length_m: 0.02\n' in text and f'# noise_std_pa: {report["noise_std_pa"]:.6g}' in text
+    assert '# length_m: 0.02\n' in text
+    assert f'# measured_noise_std_pa: {report["noise_std_pa"]:.6g} (pooled' in text
     segment = read_table(out / 'segment.csv', length=0.02)
     fitted = fit_sphere([read_inflation(path) for path in gent_tables], radius=RADIUS,
                         laws=['gent'], bootstrap=0).best
@@ -256,6 +271,11 @@ def test_the_command_writes_the_fit_the_segment_table_and_the_figure(gent_tables
     assert np.allclose(segment.pressure(volume), fitted.pressure(volume),
                        rtol=2e-3, atol=1e-3 * float(np.max(segment.pressures)))
     assert segment.rest_volume == pytest.approx(REST)
+    # softseq classify weighs the table's peak and valley against the curve's uncertainty
+    # there, which 160 rows make far smaller than one row's noise.
+    noise, source = segment_noise(segment)
+    assert source == 'declared' and noise == pytest.approx(report['table_noise_std_pa'], rel=1e-5)
+    assert noise < 0.3 * report['noise_std_pa']
 
 
 def refusal(capsys, *argv):

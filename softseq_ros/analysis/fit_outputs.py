@@ -93,8 +93,10 @@ def segment_table_text(fit: SphereFit, length: float | None = None) -> str:
         f'# softseq fit: the {best.law.name} law on a thin sphere, fitted to measured '
         'inflations (docs/fit.md); rows from its closed form',
         f'# source: {sources}',
-        f"# noise_std_pa: {fit.pooled_noise_std:.6g} (pooled; each inflation's from its raw "
-        'rows)',
+        f"# measured_noise_std_pa: {fit.pooled_noise_std:.6g} (pooled; each inflation's from "
+        'its raw rows)',
+        f'# noise_std_pa: {fit.table_noise_std():.6g} (the uncertainty of these rows at their '
+        "peaks and valleys: the fitted curve's standard error, from the fit's covariance)",
         f'# fit: {best.law.name} chosen by AICc (BIC: {fit.by_bic()}), reduced chi-square '
         f'{best.reduced_chi_square:.4g}, {best.rows} rows, weighted least squares',
     ]

@@ -276,7 +276,8 @@ class LawFit:
     and derived ones: ``radius_m``, the initial shear modulus times H / R, and with a
     thickness the law's own parameters). ``reduced_chi_square``: the weighted residuals'
     mean square per degree of freedom, about 1 when the law follows the data to their
-    noise. ``aicc``, ``bic``: the criteria (lower is better).
+    noise. ``aicc``, ``bic``: the criteria (lower is better). ``curve``: the pressure as a
+    function of the internal parameters and the volumes, for the curve's own uncertainty.
     """
 
     law: SphereLaw
@@ -296,11 +297,33 @@ class LawFit:
     message: str
     bootstrap_resamples: int = 0
     bootstrap_failed: int = 0
+    curve: Callable[[FloatArray, FloatArray], FloatArray] | None = None
 
     def pressure(self, volume: ArrayLike) -> FloatArray:
         """The fitted curve: gauge pressure [Pa] at ``volume`` [m^3]."""
         return sphere_pressure(self.law.material(self.groups),
                                sphere_stretch(volume, self.rest_volume))
+
+    def pressure_standard_error(self, volume: ArrayLike) -> FloatArray:
+        """
+        The fitted curve's standard error [Pa] at ``volume`` [m^3], from the covariance.
+
+        By the delta method: how far the curve itself is uncertain, far less than one row's
+        noise where many rows determine it. 0 at a given rest volume, where p = 0 for any
+        parameters.
+        """
+        if self.curve is None:
+            raise ValueError('this fit keeps no curve of its parameters')
+        volume = np.atleast_1d(np.asarray(volume, dtype=float))
+        slopes = np.empty((volume.size, self.internal.size))
+        for i in range(self.internal.size):
+            step = 1e-6 * max(1.0, abs(float(self.internal[i])))
+            up, down = self.internal.copy(), self.internal.copy()
+            up[i] += step
+            down[i] -= step
+            slopes[:, i] = (self.curve(up, volume) - self.curve(down, volume)) / (2.0 * step)
+        variance = np.einsum('ij,jk,ik->i', slopes, self.covariance, slopes)
+        return np.sqrt(np.maximum(variance, 0.0))
 
     @property
     def radius(self) -> float:
@@ -374,6 +397,27 @@ class SphereFit:
         volume[0], volume[-1] = fit.rest_volume, top
         return volume, fit.pressure(volume)
 
+    def table_noise_std(self) -> float:
+        """
+        The uncertainty [Pa] of the table's peaks and valleys: what they are weighed against.
+
+        ``softseq classify`` weighs each peak-valley feature of a table against the noise its
+        ``# noise_std_pa:`` line declares. The rows here are a law's, so their uncertainty is
+        its parameters', far less than one measured row's noise: the chosen curve's largest
+        standard error at its turning rows (a peak's or valley's pressure is known as well as
+        the curve is there, its slope being 0), or along the whole curve when it has none.
+        Not the steep start, where an uncertain rest volume moves the pressure a lot at one
+        volume but no feature lies.
+        """
+        volume, pressure = self.table()
+        error = self.best.pressure_standard_error(volume)
+        turning = np.flatnonzero(np.diff(np.sign(np.diff(pressure)))) + 1
+        if turning.size == 0:
+            return float(np.max(error))
+        near = np.unique(np.clip(np.concatenate([turning - 1, turning, turning + 1]), 0,
+                                 volume.size - 1))
+        return float(np.max(error[near]))
+
     def to_dict(self) -> dict[str, object]:
         """Every number, SI, as fit.json holds it."""
         weights = akaike_weights([self.laws[name].aicc for name in self.laws])
@@ -383,6 +427,7 @@ class SphereFit:
             'inflations': [{'source': i.source, 'rows': int(i.volume.size),
                             'noise_std_pa': s} for i, s in zip(self.inflations, self.noise_std)],
             'noise_std_pa': self.pooled_noise_std,
+            'table_noise_std_pa': self.table_noise_std(),
             'radius_m': {'given': self.radius_given, 'used_by_chosen_law': best.radius},
             'thickness_m': self.thickness,
             'criterion': 'AICc',
@@ -614,7 +659,7 @@ def fit_law(law: str | SphereLaw, inflations: Sequence[Inflation],
                   chi_square, reduced, aicc, bic, bool(result.success),
                   bool(np.any(np.abs(x) >= INTERNAL_BOUND * (1.0 - 1e-9))),
                   str(result.message), bootstrap,
-                  0 if samples is None else samples[1])
+                  0 if samples is None else samples[1], curve=model.curve)
 
 
 def _gradient(function: Callable, x: FloatArray, positive: bool) -> FloatArray:
