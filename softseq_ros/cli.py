@@ -437,6 +437,40 @@ def _rates(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fit(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.fit_outputs import summary_lines, write_fit_outputs
+    from softseq_ros.errors import check_output_folder
+    from softseq_ros.scene.tables import read_inflation
+    from softseq_ros.segments.fit import FIT_LAWS, FitError, fit_sphere
+
+    # Every option before any file is read: a mistake costs no fit.
+    for option, value in (('--radius-m', args.radius_m), ('--thickness-m', args.thickness_m),
+                          ('--length-m', args.length_m)):
+        if value is not None and not (math.isfinite(value) and value > 0.0):
+            raise FitError(f'{option}: must be a finite length > 0 (m), got {value}')
+    if args.bootstrap < 0:
+        raise FitError(f'--bootstrap: a number of resamples >= 0, got {args.bootstrap}')
+    laws = [name.strip() for name in args.laws.split(',')] if args.laws else list(FIT_LAWS)
+    unknown = [name for name in laws if name not in FIT_LAWS]
+    if unknown or not laws:
+        raise FitError(f'--laws: unknown law {", ".join(unknown) or "(none)"}; known: '
+                       f'{", ".join(FIT_LAWS)}')
+    style = _figure_style(args)
+    check_output_folder(args.out, '--out')
+    # The volumes' unit is checked against the segment's size where it is known.
+    size = args.length_m if args.length_m is not None else (
+        None if args.radius_m is None else 2.0 * args.radius_m)
+    inflations = [read_inflation(path, size) for path in args.tables]
+    fit = fit_sphere(inflations, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
+                     bootstrap=args.bootstrap, seed=args.seed)
+    written = write_fit_outputs(fit, args.out, args.length_m, style)
+    for line in summary_lines(fit, written):
+        print(line)
+    for note in fit.notes:
+        print(f'softseq fit: warning: {note}', file=sys.stderr)
+    return 0
+
+
 def _play(args: argparse.Namespace) -> int:
     from softseq_ros.stopping import HeldSignals
 
@@ -651,6 +685,38 @@ def build_parser() -> argparse.ArgumentParser:
     rates.add_argument('--out', type=Path, help='output folder (default bags/rates_NAME)')
     _figure_options(rates)
     rates.set_defaults(handler=_rates)
+
+    fit = sub.add_parser('fit', help='membrane laws fitted to measured inflations of a '
+                         'segment, with intervals, and the best as a segment table',
+                         description='Fit neo-Hookean, Mooney-Rivlin, Gent and one-term Ogden '
+                         'membrane laws on a thin sphere to measured inflations of one segment '
+                         '(each CSV: volume_m3 = the whole segment volume, pressure_pa = gauge, '
+                         'in rising volume), by weighted least squares with the noise '
+                         'estimated from the raw rows; 95 % intervals from the Jacobian and a '
+                         'seeded parametric bootstrap; the law chosen by AICc. Writes fit.json, '
+                         'segment.csv (the chosen curve as a segment table) and fit.png '
+                         '(docs/fit.md).')
+    fit.add_argument('tables', nargs='+', type=Path, metavar='TABLE.csv',
+                     help='measured inflations of one segment (volume_m3, pressure_pa)')
+    fit.add_argument('--geometry', choices=('sphere',), default='sphere',
+                     help="the segment's shape: a thin sphere (the balloon), the only one yet")
+    fit.add_argument('--radius-m', type=float, metavar='R', help="the sphere's reference "
+                     'radius [m]; without it the rest volume is fitted')
+    fit.add_argument('--thickness-m', type=float, metavar='H', help="the membrane's thickness "
+                     "[m]: with it the law's own moduli are reported (p(v) fixes only moduli "
+                     'times H / R)')
+    fit.add_argument('--length-m', type=float, metavar='L', help='segment length [m] written '
+                     "into segment.csv's # length_m: line (default: the sphere's diameter)")
+    fit.add_argument('--laws', metavar='LAW,...', help='laws to fit, comma-separated (default: '
+                     'neo_hookean,mooney_rivlin,gent,ogden)')
+    fit.add_argument('--bootstrap', type=int, default=200, metavar='N', help='parametric '
+                     'bootstrap resamples per law (default 200; 0: none)')
+    fit.add_argument('--seed', type=int, default=0, help="the bootstrap's random seed "
+                     '(default 0): the same files and seed give the same numbers')
+    fit.add_argument('--out', type=Path, required=True, help='folder for fit.json, segment.csv '
+                     'and fit.png')
+    _figure_options(fit)
+    fit.set_defaults(handler=_fit)
 
     play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
                           description='Publish every recorded message on its topic with its '

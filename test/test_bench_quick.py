@@ -112,6 +112,16 @@ QUICK = {
          r'\| fig1_asymmetric \| 1 mL of air \| asymmetric \| \d+\.\d\d mL at \d\.\d{3} kPa, '
          r'[^|]+ \| [^|]+ \| \d+\.\d+ s \(\d+\.\d\d\) \|'],
         ['bench/supply_results.md']),
+    'bench_fit.py': (
+        ['## Coverage of the 95 % intervals', '## Noise estimate',
+         '## The criterion names the law', '## Time per fit'],
+        [r'\| gent \| given \| 80 \| 1 % \| jm \| \d+ / 10 \| \d+ / 10 \| \d\.\d\d \|',
+         r'\| ogden \| fitted \| 30 \| 5 % \| rest_volume_m3 \| \d+ / 10 \| \d+ / 10 \| '
+         r'\d\.\d\d \|',
+         r'\| 100 \| third differences, trimmed \(fit\) \| \d\.\d{3} \| \d\.\d{3} \| \d+ % \|',
+         r'\| mooney_rivlin \| \d+ / 10 \| \d+ / 10 \| [^|]+ \|',
+         r'\| gent \| \d+\.\d ms \| \d+\.\d ms \| \d+\.\d\d s \|'],
+        ['bench/fit_results.md']),
     'bench_fem.py': (
         ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
          '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],

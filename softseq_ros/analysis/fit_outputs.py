@@ -1,0 +1,192 @@
+"""
+What ``softseq fit`` writes: fit.json, segment.csv and fit.png (docs/fit.md).
+
+- ``fit.json``: every number of :class:`~softseq_ros.segments.fit.SphereFit`, SI units: each
+  inflation's noise, per law its parameters with standard errors, Jacobian and bootstrap
+  95 % intervals, chi-square, AICc, BIC, Akaike weight, and the law chosen.
+- ``segment.csv``: the chosen law's curve as a segment table (``volume_m3,pressure_pa,
+  curvature_per_m``), read by :func:`softseq_ros.scene.tables.read_table` as any other; its
+  ``#`` lines say where it comes from (the files, the noise, the law and its intervals) and
+  give its ``length_m``, as ``softseq library`` reads it.
+- ``fit.png``: the measured rows, each law's curve, and below their residuals beside the
+  noise, in the report's figure styles.
+"""
+
+import json
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from softseq_ros.analysis.figures import (
+    COLUMN_IN,
+    KPA,
+    ML,
+    PAPER,
+    SEGMENT_COLOURS,
+    FigureStyle,
+    legend_below,
+    new_figure,
+    save_figure,
+)
+from softseq_ros.errors import write_text
+from softseq_ros.segments.fit import Estimate, SphereFit
+
+FIT_JSON = 'fit.json'
+SEGMENT_CSV = 'segment.csv'
+FIT_PNG = 'fit.png'
+# The laws' colours in the figure, one each, always the same.
+LAW_COLOURS = {'neo_hookean': SEGMENT_COLOURS[3], 'mooney_rivlin': SEGMENT_COLOURS[1],
+               'gent': SEGMENT_COLOURS[0], 'ogden': SEGMENT_COLOURS[2]}
+LAW_LABELS = {'neo_hookean': 'neo-Hookean', 'mooney_rivlin': 'Mooney-Rivlin', 'gent': 'Gent',
+              'ogden': 'Ogden'}
+MEASURED_MARKERS = ('o', 's', '^', 'v', 'D')
+CURVE_POINTS = 400
+
+
+def write_fit_outputs(fit: SphereFit, out: Path, length: float | None = None,
+                      style: FigureStyle = PAPER) -> list[Path]:
+    """
+    fit.json, segment.csv and fit.png of ``fit`` in the folder ``out`` (made when missing).
+
+    ``length`` [m]: the segment's, for the table's ``# length_m:`` line (default: the
+    sphere's diameter). A failed write is one line naming the file.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    written = [out / FIT_JSON, out / SEGMENT_CSV, out / FIT_PNG]
+    write_text(written[0], json.dumps(_finite(fit.to_dict()), indent=1, allow_nan=False)
+               + '\n')
+    write_text(written[1], segment_table_text(fit, length))
+    plot_fit(fit, written[2], style)
+    return written
+
+
+def _finite(value: object) -> object:
+    """``value`` with every number that JSON cannot hold (inf, nan) as None."""
+    if isinstance(value, dict):
+        return {key: _finite(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def estimate_text(estimate: Estimate) -> str:
+    """A number with its two intervals, on one line: '30010 (95 % CI 29840 to 30170; ...)'."""
+    low, high = estimate.interval
+    text = f'{estimate.value:.6g} (95 % CI {low:.6g} to {high:.6g}'
+    if estimate.bootstrap is not None:
+        text += f'; bootstrap {estimate.bootstrap[0]:.6g} to {estimate.bootstrap[1]:.6g}'
+    return text + ')'
+
+
+def segment_table_text(fit: SphereFit, length: float | None = None) -> str:
+    """The chosen law's curve as a segment table, its provenance in ``#`` lines."""
+    best = fit.best
+    volume, pressure = fit.table()
+    length = 2.0 * best.radius if length is None else length
+    sources = ', '.join(f'{i.source} ({i.volume.size} rows, noise {s:.6g} Pa)'
+                        for i, s in zip(fit.inflations, fit.noise_std))
+    lines = [
+        f'# softseq fit: the {best.law.name} law on a thin sphere, fitted to measured '
+        'inflations (docs/fit.md); rows from its closed form',
+        f'# source: {sources}',
+        f"# measured_noise_std_pa: {fit.pooled_noise_std:.6g} (pooled; each inflation's from "
+        'its raw rows)',
+        f'# noise_std_pa: {fit.table_noise_std():.6g} (the uncertainty of these rows at their '
+        "peaks and valleys: the fitted curve's standard error, from the fit's covariance)",
+        f'# fit: {best.law.name} chosen by AICc (BIC: {fit.by_bic()}), reduced chi-square '
+        f'{best.reduced_chi_square:.4g}, {best.rows} rows, weighted least squares',
+    ]
+    for name, estimate in best.estimates.items():
+        lines.append(f'# {name}: {estimate_text(estimate)}'
+                     + ('' if estimate.fitted else ' (derived)'))
+    if fit.radius_given is not None:
+        lines.append(f'# radius_m: {fit.radius_given:.6g} (given)')
+    if fit.thickness is not None:
+        lines.append(f'# thickness_m: {fit.thickness:.6g} (given)')
+    lines.append('# curvature_per_m: 0 (a sphere does not bend)')
+    lines.append(f'# length_m: {length!r}')
+    lines.append('volume_m3,pressure_pa,curvature_per_m')
+    lines += [f'{v!r},{p!r},0.0' for v, p in zip(volume.tolist(), pressure.tolist())]
+    return '\n'.join(lines) + '\n'
+
+
+def plot_fit(fit: SphereFit, out: Path, style: FigureStyle = PAPER) -> list[Path]:
+    """fit.png: the rows and each law's curve above, their residuals below (kPa, mL)."""
+    with style.context():
+        return _plot_fit(fit, out, style)
+
+
+def _plot_fit(fit: SphereFit, out: Path, style: FigureStyle) -> list[Path]:
+    fig, axes = new_figure(*style.size(COLUMN_IN, 3.6), rows=2, sharex=True,
+                           margins={'left': 0.16, 'right': 0.97, 'top': 0.97, 'bottom': 0.2,
+                                    'hspace': 0.08},
+                           gridspec_kw={'height_ratios': (2.2, 1.0)})
+    curve_ax, residual_ax = axes[0, 0], axes[1, 0]
+    handles = []
+    for k, (inflation, sigma) in enumerate(zip(fit.inflations, fit.noise_std)):
+        marker = MEASURED_MARKERS[k % len(MEASURED_MARKERS)]
+        grey = str(0.35 + 0.3 * (k % 3) / 2)
+        (line,) = curve_ax.plot(inflation.volume * ML, inflation.pressure * KPA, marker,
+                                ls='none', ms=2.6, mfc='none', mew=0.6, color=grey, zorder=1,
+                                label=f'{Path(inflation.source).name} ({sigma:.3g} Pa noise)')
+        handles.append(line)
+    volume = np.concatenate([i.volume for i in fit.inflations])
+    pressure = np.concatenate([i.pressure for i in fit.inflations])
+    grid = np.linspace(float(volume.min()), float(volume.max()), CURVE_POINTS)
+    for name, law in fit.laws.items():
+        chosen = name == fit.chosen
+        colour = LAW_COLOURS.get(name, '#000000')
+        label = (f'{LAW_LABELS.get(name, name)}: '
+                 + ('chosen' if chosen else f'$\\Delta$AICc {law.aicc - fit.best.aicc:.3g}')
+                 + f', $\\chi^2_\\nu$ {law.reduced_chi_square:.3g}')
+        (line,) = curve_ax.plot(grid * ML, law.pressure(grid) * KPA, color=colour,
+                                lw=1.6 if chosen else 0.9, ls='-' if chosen else (0, (4, 2)),
+                                zorder=3 if chosen else 2, label=label)
+        handles.append(line)
+        residual_ax.plot(volume * ML, (pressure - law.pressure(volume)) * KPA, '.',
+                         ms=2.0 if chosen else 1.4, color=colour, zorder=3 if chosen else 2)
+    band = 2.0 * fit.pooled_noise_std * KPA
+    residual_ax.axhspan(-band, band, color='0.88', lw=0, zorder=0)
+    residual_ax.axhline(0.0, color='0.5', lw=0.5, zorder=1)
+    # The residuals within a few noise deviations fill the panel; a law far off leaves it.
+    worst = float(np.max(np.abs(pressure - fit.best.pressure(volume)))) * KPA
+    reach = max(3.0 * band, 1.3 * worst)
+    residual_ax.set_ylim(-reach, reach)
+    curve_ax.set_ylabel('gauge pressure [kPa]')
+    residual_ax.set_ylabel('residual [kPa]')
+    residual_ax.set_xlabel('segment volume [mL]')
+    for ax in (curve_ax, residual_ax):
+        ax.grid(alpha=0.3)
+    handles.append(_band_handle(band))
+    legend_below(fig, handles, ncol=1)
+    style.title(curve_ax, f'Membrane laws fitted to a sphere; {fit.chosen} chosen by AICc')
+    return save_figure(fig, out, False, style)
+
+
+def _band_handle(band_kpa: float) -> object:
+    from matplotlib.patches import Patch
+
+    return Patch(color='0.88', label=f'$\\pm$2 noise deviations ({band_kpa:.3g} kPa)')
+
+
+def summary_lines(fit: SphereFit, written: Sequence[Path]) -> list[str]:
+    """What ``softseq fit`` prints: the choice, each law's fit and parameters, the files.
+
+    The fit's notes (a law that did not converge, a parameter at its bound) are not among
+    them: the command says those as warnings.
+    """
+    rows = sum(i.volume.size for i in fit.inflations)
+    lines = [f'{len(fit.inflations)} inflation(s), {rows} rows, noise '
+             f'{fit.pooled_noise_std:.4g} Pa: {fit.chosen} chosen by AICc'
+             + ('' if fit.by_bic() == fit.chosen else f' (BIC would choose {fit.by_bic()})')
+             + f' -> {", ".join(str(p) for p in written)}']
+    for name, law in sorted(fit.laws.items(), key=lambda item: item[1].aicc):
+        lines.append(f'  {name}: reduced chi-square {law.reduced_chi_square:.4g}, delta AICc '
+                     f'{law.aicc - fit.best.aicc:.4g}')
+        for estimate in law.estimates.values():
+            lines.append(f'    {estimate.name}: {estimate_text(estimate)}')
+    return lines

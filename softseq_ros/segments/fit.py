@@ -1,0 +1,747 @@
+"""
+Membrane laws fitted to measured inflations of one segment: from a measurement to a prediction.
+
+A measured inflation is a table of the segment's volume [m^3] and gauge pressure [Pa]. The
+segment is taken to be a thin-walled sphere, the project's balloon
+(:class:`~softseq_ros.segments.models.BalloonSegment`): with the stretch
+``lam = (v / v0)^(1/3)`` of a sphere of rest volume ``v0 = 4/3 pi R^3``,
+
+    p(v) = H / (R lam^2) dW/dlam
+
+for a membrane of reference radius ``R`` and thickness ``H`` and the law's strain energy ``W``
+under equibiaxial stretch (:mod:`softseq_ros.segments.materials`). The pressure is the law's
+moduli times ``H / R`` times a function of the stretch, so p(v) alone fixes:
+
+- the moduli times ``H / R`` (``mu H / R``, ``C1 H / R``...): a modulus and the thickness
+  over the radius cannot be told apart; with ``R`` and ``H`` given, the moduli follow;
+- the law's shape parameters (Gent's ``Jm``, Ogden's ``alpha``), which set how the curve bends
+  as the stretch grows: a locking ``Jm`` far beyond the measured stretch is not seen (its
+  interval opens upwards);
+- the rest volume ``v0`` (so ``R``), which sets the stretch scale, when ``R`` is not given.
+
+Only these identifiable groups are fitted, by weighted nonlinear least squares
+(``scipy.optimize.least_squares``); each inflation's rows are weighted by its own noise,
+estimated from its raw rows (:func:`estimate_noise_std`). Every fitted or derived number comes
+with a 95 % interval from the Jacobian at the optimum, ``(J^T J)^-1 s^2`` with the residual
+variance ``s^2`` and Student's t, and beside it a percentile interval from a seeded
+parametric bootstrap (synthetic inflations from the fitted curve with the fitted noise,
+refitted). The laws are ranked by AICc, the small-sample Akaike criterion: the law expected to
+predict new measurements best (BIC, stated beside it, penalises parameters more and aims at the
+true law among those tried). docs/fit.md says more, and what is not covered.
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from softseq_ros.errors import UserError
+from softseq_ros.segments.materials import (
+    Gent,
+    Material,
+    MooneyRivlin,
+    NeoHookean,
+    Ogden,
+    material_parameter_names,
+)
+from softseq_ros.segments.models import BalloonSegment
+
+FloatArray = NDArray[np.float64]
+
+# Rows an inflation needs: its noise comes from 4-row differences (at least 7 of them), and
+# a law of three parameters from all rows together.
+MIN_ROWS = 10
+# A difference further than this many robust deviations from the median is the curve's own
+# bend (the steep first rows of a balloon), not noise: left out of the noise's deviation.
+NOISE_TRIM = 3.5
+# The share of a normal deviation that its tails beyond NOISE_TRIM deviations carry, as a
+# factor on the trimmed standard deviation: sqrt(1 - 2 c phi(c) / (2 Phi(c) - 1)), c = 3.5.
+NOISE_TRIM_FACTOR = 0.996942
+# The median absolute deviation of a normal sample times this is its standard deviation.
+MAD_TO_STD = 1.482602
+# A noise estimate of exactly 0 (synthetic or quantised rows) would weigh rows infinitely:
+# the noise is taken as at least this share of the inflation's largest pressure.
+NOISE_FLOOR = 1e-9
+CONFIDENCE = 0.95
+# Half an interval on a logarithm beyond this (a factor e^700) is an interval without end.
+MAX_LOG_SPREAD = 700.0
+BOOTSTRAP_RESAMPLES = 200
+# The fit stops when a step changes the cost or the parameters by less than this share.
+FIT_TOLERANCE = 1e-10
+# Internal parameters (logarithms, or moduli over the pressure scale) stay within +-this:
+# bounds wide enough never to be met by a real fit, that keep a wild step finite.
+INTERNAL_BOUND = 40.0
+# Rest volumes tried for a start when R is not given, as shares of the smallest volume
+# measured (a measurement that starts at rest has its first row there).
+REST_VOLUME_STARTS = np.geomspace(0.3, 1.0, 25)
+# Rows of the segment table written from a fitted law.
+TABLE_ROWS = 201
+
+
+class FitError(UserError):
+    """Measurements or options that cannot be fitted; one line naming what is wrong."""
+
+
+@dataclass(frozen=True)
+class Inflation:
+    """One measured inflation of the segment: volumes [m^3], strictly rising, gauge Pa."""
+
+    volume: FloatArray
+    pressure: FloatArray
+    source: str = 'inflation'
+
+    def __post_init__(self) -> None:
+        """Check the rows are usable: enough, finite and in rising volume."""
+        volume = np.asarray(self.volume, dtype=float)
+        pressure = np.asarray(self.pressure, dtype=float)
+        object.__setattr__(self, 'volume', volume)
+        object.__setattr__(self, 'pressure', pressure)
+        if volume.ndim != 1 or volume.shape != pressure.shape:
+            raise FitError(f'{self.source}: volume and pressure need one row each, as many')
+        if volume.size < MIN_ROWS:
+            raise FitError(f'{self.source}: {volume.size} rows are too few to fit: at least '
+                           f'{MIN_ROWS} (the noise is estimated from the rows themselves)')
+        if not (np.all(np.isfinite(volume)) and np.all(np.isfinite(pressure))):
+            raise FitError(f'{self.source}: volumes and pressures must be finite')
+        steps = np.diff(volume)
+        if np.any(steps <= 0.0):
+            row = int(np.argmax(steps <= 0.0)) + 2
+            raise FitError(f'{self.source}: volume_m3 must rise strictly (one inflation); row '
+                           f'{row} ({volume[row - 1]:.6g}) does not exceed row {row - 1} '
+                           f'({volume[row - 2]:.6g})')
+        if volume[0] <= 0.0:
+            raise FitError(f"{self.source}: volume_m3 must be > 0 (the segment's whole "
+                           f'volume, not the volume injected), got {volume[0]:.6g} in row 1')
+
+
+def estimate_noise_std(volume: ArrayLike, pressure: ArrayLike) -> float:
+    """
+    Standard deviation [Pa] of the pressure noise, from the raw rows of one inflation.
+
+    Each run of four rows gives a third divided difference, which a quadratic through them
+    cancels; scaled by its coefficients, it is one sample of the noise's deviation on a
+    locally smooth curve (for equally spaced rows: the third difference over sqrt(20)). Those
+    further than :data:`NOISE_TRIM` robust deviations (the median absolute deviation) from
+    their median are where the curve bends faster (the first rows of a balloon) and are left
+    out; the deviation of the rest is the estimate (nearly the efficiency of a standard
+    deviation, about 10 % on 100 rows). Smoothed rows would hide the noise: give the rows as
+    measured.
+    """
+    v = np.asarray(volume, dtype=float)
+    p = np.asarray(pressure, dtype=float)
+    if v.size < 4:
+        raise FitError(f'the noise needs at least 4 rows, got {v.size}')
+    x = [v[k:v.size - 3 + k] for k in range(4)]
+    # Lagrange weights of the third divided difference on each run of four rows.
+    weights = [1.0 / np.prod([x[j] - x[k] for k in range(4) if k != j], axis=0)
+               for j in range(4)]
+    scale = np.sqrt(sum(w**2 for w in weights))
+    samples = sum(w * p[j:p.size - 3 + j] for j, w in enumerate(weights)) / scale
+    centred = samples - np.median(samples)
+    robust = MAD_TO_STD * float(np.median(np.abs(centred)))
+    kept = centred[np.abs(centred) <= NOISE_TRIM * robust] if robust > 0.0 else centred
+    return float(np.sqrt(np.mean(kept**2)) / (NOISE_TRIM_FACTOR if robust > 0.0 else 1.0))
+
+
+def sphere_stretch(volume: ArrayLike, rest_volume: float) -> FloatArray:
+    """The membrane's equibiaxial stretch at ``volume`` of a sphere of ``rest_volume``."""
+    return np.cbrt(np.asarray(volume, dtype=float) / rest_volume)
+
+
+def sphere_pressure(material: Material, stretch: ArrayLike,
+                    thickness_over_radius: float = 1.0) -> FloatArray:
+    """
+    Gauge pressure [Pa] of a thin sphere: ``H / (R lam^2) dW/dlam``, as BalloonSegment has it.
+
+    With ``thickness_over_radius`` 1 the moduli of ``material`` stand for the moduli times
+    ``H / R``: the groups that p(v) determines.
+    """
+    lam = np.asarray(stretch, dtype=float)
+    return thickness_over_radius / lam**2 * material.energy_derivative(lam)
+
+
+def radius_of(rest_volume: float) -> float:
+    """The reference radius [m] of a sphere of ``rest_volume`` [m^3]."""
+    return math.cbrt(3.0 * rest_volume / (4.0 * math.pi))
+
+
+def rest_volume_of(radius: float) -> float:
+    """The volume [m^3] of a sphere of ``radius`` [m]."""
+    return 4.0 / 3.0 * math.pi * radius**3
+
+
+@dataclass(frozen=True)
+class SphereLaw:
+    """
+    A membrane law as fitted to a sphere: its identifiable groups and how to build it.
+
+    ``groups``: the fitted parameters' names (moduli first: each a law modulus times H / R,
+    in Pa; then the shape parameters). ``positive``: which are fitted as logarithms (they
+    cannot change sign: an interval of a positive quantity stays positive). ``shape_starts``:
+    values of the one shape parameter tried for a start, the moduli solved linearly for each.
+    ``locked``: where the law has no pressure at the stretches given (past Gent's locking
+    stretch), None where it has one everywhere; the material's own ``max_stretch`` says the
+    same, at the cost of a polynomial's roots on every call of a fit.
+    """
+
+    name: str
+    groups: tuple[str, ...]
+    moduli: int
+    positive: tuple[bool, ...]
+    shape_starts: tuple[float, ...]
+    build: Callable[[Sequence[float]], Material]
+    locked: Callable[[Sequence[float], FloatArray], NDArray[np.bool_]] | None = None
+
+    def material(self, groups: Sequence[float], thickness_over_radius: float = 1.0) -> Material:
+        """The law with moduli = groups over ``thickness_over_radius`` (H / R)."""
+        values = [g / thickness_over_radius if i < self.moduli else g
+                  for i, g in enumerate(groups)]
+        return self.build(values)
+
+    def law_parameter_names(self) -> tuple[str, ...]:
+        """The law's own parameters as a scene file names them (``shear_modulus_pa``, ``jm``)."""
+        return material_parameter_names(self.name)
+
+
+SPHERE_LAWS = {
+    'neo_hookean': SphereLaw('neo_hookean', ('shear_modulus_h_over_r_pa',), 1, (True,), (),
+                             lambda g: NeoHookean(g[0])),
+    'mooney_rivlin': SphereLaw('mooney_rivlin', ('c1_h_over_r_pa', 'c2_h_over_r_pa'), 2,
+                               (False, False), (), lambda g: MooneyRivlin(g[0], g[1])),
+    # Jm from nearly rigid chains to nearly neo-Hookean; alpha over what rubbers show.
+    'gent': SphereLaw('gent', ('shear_modulus_h_over_r_pa', 'jm'), 1, (True, True),
+                      tuple(np.geomspace(0.3, 3e3, 41)), lambda g: Gent(g[0], g[1]),
+                      lambda g, lam: 2.0 * lam**2 + lam**-4 - 3.0 >= g[1]),
+    'ogden': SphereLaw('ogden', ('mu_h_over_r_pa', 'alpha'), 1, (True, True),
+                       tuple(np.geomspace(0.2, 20.0, 41)), lambda g: Ogden((g[0],), (g[1],))),
+}
+FIT_LAWS = tuple(SPHERE_LAWS)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """
+    One fitted or derived number: its value, standard error and two 95 % intervals.
+
+    ``interval``: from the Jacobian at the optimum (Student's t on the linearised model; for
+    a positive quantity on its logarithm, so it stays positive). ``bootstrap``: the 2.5 and
+    97.5 percentiles of the parametric bootstrap's refits (None without a bootstrap).
+    ``fitted``: a parameter of the fit itself, or else a quantity derived from them.
+    """
+
+    name: str
+    value: float
+    standard_error: float
+    interval: tuple[float, float]
+    bootstrap: tuple[float, float] | None
+    fitted: bool
+
+    def holds(self, value: float) -> bool:
+        """Whether the Jacobian interval holds ``value``."""
+        return self.interval[0] <= value <= self.interval[1]
+
+    def to_dict(self) -> dict[str, object]:
+        """The numbers as fit.json holds them."""
+        return {'value': self.value, 'standard_error': self.standard_error,
+                'ci95': list(self.interval),
+                'bootstrap_ci95': None if self.bootstrap is None else list(self.bootstrap),
+                'fitted': self.fitted}
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """The rows of every inflation together, with each row's noise and the fit's scales."""
+
+    volume: FloatArray
+    pressure: FloatArray
+    sigma: FloatArray
+    pressure_scale: float
+    volume_scale: float
+    rest_volume: float | None   # known (R given), or None: fitted
+
+    @property
+    def rows(self) -> int:
+        return int(self.volume.size)
+
+
+@dataclass
+class LawFit:
+    """
+    One law fitted to the measurements: its groups, intervals, residuals and criteria.
+
+    ``estimates``: every number by name (the fitted groups, ``rest_volume_m3`` when fitted,
+    and derived ones: ``radius_m``, the initial shear modulus times H / R, and with a
+    thickness the law's own parameters). ``reduced_chi_square``: the weighted residuals'
+    mean square per degree of freedom, about 1 when the law follows the data to their
+    noise. ``aicc``, ``bic``: the criteria (lower is better). ``curve``: the pressure as a
+    function of the internal parameters and the volumes, for the curve's own uncertainty.
+    """
+
+    law: SphereLaw
+    internal: FloatArray
+    covariance: FloatArray
+    estimates: dict[str, Estimate]
+    groups: tuple[float, ...]
+    rest_volume: float
+    rows: int
+    parameters: int
+    chi_square: float
+    reduced_chi_square: float
+    aicc: float
+    bic: float
+    converged: bool
+    at_bound: bool
+    message: str
+    bootstrap_resamples: int = 0
+    bootstrap_failed: int = 0
+    curve: Callable[[FloatArray, FloatArray], FloatArray] | None = None
+
+    def pressure(self, volume: ArrayLike) -> FloatArray:
+        """The fitted curve: gauge pressure [Pa] at ``volume`` [m^3]."""
+        return sphere_pressure(self.law.material(self.groups),
+                               sphere_stretch(volume, self.rest_volume))
+
+    def pressure_standard_error(self, volume: ArrayLike) -> FloatArray:
+        """
+        The fitted curve's standard error [Pa] at ``volume`` [m^3], from the covariance.
+
+        By the delta method: how far the curve itself is uncertain, far less than one row's
+        noise where many rows determine it. 0 at a given rest volume, where p = 0 for any
+        parameters.
+        """
+        if self.curve is None:
+            raise ValueError('this fit keeps no curve of its parameters')
+        volume = np.atleast_1d(np.asarray(volume, dtype=float))
+        slopes = np.empty((volume.size, self.internal.size))
+        for i in range(self.internal.size):
+            step = 1e-6 * max(1.0, abs(float(self.internal[i])))
+            up, down = self.internal.copy(), self.internal.copy()
+            up[i] += step
+            down[i] -= step
+            slopes[:, i] = (self.curve(up, volume) - self.curve(down, volume)) / (2.0 * step)
+        variance = np.einsum('ij,jk,ik->i', slopes, self.covariance, slopes)
+        return np.sqrt(np.maximum(variance, 0.0))
+
+    @property
+    def radius(self) -> float:
+        """The sphere's reference radius [m] (given, or from the fitted rest volume)."""
+        return radius_of(self.rest_volume)
+
+    def material(self, thickness: float) -> Material:
+        """The law itself for a membrane ``thickness`` [m] thick (moduli = groups R / H)."""
+        return self.law.material(self.groups, thickness / self.radius)
+
+    def balloon(self, name: str, length: float, thickness: float,
+                max_stretch: float) -> BalloonSegment:
+        """The fitted law as a balloon segment (its curve does not depend on ``thickness``)."""
+        return BalloonSegment(name, length, self.material(thickness), self.radius, thickness,
+                              max_stretch)
+
+    def to_dict(self) -> dict[str, object]:
+        """Every number of the fit, as fit.json holds it."""
+        return {'parameters': {name: e.to_dict() for name, e in self.estimates.items()},
+                'rows': self.rows, 'fitted_parameters': self.parameters,
+                'chi_square': self.chi_square, 'reduced_chi_square': self.reduced_chi_square,
+                'aicc': self.aicc, 'bic': self.bic, 'converged': self.converged,
+                'at_bound': self.at_bound, 'message': self.message,
+                'bootstrap_resamples': self.bootstrap_resamples,
+                'bootstrap_failed': self.bootstrap_failed}
+
+
+@dataclass
+class SphereFit:
+    """
+    Every law fitted to the inflations of one segment, and the one AICc chooses.
+
+    ``noise_std``: each inflation's noise [Pa], from its raw rows; ``pooled_noise_std``: their
+    mean square, each weighted by its number of differences.
+    """
+
+    inflations: tuple[Inflation, ...]
+    noise_std: tuple[float, ...]
+    pooled_noise_std: float
+    radius_given: float | None
+    thickness: float | None
+    laws: dict[str, LawFit]
+    chosen: str
+    bootstrap_resamples: int
+    seed: int
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def best(self) -> LawFit:
+        """The chosen law's fit."""
+        return self.laws[self.chosen]
+
+    def by_bic(self) -> str:
+        """The law BIC would choose (said beside AICc's choice when they differ)."""
+        return min(self.laws, key=lambda name: self.laws[name].bic)
+
+    def table(self, rows: int = TABLE_ROWS) -> tuple[FloatArray, FloatArray]:
+        """
+        The chosen law's curve as a segment table: volumes [m^3] and gauge pressures [Pa].
+
+        From the rest volume to the largest volume measured, evenly spaced in stretch (the
+        balloon's features sit at small volumes).
+        """
+        fit = self.best
+        top = max(float(np.max(i.volume)) for i in self.inflations)
+        if top <= fit.rest_volume:
+            raise FitError(f'the fitted rest volume ({fit.rest_volume:.6g} m^3) is beyond the '
+                           f'largest volume measured ({top:.6g} m^3): no curve to tabulate')
+        lam = np.linspace(1.0, np.cbrt(top / fit.rest_volume), rows)
+        volume = fit.rest_volume * lam**3
+        volume[0], volume[-1] = fit.rest_volume, top
+        return volume, fit.pressure(volume)
+
+    def table_noise_std(self) -> float:
+        """
+        The uncertainty [Pa] of the table's peaks and valleys: what they are weighed against.
+
+        ``softseq classify`` weighs each peak-valley feature of a table against the noise its
+        ``# noise_std_pa:`` line declares. The rows here are a law's, so their uncertainty is
+        its parameters', far less than one measured row's noise: the chosen curve's largest
+        standard error at its turning rows (a peak's or valley's pressure is known as well as
+        the curve is there, its slope being 0), or along the whole curve when it has none.
+        Not the steep start, where an uncertain rest volume moves the pressure a lot at one
+        volume but no feature lies.
+        """
+        volume, pressure = self.table()
+        error = self.best.pressure_standard_error(volume)
+        turning = np.flatnonzero(np.diff(np.sign(np.diff(pressure)))) + 1
+        if turning.size == 0:
+            return float(np.max(error))
+        near = np.unique(np.clip(np.concatenate([turning - 1, turning, turning + 1]), 0,
+                                 volume.size - 1))
+        return float(np.max(error[near]))
+
+    def to_dict(self) -> dict[str, object]:
+        """Every number, SI, as fit.json holds it."""
+        weights = akaike_weights([self.laws[name].aicc for name in self.laws])
+        best = self.best
+        return {
+            'geometry': 'sphere',
+            'inflations': [{'source': i.source, 'rows': int(i.volume.size),
+                            'noise_std_pa': s} for i, s in zip(self.inflations, self.noise_std)],
+            'noise_std_pa': self.pooled_noise_std,
+            'table_noise_std_pa': self.table_noise_std(),
+            'radius_m': {'given': self.radius_given, 'used_by_chosen_law': best.radius},
+            'thickness_m': self.thickness,
+            'criterion': 'AICc',
+            'chosen_law': self.chosen,
+            'chosen_by_bic': self.by_bic(),
+            'confidence': CONFIDENCE,
+            'bootstrap': {'resamples': self.bootstrap_resamples, 'seed': self.seed},
+            'laws': {name: {**fit.to_dict(), 'delta_aicc': fit.aicc - best.aicc,
+                            'akaike_weight': weight}
+                     for (name, fit), weight in zip(self.laws.items(), weights)},
+            'notes': list(self.notes),
+        }
+
+
+def akaike_weights(criteria: Sequence[float]) -> list[float]:
+    """Each model's weight of evidence, exp(-delta / 2) normalised (delta from the lowest)."""
+    values = np.asarray(criteria, dtype=float)
+    relative = np.exp(-0.5 * (values - np.min(values)))
+    return (relative / relative.sum()).tolist()
+
+
+def information_criteria(chi_square: float, rows: int, parameters: int) -> tuple[float, float]:
+    """
+    AICc and BIC of a least-squares fit whose noise scale is estimated with it.
+
+    ``parameters`` counts the fitted ones; the noise scale makes one more. The constant every
+    law shares (the weights' logarithms) is left out: only differences mean something.
+    """
+    k = parameters + 1
+    # A law through every row exactly (synthetic rows) would have no logarithm.
+    fit_term = rows * math.log(max(chi_square, 1e-300) / rows)
+    aicc = fit_term + 2.0 * k + (2.0 * k * (k + 1) / (rows - k - 1) if rows > k + 1
+                                 else math.inf)
+    return aicc, fit_term + k * math.log(rows)
+
+
+class _LawModel:
+    """One law on one problem: internal parameters <-> groups, and the weighted residuals."""
+
+    def __init__(self, law: SphereLaw, problem: _Problem) -> None:
+        self.law = law
+        self.problem = problem
+        self.size = len(law.groups) + (problem.rest_volume is None)
+
+    def groups(self, internal: FloatArray) -> tuple[float, ...]:
+        scale = self.problem.pressure_scale
+        values = []
+        for i, positive in enumerate(self.law.positive):
+            unit = scale if i < self.law.moduli else 1.0
+            values.append(float(unit * (math.exp(internal[i]) if positive else internal[i])))
+        return tuple(values)
+
+    def rest_volume(self, internal: FloatArray) -> float:
+        if self.problem.rest_volume is not None:
+            return self.problem.rest_volume
+        return float(self.problem.volume_scale * math.exp(internal[-1]))
+
+    def internal(self, groups: Sequence[float], rest_volume: float) -> FloatArray:
+        scale = self.problem.pressure_scale
+        values = []
+        for i, (g, positive) in enumerate(zip(groups, self.law.positive)):
+            g = g / scale if i < self.law.moduli else g
+            values.append(math.log(g) if positive else g)
+        if self.problem.rest_volume is None:
+            values.append(math.log(rest_volume / self.problem.volume_scale))
+        return np.asarray(values)
+
+    def curve(self, internal: FloatArray, volume: FloatArray) -> FloatArray:
+        material = self.law.material(self.groups(internal))
+        lam = sphere_stretch(volume, self.rest_volume(internal))
+        with np.errstate(all='ignore'):
+            pressure = sphere_pressure(material, lam)
+        if self.law.locked is None:
+            return pressure
+        # Past a locking stretch (Gent) the law has no pressure: no step may go there.
+        return np.where(self.law.locked(self.groups(internal), lam), np.inf, pressure)
+
+    def residuals(self, internal: FloatArray, pressure: FloatArray) -> FloatArray:
+        return (self.curve(internal, self.problem.volume) - pressure) / self.problem.sigma
+
+    def start(self) -> FloatArray:
+        """
+        A start near the optimum: the moduli solved linearly on a grid of the rest.
+
+        The pressure is linear in the moduli, so for each rest volume and shape parameter
+        tried their weighted least-squares values are exact; the best of the grid starts the
+        nonlinear fit.
+        """
+        problem = self.problem
+        rests = ([problem.rest_volume] if problem.rest_volume is not None
+                 else list(problem.volume_scale * REST_VOLUME_STARTS))
+        weight = 1.0 / problem.sigma
+        target = problem.pressure * weight
+        best, best_cost = None, math.inf
+        for shape in self.law.shape_starts or (None,):
+            shape_values = [] if shape is None else [shape]
+            # One material per modulus, the others 0: the columns of the linear problem.
+            units = [self.law.build([float(i == m) for i in range(self.law.moduli)]
+                                    + shape_values) for m in range(self.law.moduli)]
+            for rest in rests:
+                lam = sphere_stretch(problem.volume, rest)
+                if self.law.locked is not None and np.any(
+                        self.law.locked([1.0, *shape_values], lam)):
+                    continue
+                design = np.column_stack([sphere_pressure(m, lam) for m in units]) \
+                    * weight[:, None]
+                moduli, *_ = np.linalg.lstsq(design, target, rcond=None)
+                if any(p and m <= 0.0 for p, m in zip(self.law.positive, moduli)):
+                    continue
+                cost = float(np.sum((design @ moduli - target) ** 2))
+                if cost < best_cost:
+                    best = self.internal([*moduli.tolist(), *shape_values], rest)
+                    best_cost = cost
+        if best is None:
+            raise FitError(f'{self.law.name}: no start found: the pressures do not rise with '
+                           "the volume as an inflated membrane's do")
+        return best
+
+    def solve(self, pressure: FloatArray, start: FloatArray) -> object:
+        bound = np.full(self.size, INTERNAL_BOUND)
+        return least_squares(self.residuals, np.clip(start, -bound, bound), args=(pressure,),
+                             bounds=(-bound, bound), method='trf', x_scale=1.0,
+                             ftol=FIT_TOLERANCE, xtol=FIT_TOLERANCE, gtol=FIT_TOLERANCE)
+
+    def quantities(self, thickness: float | None) -> list[tuple[str, bool, bool, Callable]]:
+        """
+        What is reported, as (name, fitted, positive, function of the internal parameters).
+
+        The fitted groups (and rest volume) first, then what follows from them.
+        """
+        law = self.law
+        found: list[tuple[str, bool, bool, Callable]] = []
+        for i, (name, positive) in enumerate(zip(law.groups, law.positive)):
+            found.append((name, True, positive, lambda x, i=i: self.groups(x)[i]))
+        if self.problem.rest_volume is None:
+            found.append(('rest_volume_m3', True, True, self.rest_volume))
+            found.append(('radius_m', False, True, lambda x: radius_of(self.rest_volume(x))))
+        if law.name in ('mooney_rivlin', 'ogden'):
+            found.append(('shear_modulus_h_over_r_pa', False, law.name == 'ogden',
+                          lambda x: law.material(self.groups(x)).shear_modulus))
+        if thickness is not None:
+            for i, (name, positive) in enumerate(zip(law.law_parameter_names(), law.positive)):
+                if i >= law.moduli:
+                    break
+                found.append((name, False, positive, lambda x, i=i: self.groups(x)[i]
+                              * radius_of(self.rest_volume(x)) / thickness))
+        return found
+
+
+def _noise_of(inflation: Inflation) -> float:
+    sigma = estimate_noise_std(inflation.volume, inflation.pressure)
+    return max(sigma, NOISE_FLOOR * float(np.max(np.abs(inflation.pressure))))
+
+
+def _problem(inflations: Sequence[Inflation], noise: Sequence[float],
+             rest_volume: float | None) -> _Problem:
+    volume = np.concatenate([i.volume for i in inflations])
+    pressure = np.concatenate([i.pressure for i in inflations])
+    sigma = np.concatenate([np.full(i.volume.size, s) for i, s in zip(inflations, noise)])
+    scale = float(np.max(np.abs(pressure)))
+    return _Problem(volume, pressure, sigma, scale if scale > 0.0 else 1.0,
+                    float(min(np.min(i.volume) for i in inflations)), rest_volume)
+
+
+def _interval(value: float, spread: float, positive: bool,
+              quantile: float) -> tuple[float, float, float]:
+    """
+    Standard error and interval of a quantity from its spread (see Estimate).
+
+    ``spread``: the standard deviation of the quantity, or of its logarithm when positive.
+    """
+    if positive:
+        # A quantity the data do not fix (Gent's Jm far beyond the stretches measured) has a
+        # spread whose exponential overflows: its interval is open to infinity.
+        half = min(quantile * spread, MAX_LOG_SPREAD)
+        return (abs(value) * spread, value * math.exp(-half),
+                value * math.exp(half) if half < MAX_LOG_SPREAD else math.inf)
+    return spread, value - quantile * spread, value + quantile * spread
+
+
+def fit_law(law: str | SphereLaw, inflations: Sequence[Inflation],
+            noise_std: Sequence[float] | None = None, radius: float | None = None,
+            thickness: float | None = None, bootstrap: int = 0,
+            seed: int = 0) -> LawFit:
+    """
+    One law fitted to the inflations of a sphere (see the module's description).
+
+    ``noise_std``: each inflation's noise [Pa] (estimated from its rows when None).
+    ``radius`` [m]: the sphere's reference radius when known (else its rest volume is
+    fitted); ``thickness`` [m]: the membrane's, to report the law's own moduli.
+    ``bootstrap``: parametric resamples for the percentile intervals (0: none), from
+    ``seed``.
+    """
+    from scipy.stats import t as student_t  # 0.3 s to import: only where a fit runs
+
+    law = SPHERE_LAWS[law] if isinstance(law, str) else law
+    inflations = tuple(inflations)
+    noise = [_noise_of(i) for i in inflations] if noise_std is None else list(noise_std)
+    problem = _problem(inflations, noise, None if radius is None else rest_volume_of(radius))
+    model = _LawModel(law, problem)
+    result = model.solve(problem.pressure, model.start())
+    x = np.asarray(result.x, dtype=float)
+    rows, k = problem.rows, model.size
+    chi_square = float(np.sum(result.fun**2))
+    dof = rows - k
+    if dof < 1:
+        raise FitError(f'{law.name}: {rows} rows cannot fit {k} parameters')
+    reduced = chi_square / dof
+    jacobian = np.asarray(result.jac, dtype=float)
+    # (J^T J)^-1 s^2 by the pseudo-inverse: a direction the data do not fix gets no
+    # spurious precision from round-off, and shows as a huge interval instead.
+    covariance = np.linalg.pinv(jacobian.T @ jacobian) * reduced
+    aicc, bic = information_criteria(chi_square, rows, k)
+    quantile = float(student_t.ppf(0.5 + CONFIDENCE / 2.0, dof))
+    quantities = model.quantities(thickness)
+    samples = _bootstrap(model, x, reduced, bootstrap, seed, quantities) if bootstrap else None
+    estimates = {}
+    for index, (name, fitted, positive, function) in enumerate(quantities):
+        value = float(function(x))
+        gradient = _gradient(function, x, positive)
+        spread = float(math.sqrt(max(gradient @ covariance @ gradient, 0.0)))
+        error, low, high = _interval(value, spread, positive, quantile)
+        percentiles = None
+        if samples is not None and samples[0].size:
+            column = samples[0][:, index]
+            percentiles = (float(np.percentile(column, 2.5)), float(np.percentile(column, 97.5)))
+        estimates[name] = Estimate(name, value, error, (low, high), percentiles, fitted)
+    return LawFit(law, x, covariance, estimates, model.groups(x), model.rest_volume(x), rows, k,
+                  chi_square, reduced, aicc, bic, bool(result.success),
+                  bool(np.any(np.abs(x) >= INTERNAL_BOUND * (1.0 - 1e-9))),
+                  str(result.message), bootstrap,
+                  0 if samples is None else samples[1], curve=model.curve)
+
+
+def _gradient(function: Callable, x: FloatArray, positive: bool) -> FloatArray:
+    """D(quantity)/d(internal) by central differences (of its logarithm when positive)."""
+    def value(at: FloatArray) -> float:
+        q = float(function(at))
+        return math.log(q) if positive else q
+
+    gradient = np.empty(x.size)
+    for i in range(x.size):
+        step = 1e-6 * max(1.0, abs(x[i]))
+        up, down = x.copy(), x.copy()
+        up[i] += step
+        down[i] -= step
+        gradient[i] = (value(up) - value(down)) / (2.0 * step)
+    return gradient
+
+
+def _bootstrap(model: _LawModel, x: FloatArray, reduced: float, resamples: int, seed: int,
+               quantities: list) -> tuple[FloatArray, int]:
+    """
+    The quantities refitted on ``resamples`` synthetic inflations, and how many failed.
+
+    Each is the fitted curve plus normal noise of each row's deviation times the fit's
+    residual scale (so the bootstrap and the Jacobian intervals assume the same noise), refit
+    from the optimum.
+    """
+    rng = np.random.default_rng(seed)
+    curve = model.curve(x, model.problem.volume)
+    deviation = model.problem.sigma * math.sqrt(reduced)
+    rows, failed = [], 0
+    for _ in range(resamples):
+        synthetic = curve + deviation * rng.standard_normal(curve.size)
+        result = model.solve(synthetic, x)
+        if not result.success:
+            failed += 1
+            continue
+        rows.append([float(function(result.x)) for *_, function in quantities])
+    return np.asarray(rows, dtype=float).reshape(-1, len(quantities)), failed
+
+
+def fit_sphere(inflations: Sequence[Inflation], radius: float | None = None,
+               thickness: float | None = None, laws: Sequence[str] = FIT_LAWS,
+               bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> SphereFit:
+    """
+    Every law of ``laws`` fitted to the inflations of one segment, the best chosen by AICc.
+
+    ``radius``, ``thickness`` [m]: the sphere's, where known (see :func:`fit_law`).
+    ``bootstrap``: parametric resamples per law for the percentile intervals (0: none), each
+    law's from ``seed``. FitError (one line) for options that cannot be used.
+    """
+    inflations = tuple(inflations)
+    if not inflations:
+        raise FitError('no inflation to fit')
+    for option, value in (('radius', radius), ('thickness', thickness)):
+        if value is not None and not (math.isfinite(value) and value > 0.0):
+            raise FitError(f'{option}: must be a finite length > 0 m, got {value}')
+    unknown = [name for name in laws if name not in SPHERE_LAWS]
+    if unknown or not laws:
+        raise FitError(f'unknown law {", ".join(unknown) or "(none)"}; the fit knows '
+                       f'{", ".join(FIT_LAWS)}')
+    if bootstrap < 0:
+        raise FitError(f'bootstrap: a number of resamples >= 0, got {bootstrap}')
+    noise = [_noise_of(i) for i in inflations]
+    counts = [i.volume.size - 3 for i in inflations]
+    pooled = math.sqrt(sum(c * s**2 for c, s in zip(counts, noise)) / sum(counts))
+    notes = []
+    if radius is not None:
+        rest = rest_volume_of(radius)
+        smallest = min(float(np.min(i.volume)) for i in inflations)
+        if smallest < 0.5 * rest:
+            notes.append(f'the smallest volume measured ({smallest:.6g} m^3) is less than half '
+                         f'the rest volume of a sphere of radius {radius:g} m ({rest:.6g} m^3): '
+                         'is the volume column the injected volume? It must be the whole')
+    fits = {name: fit_law(name, inflations, noise, radius, thickness, bootstrap, seed)
+            for name in laws}
+    chosen = min(fits, key=lambda name: fits[name].aicc)
+    for name, fit in fits.items():
+        if not fit.converged:
+            notes.append(f'{name}: the fit did not converge ({fit.message})')
+        if fit.at_bound:
+            notes.append(f'{name}: a parameter ran to the edge of its range; its intervals '
+                         'do not hold')
+    return SphereFit(inflations, tuple(noise), pooled, radius, thickness, fits, chosen,
+                     bootstrap, seed, notes)
