@@ -65,6 +65,10 @@ _POINT_BYTES = 24       # a marker's point
 _PIXEL_BYTES = 3        # rgb8
 
 
+# How often in rig time the runner counts what it has written against MAX_RUN_MESSAGES.
+COUNT_CHECK_NS = 10 * NS_PER_S
+
+
 class LongRunError(UserError):
     """A run beyond the limits of a batch run (scene/programme.py), refused before it starts."""
 
@@ -334,6 +338,8 @@ class _BatchRun:
         self.namespace = namespace
         self.start_time_ns = time.time_ns() if start_time_ns is None else int(start_time_ns)
         self._now_ns = self.start_time_ns
+        self.allow_long = allow_long
+        self._next_count_check = self.start_time_ns
         self._check_length(allow_long)
         self._changed_stages = False
         if wrap is not None:
@@ -480,6 +486,9 @@ class _BatchRun:
                   for order, (core, rate) in enumerate(rates) if rate is not None]
         duration = self.duration_s
         end = None if self.controlled_s is None else start + round(duration * NS_PER_S)
+        # A programme's pump finishes at the first tick past its duration: a run still going
+        # two ticks later has a rig that no longer says where it is, and would never end.
+        overdue = start + round(duration * NS_PER_S) + 2 * round(NS_PER_S / self.pump_rate_hz)
         next_report = wall_start + PROGRESS_PERIOD_S
         # The actuator names its scene first, then the pump gives its status.
         self._record(router.run(self.actuator.begin(start) + pump.begin(start)))
@@ -503,9 +512,13 @@ class _BatchRun:
             self._now_ns = now
             self._record(router.run(core.tick(now)))
             clock[0] = now + period
+            over = self._over_limits(now, overdue if end is None else None) \
+                if core is pump else None
             if core is pump and (pump.state in (FINISHED, STOPPED, HELD)
-                                 or (end is not None and now >= end)):
-                if pump.state == HELD:
+                                 or (end is not None and now >= end) or over):
+                if over:
+                    self._notice(Notice(contract.PUMP, WARNING, over))
+                elif pump.state == HELD:
                     self._held_for_good()
                 # Every other core shows the last state once more, at the pump's last instant.
                 for other in clocks:
@@ -515,6 +528,27 @@ class _BatchRun:
             if self.progress is not None and time.perf_counter() >= next_report:
                 next_report += PROGRESS_PERIOD_S
                 self._report(wall_start, duration)
+
+    def _over_limits(self, now: int, overdue: int | None) -> str | None:
+        """
+        Why the run must end now though its pump has not finished, or None.
+
+        The limits checked before the start hold while it runs too: rig time past the end of
+        the programme, and (unless ``allow_long``) more messages than ``MAX_RUN_MESSAGES``.
+        """
+        if overdue is not None and now > overdue:
+            rig_time = (now - self.start_time_ns) / NS_PER_S
+            return (f'the pump had not finished its {self.duration_s:.6g} s programme at '
+                    f'{rig_time:.6g} s of rig time ({self.pump.status}): the run ends here, '
+                    'its bag complete up to now')
+        if not self.allow_long and now >= self._next_count_check:
+            self._next_count_check = now + COUNT_CHECK_NS
+            written = sum(channel.count for channel in self._channels.values())
+            if written > MAX_RUN_MESSAGES:
+                return (f'the bag holds {written} messages, more than {MAX_RUN_MESSAGES:.0e}: '
+                        'the run ends here, its bag complete up to now (insist with '
+                        '--allow-long)')
+        return None
 
     def _held_for_good(self) -> None:
         """

@@ -127,3 +127,47 @@ def test_softseq_run_stopped_by_a_signal_is_a_prefix_of_the_whole_run(
             process.kill()
     assert process.returncode == exit_code, stderr
     assert_prefix(paper_whole, read_topics(out))
+
+
+def test_a_run_whose_pump_never_finishes_ends_after_its_programme_with_its_bag(tmp_path):
+    # A rig that no longer says where it is (here: a pump whose programme never ends) ran on
+    # forever; the run's own limits hold while it runs: it ends two ticks past the programme.
+    import math
+
+    import softseq_ros
+    from softseq_ros.bag.reader import bag_summary
+
+    def wrap(label, function):
+        if label != 'pump.tick':
+            return function
+        pump = function.__self__
+
+        def tick(now):
+            pump.duration_s = math.inf
+            return function(now)
+        return tick
+
+    result = softseq_ros.run('fig1_none', tmp_path / 'bag', start_time_ns=0, wrap=wrap)
+    scene = softseq_ros.load_scene('fig1_none')
+    duration = scene.pump.profile.duration()
+    period = 1.0 / scene.pump.rate_hz
+    assert duration < result.sim_duration_s <= duration + 3 * period
+    assert result.pump_state == 'running'
+    assert any('had not finished its' in line and 'the run ends here' in line
+               for line in result.warnings)
+    summary = bag_summary(tmp_path / 'bag')
+    assert summary.topics['/pump/command'].message_count == result.message_counts['/pump/command']
+
+
+def test_a_run_holds_its_message_limit_while_it_runs(tmp_path, monkeypatch):
+    import softseq_ros
+    from softseq_ros import batch
+
+    # The estimate before the start says the bag fits; the count while running says it does not.
+    monkeypatch.setattr(batch, 'MAX_RUN_MESSAGES', 10_000)
+    monkeypatch.setattr(batch, 'COUNT_CHECK_NS', 10**9)
+    monkeypatch.setattr(batch._BatchRun, 'estimate', lambda self: (0.0, 0.0))
+    result = softseq_ros.run('fig1_none', tmp_path / 'bag', start_time_ns=0, by_blocks=False)
+    written = sum(result.message_counts.values())
+    assert 10_000 < written < 10_000 + 2 * 1000     # at most a second of rig time past it
+    assert any('more than 1e+04' in line for line in result.warnings)
