@@ -343,3 +343,31 @@ def test_the_shapes_mark_where_one_segment_ends_and_the_next_begins(tmp_path, mo
     for line, shot in zip(dots, shots):
         joint = segment_joints(shot.points, len(recording.segment_names))[0]
         assert line.get_xdata()[0] == pytest.approx(joint[0] * 1e3)
+
+
+def test_the_hysteresis_in_time_splits_into_the_curves_own_and_the_flows_loss(tmp_path):
+    # The segments' own hysteresis is the quasi-static path's along the same injected volumes,
+    # whatever the pump's speed; the rest is viscous, and at a laminar channel's drop R q it
+    # falls in proportion to the flow.
+    parts = {}
+    for flow in (FAST, FAST / 4):
+        data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
+        data['pump'].update({'flow_rate_m3_per_s': flow, 'rate_hz': 20.0,
+                             'legs': [{'inflate_to_m3': TOP}, {'deflate_to_m3': 0.0}]})
+        data['camera'] = {'rate_hz': 0.1}
+        data['network'] = {'channels': [CHANNEL], 'rate_hz': 20.0}
+        scene_file = tmp_path / f'fig1_{flow:g}.yaml'
+        scene_file.write_text(yaml.safe_dump(data))
+        bag = run(scene_file, tmp_path / f'bag_{flow:g}')
+        metrics, summary = write_report(bag, tmp_path / f'report_{flow:g}', str(scene_file),
+                                        figures=False)
+        total = metrics['hysteresis_area_j']
+        elastic = metrics['hysteresis_area_quasi_static_j']
+        viscous = metrics['hysteresis_area_rate_dependent_j']
+        assert elastic + viscous == pytest.approx(total, rel=1e-12)
+        assert "is the flow's viscous loss" in summary
+        parts[flow] = elastic, viscous
+    (elastic_fast, viscous_fast), (elastic_slow, viscous_slow) = parts[FAST], parts[FAST / 4]
+    # The quasi-static loop of this pair, independent of the speed (its snaps' losses).
+    assert elastic_fast > 0.0 and elastic_fast == pytest.approx(elastic_slow, rel=0.02)
+    assert 0.0 < viscous_slow < 0.5 * viscous_fast

@@ -189,12 +189,41 @@ def recording_metrics(recording: Recording, scene: object | None = None,
                 f'the recording reads as {metrics["sequence_type"]}, the scene classifies as '
                 f'{metrics["sequence_type_of_scene"]} over its whole range (the pump may not '
                 'cover it)')
+    if scene is not None and emap is not None and is_dynamic(recording) \
+            and metrics['hysteresis_area_j'] is not None:
+        metrics.update(_hysteresis_parts(recording, scene, emap, metrics['hysteresis_area_j']))
     if transients is None:
         transients = analyse_transients(recording, emap, _network(scene))
     if transients is not None:
         metrics['transients'] = transients.metrics
         metrics['warnings'].extend(transients.warnings)
     return metrics
+
+
+def _hysteresis_parts(recording: Recording, scene: object, emap: object,
+                      total: float) -> dict:
+    """
+    A recording in time: its hysteresis area split into the segments' own and the flow's.
+
+    The quasi-static path along the recorded injected volumes has the elastic hysteresis of
+    the curves alone (the snaps' losses), which stays however slowly the pump goes; the rest is
+    the viscous loss of the fluid's flow through the tubes, which vanishes as the pump slows.
+    """
+    from softseq_ros.quasistatic.equilibrium import DomainError
+    from softseq_ros.quasistatic.reach import start_tracker
+
+    injected = recording.state_injected
+    try:
+        # From where the scene's programme starts (rest, or where its start history led).
+        path = start_tracker(scene.pump.profile, emap, scene.segment_names).sweep(injected)
+    except DomainError:
+        return {}
+    still = analyse(Trace(injected, path.pressure, path.volumes, recording.state_flow_sign))
+    elastic = still['hysteresis_area_j']
+    if elastic is None:
+        return {}
+    return {'hysteresis_area_quasi_static_j': elastic,
+            'hysteresis_area_rate_dependent_j': total - elastic}
 
 
 def _snaps_in_time(recording: Recording) -> list[dict] | None:
@@ -590,7 +619,12 @@ def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
                          'moved between segments')
     else:
         lines.append('snap-throughs: none')
-    lines.append(f'hysteresis area: {_mj(metrics, "hysteresis_area_j")}')
+    lines.append(f'hysteresis area: {_mj(metrics, "hysteresis_area_j")}'
+                 + (f" (the segments' own, quasi-statically: "
+                    f'{_mj(metrics, "hysteresis_area_quasi_static_j")}; the rest, '
+                    f'{_mj(metrics, "hysteresis_area_rate_dependent_j")}, is the flow\'s '
+                    'viscous loss, which vanishes as the pump slows)'
+                    if 'hysteresis_area_quasi_static_j' in metrics else ''))
     first, later = _first_cycle_steps(metrics)
     for step in first:
         tip = step['tip_m']
