@@ -371,3 +371,23 @@ def test_the_hysteresis_in_time_splits_into_the_curves_own_and_the_flows_loss(tm
     # The quasi-static loop of this pair, independent of the speed (its snaps' losses).
     assert elastic_fast > 0.0 and elastic_fast == pytest.approx(elastic_slow, rel=0.02)
     assert 0.0 < viscous_slow < 0.5 * viscous_fast
+
+
+def test_the_time_series_shades_where_the_pump_was_held(quasi_static, tmp_path, monkeypatch):
+    from figure_checks import capture_figures
+
+    from softseq_ros.analysis import figures
+    from softseq_ros.analysis.figures import PAPER, held_spans, plot_timeseries
+
+    recording = load_recording(quasi_static)
+    # A hold from 10 s to 25 s, as a rig's ~/hold and ~/start put it on pump/status.
+    recording.status = sorted(recording.status + [(10.0, 'held', ''), (25.0, 'running', '')])
+    assert held_spans(recording) == [(10.0, 25.0)]
+    drawn = capture_figures(monkeypatch, figures)
+    with PAPER.context():
+        plot_timeseries(recording, tmp_path / 'timeseries.png')
+    fig, = drawn
+    for ax in fig.axes:
+        spans = [patch.get_x() for patch in ax.patches]
+        assert 10.0 in spans, spans
+    assert 'held' in [text.get_text() for text in fig.axes[0].texts]

@@ -571,6 +571,21 @@ def _square_limits(ax: object, recording: Recording, extra: list) -> None:
     ax.set_ylim(centre[1] - size / 2, centre[1] + size / 2)
 
 
+def held_spans(recording: Recording) -> list[tuple[float, float]]:
+    """
+    When the pump was held [s, from the first pump command]: each span to its next status.
+
+    A hold the run ends in reaches the last recorded state.
+    """
+    spans = []
+    status = recording.status
+    end = float(recording.state_time_s[-1]) if recording.state_time_s.size else 0.0
+    for k, (at, state, _) in enumerate(status):
+        if state == 'held':
+            spans.append((float(at), float(status[k + 1][0]) if k + 1 < len(status) else end))
+    return spans
+
+
 def plot_timeseries(recording: Recording, out: Path, svg: bool = False,
                     style: FigureStyle = PAPER) -> list[Path]:
     """Injected volume, gauge pressure and each segment's total volume against time."""
@@ -599,6 +614,13 @@ def plot_timeseries(recording: Recording, out: Path, svg: bool = False,
         axes[0, 0].annotate(f'run {number}', (start.time_s, 1.0), xycoords=('data',
                             'axes fraction'), xytext=(2, -2), textcoords='offset points',
                             ha='left', va='top', fontsize=7, color='0.3')
+    for begin, until in held_spans(recording):
+        # Held (by ~/hold, or for want of feedback): the programme paused there.
+        for ax in axes[:, 0]:
+            ax.axvspan(begin, until, color='0.85', lw=0, zorder=0)
+        axes[0, 0].annotate('held', (begin, 1.0), xycoords=('data', 'axes fraction'),
+                            xytext=(2, -2), textcoords='offset points', ha='left', va='top',
+                            fontsize=7, color='0.3')
     ended = recording.cut_short()
     if ended is not None:
         # The programme did not run to its end: where and why the pump ended it.
