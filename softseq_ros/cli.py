@@ -9,6 +9,7 @@ import sys
 from typing import Any, Callable, NoReturn, Sequence
 
 from softseq_ros.errors import UserError, one_line
+from softseq_ros.ros_tools.command import add_ros_parser
 from softseq_ros.stopping import TerminatedError, raise_terminated
 
 # A user's input that cannot be used, or a file the system cannot read or write: one line.
@@ -757,6 +758,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)
+
+    add_ros_parser(sub)
     parser.commands = dict(sub.choices)
     return parser
 
@@ -771,9 +774,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
+    command = parser.commands[args.command]
+    # softseq ros has subcommands of its own: each says its own mistakes.
+    command = getattr(command, 'commands', {}).get(getattr(args, 'ros_command', None), command)
     if unknown:
         # Said by the subcommand's parser, as its other mistakes are.
-        parser.commands[args.command].error(f'unrecognized arguments: {" ".join(unknown)}')
+        command.error(f'unrecognized arguments: {" ".join(unknown)}')
+    name = getattr(args, 'command_path', args.command)
     handler: Callable[[argparse.Namespace], int] = args.handler
     previous = signal.signal(signal.SIGTERM, raise_terminated)
     try:
@@ -783,13 +790,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         # file the system refused is named first, as every other refusal names its input.
         reason = f'{err.filename}: {err.strerror}' if isinstance(err, OSError) \
             and err.filename and err.strerror else str(err)
-        print(f'softseq {args.command}: error: {one_line(reason)}', file=sys.stderr)
+        print(f'softseq {name}: error: {one_line(reason)}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f'softseq {args.command}: interrupted', file=sys.stderr)
+        print(f'softseq {name}: interrupted', file=sys.stderr)
         return 130
     except TerminatedError:
-        print(f'softseq {args.command}: terminated', file=sys.stderr)
+        print(f'softseq {name}: terminated', file=sys.stderr)
         return 143
     finally:
         signal.signal(signal.SIGTERM, previous)
