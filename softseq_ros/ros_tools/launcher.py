@@ -169,7 +169,8 @@ def run_rig(namespace: str, params_file: Path | None, scene: str | None, record:
     check_inputs(params_file, record)
     supervisor = Supervisor(rig_commands(namespace, params_file, scene, record))
     try:
-        where = f'into {record}' if record else "into the recorder's bag folder"
+        where = f'into {record}' if record else ('into the folder of the parameters file, '
+                                                 'else bags/rig_<UTC time>')
         print(f'softseq ros rig: rig and recorder in {namespace}, recording {where}; Ctrl-C '
               'stops both', file=sys.stderr)
         ended = None
