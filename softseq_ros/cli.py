@@ -658,7 +658,8 @@ def build_parser() -> argparse.ArgumentParser:
                           'recorded timing and QoS, as recorded CDR. While it plays, the '
                           'node softseq_player serves ~/pause, ~/resume, ~/toggle_paused and '
                           '~/is_paused (std_srvs/Trigger) and takes its speed factor from '
-                          'its rate parameter (ros2 param set /softseq_player rate 2.0).')
+                          'its rate parameter (ros2 param set /softseq_player rate 2.0, or '
+                          'without ros2: softseq ros param set /softseq_player rate 2.0).')
     play.add_argument('bag', type=Path, help='bag directory')
     play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
