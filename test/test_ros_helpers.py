@@ -208,6 +208,31 @@ def test_echo_prints_count_messages_as_yaml(context, ros_env, tmp_path):
 
 
 @pytest.mark.ros
+def test_echo_without_count_ends_at_ctrl_c_after_a_whole_message(context, ros_env, tmp_path):
+    pump = pump_node(context, write_scene(tmp_path))   # idle, it commands its volume at 100 Hz
+    printed = tmp_path / 'echo.out'
+    with spinning(context, pump), open(printed, 'wb') as output:
+        echo = subprocess.Popen(
+            [sys.executable, '-m', 'softseq_ros.cli', 'ros', 'echo', 'pump/command',
+             '--timeout', FIND_S], env=ros_env, stdout=output, stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL)
+        try:
+            wait_for(lambda: printed.read_text().count('---\n') >= 2, 'two messages printed',
+                     timeout=COMMAND_TIMEOUT_S)
+            echo.send_signal(signal.SIGINT)
+            _, errors = echo.communicate(timeout=COMMAND_TIMEOUT_S)
+        finally:
+            if echo.poll() is None:
+                echo.kill()
+                echo.wait()
+    assert (echo.returncode, errors) == (0, b'')
+    text = printed.read_text()
+    assert text.endswith('---\n')
+    for document in text.split('---\n')[:-1]:
+        assert yaml.safe_load(document)['name'] == ['syringe']
+
+
+@pytest.mark.ros
 def test_nothing_there_ends_within_the_timeout_in_one_line(context, ros_env, tmp_path):
     pump = pump_node(context, write_scene(tmp_path))
     with spinning(context, pump):

@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 
-from softseq_ros.errors import read_regular_file
+from softseq_ros.errors import UserError, read_regular_file
 from softseq_ros.ros_tools.session import RosToolError, seconds_text
 
 # How long a child may take to stop after SIGINT before it is killed: a recorder closing a
@@ -64,7 +64,13 @@ def rig_commands(namespace: str, params_file: Path | None, scene: str | None,
 def check_inputs(params_file: Path | None, record: Path | None) -> None:
     """Refuse, before anything starts, a parameters file or a bag folder the nodes would."""
     if params_file is not None:
-        read_regular_file(params_file)
+        try:
+            read_regular_file(params_file)
+        except OSError as err:
+            raise RosToolError(f'--params-file {params_file}: cannot read it '
+                               f'({err.strerror or err})') from None
+        except UserError as err:   # a folder or a FIFO
+            raise RosToolError(f'--params-file {err}') from None
     if record is not None and record.exists() and (not record.is_dir()
                                                    or any(record.iterdir())):
         raise RosToolError(f'--record {record}: already exists and is not an empty folder; '

@@ -42,6 +42,11 @@ def seconds_text(seconds: float) -> str:
     return f'{seconds:g} s'
 
 
+def _first_line(err: Exception) -> str:
+    """The reason rclpy gives for an invalid name: its first line, no colon at the end."""
+    return ' '.join(str(err).split('\n')[0].split()).rstrip(':')
+
+
 def check_name(name: str, what: str) -> str:
     """
     Refuse a name no ROS graph can hold before any participant starts, in one line.
@@ -58,8 +63,8 @@ def check_name(name: str, what: str) -> str:
     try:
         validate_topic_name(name)
     except InvalidTopicNameException as err:
-        reason = ' '.join(str(err).split('\n')[0].split())
-        raise RosToolError(f'{what} {name!r}: not a valid ROS name ({reason})') from None
+        raise RosToolError(f'{what} {name!r}: not a valid ROS name ({_first_line(err)})') \
+            from None
     return name
 
 
@@ -73,9 +78,8 @@ def check_namespace(namespace: str) -> str:
     try:
         validate_namespace(absolute)
     except InvalidNamespaceException as err:
-        reason = ' '.join(str(err).split('\n')[0].split())
-        raise RosToolError(f'--namespace {namespace!r}: not a valid namespace ({reason})') \
-            from None
+        raise RosToolError(f'--namespace {namespace!r}: not a valid namespace '
+                           f'({_first_line(err)})') from None
     return absolute
 
 
@@ -104,7 +108,8 @@ class Session:
             rclpy.init(args=arguments, context=self.context)
         except Exception as err:
             # rcl's refusal of an argument after --ros-args: its class is not public API.
-            raise RosToolError(f'--ros-args: {" ".join(str(err).split())}') from None
+            raise RosToolError(f'--ros-args: rcl refused them: {" ".join(str(err).split())}') \
+                from None
         try:
             self.node = rclpy.create_node(f'_softseq_{os.getpid()}', namespace=namespace,
                                           context=self.context, enable_rosout=False,
