@@ -143,7 +143,7 @@ class ParameterClient:
         self.client = AsyncParameterClient(session.node, self.node)
         if not session.wait(self.client.services_are_ready):
             raise session.not_found(f'no node {self.node} (its parameter services)',
-                                    f'{self.node}/list_parameters')
+                                    self.node, 'node')
 
     def _answer(self, future: Any, what: str) -> Any:
         response = self.session.answer(future)

@@ -160,16 +160,22 @@ class Session:
 
     def elsewhere(self, absolute: str, kind: str = 'service') -> str:
         """
-        Where else a service (or topic) of this last name runs, for a not-found message.
+        Where else a service, topic or node of this name runs, for a not-found message.
 
         ``/syringe_pump/start`` not found but ``/rig2/syringe_pump/start`` there: the user
         left out the namespace. The empty string when there is nothing of the kind.
         """
-        names = (self.node.get_service_names_and_types() if kind == 'service'
-                 else self.node.get_topic_names_and_types())
-        tail = absolute.rsplit('/', 2)
-        suffix = '/' + '/'.join(tail[-2:]) if len(tail) >= 3 and tail[-2] else absolute
-        found = sorted(name for name, _ in names if name.endswith(suffix) and name != absolute)
+        if kind == 'node':
+            names = [namespace.rstrip('/') + '/' + name
+                     for name, namespace in self.node.get_node_names_and_namespaces()]
+        else:
+            names = [name for name, _ in (self.node.get_service_names_and_types()
+                                          if kind == 'service'
+                                          else self.node.get_topic_names_and_types())]
+        # The last two parts (syringe_pump/start), or the last of a node's name.
+        parts = absolute.rsplit('/', 1 if kind == 'node' else 2)
+        suffix = '/' + '/'.join(parts[1:]) if len(parts) > 1 and all(parts[1:]) else absolute
+        found = sorted({name for name in names if name.endswith(suffix) and name != absolute})
         if not found:
             return ''
         more = f' and {len(found) - 3} more' if len(found) > 3 else ''
