@@ -9,6 +9,7 @@ import sys
 from typing import Any, Callable, NoReturn, Sequence
 
 from softseq_ros.errors import UserError, one_line
+from softseq_ros.ros_tools.command import add_ros_parser
 from softseq_ros.stopping import TerminatedError, raise_terminated
 
 # A user's input that cannot be used, or a file the system cannot read or write: one line.
@@ -723,7 +724,8 @@ def build_parser() -> argparse.ArgumentParser:
                           'recorded timing and QoS, as recorded CDR. While it plays, the '
                           'node softseq_player serves ~/pause, ~/resume, ~/toggle_paused and '
                           '~/is_paused (std_srvs/Trigger) and takes its speed factor from '
-                          'its rate parameter (ros2 param set /softseq_player rate 2.0).')
+                          'its rate parameter (ros2 param set /softseq_player rate 2.0, or '
+                          'without ros2: softseq ros param set /softseq_player rate 2.0).')
     play.add_argument('bag', type=Path, help='bag directory')
     play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
@@ -823,6 +825,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     scenes = sub.add_parser('scenes', help='list the shipped scenes')
     scenes.set_defaults(handler=_scenes)
+
+    add_ros_parser(sub)
     parser.commands = dict(sub.choices)
     return parser
 
@@ -837,9 +841,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
+    command = parser.commands[args.command]
+    # softseq ros has subcommands of its own: each says its own mistakes.
+    command = getattr(command, 'commands', {}).get(getattr(args, 'ros_command', None), command)
     if unknown:
         # Said by the subcommand's parser, as its other mistakes are.
-        parser.commands[args.command].error(f'unrecognized arguments: {" ".join(unknown)}')
+        command.error(f'unrecognized arguments: {" ".join(unknown)}')
+    name = getattr(args, 'command_path', args.command)
     handler: Callable[[argparse.Namespace], int] = args.handler
     previous = signal.signal(signal.SIGTERM, raise_terminated)
     try:
@@ -849,13 +857,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         # file the system refused is named first, as every other refusal names its input.
         reason = f'{err.filename}: {err.strerror}' if isinstance(err, OSError) \
             and err.filename and err.strerror else str(err)
-        print(f'softseq {args.command}: error: {one_line(reason)}', file=sys.stderr)
+        print(f'softseq {name}: error: {one_line(reason)}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f'softseq {args.command}: interrupted', file=sys.stderr)
+        print(f'softseq {name}: interrupted', file=sys.stderr)
         return 130
     except TerminatedError:
-        print(f'softseq {args.command}: terminated', file=sys.stderr)
+        print(f'softseq {name}: terminated', file=sys.stderr)
         return 143
     finally:
         signal.signal(signal.SIGTERM, previous)
