@@ -45,7 +45,8 @@ class ManagedSyringePumpNode(LifecycleNodeMixin, SyringePumpNode):
 
     HELP_NOTES = SyringePumpNode.HELP_NOTES + (
         'A managed (lifecycle) node: it starts unconfigured; ros2 lifecycle set /syringe_pump '
-        'configure, then activate, start it (~/change_state and ~/get_state, lifecycle_msgs). '
+        'configure, then activate, start it (softseq ros lifecycle set /syringe_pump configure '
+        'without the ros2 command; ~/change_state and ~/get_state, lifecycle_msgs). '
         'Configure builds the pump from its parameters, activate starts its commands, '
         'deactivate holds it, cleanup releases it, shutdown stops it first.',)
 

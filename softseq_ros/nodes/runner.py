@@ -239,7 +239,8 @@ def help_text(node_classes: Sequence[Callable[..., Node]], name: str) -> str:
         for note in getattr(node_class, 'HELP_NOTES', ()):
             lines += ['', _wrap(note, '')]
         lines.append('')
-    lines.append('Every node also has the ROS parameter services (ros2 param list/get/set).')
+    lines.append('Every node also has the ROS parameter services (ros2 param list/get/set, or '
+                 'softseq ros param list/get/set without the ros2 command).')
     return '\n'.join(lines)
 
 
