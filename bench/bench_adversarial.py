@@ -60,7 +60,7 @@ RESULTS = ROOT / 'bench' / 'adversarial_results.md'
 FAULTS = ROOT / 'docs' / 'faults.md'
 BEGIN, END = '<!-- adversarial summary: begin -->', '<!-- adversarial summary: end -->'
 CLASSES = ('scene', 'table', 'design', 'experiment', 'reference', 'history', 'bag', 'cli',
-           'node_parameter', 'topic', 'signal')
+           'option', 'node_parameter', 'topic', 'signal')
 QUICK_PER_CLASS = 1
 COMMAND_TIMEOUT_S = 120.0
 # A refusal comes before any work: a FEM run or a playback still going after this did not.
@@ -378,6 +378,9 @@ MAYBE_A_NUMBER = (('-1', -1), ('0', 0))
 NOT_A_TEXT = (('list', ['a']), ('mapping', {'a': 1}), ('null', None))
 # Keys whose value is free text: any text goes.
 FREE_TEXT = {'description', 'source'}
+# Keys where null is documented as "the default" (docs/scene_reference.md): null is taken.
+NULL_MEANS_DEFAULT = {'solver.resolution', 'segments[].smoothing.noise_std_pa',
+                      'segments[].smoothing.prominence_pa'}
 
 
 @dataclass(frozen=True)
@@ -411,9 +414,11 @@ def mutations(document: Any) -> list[Mutation]:
             found.append(Mutation(f'{where}: text', path,
                                   lambda d, p=path: _set(d, p, 'maybe'), True))
         elif isinstance(value, (int, float)):
+            documented = re.sub(r'\[\d+\]', '[]', where)
             for label, bad in NOT_A_NUMBER:
+                refuse = not (bad is None and documented in NULL_MEANS_DEFAULT)
                 found.append(Mutation(f'{where}: {label}', path,
-                                      lambda d, p=path, b=bad: _set(d, p, b), True))
+                                      lambda d, p=path, b=bad: _set(d, p, b), refuse))
             for label, odd in MAYBE_A_NUMBER:
                 found.append(Mutation(f'{where}: {label}', path,
                                       lambda d, p=path, b=odd: _set(d, p, b), False))
@@ -449,15 +454,100 @@ def judge_names(outcome: Outcome, command: str, file_name: str, path: tuple,
 
 # ------------------------------------------------------------------------------ case makers
 
-SCENE_BASES = ('fig1_none.yaml', 'fig1_asymmetric.yaml', 'rate_inversion.yaml', 'paper.yaml')
+SHIPPED_SCENE_BASES = ('fig1_none.yaml', 'fig1_asymmetric.yaml', 'rate_inversion.yaml',
+                       'paper.yaml')
+# Scenes written here so that, with the shipped ones, every key of the scene reference
+# (softseq_ros/scene/reference.py) is in some base and so made wrong in every way:
+# test/test_adversarial_registry.py fails on a documented key no base holds.
+MAXIMAL_SCENE_BASES = ('every_block', 'every_law', 'every_leg')
+SCENE_BASES = SHIPPED_SCENE_BASES + MAXIMAL_SCENE_BASES
+# The profile leg's file of the base every_leg (time_s, injected_m3: 3 mL to 5 mL), written
+# beside each scene made of it.
+PROFILE_CSV = ('fill.csv', 'time_s,injected_m3\n0,3.0e-6\n2,4.0e-6\n4,5.0e-6\n')
+
+
+def write_companions(folder: Path, base: str) -> None:
+    """The files a base scene names relative to itself, into the scene's ``folder``."""
+    if base == 'every_leg':
+        (folder / PROFILE_CSV[0]).write_text(PROFILE_CSV[1], encoding='utf-8')
+
+
+def _maximal_document(name: str) -> Any:
+    """One of MAXIMAL_SCENE_BASES: a valid scene holding keys no shipped scene holds."""
+    gent = {'law': 'gent', 'shear_modulus_pa': 60.0e3, 'jm': 40.0}
+
+    def balloon(segment: str, material: dict, stretch: float = 3.0) -> dict:
+        return {'name': segment, 'length_m': 0.111,
+                'balloon': {'material': material, 'radius_m': 0.006, 'thickness_m': 0.6e-3,
+                            'max_stretch': stretch, 'curvature_per_m_per_m3': 5.0e5}}
+    if name == 'every_block':
+        return {
+            'name': 'every_block', 'description': 'every block the scene file has',
+            'segments': [
+                {'name': 'bottom', 'length_m': 0.111, 'smoothing': {
+                    'noise_std_pa': 5.0, 'prominence_pa': 50.0},
+                 'table': str(_config('segments') / 'paper_bottom.csv')},
+                {'name': 'top', 'length_m': 0.111,
+                 'linear': {'rest_volume_m3': 2.0e-6, 'stiffness_pa_per_m3': 2.0e8,
+                            'max_volume_m3': 6.0e-5, 'curvature_per_m_per_m3': 1.0e5}}],
+            'pump': {'flow_rate_m3_per_s': 1.0e-6, 'rate_hz': 20.0, 'cycles': 1,
+                     'start_history_m3': [2.0e-6, 1.0e-6],
+                     'legs': [{'inflate_to_m3': 5.0e-6}, {'deflate_to_m3': 0.0}]},
+            'camera': {'rate_hz': 2.0, 'noise_std_m': 1.0e-4, 'seed': 3,
+                       'trigger_injected_m3': [2.0e-6], 'points_per_segment': 10,
+                       'image_width_px': 64, 'image_height_px': 48},
+            'outputs': ['pressure', 'volumes', 'curvature', 'events'],
+            'solver': {'resolution': 400},
+            'network': {'fluid': {'viscosity_pa_s': 1.0e-3, 'density_kg_per_m3': 998.0},
+                        'supply': {'length_m': 0.3, 'radius_m': 0.8e-3, 'inertance': False,
+                                   'minor_loss': 0.5, 'friction': 'laminar'},
+                        'feeds': 'bottom',
+                        'channels': [{'length_m': 0.01, 'radius_m': 0.5e-3,
+                                      'inertance': False, 'minor_loss': 0.5,
+                                      'friction': 'blasius'}],
+                        'rate_hz': 20.0, 'rtol': 1.0e-6},
+            'supply': {'trapped_gas_m3': 1.0e-6, 'line_compliance_m3_per_pa': 1.0e-12,
+                       'ambient_pa': 101325.0, 'polytropic_exponent': 1.0}}
+    if name == 'every_law':
+        return {
+            'name': 'every_law',
+            'segments': [
+                balloon('neo', {'law': 'neo_hookean', 'shear_modulus_pa': 60.0e3}),
+                balloon('mooney', {'law': 'mooney_rivlin', 'c1_pa': 25.0e3, 'c2_pa': 5.0e3}),
+                balloon('ogden', {'law': 'ogden', 'mu_pa': [60.0e3], 'alpha': [2.0]}),
+                balloon('arruda', {'law': 'arruda_boyce', 'shear_modulus_pa': 60.0e3,
+                                   'lambda_m': 5.0}),
+                balloon('yeoh', {'law': 'yeoh', 'c1_pa': 30.0e3, 'c2_pa': -300.0,
+                                 'c3_pa': 10.0}),
+                balloon('gent', gent)],
+            'pump': {'start_injected_m3': 0.0,
+                     'legs': [{'inflate_to_m3': 2.0e-6}, {'deflate_to_m3': 0.0}]}}
+    if name == 'every_leg':
+        return {
+            'name': 'every_leg',
+            'segments': [balloon('bottom', gent, 4.0),
+                         balloon('top', {**gent, 'jm': 30.0}, 3.6)],
+            'pump': {'start_branch': 0, 'flow_rate_m3_per_s': 1.0e-6,
+                     'legs': [{'inflate_to_m3': 3.0e-6, 'flow_rate_m3_per_s': 2.0e-6},
+                              {'profile': PROFILE_CSV[0]}, {'hold_s': 1.0},
+                              {'deflate_to_m3': 0.0}]}}
+    raise ValueError(f'no maximal scene base {name!r}')
 
 
 def _scene_document(base: str) -> Any:
+    if base in MAXIMAL_SCENE_BASES:
+        return _maximal_document(base)
     data = _read_yaml(_config(base))
     for segment in data.get('segments', []):
         if 'table' in segment:
             segment['table'] = str(_config(segment['table']))
     return data
+
+
+def scene_key_paths(document: Any) -> set[str]:
+    """Every key a scene document holds, by path, list items as ``[]``."""
+    return {re.sub(r'\[\d+\]', '[]', key_path(path)) for kind, path, _ in _walk(document)
+            if path and isinstance(path[-1], str)}
 
 
 def scene_cases() -> list[Case]:
@@ -477,6 +567,7 @@ def scene_cases() -> list[Case]:
                 folder = bench.folder('scene')
                 scene = folder / 'scene.yaml'
                 scene.write_text(_yaml(data), encoding='utf-8')
+                write_companions(folder, base)
                 outcome = bench.softseq(['classify', str(scene)], folder)
                 return judge_names(outcome, 'classify', 'scene.yaml', mutation.path,
                                    mutation.must_refuse)
@@ -967,6 +1058,83 @@ CLI = [
     ('graph', ['fig1_none', '--out', '/proc/no/such/g'], '/proc/no'),
     ('scenes', ['--bogus'], '--bogus'),
 ]
+
+
+# What every option that takes a value is given, whatever it means: each must be taken or
+# refused in one line, never a traceback, and never a wait without end.
+BAD_OPTION_VALUES = (('nan', 'nan'), ('inf', 'inf'), ('-1', '-1'), ('0', '0'),
+                     ('1e300', '1e300'), ('text', 'abc'), ('empty', ''), ('Latin-1', 'caf\xe9'))
+# Words a command is given beside the option under test, so that it refuses before any work:
+# a file that is not there, and for the commands that would otherwise run until stopped, a
+# bound of their own (an option under test replaces its own default here).
+OPTION_FILL: dict[tuple[str, ...], list[str]] = {
+    ('ros', 'echo'): ['/no/such/topic', '--count', '1', '--timeout', '1'],
+    ('ros', 'rig'): ['--scene', '{missing}'],
+    ('ros', 'call'): ['/no/such/service', '--timeout', '1'],
+    ('ros', 'param'): ['get', '/no_such_node', 'rate_hz', '--timeout', '1'],
+    ('ros', 'lifecycle'): ['get', '/no_such_node', '--timeout', '1'],
+}
+
+
+def parser_commands() -> list[tuple[tuple[str, ...], argparse.ArgumentParser]]:
+    """Every command of softseq's own parser, nested ones (``ros call``) too: (words, parser)."""
+    from softseq_ros.cli import build_parser
+
+    found = []
+
+    def walk(words: tuple[str, ...], parser: argparse.ArgumentParser) -> None:
+        commands = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not commands:
+            found.append((words, parser))
+        for action in commands:
+            for name, command in action.choices.items():
+                walk(words + (name,), command)
+    walk((), build_parser())
+    return found
+
+
+def valued_options(parser: argparse.ArgumentParser) -> list[str]:
+    """The options of a command that take a value, each by its long name."""
+    return [max(action.option_strings, key=len) for action in parser._actions
+            if action.option_strings and action.nargs != 0
+            and not isinstance(action, argparse._HelpAction)]
+
+
+def required_options(parser: argparse.ArgumentParser) -> list[list[str]]:
+    """A command's required options, each with a value of the right form: [option, value]."""
+    return [[max(action.option_strings, key=len),
+             '{folder}/out' if 'out' in action.dest else '1e-8']
+            for action in parser._actions if action.option_strings and action.required]
+
+
+def option_cases() -> list[Case]:
+    """Every option of every command that takes a value, given each of BAD_OPTION_VALUES."""
+    cases = []
+    for words, parser in parser_commands():
+        fill = OPTION_FILL.get(words)
+        if fill is None:
+            fill = ['{missing}' for action in parser._actions
+                    if not action.option_strings and action.nargs not in ('?', '*')]
+            fill += [word for pair in required_options(parser) for word in pair]
+        for option in valued_options(parser):
+            for label, value in BAD_OPTION_VALUES:
+                def run(bench: Workbench, words=words, fill=fill, option=option,
+                        value=value) -> Verdict:
+                    folder = bench.folder('option')
+                    missing = str(folder / 'missing.yaml')
+                    words_given = [w.format(missing=missing, folder=folder) for w in fill]
+                    if option in words_given:
+                        # The option under test replaces the fill's own bound.
+                        at = words_given.index(option)
+                        del words_given[at:at + 2]
+                    outcome = bench.softseq([*words, *words_given, option, value], folder,
+                                            REFUSE_TIMEOUT_S)
+                    # The line names the option, the value given or the file not there.
+                    names = (option, 'missing', 'no_such', '/no/such') + \
+                        ((value,) if value else ())
+                    return judge_refusal(outcome, ' '.join(words), names)
+                cases.append(Case('option', f'{" ".join(words)} {option} {label}', run))
+    return cases
 
 
 def cli_cases() -> list[Case]:
@@ -1572,10 +1740,15 @@ def signal_cases() -> list[Case]:
 MAKERS: dict[str, Callable[[], list[Case]]] = {
     'scene': scene_cases, 'table': table_cases, 'design': design_cases,
     'experiment': experiment_cases, 'reference': reference_cases, 'history': history_cases,
-    'bag': bag_cases, 'cli': cli_cases, 'node_parameter': node_parameter_cases,
+    'bag': bag_cases, 'cli': cli_cases, 'option': option_cases,
+    'node_parameter': node_parameter_cases,
     'topic': topic_cases, 'signal': signal_cases,
 }
 WHAT = {
+    'option': 'every option of every command that takes a value (read from the parser itself, '
+              'nested commands too) given NaN, infinity, -1, 0, 1e300, text, nothing and '
+              'Latin-1, beside a file that is not there: refused in one line, never a '
+              'traceback or a wait without end',
     'scene': 'every key of four shipped scenes (linear, balloon, network, tables) given a '
              'wrong type, NaN, infinity, an integer beyond a double, deleted or unknown; whole '
              'files that are no scene (`softseq classify`, `softseq run`)',
