@@ -564,6 +564,20 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n')
 
 
+def _given(what: str) -> Any:
+    """An argparse type: the text as given, refusing an empty word (it would name no file)."""
+    def given(text: str) -> str:
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f'empty; give {what}')
+        return text
+    return given
+
+
+def _given_path(what: str) -> Any:
+    """As :func:`_given`, as a Path."""
+    return lambda text: Path(_given(what)(text))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     parser = OneLineParser(
@@ -615,12 +629,15 @@ def build_parser() -> argparse.ArgumentParser:
                             description='Summarise a rig bag and draw the paper-style figures, '
                             'optionally beside a measured PV curve.')
     report.add_argument('bag', type=Path, help='bag directory (metadata.yaml and .mcap)')
-    report.add_argument('--scene', help='scene of the run: adds the segment curves and the '
+    report.add_argument('--scene', type=_given('a scene file or a shipped scene name'),
+                        help='scene of the run: adds the segment curves and the '
                         'equilibrium set to the figures')
-    report.add_argument('--experiment', type=Path, help='experiment CSV (injected_m3, '
+    report.add_argument('--experiment', type=_given_path('an experiment file'),
+                        help='experiment CSV (injected_m3, '
                         'pressure_pa, optional direction, tip_x_m, tip_z_m; "# pressure_kind: '
                         'gauge|absolute"; see docs/analysis.md)')
-    report.add_argument('--reference', type=Path, help='YAML of what a paper reports (e.g. '
+    report.add_argument('--reference', type=_given_path('a reference file'),
+                        help='YAML of what a paper reports (e.g. '
                         'config/reference/milana2018.yaml): each fact beside the recording')
     report.add_argument('--namespace', help='rig namespace when the bag holds several rigs')
     svg = report.add_mutually_exclusive_group()
@@ -641,7 +658,8 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument('b', type=Path, help='second bag directory')
     compare.add_argument('--namespace-a', help='rig namespace in A when it holds several')
     compare.add_argument('--namespace-b', help='rig namespace in B when it holds several')
-    compare.add_argument('--scene', help='the scene (file or shipped name) whose segments made '
+    compare.add_argument('--scene', type=_given('a scene file or a shipped scene name'),
+                         help='the scene (file or shipped name) whose segments made '
                          'both bags: with it a dynamic bag also shows its lag behind the '
                          'quasi-static path')
     compare.add_argument('--out', type=Path, help='folder for compare.md, compare.json, '

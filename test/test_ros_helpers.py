@@ -312,3 +312,21 @@ def test_one_command_runs_a_rig_in_a_namespace_into_a_bag_and_stops_on_sigint(
     # Recorded from before the start: the idle pump, then its whole programme.
     assert states[0] == 'idle' and 'running' in states and states[-1] == 'finished', states
     assert 'closed' in log.read_text(), _tail(log)
+
+
+def test_a_wait_without_end_and_a_scene_no_node_loads_are_refused_before_anything_starts(
+        tmp_path):
+    from pathlib import Path
+    import subprocess
+    import sys
+
+    softseq = str(Path(sys.prefix) / 'bin' / 'softseq')
+    for argv, said in (
+            (['ros', 'call', '/syringe_pump/start', '--timeout', '1e300'], 'at most 3600'),
+            (['ros', 'rig', '--scene', str(tmp_path / 'missing.yaml')], 'scene file not found'),
+            (['ros', 'rig', '--scene', ' '], '--scene: empty')):
+        result = subprocess.run([softseq, *argv], capture_output=True, text=True, timeout=60,
+                                cwd=tmp_path)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and said in lines[0], result.stderr
+    assert not list(tmp_path.glob('bags*'))     # no rig started, nothing recorded

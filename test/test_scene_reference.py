@@ -108,3 +108,45 @@ def test_the_written_reference_is_the_one_the_module_writes():
     for section in reference.SCENE_SECTIONS + reference.DESIGN_SECTIONS:
         for key in section.keys:
             assert key.limit is None or key.limit.rsplit('.', 1)[1] == key.name
+
+
+@pytest.mark.parametrize('mu, alpha, key', [
+    ([60.0e3], [-1.0], 'alpha[0]'), ([-60.0e3], [2.0], 'mu_pa[0]'), ([60.0e3], [0.0], 'alpha[0]'),
+    ([0.0], [2.0], 'mu_pa[0]')])
+def test_an_ogden_term_that_does_not_stiffen_is_refused_at_its_value(tmp_path, mu, alpha, key):
+    from scenes import shipped_scene_with
+
+    from softseq_ros.scene.validation import SceneError
+
+    ogden = {'name': 'top', 'length_m': 0.111, 'balloon': {
+        'material': {'law': 'ogden', 'mu_pa': mu, 'alpha': alpha}, 'radius_m': 0.006,
+        'thickness_m': 0.6e-3, 'max_stretch': 3.0}}
+    bottom = {'name': 'bottom', 'length_m': 0.111, 'balloon': {
+        'material': {'law': 'gent', 'shear_modulus_pa': 60.0e3, 'jm': 40.0},
+        'radius_m': 0.006, 'thickness_m': 0.6e-3, 'max_stretch': 3.0}}
+    path = shipped_scene_with(tmp_path, 'fig1_asymmetric.yaml', 'ogden.yaml',
+                              segments=[bottom, ogden])
+    where = re.escape(f'segments[1].balloon.material.{key}: mu_pa[0] x alpha[0]')
+    with pytest.raises(SceneError, match=where):
+        softseq_ros.load_scene(path)
+    # Treloar's rubber has a term with both negative: it stiffens, and is taken.
+    ogden['balloon']['material'] = {'law': 'ogden', 'mu_pa': [6.3e5, 1.2e3, -1.0e4],
+                                    'alpha': [1.3, 5.0, -2.0]}
+    path = shipped_scene_with(tmp_path, 'fig1_asymmetric.yaml', 'treloar.yaml',
+                              segments=[bottom, ogden],
+                              pump={'legs': [{'inflate_to_m3': 1.0e-5}, {'deflate_to_m3': 0.0}]},
+                              camera={'rate_hz': 1})
+    assert softseq_ros.load_scene(path).segments[1].name == 'top'
+
+
+def test_segments_without_a_stable_state_are_refused_naming_those_that_fall_from_rest():
+    from softseq_ros.errors import UserError
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap
+    from softseq_ros.segments.materials import Gent, Ogden
+    from softseq_ros.segments.models import BalloonSegment
+
+    falling = BalloonSegment('soft', 0.1, Ogden((-60.0e3,), (2.0,)), 0.006, 0.6e-3, 3.0)
+    with pytest.raises(UserError, match='no stable equilibrium at all: the pressure of soft '
+                                        'falls from rest'):
+        EquilibriumMap([falling, BalloonSegment('gent', 0.1, Gent(60e3, 40.0), 0.006, 0.6e-3,
+                                                3.0)])

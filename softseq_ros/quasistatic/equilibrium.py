@@ -158,7 +158,12 @@ class EquilibriumMap:
         assembly = Assembly(numerics, self.resolution)
         self.branches: list[Branch] = assembly.branches
         if not self.branches:
-            raise ValueError('these segments have no stable equilibrium at all')
+            falling = [segment.name for segment in segments
+                       if not segment.monotone_pieces()
+                       or segment.monotone_pieces()[0].direction < 0]
+            why = (f': the pressure of {", ".join(falling)} falls from rest' if falling
+                   else '')
+            raise UserError(f'these segments have no stable equilibrium at all{why}')
         self.member_reader = StateReader(numerics, self.branches, self.polish)
         BranchEnds(numerics, self.branches, self.member_reader).connect_all()
         self.reader = (self.member_reader if supply is None

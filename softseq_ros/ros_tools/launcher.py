@@ -61,8 +61,19 @@ def rig_commands(namespace: str, params_file: Path | None, scene: str | None,
     return {RECORDER: _executable(RECORDER) + recorder, RIG: _executable(RIG) + rig}
 
 
-def check_inputs(params_file: Path | None, record: Path | None) -> None:
-    """Refuse, before anything starts, a parameters file or a bag folder the nodes would."""
+def check_inputs(params_file: Path | None, record: Path | None,
+                 scene: str | None = None) -> None:
+    """Refuse, before anything starts, a scene, parameters file or bag folder the nodes would."""
+    if scene is not None:
+        # Loaded here as the nodes will load it: a scene they would refuse starts nothing.
+        from softseq_ros.rig.model import load_rig_scene
+
+        if not scene.strip():
+            raise RosToolError('--scene: empty; give a scene file or a shipped scene name')
+        try:
+            load_rig_scene(scene)
+        except UserError as err:
+            raise RosToolError(f'--scene {" ".join(str(err).split())}') from None
     if params_file is not None:
         try:
             read_regular_file(params_file)
@@ -172,7 +183,7 @@ def run_rig(namespace: str, params_file: Path | None, scene: str | None, record:
     With ``start_timeout_s``, the pump's ``~/start`` is called once the recorder records its
     commands (within that many seconds, else exit 1).
     """
-    check_inputs(params_file, record)
+    check_inputs(params_file, record, scene)
     supervisor = Supervisor(rig_commands(namespace, params_file, scene, record))
     try:
         where = f'into {record}' if record else ('into the folder of the parameters file, '

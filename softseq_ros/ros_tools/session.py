@@ -24,16 +24,22 @@ class RosToolError(UserError):
     """A name, value or option that cannot be used, or what it names was not found in time."""
 
 
+# The longest a command waits for a node, a service or a message [s]: an hour is beyond any
+# rig's start-up, and a wait longer than that is a typing slip, not a plan.
+MAX_TIMEOUT_S = 3600.0
+
+
 def timeout_seconds(text: str) -> float:
-    """``--timeout``: a finite number of seconds > 0 (an argparse type, refusing in one line)."""
+    """``--timeout``: seconds > 0, at most MAX_TIMEOUT_S (an argparse type, one-line refusal)."""
     from argparse import ArgumentTypeError
 
     try:
         seconds = float(text)
     except ValueError:
         raise ArgumentTypeError(f'{text!r} is not a number of seconds') from None
-    if not (math.isfinite(seconds) and seconds > 0.0):
-        raise ArgumentTypeError(f'must be a finite number of seconds > 0, got {text}')
+    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_TIMEOUT_S):
+        raise ArgumentTypeError(f'must be a number of seconds > 0 and at most '
+                                f'{MAX_TIMEOUT_S:g}, got {text}')
     return seconds
 
 

@@ -88,9 +88,10 @@ SCENE_SECTIONS: tuple[Section, ...] = (
         Key('smoothing', 'tables only, opt-in: smooth a measured table (below)'),
     )),
     Section('segments[].smoothing', 'Smoothing of a measured table', (
-        Key('noise_std_pa', "number [Pa] >= 0 (estimated from the rows): the readings' noise"),
-        Key('prominence_pa', 'number [Pa] (6 noise deviations): the smallest peak or valley '
-            'kept'),
+        Key('noise_std_pa', "number [Pa] >= 0 (absent or null: estimated from the rows): the "
+            "readings' noise"),
+        Key('prominence_pa', 'number [Pa] (absent or null: 6 noise deviations): the smallest '
+            'peak or valley kept'),
     )),
     Section('segments[].linear', 'A linear segment', (
         Key('rest_volume_m3', 'number [m^3] >= 0', True),

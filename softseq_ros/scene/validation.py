@@ -237,6 +237,15 @@ class Context:
             raise self.error(join(key_path, 'alpha'),
                              f'needs as many values as mu_pa ({len(checked["mu_pa"])}), '
                              f'got {len(checked["alpha"])}')
+        if law == 'ogden':
+            # Ogden's stability condition, term by term: mu_i alpha_i > 0. Named at the value
+            # that breaks it: a zero or wrongly signed exponent, else its modulus.
+            for i, (mu, alpha) in enumerate(zip(checked['mu_pa'], checked['alpha'])):
+                if not mu * alpha > 0.0:
+                    at = f'alpha[{i}]' if alpha == 0.0 or mu > 0.0 else f'mu_pa[{i}]'
+                    raise self.error(join(key_path, at),
+                                     f'mu_pa[{i}] x alpha[{i}] = {mu:g} x {alpha:g} must be '
+                                     '> 0 (each term of an Ogden law stiffens as it stretches)')
         try:
             material = make_material(law, checked)
         except ValueError as err:
