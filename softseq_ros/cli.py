@@ -271,8 +271,24 @@ def _run(args: argparse.Namespace) -> int:
 
     # Parsed here, not by argparse: a refusal is one line, without the usage text.
     start = None if args.start_time is None else start_time_ns(args.start_time)
+    held = {}
+    if args.hold_gauge_pa is not None:
+        from softseq_ros.rig.controller import PressureHold
+
+        if args.hold_for_s is None:
+            raise UserError('--hold-gauge-pa needs --hold-for-s: how long the controller '
+                            'drives the pump [s of rig time]')
+        for option, value in (('--hold-gauge-pa', args.hold_gauge_pa),
+                              ('--hold-for-s', args.hold_for_s)):
+            if not math.isfinite(value) or (option == '--hold-for-s' and value <= 0.0):
+                raise UserError(f'{option}: must be a finite number'
+                                + (' of seconds > 0' if option == '--hold-for-s' else '')
+                                + f', got {value}')
+        held = {'controller': PressureHold(args.hold_gauge_pa), 'controlled_s': args.hold_for_s}
+    elif args.hold_for_s is not None:
+        raise UserError('--hold-for-s goes with --hold-gauge-pa')
     result = run(args.scene, args.out, progress=None if args.quiet else sys.stderr,
-                 log=sys.stderr, start_time_ns=start, allow_long=args.allow_long)
+                 log=sys.stderr, start_time_ns=start, allow_long=args.allow_long, **held)
     print(f'{args.out}: {result.sim_duration_s:.1f} s of rig time in {result.wall_s:.1f} s '
           f'({result.speedup:.0f}x real time), {sum(result.message_counts.values())} messages, '
           f'pump {result.pump_state}')
@@ -623,6 +639,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help='run a programme beyond the limits of a batch run (1e6 s of rig '
                      'time, 1e8 messages, 10 GB of bag; docs/faults.md) all the same')
     run.add_argument('--no-report', action='store_true', help='skip the summary and figures')
+    run.add_argument('--hold-gauge-pa', type=float, metavar='PA',
+                     help="instead of the scene's programme, the example PI controller holds "
+                     "this gauge pressure [Pa] through the pump's setpoints "
+                     '(docs/controllers.md); with --hold-for-s')
+    run.add_argument('--hold-for-s', type=float, metavar='S',
+                     help='how long the controller drives the pump [s of rig time]')
     run.set_defaults(handler=_run)
 
     report = sub.add_parser('report', help='summary and figures of a recorded bag',

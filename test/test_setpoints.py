@@ -288,3 +288,24 @@ def test_the_batch_runner_hosts_the_same_controller_and_records_its_setpoints(tm
     assert late and max(abs(p - 5.0e3) for p in late) < 0.01 * 5.0e3
     with pytest.raises(ValueError, match='go together'):
         softseq_ros.run('paper', tmp_path / 'x', controller=PressureHold(5.0e3))
+
+
+def test_softseq_run_holds_a_pressure_with_the_example_controller(tmp_path, capsys):
+    from softseq_ros.analysis.recording import load_recording
+    from softseq_ros.cli import main
+
+    out = tmp_path / 'held'
+    assert main(['run', 'paper', '--hold-gauge-pa', '5000', '--hold-for-s', '25', '--out',
+                 str(out), '--quiet', '--no-report']) == 0
+    assert 'pump running' in capsys.readouterr().out
+    recording = load_recording(out)
+    late = recording.pressure[recording.state_time_s >= 20.0]
+    assert late.size and np.max(np.abs(late - 5.0e3)) < 0.01 * 5.0e3
+    for argv, said in ((['--hold-for-s', '25'], 'goes with --hold-gauge-pa'),
+                       (['--hold-gauge-pa', '5000'], 'needs --hold-for-s'),
+                       (['--hold-gauge-pa', 'nan', '--hold-for-s', '25'], 'finite'),
+                       (['--hold-gauge-pa', '5000', '--hold-for-s', '-1'], '> 0')):
+        assert main(['run', 'paper', '--out', str(tmp_path / 'x'), *argv]) == 2
+        error = capsys.readouterr().err.strip().splitlines()
+        assert len(error) == 1 and said in error[0]
+        assert not (tmp_path / 'x').exists()
