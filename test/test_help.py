@@ -17,6 +17,7 @@ from softseq_ros.nodes.actuator import ActuatorNode
 from softseq_ros.nodes.camera import CameraNode
 from softseq_ros.nodes.pressure_hold import PressureHoldNode
 from softseq_ros.nodes.recorder import Recorder
+from softseq_ros.nodes.runner import node_role
 from softseq_ros.nodes.sim_clock import SimClockNode
 from softseq_ros.nodes.syringe_pump import SyringePumpNode
 from softseq_ros.wire import contract
@@ -83,9 +84,7 @@ def test_help_lists_what_the_node_declares_and_starts_nothing(script, context, r
             assert f'\n  {name}: ' in section, f'{script} --help: parameter {name} missing'
     if script != 'recorder':
         for node_class in EXECUTABLES[script]:
-            role = getattr(node_class, 'ROLE', None) or next(
-                (role for role, name in contract.NODE_NAMES.items()
-                 if name == node_class.NODE_NAME), None)
+            role = node_role(node_class)
             produced = [t for t in contract.RIG_TOPICS + (contract.CLOCK,)
                         if t.producer in (role, node_class.NODE_NAME)]
             assert produced

@@ -187,11 +187,15 @@ def _parameters_help(node_class: Callable[..., Node], several: bool) -> list[str
     return lines
 
 
-def _topics_help(node_class: Callable[..., Node]) -> list[str]:
-    # A rig node's role is its name's in the contract; a controller says its own.
-    role = getattr(node_class, 'ROLE', None) or next(
+def node_role(node_class: Callable[..., Node]) -> str | None:
+    """The contract role of a node class: a rig node's is its name's, a controller says its own."""
+    return getattr(node_class, 'ROLE', None) or next(
         (role for role, node_name in contract.NODE_NAMES.items()
          if node_name == getattr(node_class, 'NODE_NAME', None)), None)
+
+
+def _topics_help(node_class: Callable[..., Node]) -> list[str]:
+    role = node_role(node_class)
     topics = [('publishes', topic) for topic in contract.RIG_TOPICS + (contract.CLOCK,)
               if topic.producer in (role, getattr(node_class, 'NODE_NAME', None))]
     if hasattr(node_class, 'DIAGNOSTIC_TASK'):
