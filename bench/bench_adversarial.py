@@ -459,17 +459,27 @@ SHIPPED_SCENE_BASES = ('fig1_none.yaml', 'fig1_asymmetric.yaml', 'rate_inversion
 # Scenes written here so that, with the shipped ones, every key of the scene reference
 # (softseq_ros/scene/reference.py) is in some base and so made wrong in every way:
 # test/test_adversarial_registry.py fails on a documented key no base holds.
-MAXIMAL_SCENE_BASES = ('every_block', 'every_law', 'every_leg')
+MAXIMAL_SCENE_BASES = ('every_block', 'every_law', 'every_leg', 'every_regulator_leg')
 SCENE_BASES = SHIPPED_SCENE_BASES + MAXIMAL_SCENE_BASES
 # The profile leg's file of the base every_leg (time_s, injected_m3: 3 mL to 5 mL), written
-# beside each scene made of it.
+# beside each scene made of it; and of every_regulator_leg (time_s, gauge_pa: 3 to 8 kPa).
 PROFILE_CSV = ('fill.csv', 'time_s,injected_m3\n0,3.0e-6\n2,4.0e-6\n4,5.0e-6\n')
+PRESSURE_PROFILE_CSV = ('press.csv', 'time_s,gauge_pa\n0,3000\n2,5000\n4,8000\n')
 
 
 def write_companions(folder: Path, base: str) -> None:
     """The files a base scene names relative to itself, into the scene's ``folder``."""
     if base == 'every_leg':
         (folder / PROFILE_CSV[0]).write_text(PROFILE_CSV[1], encoding='utf-8')
+    if base == 'every_regulator_leg':
+        (folder / PRESSURE_PROFILE_CSV[0]).write_text(PRESSURE_PROFILE_CSV[1], encoding='utf-8')
+
+
+def scene_job(base: str, scene: Path, folder: Path) -> list[str]:
+    """What a scene made of ``base`` is tried with: classify, or behind a regulator solve."""
+    if base == 'every_regulator_leg':
+        return ['solve', str(scene), '--out', str(folder / 'path.csv')]
+    return ['classify', str(scene)]
 
 
 def _maximal_document(name: str) -> Any:
@@ -531,6 +541,17 @@ def _maximal_document(name: str) -> Any:
                      'legs': [{'inflate_to_m3': 3.0e-6, 'flow_rate_m3_per_s': 2.0e-6},
                               {'profile': PROFILE_CSV[0]}, {'hold_s': 1.0},
                               {'deflate_to_m3': 0.0}]}}
+    if name == 'every_regulator_leg':
+        return {
+            'name': 'every_regulator_leg',
+            'segments': [balloon('bottom', gent, 4.0),
+                         balloon('top', {**gent, 'jm': 30.0}, 3.6)],
+            'supply': {'regulator': {'time_constant_s': 0.5, 'max_flow_m3_per_s': 2.0e-6,
+                                     'max_pressure_pa': 12000.0}},
+            'pump': {'pressure_rate_pa_per_s': 500.0, 'rate_hz': 5.0, 'cycles': 1,
+                     'legs': [{'inflate_to_pa': 3000.0, 'rate_pa_per_s': 1000.0},
+                              {'profile': PRESSURE_PROFILE_CSV[0]}, {'hold_s': 1.0},
+                              {'deflate_to_pa': 0.0}]}}
     raise ValueError(f'no maximal scene base {name!r}')
 
 
@@ -568,8 +589,9 @@ def scene_cases() -> list[Case]:
                 scene = folder / 'scene.yaml'
                 scene.write_text(_yaml(data), encoding='utf-8')
                 write_companions(folder, base)
-                outcome = bench.softseq(['classify', str(scene)], folder)
-                return judge_names(outcome, 'classify', 'scene.yaml', mutation.path,
+                job = scene_job(base, scene, folder)
+                outcome = bench.softseq(job, folder)
+                return judge_names(outcome, job[0], 'scene.yaml', mutation.path,
                                    mutation.must_refuse)
             cases.append(Case('scene', f'{base}: {mutation.name}', run))
     # Not a scene at all, and what `run` must not start on.

@@ -30,6 +30,7 @@ if _typing.TYPE_CHECKING:
     from softseq_ros.dynamic.path import DynamicPath, StartState
     from softseq_ros.quasistatic.equilibrium import SolvedPath
     from softseq_ros.quasistatic.graph import TransitionGraph
+    from softseq_ros.quasistatic.regulator import HysteronGraph, RegulatedPath
     from softseq_ros.scene.loader import Scene
 
 __version__ = '0.1.0'
@@ -66,10 +67,22 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
     row by row, or with ``times`` [s] at each row's time, holds included; every segment's own
     pressure beside the syringe's; snap-throughs with their durations in ``snaps``). A
     quasi-static path depends on the order of the volumes only: ``times`` do not change it.
+
+    A scene behind a pressure regulator (``supply.regulator``) follows its programme of
+    pressures, sampled at its rate: quasi-statically a
+    :class:`~softseq_ros.quasistatic.regulator.RegulatedPath` (each segment an independent
+    hysteron, its flips on the way), with a network a
+    :class:`~softseq_ros.dynamic.path.DynamicPath` in time
+    (softseq_ros.dynamic.regulated); it takes no volume history.
     """
     import numpy as np
 
     loaded = load_scene(scene)
+    if loaded.regulator is not None:
+        if injected is not None or times is not None:
+            raise _regulator_refusal(loaded, "a volume history is a syringe's: the regulator "
+                                     'follows its programme of pressures (pump.legs)')
+        return _solve_regulated(loaded)
     history = None if injected is None else np.asarray(injected, dtype=float)
     if times is not None and history is None:
         raise ValueError('times come with a history of injected volumes, one time per volume')
@@ -101,6 +114,30 @@ def solve(scene: 'str | PathLike | Scene', injected: 'Sequence[float] | None' = 
     return Tracker(emap).sweep(history)
 
 
+def _solve_regulated(scene: 'Scene') -> 'RegulatedPath | DynamicPath':
+    """A regulator scene's programme of pressures, quasi-static or in time."""
+    regulator = scene.regulator
+    programme = regulator.programme
+    _check_sample_count(scene, programme.duration(), regulator.rate_hz)
+    if scene.network is not None:
+        from softseq_ros.dynamic.regulated import regulated_network_path
+
+        return regulated_network_path(scene.segments, scene.network, regulator)
+    from dataclasses import replace
+
+    from softseq_ros.quasistatic.regulator import regulated_path
+
+    times = programme.sample_times(regulator.rate_hz)
+    return replace(regulated_path(scene.segments, programme.target_at(times)), time_s=times)
+
+
+def _regulator_refusal(scene: 'Scene', reason: str) -> Exception:
+    from softseq_ros.scene.validation import SceneError
+
+    where = scene.path if scene.path is not None else '<scene>'
+    return SceneError(f'{where}: supply.regulator: {reason}')
+
+
 def _network_start(scene: 'Scene') -> 'StartState | None':
     """Where a programme with a start history starts, at rest: the balanced state it led to."""
     from softseq_ros.dynamic.path import StartState
@@ -116,17 +153,21 @@ def _network_start(scene: 'Scene') -> 'StartState | None':
 
 def _check_samples(scene: 'Scene') -> None:
     """Refuse, naming the scene and its keys, a programme too long to sample at the pump's rate."""
+    _check_sample_count(scene, scene.pump.profile.duration(), scene.pump.rate_hz)
+
+
+def _check_sample_count(scene: 'Scene', duration_s: float, rate_hz: float) -> None:
     from softseq_ros.scene.programme import MAX_SAMPLES
     from softseq_ros.scene.validation import SceneError
 
-    samples = scene.pump.profile.duration() * scene.pump.rate_hz
+    samples = duration_s * rate_hz
     if samples > MAX_SAMPLES:
         raise SceneError(
             f'{scene.path if scene.path is not None else "<scene>"}: pump.rate_hz: '
-            f"{scene.pump.rate_hz:g} Hz over the programme's {scene.pump.profile.duration():.6g} "
+            f"{rate_hz:g} Hz over the programme's {duration_s:.6g} "
             f's (pump.legs, pump.cycles) gives {samples:.3g} samples, more than '
-            f'{MAX_SAMPLES:.0e}: lower the rate or shorten the programme, or give a volume '
-            'history')
+            f'{MAX_SAMPLES:.0e}: lower the rate or shorten the programme'
+            + ('' if scene.regulator is not None else ', or give a volume history'))
 
 
 def classify(scene: 'str | PathLike | Scene') -> str:
@@ -142,23 +183,33 @@ def classify(scene: 'str | PathLike | Scene') -> str:
     from softseq_ros.quasistatic.solve import scene_map
 
     loaded = load_scene(scene)
+    if loaded.regulator is not None:
+        raise _regulator_refusal(loaded, 'the sequence types are those of segments sharing '
+                                 'the volume a syringe pushes; behind a regulator each segment '
+                                 'is an independent hysteron: softseq graph shows its flips')
     emap = scene_map(loaded)
     check_scene_reach(loaded, emap)
     return _classify(emap)
 
 
-def graph(scene: 'str | PathLike | Scene') -> 'TransitionGraph':
+def graph(scene: 'str | PathLike | Scene') -> 'TransitionGraph | HysteronGraph':
     """
     Every stable state of the scene's segments and how they connect (``softseq graph``).
 
     Its branches carry their volume intervals and labels, its transitions the joins and snaps
     (fluid moved, energy released); ``history_to(index)`` gives the fewest reversals of a
-    volume history from rest that reaches a branch.
+    volume history from rest that reaches a branch. Behind a pressure regulator
+    (``supply.regulator``), the graph of independent hysterons
+    (:class:`~softseq_ros.quasistatic.regulator.HysteronGraph`): its states and flips.
     """
     from softseq_ros.quasistatic.graph import transition_graph
+    from softseq_ros.quasistatic.regulator import hysteron_graph
     from softseq_ros.quasistatic.solve import scene_map
 
-    return transition_graph(scene_map(load_scene(scene)))
+    loaded = load_scene(scene)
+    if loaded.regulator is not None:
+        return hysteron_graph(loaded.segments)
+    return transition_graph(scene_map(loaded))
 
 
 def report(bag: 'str | PathLike', out: 'str | PathLike | None' = None, *,

@@ -29,7 +29,7 @@ from softseq_ros.rig.build import actuator_core, camera_core, pump_core
 from softseq_ros.rig.model import ActuatorModel, CommandBlock, load_rig_scene
 from softseq_ros.rig.pump import FINISHED, HELD, STOPPED
 from softseq_ros.rig.routing import Router
-from softseq_ros.scene.loader import Scene
+from softseq_ros.scene.loader import Scene, require_syringe
 from softseq_ros.scene.programme import (
     MAX_RUN_BYTES,
     MAX_RUN_MESSAGES,
@@ -304,6 +304,7 @@ class _BatchRun:
         refused here (LongRunError), before anything is written, unless ``allow_long``.
         """
         self.scene = scene if isinstance(scene, Scene) else load_rig_scene(scene)
+        require_syringe(self.scene, 'softseq run')
         self.out = Path(out)
         self.wrap = wrap
         overrides = overrides or {}

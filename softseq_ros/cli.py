@@ -28,6 +28,8 @@ def _solve(args: argparse.Namespace) -> int:
     if args.pressure_path is not None:
         return _solve_regulated(args)
     scene = softseq_ros.load_scene(args.scene)
+    if scene.regulator is not None and args.path is None:
+        return _solve_regulator_scene(args, scene)
     times, history = (None, None) if args.path is None else read_timed_history(args.path)
     try:
         solved = softseq_ros.solve(scene, history, times=times)
@@ -86,12 +88,34 @@ def _solve_regulated(args: argparse.Namespace) -> int:
     write_regulated_path(args.out, solved, names)
     print(f'{scene.name}: {pressures.size} regulated gauge pressures solved (each segment an '
           f'independent hysteron) -> {args.out} (flips: {len(solved.flips)})')
+    _print_flips(solved, names)
+    return 0
+
+
+def _solve_regulator_scene(args: argparse.Namespace, scene: Any) -> int:
+    """``solve`` on a scene behind a pressure regulator: its programme, quasi-static or in time."""
+    import softseq_ros
+    from softseq_ros.quasistatic.solve import write_regulated_path
+
+    solved = softseq_ros.solve(scene)
+    if scene.network is not None:
+        return _write_network_path(args, scene, solved, timed=False)
+    names = scene.segment_names
+    write_regulated_path(args.out, solved, names)
+    print(f"{scene.name}: the regulator's programme, {solved.pressure.size} gauge pressures "
+          f'solved (each segment an independent hysteron) -> {args.out} (flips: '
+          f'{len(solved.flips)})')
+    _print_flips(solved, names)
+    return 0
+
+
+def _print_flips(solved: Any, names: Sequence[str]) -> None:
+    """Each flip of a regulated path, one line each."""
     for flip in solved.flips:
         way = 'up past its peak' if flip.to_volume > flip.from_volume else 'down past its valley'
         print(f'  row {flip.row + 1}: {names[flip.segment]} flips {way} at '
               f'{flip.pressure * 1e-3:.4f} kPa, {flip.from_volume * 1e6:.4f} -> '
               f'{flip.to_volume * 1e6:.4f} mL')
-    return 0
 
 
 def _write_network_path(args: argparse.Namespace, scene: Any, path: Any, timed: bool) -> int:
@@ -108,13 +132,17 @@ def _write_network_path(args: argparse.Namespace, scene: Any, path: Any, timed: 
     )
     from softseq_ros.scene.network import LAMINAR, channel_names
 
-    profile = scene.pump.profile
     snaps_out, folds_out = snaps_file(args.out), folds_file(args.out)
     write_path(args.out, path, scene.segment_names)
     write_snaps(snaps_out, path.snaps, scene.segment_names, line=scene.supply is not None)
     write_folds(folds_out, path.folds)
-    pushed = (f'at the times of {args.path}' if timed
-              else f'pump at {profile.flow_rate * 1e6:g} mL/s')
+    if scene.regulator is not None:
+        pushed = "the regulator's programme of pressures"
+    elif timed:
+        pushed = f'at the times of {args.path}'
+    else:
+        pushed = f'pump at {scene.pump.profile.flow_rate * 1e6:g} mL/s'
+
     print(f'{scene.name}: {path.time_s.size} samples of the network in time, {pushed} -> '
           f'{args.out} (snap-throughs: {len(path.snaps)} -> {snaps_out}; fold crossings: '
           f'{len(path.folds)} -> {folds_out})')
@@ -173,7 +201,7 @@ def _graph(args: argparse.Namespace) -> int:
         raise UserError(f'--reversals must be >= 0, got {args.reversals}')
     style = _figure_style(args)
     scene = softseq_ros.load_scene(args.scene)
-    if args.regulator:
+    if args.regulator or scene.regulator is not None:
         return _regulated_graph(args, scene, style)
     graph = softseq_ros.graph(scene)
     # Before anything is written: a figure of too many branches exhausted the memory after
@@ -340,8 +368,10 @@ def _compare(args: argparse.Namespace) -> int:
     scene = None
     if args.scene is not None:
         from softseq_ros import load_scene
+        from softseq_ros.scene.loader import require_syringe
 
         scene = load_scene(args.scene)
+        require_syringe(scene, 'a rig recording')
     metrics_a, metrics_b, table = compare_bags(args.a, args.b, args.namespace_a,
                                                args.namespace_b, scene=scene)
     print(table, end='')
@@ -408,6 +438,7 @@ def _rates(args: argparse.Namespace) -> int:
     )
     from softseq_ros.errors import check_output_folder
     from softseq_ros.parallel import scheduler_option
+    from softseq_ros.scene.loader import require_syringe
 
     def numbers(option: str, text: str) -> list[float]:
         try:
@@ -439,6 +470,7 @@ def _rates(args: argparse.Namespace) -> int:
         raise RatesError('--workers: not with --scheduler (the cluster has its own workers)')
     style = _figure_style(args)
     scene = load_scene(args.scene)
+    require_syringe(scene, 'softseq rates')
     check_grid(scene, flows, radii)
     out = args.out or Path('bags') / f'rates_{scene.name}'
     check_output_folder(out, '--out' if args.out is not None else 'the output folder')

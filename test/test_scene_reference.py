@@ -21,7 +21,7 @@ from softseq_ros.scene.paths import config_dir, shipped_scenes
 from softseq_ros.segments.materials import LAW_NAMES, material_parameter_names
 
 REPO = Path(__file__).resolve().parent.parent
-SCENE_MODULES = ('loader.py', 'network.py', 'validation.py')
+SCENE_MODULES = ('loader.py', 'network.py', 'regulator.py', 'validation.py')
 DESIGN_MODULES = ('design.py', 'validation.py')
 
 

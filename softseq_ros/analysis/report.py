@@ -446,9 +446,10 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     scene = emap = None
     if scene_name is not None:
         from softseq_ros.quasistatic.solve import segments_graph
-        from softseq_ros.scene.loader import load_scene
+        from softseq_ros.scene.loader import load_scene, require_syringe
 
         scene = load_scene(scene_name, segments_graph)
+        require_syringe(scene, 'a rig recording')
     recording = load_recording(bag, namespace)
     if reference is not None:
         check_reference_segments(reference_file, reference, recording.segment_names)

@@ -88,6 +88,10 @@ class DynamicPath:
     Behind a compliant supply line (a scene's ``supply``), per sample: ``line_volume`` the
     fluid the line holds [m^3], ``line_pressure`` its gauge pressure [Pa] and
     ``supply_flow`` the supply tube's flow into the fed segment [m^3/s]; None without a line.
+
+    Behind a pressure regulator (softseq_ros.dynamic.regulated): ``pressure`` is its outlet's
+    gauge pressure, ``target_pressure`` its programme's target [Pa, gauge], ``supply_flow``
+    the supply tube's flow into the fed segment, ``injected`` what it let in since rest.
     """
 
     time_s: FloatArray
@@ -106,6 +110,7 @@ class DynamicPath:
     line_volume: FloatArray | None = None
     line_pressure: FloatArray | None = None
     supply_flow: FloatArray | None = None
+    target_pressure: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -331,30 +336,41 @@ def history_path(segments: Sequence[Segment], network: NetworkSettings, history:
 # tube's flow into the fed segment. Named apart from the per-segment columns (which start with
 # pressure_, volume_, curvature_ and flow_), so no segment's name can make a column twice.
 LINE_COLUMNS = ['supply_pressure_pa', 'supply_volume_m3', 'supply_flow_m3_per_s']
+# Behind a pressure regulator: its target and the supply tube's flow (pressure_pa is its
+# outlet's pressure, injected_m3 what it let in).
+REGULATOR_COLUMNS = ['target_pa', 'supply_flow_m3_per_s']
 
 
-def path_columns(names: Sequence[str], line: bool = False) -> list[str]:
+def path_columns(names: Sequence[str], line: bool = False,
+                 regulator: bool = False) -> list[str]:
     """
     Column names of a dynamic path's CSV for segments ``names`` (base to tip).
 
     The quasi-static path's columns (``pressure_pa`` is the syringe's gauge pressure here),
     with the time first, each segment's own gauge pressure after the syringe's, and each
     channel's flow before the event column; behind a compliant supply line (``line``),
-    LINE_COLUMNS after the channels' flows.
+    LINE_COLUMNS after the channels' flows, behind a regulator (``regulator``),
+    REGULATOR_COLUMNS.
     """
     flows = [f'flow_{a}_to_{b}_m3_per_s' for a, b in zip(names[:-1], names[1:])]
     return (['time_s', 'injected_m3', 'pressure_pa'] + [f'pressure_{n}_pa' for n in names]
             + [f'volume_{n}_m3' for n in names]
             + [f'curvature_{n}_per_m' for n in names] + flows
-            + (LINE_COLUMNS if line else []) + ['event'])
+            + (LINE_COLUMNS if line else []) + (REGULATOR_COLUMNS if regulator else [])
+            + ['event'])
 
 
 def write_path(out: str | Path, path: DynamicPath, names: Sequence[str]) -> None:
     """One row per sample; ``event`` is ``snap`` where a snap-through started."""
     line = path.line_volume is not None
-    line_rows = (np.column_stack([path.line_pressure, path.line_volume, path.supply_flow])
-                 if line else np.empty((path.time_s.size, 0)))
-    write_rows(out, path_columns(names, line), (
+    regulator = path.target_pressure is not None
+    if line:
+        line_rows = np.column_stack([path.line_pressure, path.line_volume, path.supply_flow])
+    elif regulator:
+        line_rows = np.column_stack([path.target_pressure, path.supply_flow])
+    else:
+        line_rows = np.empty((path.time_s.size, 0))
+    write_rows(out, path_columns(names, line, regulator), (
         ((path.time_s[i], path.injected[i], path.pressure[i], *path.segment_pressure[i],
           *path.volumes[i],
           *path.curvatures[i], *path.channel_flows[i], *line_rows[i]),

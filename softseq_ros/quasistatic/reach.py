@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
-from softseq_ros.scene.loader import Scene, SceneError
+from softseq_ros.scene.loader import Scene, SceneError, require_syringe
 from softseq_ros.scene.programme import ProgrammeError, PumpProfile, leg_key, leg_targets
 
 
@@ -90,7 +90,8 @@ def beyond_domain(target: float, err: DomainError, emap: EquilibriumMap,
 def check_scene_reach(scene: Scene, emap: EquilibriumMap) -> None:
     """:func:`check_reach` for the scene's own programme; the refusal names the scene file."""
     try:
-        check_reach(scene.pump.profile, emap, scene.segment_names, 'pump.')
+        check_reach(require_syringe(scene, 'a volume programme').profile, emap,
+                    scene.segment_names, 'pump.')
     except ProgrammeError as err:
         raise SceneError(f'{scene.path if scene.path is not None else "<scene>"}: {err}') \
             from None

@@ -53,6 +53,7 @@ class RegulatedPath:
     curvatures: FloatArray
     flips: list[Flip] = field(default_factory=list)
     rest_volume: float = 0.0    # the segments' rest volumes together [m^3]
+    time_s: FloatArray | None = None    # a programme's times [s], when it had any
 
     @property
     def injected(self) -> FloatArray:

@@ -117,9 +117,10 @@ def read_pressure_history(path: str | Path) -> NDArray[np.float64]:
                         optional=(TIME_COLUMN,))[GAUGE_COLUMN]
 
 
-def regulated_columns(names: Sequence[str]) -> list[str]:
-    """Column names of a regulated-path CSV for segments ``names`` (base to tip)."""
-    return ([GAUGE_COLUMN, 'injected_m3'] + [f'volume_{n}_m3' for n in names]
+def regulated_columns(names: Sequence[str], timed: bool = False) -> list[str]:
+    """Column names of a regulated-path CSV for segments ``names``; ``timed``: time first."""
+    return ((['time_s'] if timed else []) + [GAUGE_COLUMN, 'injected_m3']
+            + [f'volume_{n}_m3' for n in names]
             + [f'curvature_{n}_per_m' for n in names] + ['event'])
 
 
@@ -130,6 +131,9 @@ def write_regulated_path(path: str | Path, solved: RegulatedPath,
     for flip in solved.flips:
         flipped.setdefault(flip.row, []).append(f'flip {names[flip.segment]}')
     injected = solved.injected
-    write_rows(path, regulated_columns(names), (
-        ((solved.pressure[i], injected[i], *solved.volumes[i], *solved.curvatures[i]),
-         ' '.join(flipped.get(i, ()))) for i in range(solved.pressure.size)))
+    timed = solved.time_s is not None
+    times = solved.time_s if timed else np.empty((solved.pressure.size, 0))
+    write_rows(path, regulated_columns(names, timed), (
+        ((*np.atleast_1d(times[i]), solved.pressure[i], injected[i], *solved.volumes[i],
+          *solved.curvatures[i]), ' '.join(flipped.get(i, ())))
+        for i in range(solved.pressure.size)))

@@ -39,7 +39,8 @@ from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
 from softseq_ros.quasistatic.solve import scene_map, segments_graph
-from softseq_ros.scene.loader import Scene, load_scene
+from softseq_ros.scene.limits import RELIEF_MARGIN
+from softseq_ros.scene.loader import Scene, load_scene, require_syringe
 from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.scene.validation import SceneError
@@ -479,12 +480,6 @@ class DynamicModel:
         self.reach.check_programme(scene, profile)
 
 
-# The relief's margin over the highest gauge pressure the scene's segments can balance (plus the
-# supply tube's steady drop at the programme's fastest flow): a rig 50 % beyond anything its
-# segments hold is blocked or broken, and a real pump's relief is set so.
-RELIEF_MARGIN = 1.5
-
-
 def default_max_pressure_pa(scene: Scene) -> float:
     """
     The pump's relief by default [Pa, gauge], from the scene's own curves.
@@ -509,7 +504,9 @@ def load_rig_scene(path: str | Path) -> Scene:
     The rig's drivers know no physics, this seam does: a ``pump.start_branch`` is looked up in
     the transition graph of the process's shared map, the one the actuator's model runs on.
     """
-    return load_scene(path, segments_graph)
+    scene = load_scene(path, segments_graph)
+    require_syringe(scene, 'the rig')
+    return scene
 
 
 def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':

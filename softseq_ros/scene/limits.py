@@ -39,6 +39,12 @@ class Limit:
         return bounds
 
 
+# The relief by default: this multiple of the highest pressure on any segment's curve (a rig 50 %
+# beyond anything its segments hold is blocked or broken, and a real relief is set so). The
+# syringe pump's adds its supply tube's steady drop (softseq_ros.rig.model); a regulator's is
+# at its outlet.
+RELIEF_MARGIN = 1.5
+
 # Keyed by the scene's key path; the node parameter of the same meaning uses the same entry.
 LIMITS: dict[str, Limit] = {
     'pump.rate_hz': Limit(0.0, 1.0e4, open_minimum=True),
@@ -60,6 +66,13 @@ LIMITS: dict[str, Limit] = {
     'supply.line_compliance_m3_per_pa': Limit(0.0, 1.0e-6),
     'supply.ambient_pa': Limit(1.0e4, 1.0e6),
     'supply.polytropic_exponent': Limit(1.0, 2.0),
+    # A pressure regulator: a response from at once to three hours, a flow limit as a pump's,
+    # a relief up to 10 MPa (far above any soft actuator), ramps from 1 mPa/s to 1 GPa/s.
+    'supply.regulator.time_constant_s': Limit(0.0, 1.0e4),
+    'supply.regulator.max_flow_m3_per_s': Limit(1.0e-15, 1.0e-3),
+    'supply.regulator.max_pressure_pa': Limit(0.0, 1.0e7, open_minimum=True),
+    'pump.pressure_rate_pa_per_s': Limit(1.0e-3, 1.0e9),
+    'pump.legs.rate_pa_per_s': Limit(1.0e-3, 1.0e9),
     # A segment from a micrometre to 10 m (the paper's: 0.111 m).
     'segments.length_m': Limit(0.0, 10.0, open_minimum=True),
     # From a gas (air: 1.8e-5 Pa s) to a silicone gum (1e4 Pa s); water: 1e-3 Pa s. Beyond,

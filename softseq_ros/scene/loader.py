@@ -56,7 +56,12 @@ from softseq_ros.scene.design import (
     design_path,
     load_design,
 )
-from softseq_ros.scene.network import NO_SUPPLY_TUBE, NetworkSettings, read_network
+from softseq_ros.scene.network import (
+    NO_REGULATOR_TUBE,
+    NO_SUPPLY_TUBE,
+    NetworkSettings,
+    read_network,
+)
 from softseq_ros.scene.outputs import DEFAULT_OUTPUTS, OUTPUT_NAMES
 from softseq_ros.scene.paths import scene_path
 from softseq_ros.scene.plausibility import segment_problem
@@ -67,6 +72,7 @@ from softseq_ros.scene.programme import (
     PumpProfile,
     check_capacity,
 )
+from softseq_ros.scene.regulator import Regulator, read_regulator
 from softseq_ros.scene.tables import read_table
 from softseq_ros.scene.validation import (
     SCENE_NAME,
@@ -113,6 +119,7 @@ class BranchGraph(Protocol):
 GraphOf = Callable[[tuple[Segment, ...], int | None, CompliantSupply | None], BranchGraph]
 
 _START_BRANCH_KEY = 'pump.start_branch'
+REGULATOR_KEY = 'regulator'
 
 @dataclass(frozen=True)
 class PumpSettings:
@@ -156,12 +163,15 @@ class Scene:
     description: str
     path: Path | None
     segments: tuple[Segment, ...]
-    pump: PumpSettings
+    pump: PumpSettings | None
     camera: CameraSettings
     outputs: frozenset[str]
     solver: SolverSettings
     network: NetworkSettings | None = None
     supply: CompliantSupply | None = None
+    # A pressure regulator in place of the syringe (its programme from the ``pump`` block);
+    # ``pump`` is then None.
+    regulator: Regulator | None = None
 
     @property
     def segment_names(self) -> tuple[str, ...]:
@@ -503,7 +513,8 @@ def _history_onto_branch(ctx: Context, branch: int, graph_of: GraphOf | None,
     return tuple(reach.history)
 
 
-def _camera(ctx: Context, value: object, pump: PumpProfile) -> CameraSettings:
+def _camera(ctx: Context, value: object, reach: float) -> CameraSettings:
+    """The camera; ``reach``: the most the programme injects [m^3], past every trigger."""
     if value is None:
         return CameraSettings()
     raw = ctx.mapping(value, 'camera', (),
@@ -515,7 +526,6 @@ def _camera(ctx: Context, value: object, pump: PumpProfile) -> CameraSettings:
     seed = int(ctx.limited(raw.get('seed', defaults.seed), 'camera.seed', integer=True))
     triggers = []
     items = ctx.sequence(raw.get('trigger_injected_m3', []), 'camera.trigger_injected_m3')
-    reach = pump.max_injected()
     for index, item in enumerate(items):
         where = f'camera.trigger_injected_m3[{index}]'
         trigger = ctx.number(item, where, ge=0.0)
@@ -564,13 +574,14 @@ def _supply(ctx: Context, value: object, segments: tuple[Segment, ...]) -> Compl
     if value is None:
         return None
     keys = ('trapped_gas_m3', 'line_compliance_m3_per_pa', 'ambient_pa', 'polytropic_exponent')
-    raw = ctx.mapping(value, 'supply', (), keys)
+    raw = ctx.mapping(value, 'supply', (), keys + (REGULATOR_KEY,))
     numbers = {key: ctx.limited(raw[key], f'supply.{key}') for key in keys if key in raw}
     gas = numbers.get('trapped_gas_m3', 0.0)
     compliance = numbers.get('line_compliance_m3_per_pa', 0.0)
     if not gas > 0.0 and not compliance > 0.0:
-        raise ctx.error('supply', 'give trapped_gas_m3 or line_compliance_m3_per_pa above 0 '
-                                  '(without both the syringe is ideal: leave the block out)')
+        raise ctx.error('supply', 'give trapped_gas_m3 or line_compliance_m3_per_pa above 0, '
+                                  'or a supply.regulator instead of the syringe (without any '
+                                  'the syringe is ideal: leave the block out)')
     highest = max(max(abs(pc.p_at_lo), abs(pc.p_at_hi)) for s in segments
                   for pc in s.monotone_pieces())
     return CompliantSupply(gas, ambient_pa=numbers.get('ambient_pa', STANDARD_AMBIENT_PA),
@@ -620,19 +631,49 @@ def scene_from_dict(data: object, path: str | Path | None = None,
     # Before the pump: a start branch is looked up on the map these three settle.
     solver = _solver(ctx, raw.get('solver'))
     network = read_network(ctx, raw.get('network'), tuple(s.name for s in segments))
-    supply = _supply(ctx, raw.get('supply'), segments)
+    supply_raw = raw.get('supply')
+    if isinstance(supply_raw, dict) and REGULATOR_KEY in supply_raw:
+        others = [key for key in supply_raw if key != REGULATOR_KEY]
+        if others:
+            raise ctx.error(join('supply', str(others[0])),
+                            'a pressure regulator replaces the syringe and its line: give '
+                            'supply.regulator alone')
+        regulator = read_regulator(ctx, supply_raw[REGULATOR_KEY], raw['pump'], segments)
+        if network is not None and network.supply is None:
+            raise ctx.error('network.supply', NO_REGULATOR_TUBE)
+        return Scene(name=name, description=description, network=network,
+                     path=Path(path) if path is not None else None, segments=segments,
+                     pump=None, camera=_camera(ctx, raw.get('camera'), capacity),
+                     outputs=_outputs(ctx, raw.get('outputs')), solver=solver,
+                     regulator=regulator)
+    supply = _supply(ctx, supply_raw, segments)
 
     def history_onto(branch: int) -> tuple[float, ...]:
         return _history_onto_branch(ctx, branch, graph_of, segments, solver, supply, network)
 
     pump = _pump(ctx, raw['pump'], capacity, history_onto)
-    camera = _camera(ctx, raw.get('camera'), pump.profile)
+    camera = _camera(ctx, raw.get('camera'), pump.profile.max_injected())
     outputs = _outputs(ctx, raw.get('outputs'))
     if supply is not None and network is not None and network.supply is None:
         raise ctx.error('network.supply', NO_SUPPLY_TUBE)
     return Scene(name=name, description=description, network=network,
                  path=Path(path) if path is not None else None, segments=segments, pump=pump,
                  camera=camera, outputs=outputs, solver=solver, supply=supply)
+
+
+def require_syringe(scene: Scene, job: str) -> PumpSettings:
+    """
+    The scene's syringe pump, for a ``job`` that needs one (the rig, a recording's analysis).
+
+    A scene behind a pressure regulator has none: refused in one line naming the scene file
+    and ``supply.regulator``, before anything runs.
+    """
+    if scene.pump is None:
+        where = scene.path if scene.path is not None else '<scene>'
+        raise SceneError(f'{where}: supply.regulator: {job} drives a syringe pump; a scene '
+                         'behind a pressure regulator runs in softseq solve and softseq graph '
+                         '(docs/supply.md)')
+    return scene.pump
 
 
 def load_scene(path: str | Path, graph_of: GraphOf | None = None) -> Scene:

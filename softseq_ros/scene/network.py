@@ -42,6 +42,10 @@ TUBE_KEYS = ('length_m', 'radius_m', 'inertance', 'minor_loss', 'friction')
 # segment passes a fold of its curve faster than the line can follow.
 NO_SUPPLY_TUBE = ('a compliant supply needs a supply tube between the line and the fed '
                   'segment: give network.supply (its length_m and radius_m)')
+# A regulator holds the pressure at its outlet: with no tube between it and the fed segment, that
+# segment's pressure would jump with the target at once, and its volume with it.
+NO_REGULATOR_TUBE = ('a pressure regulator drives the fed segment through the supply tube: give '
+                     'network.supply (its length_m and radius_m)')
 
 
 @dataclass(frozen=True)

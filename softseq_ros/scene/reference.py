@@ -73,8 +73,8 @@ SCENE_SECTIONS: tuple[Section, ...] = (
         Key('solver', 'the equilibrium solver'),
         Key('network', 'the fluid network: time in the physics (docs/dynamic.md); none: '
             'quasi-static'),
-        Key('supply', 'the syringe line: trapped gas and compliance (docs/supply.md); none: an '
-            'ideal syringe'),
+        Key('supply', 'the syringe line: trapped gas and compliance, or a pressure regulator in '
+            "the syringe's place (docs/supply.md); none: an ideal syringe"),
     )),
     Section('segments[]', 'A segment (exactly one of table, design, linear, balloon)', (
         Key('name', 'text: a letter, then letters, digits and _; unique', True),
@@ -110,8 +110,11 @@ SCENE_SECTIONS: tuple[Section, ...] = (
             'rest'),
     )),
     MATERIAL,
-    Section('pump', 'The pump programme', (
+    Section('pump', 'The pump programme (behind a regulator: its programme of gauge pressures, '
+            'from rest, with legs, pressure_rate_pa_per_s, cycles and rate_hz only)', (
         Key('legs', 'list of legs (below), run in order', True),
+        Key('pressure_rate_pa_per_s', 'number [Pa/s] (100): behind a regulator, the rate of a '
+            'leg without its own', limit='pump.pressure_rate_pa_per_s'),
         Key('flow_rate_m3_per_s', 'number [m^3/s] (5e-8): the rate of a leg without its own',
             limit='pump.flow_rate_m3_per_s'),
         Key('rate_hz', 'number [Hz] (50): commands per second while running',
@@ -125,7 +128,7 @@ SCENE_SECTIONS: tuple[Section, ...] = (
             "where the graph's history onto it ends (not with the two above)"),
     )),
     Section('pump.legs[]', 'A leg (exactly one of inflate_to_m3, deflate_to_m3, hold_s, '
-            'profile)', (
+            'profile; behind a regulator inflate_to_pa, deflate_to_pa, hold_s, profile)', (
         Key('inflate_to_m3', 'number [m^3], above where the leg starts'),
         Key('deflate_to_m3', 'number [m^3] >= 0, below where the leg starts'),
         Key('hold_s', 'number [s] > 0', limit='pump.legs.hold_s'),
@@ -133,6 +136,11 @@ SCENE_SECTIONS: tuple[Section, ...] = (
             'the scene file'),
         Key('flow_rate_m3_per_s', "number [m^3/s] (the pump's): this leg's own rate",
             limit='pump.flow_rate_m3_per_s'),
+        Key('inflate_to_pa', 'number [Pa, gauge], above where the leg starts, within the '
+            "regulator's relief and what every segment holds on a rising piece (regulator)"),
+        Key('deflate_to_pa', 'number [Pa, gauge] >= 0, below where the leg starts (regulator)'),
+        Key('rate_pa_per_s', "number [Pa/s] (pressure_rate_pa_per_s): this leg's own rate "
+            '(regulator)', limit='pump.legs.rate_pa_per_s'),
     )),
     Section('camera', 'The camera', (
         Key('rate_hz', 'number [Hz] (10): frames per second', limit='camera.rate_hz'),
@@ -166,7 +174,8 @@ SCENE_SECTIONS: tuple[Section, ...] = (
     )),
     _tube('network.supply', 'The supply tube'),
     _tube('network.channels[]', 'A channel between neighbouring segments'),
-    Section('supply', 'The syringe line (docs/supply.md): at least one of the first two', (
+    Section('supply', 'The syringe line (docs/supply.md): at least one of the first two, or '
+            'a regulator alone', (
         Key('trapped_gas_m3', 'number [m^3] (0): air in the line at the ambient pressure',
             limit='supply.trapped_gas_m3'),
         Key('line_compliance_m3_per_pa', "number [m^3/Pa] (0): the tubing's swelling",
@@ -174,6 +183,18 @@ SCENE_SECTIONS: tuple[Section, ...] = (
         Key('ambient_pa', 'number [Pa, absolute] (101325)', limit='supply.ambient_pa'),
         Key('polytropic_exponent', 'number (1: isothermal; 1.4: adiabatic air)',
             limit='supply.polytropic_exponent'),
+        Key('regulator', "a pressure regulator in the syringe's place (below); the pump block "
+            'is then its programme of gauge pressures'),
+    )),
+    Section('supply.regulator', 'A pressure regulator (docs/supply.md); with a network it '
+            'needs network.supply', (
+        Key('time_constant_s', 'number [s] (0: at once): its outlet follows the target as a '
+            'first-order lag', limit='supply.regulator.time_constant_s'),
+        Key('max_flow_m3_per_s', 'number [m^3/s] (no limit): the most it delivers or vents',
+            limit='supply.regulator.max_flow_m3_per_s'),
+        Key('max_pressure_pa', "number [Pa, gauge] (1.5 x the highest pressure on the "
+            "segments' curves): its relief, above every target",
+            limit='supply.regulator.max_pressure_pa'),
     )),
 )
 

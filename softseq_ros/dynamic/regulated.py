@@ -1,0 +1,260 @@
+"""
+The network driven by a pressure regulator: the source holds a pressure, the fluid follows.
+
+The regulator's outlet pressure p_r follows its programme's target P(t)
+(softseq_ros.scene.regulator) as a first-order lag of time constant tau (at once when
+tau = 0), and drives the supply tube's flow q_s into the fed segment f, at most the
+regulator's q_max either way:
+
+    tau dp_r/dt = P(t) - p_r                     (tau = 0: p_r = P(t))
+    q_s = clip(drop_s^-1(p_r - p_f), -q_max, q_max)
+          (with the tube's inertance: L_s dq_s/dt = p_r - p_f - drop_s(q_s), held at +-q_max)
+    dI/dt = q_s,   dv_i/dt = [i = f] q_s + q_(i-1) - q_i
+
+I is what the regulator has let in since rest; the tip's volume follows from mass, I less the
+others' fluid, so the segments hold what the regulator let in to round-off. The segments'
+curves, the channels and their laws are the syringe network's (softseq_ros.dynamic.flow,
+whose :class:`NetworkFlow` evaluates them here too). The state is stiff where the channels are
+short and wide, so it is integrated by scipy's Radau, one integration per straight piece of the
+programme (its corners are where the target's slope jumps), each segment's passages through
+the folds of its curve located by the integrator's events. A segment pushed past the end of its
+curve stops the path there with :class:`NetworkDomainError`, as the syringe's network does.
+"""
+
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.integrate import solve_ivp
+
+from softseq_ros.dynamic.events import EMPTYING, FILLING, FoldCrossing, segment_folds
+from softseq_ros.dynamic.flow import ATOL_SHARE, END_SLACK, NetworkDomainError, NetworkFlow
+from softseq_ros.dynamic.path import DynamicPath
+from softseq_ros.scene.network import NO_REGULATOR_TUBE, NetworkSettings
+from softseq_ros.scene.regulator import Regulator
+from softseq_ros.segments.models import Segment
+
+FloatArray = NDArray[np.float64]
+Event = Callable[[float, FloatArray], float]
+
+
+class RegulatedNetwork:
+    """The segments and channels of a network, fed through its supply tube by a regulator."""
+
+    def __init__(self, segments: Sequence[Segment], network: NetworkSettings,
+                 regulator: Regulator, rtol: float | None = None) -> None:
+        """At rest at time 0, the outlet at 0 Pa gauge; ``rtol`` overrides the network's."""
+        if network.supply is None:
+            raise ValueError(NO_REGULATOR_TUBE)
+        self.members = NetworkFlow(segments, network, rtol)
+        self.segments = list(segments)
+        self.regulator = regulator
+        members = self.members
+        self.n = members.n
+        self.tube = members.supply
+        self.feed = members.feed
+        self.lagged = regulator.time_constant_s > 0.0
+        self.tube_inertial = self.tube.inertance > 0.0
+        # The state: the volumes but the tip's, the inertial channels' flows (as the syringe's
+        # network has them), then what the regulator let in, its outlet pressure when it lags
+        # and the supply tube's flow when its inertia counts.
+        self.at_injected = self.n - 1 + len(members.inertial)
+        self.at_outlet = self.at_injected + 1
+        self.at_tube = self.at_outlet + int(self.lagged)
+        size = self.at_tube + int(self.tube_inertial)
+        volume_atol = members.rtol * ATOL_SHARE * members.v_scale
+        pressure_scale = max(abs(regulator.programme.highest()), 1.0)
+        self.atol = np.full(size, volume_atol)
+        if self.lagged:
+            self.atol[self.at_outlet] = members.rtol * ATOL_SHARE * pressure_scale
+        self.rtol = members.rtol
+        self.rest_total = members.rest_total
+        self.upper = [s.max_volume + END_SLACK * members.v_scale for s in self.segments]
+
+    # ------------------------------------------------------------------ the equations
+
+    def _outlet(self, t: float, state: Sequence[float],
+                piece: tuple[float, float, float]) -> float:
+        if self.lagged:
+            return state[self.at_outlet]
+        start_t, start_p, slope = piece
+        return start_p + slope * (t - start_t)
+
+    def _tube_flow(self, state: Sequence[float], drop: float) -> float:
+        limit = self.regulator.max_flow_m3_per_s
+        flow = state[self.at_tube] if self.tube_inertial else self.tube.flow(drop)
+        return min(max(flow, -limit), limit)
+
+    def balance(self, t: float, y: FloatArray, piece: tuple[float, float, float]) -> tuple[
+            FloatArray, FloatArray, FloatArray, float, float, FloatArray]:
+        """
+        Volumes, pressures, channel flows, outlet pressure, tube flow and rates at time ``t``.
+
+        ``piece``: the programme's straight piece the time lies on, (start [s], target there
+        [Pa], slope [Pa/s]).
+        """
+        members = self.members
+        state = y.tolist()
+        volumes = members.volumes_of(y[:self.at_injected], state[self.at_injected])
+        pressures = members.pressures(volumes)
+        flows = members.channel_flows(y[:self.at_injected], pressures)
+        outlet = self._outlet(t, state, piece)
+        drop = outlet - float(pressures[self.feed])
+        supply = self._tube_flow(state, drop)
+        last = self.n - 1
+        rates = [(flows[i - 1] if i else 0.0) - flows[i] for i in range(last)]
+        if self.feed < last:
+            rates[self.feed] += supply
+        for j in members.inertial:
+            law = members.laws[j]
+            rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
+        rates.append(supply)
+        if self.lagged:
+            start_t, start_p, slope = piece
+            target = start_p + slope * (t - start_t)
+            rates.append((target - outlet) / self.regulator.time_constant_s)
+        if self.tube_inertial:
+            push = (drop - self.tube.drop(supply)) / self.tube.inertance
+            limit = self.regulator.max_flow_m3_per_s
+            held = (supply >= limit and push > 0.0) or (supply <= -limit and push < 0.0)
+            rates.append(0.0 if held else push)
+        return volumes, pressures, flows, outlet, supply, np.array(rates)
+
+    def _volume_of(self, i: int) -> Callable[[FloatArray], float]:
+        if i < self.n - 1:
+            return lambda y: float(y[i])
+        last = self.n - 1
+        return lambda y: float(self.rest_total + y[self.at_injected] - np.sum(y[:last]))
+
+    def _events(self) -> tuple[list[Event], list[tuple[int, object]], list[Event]]:
+        """The folds' events (each with its segment and fold) and the curves' ends' events."""
+        folds: list[Event] = []
+        which: list[tuple[int, object]] = []
+        ends: list[Event] = []
+        for i, segment in enumerate(self.segments):
+            volume = self._volume_of(i)
+            for fold in segment_folds(segment):
+                folds.append(lambda t, y, volume=volume, level=fold.volume: volume(y) - level)
+                which.append((i, fold))
+
+            def end(t: float, y: FloatArray, volume: Callable[[FloatArray], float] = volume,
+                    level: float = self.upper[i]) -> float:
+                return volume(y) - level
+            end.terminal, end.direction = True, 1.0
+            ends.append(end)
+        return folds, which, ends
+
+    # ------------------------------------------------------------------ the path
+
+    def path(self, times: Sequence[float] | FloatArray | None = None) -> DynamicPath:
+        """
+        The network's state at ``times`` [s], in order, from rest at time 0.
+
+        By default the programme sampled at the regulator's rate. A segment pushed past the
+        end of its curve raises :class:`NetworkDomainError` at the located instant, the rows
+        before it in ``error.rows``.
+        """
+        programme = self.regulator.programme
+        if times is None:
+            times = programme.sample_times(self.regulator.rate_hz)
+        times = np.asarray(times, dtype=float).reshape(-1)
+        if times.size and (times[0] < 0.0 or np.any(np.diff(times) < 0.0)):
+            raise ValueError('times must be in order, from 0 s on')
+        corners = np.asarray(programme.times)
+        end = float(times[-1]) if times.size else 0.0
+        # The straight pieces up to the last time (held beyond the programme's end).
+        starts = corners[corners < end].tolist() or [0.0]
+        stops = starts[1:] + [end]
+        folds, which, ends = self._events()
+        y = np.zeros(self.at_tube + int(self.tube_inertial))
+        y[:self.n - 1] = [s.rest_volume for s in self.segments[:-1]]
+        rows = np.empty((times.size, y.size))
+        crossings: list[FoldCrossing] = []
+        steps = 0
+        k = int(np.searchsorted(times, 0.0, side='right'))
+        rows[:k] = y
+        for start, stop in zip(starts, stops):
+            if stop <= start:
+                continue
+            target = float(programme.target_at(start))
+            slope = (float(programme.target_at(stop)) - target) / (stop - start)
+            piece = (start, target, slope)
+            solved = solve_ivp(lambda t, state, piece=piece: self.balance(t, state, piece)[5],
+                               (start, stop),
+                               y, method='Radau', rtol=self.rtol, atol=self.atol,
+                               dense_output=True, events=folds + ends)
+            if solved.status < 0:
+                raise NetworkDomainError(f'the regulated network integration failed at '
+                                         f'{solved.t[-1]:.6g} s: {solved.message}')
+            steps += len(solved.t) - 1
+            for index, (event_times, event_states) in enumerate(zip(solved.t_events[:len(folds)],
+                                                                    solved.y_events)):
+                i, fold = which[index]
+                for t_event, state in zip(event_times, event_states):
+                    rates = self.balance(t_event, state, piece)[5]
+                    direction = self._volume_rate(i, rates)
+                    crossings.append(FoldCrossing(
+                        self.segments[i].name, fold.volume, fold.pressure, fold.kind,
+                        FILLING if direction > 0.0 else EMPTYING, float(t_event),
+                        float(state[self.at_injected])))
+            reached = float(solved.t[-1])
+            inside = int(np.searchsorted(times, reached, side='right'))
+            if inside > k:
+                rows[k:inside] = solved.sol(times[k:inside]).T
+                k = inside
+            y = solved.y[:, -1]
+            if solved.status == 1:
+                ended = next(i for i, hits in enumerate(solved.t_events[len(folds):]) if hits.size)
+                error = NetworkDomainError(
+                    f'segment {self.segments[ended].name} passes the end of its curve at '
+                    f'{reached:.6g} s ({self._volume_of(ended)(y):.6g} m^3, let in '
+                    f'{y[self.at_injected]:.6g} m^3)', located=True)
+                error.rows = rows[:k]
+                raise error
+        rows[k:] = y
+        crossings.sort(key=lambda c: c.time_s)
+        return self._read(times, rows, crossings, steps)
+
+    def _volume_rate(self, i: int, rates: FloatArray) -> float:
+        if i < self.n - 1:
+            return float(rates[i])
+        return float(rates[self.at_injected] - np.sum(rates[:self.n - 1]))
+
+    def _read(self, times: FloatArray, rows: FloatArray, crossings: list[FoldCrossing],
+              steps: int) -> DynamicPath:
+        programme = self.regulator.programme
+        corners = programme.times
+        count = times.size
+        volumes = np.empty((count, self.n))
+        pressures = np.empty((count, self.n))
+        flows = np.empty((count, len(self.members.laws)))
+        outlets = np.empty(count)
+        supply = np.empty(count)
+        for r, (t, state) in enumerate(zip(times.tolist(), rows)):
+            piece_at = max(int(np.searchsorted(corners, t, side='right')) - 1, 0)
+            start = corners[piece_at]
+            stop = corners[piece_at + 1] if piece_at + 1 < len(corners) else start
+            target = float(programme.target_at(start))
+            slope = ((float(programme.target_at(stop)) - target) / (stop - start)
+                     if stop > start else 0.0)
+            v, p, q, outlet, flow, _ = self.balance(t, state, (start, target, slope))
+            volumes[r], pressures[r], flows[r], outlets[r], supply[r] = v, p, q, outlet, flow
+        curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, i]), dtype=float)
+                                      for i, s in enumerate(self.segments)])
+        peak_reynolds = [max((law.reynolds(q) for q in flows[:, j].tolist()), default=0.0)
+                         for j, law in enumerate(self.members.laws)]
+        return DynamicPath(
+            time_s=times, injected=rows[:, self.at_injected].copy(), pressure=outlets,
+            volumes=volumes, curvatures=curvatures, channel_flows=flows,
+            snap=np.zeros(count, dtype=bool), snaps=[], peak_reynolds=peak_reynolds,
+            steps=steps, folds=crossings, segment_pressure=pressures, supply_flow=supply,
+            target_pressure=programme.target_at(times))
+
+
+def regulated_network_path(segments: Sequence[Segment], network: NetworkSettings,
+                           regulator: Regulator,
+                   times: Sequence[float] | FloatArray | None = None,
+                   rtol: float | None = None) -> DynamicPath:
+    """The network behind ``regulator`` at ``times`` (default: its programme at its rate)."""
+    return RegulatedNetwork(segments, network, regulator, rtol).path(times)
+
