@@ -136,6 +136,28 @@ def test_a_softer_line_moves_the_snaps_onto_each_segment_s_own_peak_and_valley()
                                rtol=1e-6)
 
 
+def test_as_the_gas_grows_the_snaps_tend_to_the_pressure_controlled_flips_at_second_order():
+    # Isothermal gas at gauge p holds s = V_g p / (p_a + p), so its stiffness is
+    # k_s = dp/ds = (p_a + p)^2 / (V_g p_a): inversely proportional to the gas's volume. The
+    # fold behind a line of stiffness k_s lies a pressure proportional to k_s^2 from the peak
+    # (the test above), so ten times the gas puts each snap a hundred times closer to where
+    # the segment flips under pressure control: its peak inflating, its valley deflating.
+    segments = load_scene('fig1_asymmetric').segments
+    peaks, valleys = first_turns(segments, 1), first_turns(segments, -1)
+    up_gaps, down_gaps = [], []
+    for gas in (1e-3, 1e-2, 1e-1, 1.0):
+        up, down = inflate_and_deflate(
+            EquilibriumMap(segments, supply=CompliantSupply(gas, max_pressure_pa=3e4)), 4001)
+        up_gaps.append(max(min(abs(e.from_pressure - q) for q in peaks) for e in up.events))
+        down_gaps.append(max(min(abs(e.from_pressure - q) for q in valleys)
+                             for e in down.events))
+    for gaps in (up_gaps, down_gaps):
+        assert all(a > b for a, b in zip(gaps, gaps[1:]))
+        assert gaps[-2] / gaps[-1] == pytest.approx(100.0, rel=0.05)
+    # A cubic metre of air: every snap within 1e-8 of a peak's pressure, 1e-6 of a valley's.
+    assert up_gaps[-1] < 1e-8 * max(peaks) and down_gaps[-1] < 1e-6 * max(valleys)
+
+
 @pytest.mark.parametrize('gas', [1e-6, 1e-5])
 def test_every_snap_with_a_compliant_line_releases_energy_and_lands_stable(gas):
     segments = load_scene('fig1_asymmetric').segments
