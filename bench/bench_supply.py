@@ -131,6 +131,48 @@ def batch_rows(repeats: int) -> list[str]:
     return lines
 
 
+def in_time_rows(repeats: int) -> list[str]:
+    """
+    The Fig. 1 pair in time behind the syringe and behind a regulator, over the same span.
+
+    The syringe runs fig1_asymmetric_dynamic's programme (to 65 mL and back); the regulator,
+    on the same network, ramps to 8 kPa (past both peaks) and back over the same duration, and
+    then follows the syringe run's own pressure, sampled every 10 s, as a profile (a leg of
+    262 rows, no step passing a row's corner). Best of ``repeats``, ratios to the syringe's.
+    """
+    import softseq_ros
+    from softseq_ros.dynamic.regulated import regulated_network_path
+    from softseq_ros.scene.regulator import PressureProgramme, Regulator
+
+    scene = load_scene('fig1_asymmetric_dynamic')
+    span = scene.pump.profile.duration()
+    syringe_path = softseq_ros.solve(scene)
+    rows = np.append(np.arange(0.0, span, 10.0), span)
+    measured = np.clip(np.interp(rows, syringe_path.time_s, syringe_path.pressure), 0.0, None)
+    ramp = PressureProgramme((0.0, span / 2.0, span), (0.0, 8000.0, 0.0))
+    profile = PressureProgramme(tuple(rows.tolist()), tuple(measured.tolist()), (0.0, span))
+    cases = [('syringe: to 65 mL and back', lambda: softseq_ros.solve(scene))]
+    for label, programme in (('regulator: to 8 kPa and back', ramp),
+                             ("regulator: the syringe run's pressure every 10 s", profile)):
+        regulator = Regulator(programme, rate_hz=scene.network.rate_hz)
+        cases.append((label, lambda regulator=regulator: regulated_network_path(
+            scene.segments, scene.network, regulator)))
+    lines = [f'| fig1_asymmetric_dynamic, {span:g} s | solve in time | steps | ratio to the '
+             'syringe |', '|---|---|---|---|']
+    print('\n'.join(lines), flush=True)
+    baseline = None
+    for label, job in cases:
+        best = float('inf')
+        for _ in range(repeats):
+            start = time.perf_counter()
+            path = job()
+            best = min(best, time.perf_counter() - start)
+        baseline = best if baseline is None else baseline
+        lines.append(f'| {label} | {best:.3f} s | {path.steps} | {best / baseline:.2f} |')
+        print(lines[-1], flush=True)
+    return lines
+
+
 def three_segment_rows(repeats: int) -> list[str]:
     """The map and graph of three segments behind each supply (the promise: under 2 s)."""
     lines = ['| scene | supply | map and graph | under 2 s |', '|---|---|---|---|']
@@ -177,6 +219,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick:
         lines += batch_rows(repeats) + ['']
         print(flush=True)
+    lines += in_time_rows(repeats) + ['']
+    print(flush=True)
     lines += three_segment_rows(repeats)
     out = args.out or (None if args.quick else RESULTS)
     if out is not None:

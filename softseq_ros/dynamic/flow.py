@@ -677,23 +677,24 @@ class NetworkFlow:
         injected = start_injected + self.flow * (times - start_t)
         volumes = self.states_volumes(states, injected)
         pressures = self.row_pressures(volumes)
-        flows = np.empty((times.size, len(self.laws)))
-        inertial = iter(range(self.n - 1, states.shape[1]))
-        for j, law in enumerate(self.laws):
-            if self._steady[j] is None:
-                flows[:, j] = states[:, next(inertial)]
-                continue
-            drops = pressures[:, j] - pressures[:, j + 1]
-            if law.quadratic == 0.0 and law.turbulent == 0.0:
-                flows[:, j] = drops / law.resistance
-            else:
-                flows[:, j] = [law.flow(d) for d in drops.tolist()]
+        flows = self.channel_flow_rows(states, pressures)
         if self.line is not None:
             # The piston pushes on the line: the syringe's pressure is the line's.
             return injected, volumes, flows, self.read_line(states, volumes)[1]
         syringe = pressures[:, self.feed] + (self.supply.drop(self.flow)
                                              if self.supply is not None else 0.0)
         return injected, volumes, flows, syringe
+
+    def channel_flow_rows(self, states: FloatArray, pressures: FloatArray) -> FloatArray:
+        """:meth:`channel_flows` of many states (rows) at their segments' pressures (rows)."""
+        flows = np.empty((states.shape[0], len(self.laws)))
+        inertial = iter(range(self.n - 1, states.shape[1]))
+        for j, law in enumerate(self.laws):
+            if self._steady[j] is None:
+                flows[:, j] = states[:, next(inertial)]
+                continue
+            flows[:, j] = law.flow_rows(pressures[:, j] - pressures[:, j + 1])
+        return flows
 
     def read_line(self, states: FloatArray, volumes: FloatArray) -> tuple[
             FloatArray, FloatArray, FloatArray]:

@@ -26,6 +26,8 @@ and f the friction law the tube declares:
 from dataclasses import dataclass
 import math
 
+import numpy as np
+from numpy.typing import NDArray
 from scipy.optimize import brentq
 
 from softseq_ros.scene.network import BLASIUS, Fluid, Tube
@@ -80,6 +82,13 @@ class TubeLaw:
         magnitude = brentq(lambda q: self._magnitude_drop(q) - size, 0.0, bound,
                            xtol=1e-300, rtol=4.0 * 2.0 ** -52)
         return math.copysign(magnitude, drop_pa)
+
+    def flow_rows(self, drops_pa: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`flow` of many drops [Pa] at once (exact arithmetic where the law is linear)."""
+        drops = np.asarray(drops_pa, dtype=float)
+        if self.quadratic == 0.0 and self.turbulent == 0.0:
+            return drops / self.resistance
+        return np.array([self.flow(d) for d in drops.tolist()])
 
     def drop(self, flow: float) -> float:
         """The steady pressure drop [Pa] of a flow (no inertia)."""

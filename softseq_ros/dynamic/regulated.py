@@ -15,12 +15,14 @@ I is what the regulator has let in since rest; the tip's volume follows from mas
 others' fluid, so the segments hold what the regulator let in to round-off. The segments'
 curves, the channels and their laws are the syringe network's (softseq_ros.dynamic.flow,
 whose :class:`NetworkFlow` evaluates them here too). The state is stiff where the channels are
-short and wide, so it is integrated by scipy's Radau, one integration per straight piece of the
-programme (its corners are where the target's slope jumps), each segment's passages through
+short and wide, so it is integrated by scipy's Radau, one integration per leg of the programme
+(where the target's slope jumps; a profile's rows within a leg are corners no step passes
+over), each segment's passages through
 the folds of its curve located by the integrator's events. A segment pushed past the end of its
 curve stops the path there with :class:`NetworkDomainError`, as the syringe's network does.
 """
 
+import math
 from typing import Callable, Sequence
 
 import numpy as np
@@ -36,6 +38,8 @@ from softseq_ros.segments.models import Segment
 
 FloatArray = NDArray[np.float64]
 Event = Callable[[float, FloatArray], float]
+# The programme's target gauge pressure [Pa] at a time [s].
+Target = Callable[[float], float]
 
 
 class RegulatedNetwork:
@@ -73,32 +77,27 @@ class RegulatedNetwork:
 
     # ------------------------------------------------------------------ the equations
 
-    def _outlet(self, t: float, state: Sequence[float],
-                piece: tuple[float, float, float]) -> float:
-        if self.lagged:
-            return state[self.at_outlet]
-        start_t, start_p, slope = piece
-        return start_p + slope * (t - start_t)
+    def _outlet(self, t: float, state: Sequence[float], target: Target) -> float:
+        return state[self.at_outlet] if self.lagged else target(t)
 
     def _tube_flow(self, state: Sequence[float], drop: float) -> float:
         limit = self.regulator.max_flow_m3_per_s
         flow = state[self.at_tube] if self.tube_inertial else self.tube.flow(drop)
         return min(max(flow, -limit), limit)
 
-    def balance(self, t: float, y: FloatArray, piece: tuple[float, float, float]) -> tuple[
+    def balance(self, t: float, y: FloatArray, target: Target) -> tuple[
             FloatArray, FloatArray, FloatArray, float, float, FloatArray]:
         """
         Volumes, pressures, channel flows, outlet pressure, tube flow and rates at time ``t``.
 
-        ``piece``: the programme's straight piece the time lies on, (start [s], target there
-        [Pa], slope [Pa/s]).
+        ``target``: the programme's target [Pa] at a time [s] of the leg the time lies in.
         """
         members = self.members
         state = y.tolist()
         volumes = members.volumes_of(y[:self.at_injected], state[self.at_injected])
         pressures = members.pressures(volumes)
         flows = members.channel_flows(y[:self.at_injected], pressures)
-        outlet = self._outlet(t, state, piece)
+        outlet = self._outlet(t, state, target)
         drop = outlet - float(pressures[self.feed])
         supply = self._tube_flow(state, drop)
         last = self.n - 1
@@ -110,9 +109,7 @@ class RegulatedNetwork:
             rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
         rates.append(supply)
         if self.lagged:
-            start_t, start_p, slope = piece
-            target = start_p + slope * (t - start_t)
-            rates.append((target - outlet) / self.regulator.time_constant_s)
+            rates.append((target(t) - outlet) / self.regulator.time_constant_s)
         if self.tube_inertial:
             push = (drop - self.tube.drop(supply)) / self.tube.inertance
             limit = self.regulator.max_flow_m3_per_s
@@ -160,9 +157,9 @@ class RegulatedNetwork:
         times = np.asarray(times, dtype=float).reshape(-1)
         if times.size and (times[0] < 0.0 or np.any(np.diff(times) < 0.0)):
             raise ValueError('times must be in order, from 0 s on')
-        corners = np.asarray(programme.times)
+        corners = np.asarray(programme.corners or programme.times)
         end = float(times[-1]) if times.size else 0.0
-        # The straight pieces up to the last time (held beyond the programme's end).
+        # The legs up to the last time (held beyond the programme's end).
         starts = corners[corners < end].tolist() or [0.0]
         stops = starts[1:] + [end]
         folds, which, ends = self._events()
@@ -176,13 +173,11 @@ class RegulatedNetwork:
         for start, stop in zip(starts, stops):
             if stop <= start:
                 continue
-            target = float(programme.target_at(start))
-            slope = (float(programme.target_at(stop)) - target) / (stop - start)
-            piece = (start, target, slope)
-            solved = solve_ivp(lambda t, state, piece=piece: self.balance(t, state, piece)[5],
-                               (start, stop),
-                               y, method='Radau', rtol=self.rtol, atol=self.atol,
-                               dense_output=True, events=folds + ends)
+            target, max_step = self._leg_target(start, stop)
+            solved = solve_ivp(lambda t, state, target=target: self.balance(t, state, target)[5],
+                               (start, stop), y, method='Radau', rtol=self.rtol,
+                               atol=self.atol, dense_output=True, events=folds + ends,
+                               max_step=max_step)
             if solved.status < 0:
                 raise NetworkDomainError(f'the regulated network integration failed at '
                                          f'{solved.t[-1]:.6g} s: {solved.message}')
@@ -191,7 +186,7 @@ class RegulatedNetwork:
                                                                     solved.y_events)):
                 i, fold = which[index]
                 for t_event, state in zip(event_times, event_states):
-                    rates = self.balance(t_event, state, piece)[5]
+                    rates = self.balance(t_event, state, target)[5]
                     direction = self._volume_rate(i, rates)
                     crossings.append(FoldCrossing(
                         self.segments[i].name, fold.volume, fold.pressure, fold.kind,
@@ -215,6 +210,24 @@ class RegulatedNetwork:
         crossings.sort(key=lambda c: c.time_s)
         return self._read(times, rows, crossings, steps)
 
+    def _leg_target(self, start: float, stop: float) -> tuple[Target, float]:
+        """
+        The target within a leg from ``start`` to ``stop`` [s], and the longest step in it.
+
+        A straight leg (a ramp, a hold) has its line; a profile its rows, followed linearly,
+        and no step longer than its shortest row, so that no step passes over a row's corner.
+        """
+        programme = self.regulator.programme
+        times = np.asarray(programme.times)
+        inside = (times > start) & (times < stop)
+        start_p = float(programme.target_at(start))
+        if not np.any(inside):
+            slope = (float(programme.target_at(stop)) - start_p) / (stop - start)
+            return (lambda t: start_p + slope * (t - start)), math.inf
+        knots = np.concatenate([[start], times[inside], [stop]])
+        values = programme.target_at(knots)
+        return ((lambda t: float(np.interp(t, knots, values))), float(np.min(np.diff(knots))))
+
     def _volume_rate(self, i: int, rates: FloatArray) -> float:
         if i < self.n - 1:
             return float(rates[i])
@@ -222,33 +235,30 @@ class RegulatedNetwork:
 
     def _read(self, times: FloatArray, rows: FloatArray, crossings: list[FoldCrossing],
               steps: int) -> DynamicPath:
-        programme = self.regulator.programme
-        corners = programme.times
-        count = times.size
-        volumes = np.empty((count, self.n))
-        pressures = np.empty((count, self.n))
-        flows = np.empty((count, len(self.members.laws)))
-        outlets = np.empty(count)
-        supply = np.empty(count)
-        for r, (t, state) in enumerate(zip(times.tolist(), rows)):
-            piece_at = max(int(np.searchsorted(corners, t, side='right')) - 1, 0)
-            start = corners[piece_at]
-            stop = corners[piece_at + 1] if piece_at + 1 < len(corners) else start
-            target = float(programme.target_at(start))
-            slope = ((float(programme.target_at(stop)) - target) / (stop - start)
-                     if stop > start else 0.0)
-            v, p, q, outlet, flow, _ = self.balance(t, state, (start, target, slope))
-            volumes[r], pressures[r], flows[r], outlets[r], supply[r] = v, p, q, outlet, flow
+        """The path's arrays from the states at ``times``, as :meth:`balance` reads one."""
+        members = self.members
+        injected = rows[:, self.at_injected].copy()
+        volumes = members.states_volumes(rows[:, :self.at_injected], injected)
+        pressures = members.row_pressures(volumes)
+        flows = members.channel_flow_rows(rows[:, :self.at_injected], pressures)
+        target = self.regulator.programme.target_at(times)
+        outlets = rows[:, self.at_outlet].copy() if self.lagged else target
+        if self.tube_inertial:
+            supply = rows[:, self.at_tube].copy()
+        else:
+            supply = self.tube.flow_rows(outlets - pressures[:, self.feed])
+        limit = self.regulator.max_flow_m3_per_s
+        supply = np.clip(supply, -limit, limit)
         curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, i]), dtype=float)
                                       for i, s in enumerate(self.segments)])
-        peak_reynolds = [max((law.reynolds(q) for q in flows[:, j].tolist()), default=0.0)
-                         for j, law in enumerate(self.members.laws)]
+        peak_reynolds = [max((law.reynolds(q) for q in (float(np.max(flows[:, j], initial=0.0)),
+                                                         float(np.min(flows[:, j], initial=0.0)))),
+                             default=0.0) for j, law in enumerate(members.laws)]
         return DynamicPath(
-            time_s=times, injected=rows[:, self.at_injected].copy(), pressure=outlets,
-            volumes=volumes, curvatures=curvatures, channel_flows=flows,
-            snap=np.zeros(count, dtype=bool), snaps=[], peak_reynolds=peak_reynolds,
-            steps=steps, folds=crossings, segment_pressure=pressures, supply_flow=supply,
-            target_pressure=programme.target_at(times))
+            time_s=times, injected=injected, pressure=outlets, volumes=volumes,
+            curvatures=curvatures, channel_flows=flows, snap=np.zeros(times.size, dtype=bool),
+            snaps=[], peak_reynolds=peak_reynolds, steps=steps, folds=crossings,
+            segment_pressure=pressures, supply_flow=supply, target_pressure=target)
 
 
 def regulated_network_path(segments: Sequence[Segment], network: NetworkSettings,

@@ -68,11 +68,14 @@ class PressureProgramme:
     """
     Target gauge pressures [Pa] at breakpoint times [s], followed linearly between them.
 
-    Time 0 is the programme's start, at 0 Pa gauge (the segments at rest).
+    Time 0 is the programme's start, at 0 Pa gauge (the segments at rest). ``corners``: the
+    times where its legs meet (a profile's rows inside a leg are not among them); empty: every
+    breakpoint is one.
     """
 
     times: tuple[float, ...]
     pressures: tuple[float, ...]
+    corners: tuple[float, ...] = ()
 
     def duration(self) -> float:
         """When the last leg of the last cycle ends [s]."""
@@ -192,7 +195,7 @@ def _legs(ctx: Context, value: object, default_rate: float, cycles: int, highest
             if value > highest:
                 raise ctx.error(at, f'{value:g} Pa is above {why_highest}')
         parsed.append((index, key, value, rate))
-    times, pressures = [0.0], [0.0]
+    times, pressures, corners = [0.0], [0.0], [0.0]
     for cycle in range(1, cycles + 1):
         in_cycle = f' in cycle {cycle}' if cycles > 1 else ''
         for index, key, value, rate in parsed:
@@ -220,7 +223,8 @@ def _legs(ctx: Context, value: object, default_rate: float, cycles: int, highest
                                         f'from ({now:g} Pa{in_cycle})')
                 times.append(times[-1] + abs(target - now) / (rate or default_rate))
                 pressures.append(target)
-    return PressureProgramme(tuple(times), tuple(pressures))
+            corners.append(times[-1])
+    return PressureProgramme(tuple(times), tuple(pressures), tuple(corners))
 
 
 def read_regulator(ctx: Context, supply: object, pump: object,
