@@ -511,7 +511,8 @@ def wilson_interval(count: int, samples: int, confidence: float = DEFAULT_CONFID
     scale = 1.0 + z * z / samples
     centre = (share + z * z / (2 * samples)) / scale
     half = z / scale * math.sqrt(share * (1.0 - share) / samples + z * z / (4 * samples**2))
-    return max(0.0, centre - half), min(1.0, centre + half)
+    # It holds the share seen, also at 0 and 1 where round-off would leave it just outside.
+    return max(0.0, min(share, centre - half)), min(1.0, max(share, centre + half))
 
 
 def proportion(count: int, samples: int, confidence: float) -> dict:

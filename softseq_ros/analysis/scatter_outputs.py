@@ -167,8 +167,9 @@ def _plot_scatter(result: ScatterResult, out: Path, style: FigureStyle) -> list[
         p = chances[kind]
         low, high = p['interval']
         types_ax.bar(x, p['probability'], color=TYPE_COLOURS[kind], width=0.6)
-        types_ax.errorbar(x, p['probability'], yerr=[[p['probability'] - low],
-                                                     [high - p['probability']]],
+        # max(0, ...): the interval holds its probability up to round-off.
+        types_ax.errorbar(x, p['probability'], yerr=[[max(0.0, p['probability'] - low)],
+                                                     [max(0.0, high - p['probability'])]],
                           color='0.2', capsize=3, lw=0.8)
     types_ax.set_xticks(range(len(SEQUENCE_TYPES)), SEQUENCE_TYPES)
     types_ax.set_ylim(0.0, 1.05)
