@@ -10,7 +10,6 @@ and with H normal the probability of the symmetric type is the normal CDF there.
 
 import json
 import math
-from pathlib import Path
 import subprocess
 import sys
 
