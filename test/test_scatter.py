@@ -1,11 +1,12 @@
 """
 softseq scatter: the sequence under parameter scatter, against closed forms and as a user runs it.
 
-The closed-form pair: a linear bottom segment that ends at P_MAX and a neo-Hookean balloon top
-whose pressure peaks at p* = (12/7) 7^(-1/6) mu H / R. Where p* < P_MAX the top passes its
-peak and empties the bottom into itself (symmetric); where p* > P_MAX the bottom ends first and
-the top only takes over (partial). So the type flips at H_FLIP = P_MAX R / ((12/7) 7^(-1/6) mu),
-and with H normal the probability of the symmetric type is the normal CDF there.
+The closed-form pair (scenes.flip_document): a linear bottom segment that ends at P_MAX and a
+neo-Hookean balloon top whose pressure peaks at p* = (12/7) 7^(-1/6) mu H / R. Where p* < P_MAX
+the top passes its peak and empties the bottom into itself (symmetric); where p* > P_MAX the
+bottom ends first and the top only takes over (partial). So the type flips at
+H_FLIP = P_MAX R / ((12/7) 7^(-1/6) mu), and with H normal the probability of the symmetric
+type is the normal CDF there.
 """
 
 import json
@@ -15,26 +16,14 @@ import sys
 
 import numpy as np
 import pytest
+from scenes import FLIP_H, FLIP_STIFFNESS, flip_document
 from scipy.stats import binomtest, norm
 
 from softseq_ros.analysis import scatter
 from softseq_ros.cli import main
 from softseq_ros.scene.loader import scene_from_dict
 
-MU, RADIUS, P_MAX, STIFFNESS = 34e3, 0.01, 8000.0, 5e8
-PEAK_FACTOR = 12.0 / 7.0 * 7.0 ** (-1.0 / 6.0)   # neo-Hookean sphere: p* / (mu H / R)
-H_FLIP = P_MAX * RADIUS / (PEAK_FACTOR * MU)
-
-
-def flip_document(thickness: float = H_FLIP) -> dict:
-    return {'name': 'flip', 'segments': [
-        {'name': 'bottom', 'length_m': 0.111,
-         'linear': {'rest_volume_m3': 1e-5, 'stiffness_pa_per_m3': STIFFNESS,
-                    'max_volume_m3': 1e-5 + P_MAX / STIFFNESS}},
-        {'name': 'top', 'length_m': 0.111,
-         'balloon': {'material': {'law': 'neo_hookean', 'shear_modulus_pa': MU},
-                     'radius_m': RADIUS, 'thickness_m': thickness, 'max_stretch': 2.6}}],
-        'pump': {'legs': [{'inflate_to_m3': 1e-6}]}}
+H_FLIP, STIFFNESS = FLIP_H, FLIP_STIFFNESS
 
 
 @pytest.fixture(scope='module')
