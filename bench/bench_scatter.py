@@ -24,6 +24,7 @@ import argparse
 import os
 from pathlib import Path
 import sys
+import tempfile
 import time
 
 REPO = Path(__file__).resolve().parents[1]
@@ -64,10 +65,15 @@ def main() -> int:
             ('local processes (2 workers)', {'workers': 2}),
             ('local Dask cluster (2 workers x 1 thread)', {'workers': 2, 'backend': 'dask'})]
     rows, results = [], []
-    for label, how in runs:
-        result, wall, cpu = timed(scene, parameters, samples, **how)
-        results.append(result)
-        rows.append((label, wall, cpu))
+    import dask
+
+    # The Dask workers' scratch space in a folder of our own, removed after the runs.
+    with tempfile.TemporaryDirectory(prefix='bench_scatter_') as scratch, \
+            dask.config.set({'temporary-directory': scratch}):
+        for label, how in runs:
+            result, wall, cpu = timed(scene, parameters, samples, **how)
+            results.append(result)
+            rows.append((label, wall, cpu))
     same = all(r.samples == results[0].samples for r in results[1:])
     serial = rows[0][1]
     chance = results[0].summary['sequence_type']['symmetric']
