@@ -1079,6 +1079,19 @@ CLI = [
     ('graph', ['fig1_none', '--reversals', 'many'], '--reversals'),
     ('graph', ['fig1_none', '--out', '/proc/no/such/g'], '/proc/no'),
     ('scenes', ['--bogus'], '--bogus'),
+    ('scatter', [], 'scene'), ('scatter', ['fig1_symmetric'], '--vary'),
+    ('scatter', ['fig1_symmetric', '--vary', 'top.thickness_m=normal:2e-3,-1e-4'],
+     'top.thickness_m'),
+    ('scatter', ['fig1_symmetric', '--vary', 'top.thickness_m=normal:nan,1e-4'],
+     'top.thickness_m'),
+    ('scatter', ['fig1_symmetric', '--vary', 'top.no_such_m=normal:5%'], 'no_such_m'),
+    ('scatter', ['fig1_symmetric', '--vary', 'middle.thickness_m=normal:5%'], 'middle'),
+    ('scatter', ['fig1_symmetric', '--vary', 'top.thickness_m=uniform:-1e-3,3e-3'],
+     'top.thickness_m'),
+    ('scatter', ['fig1_symmetric', '--vary', 'top.thickness_m=normal:5%', '--spec',
+                 '{missing}'], 'missing'),
+    ('scatter', ['fig1_symmetric', '--vary', 'top.thickness_m=normal:5%', '--sobol', '3'],
+     '--sobol'),
 ]
 
 

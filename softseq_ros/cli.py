@@ -520,6 +520,61 @@ def _fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scatter(args: argparse.Namespace) -> int:
+    from softseq_ros import load_scene
+    from softseq_ros.analysis.scatter import (
+        ScatterError,
+        check_settings,
+        parameters_of,
+        read_vary,
+        run_scatter,
+    )
+    from softseq_ros.analysis.scatter_outputs import summary_lines, write_scatter_outputs
+    from softseq_ros.errors import check_output_folder
+    from softseq_ros.parallel import scheduler_option, worker_option
+    from softseq_ros.progress import end_progress, write_progress
+
+    # Every option before the scene is loaded: a mistake costs no run.
+    for option, value in (('--until-width', args.until_width),
+                          ('--confidence', args.confidence)):
+        if value is not None and not math.isfinite(value):
+            raise ScatterError(f'{option}: must be a finite number, got {value}')
+    if args.seed < 0:
+        raise ScatterError(f'--seed: a whole number >= 0, got {args.seed}')
+    vary = read_vary(args.vary, args.spec)
+    check_settings(args.samples, args.until_width, args.confidence, args.sobol,
+                   max(len(vary), 1))
+    workers = worker_option('--workers', args.workers)
+    scheduler = scheduler_option('--scheduler', args.scheduler)
+    if scheduler is not None and workers is not None:
+        raise ScatterError('--workers: not with --scheduler (the cluster has its own workers)')
+    style = _figure_style(args)
+    scene = load_scene(args.scene)
+    parameters = parameters_of(scene, vary)
+    out = args.out or Path('bags') / f'scatter_{scene.name}'
+    check_output_folder(out, '--out' if args.out is not None else 'the output folder')
+    stream = None if args.quiet else sys.stderr
+    result = run_scatter(scene, parameters, samples=args.samples, until_width=args.until_width,
+                         confidence=args.confidence, seed=args.seed, sobol=args.sobol,
+                         workers=workers, scheduler=scheduler,
+                         backend='dask' if scheduler is not None else 'processes',
+                         progress=None if stream is None else
+                         (lambda line: write_progress(stream, line)))
+    end_progress(stream)
+    written = write_scatter_outputs(result, out, style)
+    for line in summary_lines(result, written):
+        print(line)
+    stop = result.stop
+    if stop['reached'] is False:
+        print(f'softseq scatter: warning: the widest interval is {stop["widest_interval"]:.3g}, '
+              f'not {stop["until_width"]:g}, after {stop["samples"]} samples: give more '
+              '--samples', file=sys.stderr)
+    if result.summary['unconverged_samples']:
+        print(f'softseq scatter: warning: {result.summary["unconverged_samples"]} samples ran '
+              "out of the solver's budget (softseq_ros.tolerances)", file=sys.stderr)
+    return 0
+
+
 def _play(args: argparse.Namespace) -> int:
     from softseq_ros.stopping import HeldSignals
 
@@ -790,6 +845,45 @@ def build_parser() -> argparse.ArgumentParser:
                      'and fit.png')
     _figure_options(fit)
     fit.set_defaults(handler=_fit)
+
+    scatter = sub.add_parser('scatter', help='the sequence under manufacturing scatter: '
+                             'Monte Carlo probabilities and Sobol indices',
+                             description='Draw the varied parameters of a scene (a law '
+                             "segment's numbers, a table's pressure scale or noise) from "
+                             'their distributions, classify every sample as classify does and '
+                             'measure its switch, snap-throughs and plateau; every probability '
+                             'with its Wilson interval; Sobol first-order and total indices '
+                             '(SALib) of each number; on local processes or a Dask scheduler. '
+                             'Writes scatter.json, scatter.png and summary.txt '
+                             '(docs/scatter.md).')
+    scatter.add_argument('scene', help='scene YAML file, or the name of a shipped scene')
+    scatter.add_argument('--vary', action='append', metavar='NAME=DIST',
+                         help='a parameter and its distribution, repeatable: '
+                         'top.thickness_m=normal:5%%, top.material.shear_modulus_pa='
+                         'uniform:30e3,38e3, top.pressure_scale=normal:1,0.05 (a table), '
+                         'top.noise_std_pa=20 (a table: Pa of noise, drawn afresh per sample)')
+    scatter.add_argument('--spec', type=_given_path('a spec file'), metavar='FILE.yaml',
+                         help='YAML with one key, vary: a mapping of NAME: DIST as --vary '
+                         'takes them')
+    scatter.add_argument('--samples', type=int, default=1000, metavar='N',
+                         help='Monte Carlo samples, at most (default 1000)')
+    scatter.add_argument('--until-width', type=float, metavar='W',
+                         help="stop once every probability's interval is at most W wide "
+                         '(checked every 50 samples, in order)')
+    scatter.add_argument('--confidence', type=float, default=0.95,
+                         help='confidence level of the intervals (default 0.95)')
+    scatter.add_argument('--seed', type=int, default=0, help='random seed (default 0): the '
+                         'same seed gives the same samples, whatever the workers')
+    scatter.add_argument('--sobol', type=int, default=64, metavar='N',
+                         help='base samples of the Sobol design, a power of 2 (default 64: '
+                         '64 x (parameters + 2) samples more); 0: no indices')
+    scatter.add_argument('--workers', help='local worker processes (default: one per core)')
+    scatter.add_argument('--scheduler', help='Dask scheduler address, e.g. '
+                         'tcp://10.0.0.5:8786')
+    scatter.add_argument('--out', type=Path, help='output folder (default bags/scatter_NAME)')
+    scatter.add_argument('--quiet', action='store_true', help='no progress lines')
+    _figure_options(scatter)
+    scatter.set_defaults(handler=_scatter)
 
     play = sub.add_parser('play', help='republish a bag on its topics (like ros2 bag play)',
                           description='Publish every recorded message on its topic with its '

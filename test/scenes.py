@@ -105,3 +105,25 @@ def fast_asymmetric(folder: Path, name: str, pump_rate_hz: float = 50,
         folder, 'fig1_asymmetric.yaml', name,
         {**FAST_ASYMMETRIC_PUMP, 'rate_hz': pump_rate_hz},
         {'rate_hz': camera_rate_hz, 'trigger_injected_m3': list(triggers)}, file_name)
+
+
+# The closed-form flip of `softseq scatter` (test_scatter.py, bench/bench_scatter.py): a linear
+# bottom segment ending at FLIP_P_MAX beside a neo-Hookean balloon top whose pressure peaks at
+# p* = (12/7) 7^(-1/6) mu H / R. Where p* < FLIP_P_MAX the top passes its peak and empties the
+# bottom into itself (symmetric); where p* > FLIP_P_MAX the bottom ends first and the top only
+# takes over (partial): the type flips at the thickness FLIP_H.
+FLIP_MU, FLIP_RADIUS, FLIP_P_MAX, FLIP_STIFFNESS = 34e3, 0.01, 8000.0, 5e8
+NEO_HOOKEAN_PEAK = 12.0 / 7.0 * 7.0 ** (-1.0 / 6.0)   # a thin sphere's p* / (mu H / R)
+FLIP_H = FLIP_P_MAX * FLIP_RADIUS / (NEO_HOOKEAN_PEAK * FLIP_MU)
+
+
+def flip_document(thickness: float = FLIP_H) -> dict:
+    """The flip pair as a scene's parsed YAML, its balloon ``thickness`` [m] thick."""
+    return {'name': 'flip', 'segments': [
+        {'name': 'bottom', 'length_m': 0.111,
+         'linear': {'rest_volume_m3': 1e-5, 'stiffness_pa_per_m3': FLIP_STIFFNESS,
+                    'max_volume_m3': 1e-5 + FLIP_P_MAX / FLIP_STIFFNESS}},
+        {'name': 'top', 'length_m': 0.111,
+         'balloon': {'material': {'law': 'neo_hookean', 'shear_modulus_pa': FLIP_MU},
+                     'radius_m': FLIP_RADIUS, 'thickness_m': thickness, 'max_stretch': 2.6}}],
+        'pump': {'legs': [{'inflate_to_m3': 1e-6}]}}

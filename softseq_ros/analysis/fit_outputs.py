@@ -55,19 +55,19 @@ def write_fit_outputs(fit: SphereFit, out: Path, length: float | None = None,
     """
     out.mkdir(parents=True, exist_ok=True)
     written = [out / FIT_JSON, out / SEGMENT_CSV, out / FIT_PNG]
-    write_text(written[0], json.dumps(_finite(fit.to_dict()), indent=1, allow_nan=False)
+    write_text(written[0], json.dumps(finite_json(fit.to_dict()), indent=1, allow_nan=False)
                + '\n')
     write_text(written[1], segment_table_text(fit, length))
     plot_fit(fit, written[2], style)
     return written
 
 
-def _finite(value: object) -> object:
+def finite_json(value: object) -> object:
     """``value`` with every number that JSON cannot hold (inf, nan) as None."""
     if isinstance(value, dict):
-        return {key: _finite(item) for key, item in value.items()}
+        return {key: finite_json(item) for key, item in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite(item) for item in value]
+        return [finite_json(item) for item in value]
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value

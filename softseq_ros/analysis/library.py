@@ -39,7 +39,7 @@ from softseq_ros.analysis.figures import (
     new_figure,
     save_figure,
 )
-from softseq_ros.analysis.metrics import Trace, analyse
+from softseq_ros.analysis.metrics import sweep_metrics
 from softseq_ros.analysis.recording import DEFLATION, INFLATION
 from softseq_ros.analysis.text import millijoules_text
 from softseq_ros.errors import UserError, write_text, writing
@@ -182,13 +182,7 @@ def assemble(entries: tuple[Entry, ...]) -> dict:
     kind = classify(emap)
     lo, hi = emap.injected_range
     rising, falling = inflate_and_deflate(emap, SWEEP_POINTS)
-    rows = rising.injected.size
-    trace = Trace(np.concatenate([rising.injected, falling.injected]),
-                  np.concatenate([rising.pressure, falling.pressure]),
-                  np.vstack([rising.volumes, falling.volumes]),
-                  np.concatenate([np.ones(rows, np.int8), -np.ones(rows, np.int8)]),
-                  segment_names=tuple(s.name for s in segments))
-    metrics = analyse(trace, v_range=hi - lo)
+    metrics = sweep_metrics(rising, falling, tuple(s.name for s in segments), hi - lo)
     lengths = [e.length_m for e in entries]
     points, _ = backbone_batch(rising.curvatures, lengths, points_per_segment=8)
     tip = points[:, -1, :]

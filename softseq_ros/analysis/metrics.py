@@ -224,6 +224,24 @@ def analyse(trace: Trace, v_range: float | None = None,
     return result
 
 
+def sweep_metrics(rising: object, falling: object, names: tuple[str, ...],
+                  v_range: float) -> dict:
+    """
+    :func:`analyse` of a solver's sweep: an inflation path and the deflation path after it.
+
+    ``rising`` and ``falling`` are :class:`~softseq_ros.quasistatic.equilibrium.SolvedPath`
+    (``inflate_and_deflate``), ``names`` the segments', ``v_range`` the injected range [m^3].
+    """
+    rows = rising.injected.size
+    trace = Trace(np.concatenate([rising.injected, falling.injected]),
+                  np.concatenate([rising.pressure, falling.pressure]),
+                  np.vstack([rising.volumes, falling.volumes]),
+                  np.concatenate([np.ones(rows, np.int8), -np.ones(falling.injected.size,
+                                                                np.int8)]),
+                  segment_names=names)
+    return analyse(trace, v_range=v_range)
+
+
 def _area(u: FloatArray, p: FloatArray, lo: float, hi: float) -> float:
     """Integral of p du from lo to hi over a monotone curve [J]."""
     inside = (u > lo) & (u < hi)

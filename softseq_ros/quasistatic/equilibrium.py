@@ -383,7 +383,16 @@ def classify(emap: EquilibriumMap, samples: int = 4001) -> str:
     Inflate over the whole range and deflate back, then apply the rules of
     :func:`softseq_ros.quasistatic.sequence.sequence_type` to the solved paths.
     """
-    inflation, deflation = inflate_and_deflate(emap, samples)
+    return sweep_sequence_type(emap, *inflate_and_deflate(emap, samples))
+
+
+def sweep_sequence_type(emap: EquilibriumMap, inflation: SolvedPath,
+                        deflation: SolvedPath) -> str:
+    """
+    The sequence type of a sweep of :func:`inflate_and_deflate` (what :func:`classify` returns).
+
+    For a caller that keeps the sweep's paths for other numbers: one sweep, not two.
+    """
     gap = np.max(np.abs(inflation.volumes - deflation.volumes[::-1]))
     share = np.diff(inflation.volumes, axis=0) / np.diff(inflation.injected)[:, None]
     return sequence_type(bool(inflation.events or deflation.events), float(gap),

@@ -676,6 +676,17 @@ def require_syringe(scene: Scene, job: str) -> PumpSettings:
     return scene.pump
 
 
+def segment_from_entry(entry: object, key_path: str = 'segment') -> Segment:
+    """
+    One segment from its entry as a scene lists it (``{name, length_m, balloon: {...}}``).
+
+    Checked as the loader checks a scene's segments; SceneError names ``key_path`` and the
+    key. Table paths are relative to the current folder. For a closed-form segment built from
+    its scene entry with some of its numbers changed (``softseq scatter``).
+    """
+    return _segment(Context('', Path('.')), entry, key_path)
+
+
 def load_scene(path: str | Path, graph_of: GraphOf | None = None) -> Scene:
     """
     Load and validate a scene file, or a shipped scene by its bare name (``paper``).
