@@ -60,7 +60,7 @@ RESULTS = ROOT / 'bench' / 'adversarial_results.md'
 FAULTS = ROOT / 'docs' / 'faults.md'
 BEGIN, END = '<!-- adversarial summary: begin -->', '<!-- adversarial summary: end -->'
 CLASSES = ('scene', 'table', 'design', 'experiment', 'reference', 'history', 'bag', 'cli',
-           'option', 'node_parameter', 'topic', 'signal')
+           'option', 'node_parameter', 'service', 'topic', 'signal')
 QUICK_PER_CLASS = 1
 COMMAND_TIMEOUT_S = 120.0
 # A refusal comes before any work: a FEM run or a playback still going after this did not.
@@ -1227,7 +1227,7 @@ def _node_classes() -> dict[str, Any]:
 # every executable of setup.py to a node class above or a reason here).
 NODES_TRIED_ELSEWHERE = {
     'managed_syringe_pump': 'the syringe pump class declares its parameters (tried above); its '
-                            "lifecycle is test_managed_pump.py's",
+                            "lifecycle and services are the service class's",
     'rig': 'the pump, actuator and camera in one process: each node class is tried above',
 }
 
@@ -1355,6 +1355,195 @@ def _destroy(node: Any) -> None:
     if close is not None:
         close(log=False)
     node.destroy_node()
+
+
+# ------------------------------------------------------------------------------ services
+
+# rclpy's own parameter services: the node_parameter class tries what they carry.
+PARAMETER_SERVICES = ('describe_parameters', 'get_parameter_types', 'get_parameters',
+                      'get_type_description', 'list_parameters', 'set_parameters',
+                      'set_parameters_atomically')
+# States of the syringe pump a service may find it in: reached from a fresh, idle pump by these
+# service calls (the answers need not succeed: a state is what the calls leave).
+PUMP_STATES = {'idle': (), 'running': ('start',), 'held': ('start', 'hold'),
+               'stopped': ('start', 'stop'), 'setpoint': ('start', ('setpoint_mode', True)),
+               'reset': ('start', 'stop', 'reset')}
+# The transitions each primary state of a managed node has (the ROS 2 managed-node design);
+# every other id, 0 to 11 and two beyond, must be refused with the node living on.
+LIFECYCLE_PATH = (('unconfigured', 1), ('inactive', 3), ('active', 7), ('finalized', None))
+LIFECYCLE_ALLOWED = {'unconfigured': {1, 5}, 'inactive': {2, 3, 6}, 'active': {4, 7},
+                     'finalized': set()}
+LIFECYCLE_IDS = tuple(range(12)) + (99, 255)
+SERVICE_TIMEOUT_S = 20.0
+
+
+def node_services(node: str, bench: Workbench) -> list[tuple[str, Any]]:
+    """A node's own services (name after the node's, type), read from a node built here."""
+    built = _build(bench, node, bench.folder('services'))
+    try:
+        found = []
+        for service in built.services:
+            name = service.srv_name.rsplit('/', 1)[-1]
+            if name not in PARAMETER_SERVICES:
+                found.append((name, service.srv_type))
+        return sorted(found, key=lambda item: item[0])
+    finally:
+        _destroy(built)
+
+
+def _requests(srv_type: Any) -> list[tuple[str, Any]]:
+    """The requests a service is given: its default, then each bool field both ways."""
+    made = [('default request', srv_type.Request())]
+    for field_name, kind in srv_type.Request.get_fields_and_field_types().items():
+        if kind == 'boolean':
+            for value in (True, False):
+                request = srv_type.Request()
+                setattr(request, field_name, value)
+                made.append((f'{field_name}={value}', request))
+    return made
+
+
+def _call(client_node: Any, srv_type: Any, service: str, request: Any) -> Any:
+    from softseq_ros.testing import wait_for
+    client = client_node.create_client(srv_type, service)
+    if not client.wait_for_service(timeout_sec=SERVICE_TIMEOUT_S):
+        raise TimeoutError(f'{service} never came up')
+    future = client.call_async(request)
+    wait_for(future.done, f'the answer of {service}', SERVICE_TIMEOUT_S)
+    return future.result()
+
+
+def _trigger_path(client_node: Any, target: str, steps: tuple) -> None:
+    from std_srvs.srv import SetBool, Trigger
+    for step in steps:
+        if isinstance(step, tuple):
+            _call(client_node, SetBool, f'{target}/{step[0]}', SetBool.Request(data=step[1]))
+        else:
+            _call(client_node, Trigger, f'{target}/{step}', Trigger.Request())
+
+
+def service_cases() -> list[Case]:
+    """
+    Every service of every node, in every state the node can be in, and every lifecycle
+    transition from every state of the managed pump: an answer, and the node lives on.
+    """
+    cases = []
+    for node, pump_states in (('syringe_pump', PUMP_STATES),):
+        for state, path in pump_states.items():
+            def run(bench: Workbench, node=node, state=state, path=path) -> Verdict:
+                return _judge_services(bench, node, path)
+            cases.append(Case('service', f'{node} in state {state}: every service, every '
+                                         'request', run))
+    for state, transitions in (('inactive', (1,)), ('active', (1, 3))):
+        for pump_state, path in PUMP_STATES.items():
+            def run_managed(bench: Workbench, transitions=transitions, path=path) -> Verdict:
+                return _judge_services(bench, 'syringe_pump', path, transitions)
+            cases.append(Case('service', f'managed_syringe_pump {state}, pump {pump_state}: '
+                                         'every service, every request', run_managed))
+    for node in _node_classes():
+        if node == 'syringe_pump':
+            continue
+
+        def run_other(bench: Workbench, node=node) -> Verdict:
+            return _judge_services(bench, node, ())
+        cases.append(Case('service', f'{node}: every service, every request', run_other))
+    for state, _ in LIFECYCLE_PATH:
+        for transition in LIFECYCLE_IDS:
+            def run_transition(bench: Workbench, state=state,
+                               transition=transition) -> Verdict:
+                return _judge_transition(bench, state, transition)
+            cases.append(Case('service', f'managed_syringe_pump in state {state}: transition '
+                                         f'{transition}', run_transition))
+    return cases
+
+
+def _judge_services(bench: Workbench, node: str, path: tuple,
+                    transitions: tuple[int, ...] | None = None) -> Verdict:
+    """
+    Each service of a fresh ``node`` (brought along ``path`` first) called with each request.
+
+    ``transitions``: the node is the managed pump instead, taken through these lifecycle
+    transitions before the path.
+    """
+    from lifecycle_msgs.srv import ChangeState
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from softseq_ros.nodes.managed_syringe_pump import ManagedSyringePumpNode
+    from softseq_ros.testing import spinning
+    services = node_services(node, bench)
+    for name, srv_type in services:
+        for label, request in _requests(srv_type):
+            if transitions is None:
+                built = _build(bench, node, bench.folder('services'))
+            else:
+                built = ManagedSyringePumpNode(context=bench.ros.context, parameter_overrides=[
+                    Parameter(key, value=value) for key, value in
+                    _base_overrides(node, bench.folder('services')).items()])
+            target = built.get_fully_qualified_name()
+            client = Node('service_client', context=bench.ros.context)
+            try:
+                with spinning(bench.ros.context, built, client):
+                    for transition in transitions or ():
+                        change = ChangeState.Request()
+                        change.transition.id = transition
+                        if not _call(client, ChangeState, f'{target}/change_state',
+                                     change).success:
+                            return broken(f'lifecycle transition {transition} refused')
+                    _trigger_path(client, target, path)
+                    answer = _call(client, srv_type, f'{target}/{name}', request)
+                    if hasattr(answer, 'success') and not answer.success \
+                            and not getattr(answer, 'message', 'x'):
+                        return broken(f'{name} ({label}): refused without saying why')
+                    # The node lives on: it answers the same call again.
+                    _call(client, srv_type, f'{target}/{name}', request)
+            except Exception as err:  # noqa: BLE001 - a dead executor or no answer breaks it
+                return broken(f'{name} ({label}): {type(err).__name__}: {str(err)[:160]}')
+    return HELD
+
+
+def _judge_transition(bench: Workbench, state: str, transition: int) -> Verdict:
+    """A fresh managed pump brought to ``state``, then sent ``transition``."""
+    from lifecycle_msgs.srv import ChangeState, GetState
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from softseq_ros.nodes.managed_syringe_pump import ManagedSyringePumpNode
+    from softseq_ros.testing import spinning
+    pump = ManagedSyringePumpNode(context=bench.ros.context, parameter_overrides=[
+        Parameter('scene', value='fig1_none'), Parameter('autostart', value=False),
+        Parameter('open_loop', value=True)])
+    client = Node('lifecycle_client', context=bench.ros.context)
+    target = pump.get_fully_qualified_name()
+
+    def change(transition_id: int) -> bool:
+        request = ChangeState.Request()
+        request.transition.id = transition_id
+        return _call(client, ChangeState, f'{target}/change_state', request).success
+
+    def current() -> str:
+        return _call(client, GetState, f'{target}/get_state',
+                     GetState.Request()).current_state.label
+    try:
+        with spinning(bench.ros.context, pump, client):
+            for reached, onwards in LIFECYCLE_PATH:
+                if reached == state:
+                    break
+                if not change(onwards):
+                    return broken(f'could not reach {state}: {reached} refused {onwards}')
+            if current() != state:
+                return broken(f'expected state {state}, the node says {current()}')
+            allowed = transition in LIFECYCLE_ALLOWED[state]
+            done = change(transition)
+            after = current()
+            if done != allowed:
+                return broken(f'transition {transition} from {state}: '
+                              f'{"taken" if done else "refused"}, the design says otherwise')
+            if not allowed and after != state:
+                return broken(f'refused, but the state went from {state} to {after}')
+    except Exception as err:  # noqa: BLE001 - a dead executor or no answer breaks it
+        return broken(f'{type(err).__name__}: {str(err)[:200]}')
+    return HELD
 
 
 # ------------------------------------------------------------------------------ topics
@@ -1787,7 +1976,7 @@ MAKERS: dict[str, Callable[[], list[Case]]] = {
     'scene': scene_cases, 'table': table_cases, 'design': design_cases,
     'experiment': experiment_cases, 'reference': reference_cases, 'history': history_cases,
     'bag': bag_cases, 'cli': cli_cases, 'option': option_cases,
-    'node_parameter': node_parameter_cases,
+    'node_parameter': node_parameter_cases, 'service': service_cases,
     'topic': topic_cases, 'signal': signal_cases,
 }
 WHAT = {
@@ -1811,6 +2000,11 @@ WHAT = {
     'cli': 'every subcommand without its arguments, with unknown options or bad values',
     'node_parameter': 'every parameter of the pump, actuator, camera, sim clock and recorder '
                       'given values it cannot take, at start and at run time (`set_parameters`)',
+    'service': 'every service of every node called in every state the node can be in (the '
+               'pump idle, running, held, stopped, following setpoints, reset), each bool '
+               'field both ways; every lifecycle transition (0 to 11, 99, 255) from every '
+               'state of the managed pump: an answer, a refusal that says why, the node lives '
+               'on',
     'topic': 'garbage on every topic a node subscribes to, while it runs',
     'signal': 'SIGINT and SIGTERM at random moments of `softseq run`, `softseq play` and '
               'every node executable; SIGKILL of the recorder, then `softseq recover`',
@@ -1940,7 +2134,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix='adversarial_') as tmp:
         bench = Workbench(Path(tmp), Zygote(), rng, domain_id=1 + os.getpid() % 90)
         try:
-            if any(c.cls in ('node_parameter', 'topic', 'signal') for c in cases):
+            if any(c.cls in ('node_parameter', 'service', 'topic', 'signal') for c in cases):
                 bench.ros = Ros(bench.domain_id)
             tallies = run_cases(cases, bench)
         finally:

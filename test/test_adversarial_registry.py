@@ -63,3 +63,23 @@ def test_each_written_base_scene_loads_as_it_is(base, tmp_path):
         assert softseq_ros.solve(scene).flips
         return
     assert softseq_ros.classify(scene) in ('none', 'partial', 'symmetric', 'asymmetric')
+
+
+def test_every_node_and_every_lifecycle_transition_from_every_state_has_service_cases():
+    names = {case.name for case in adversarial.service_cases()}
+    for node in adversarial._node_classes():
+        if node == 'syringe_pump':
+            for state in adversarial.PUMP_STATES:
+                assert f'syringe_pump in state {state}: every service, every request' in names
+                for managed in ('inactive', 'active'):
+                    assert (f'managed_syringe_pump {managed}, pump {state}: every service, '
+                            'every request') in names
+        else:
+            assert f'{node}: every service, every request' in names
+    for state, _ in adversarial.LIFECYCLE_PATH:
+        for transition in adversarial.LIFECYCLE_IDS:
+            assert f'managed_syringe_pump in state {state}: transition {transition}' in names
+    # Every lifecycle id a state has is among those tried, and every state is reached.
+    assert set(adversarial.LIFECYCLE_ALLOWED) == {s for s, _ in adversarial.LIFECYCLE_PATH}
+    for allowed in adversarial.LIFECYCLE_ALLOWED.values():
+        assert allowed <= set(adversarial.LIFECYCLE_IDS)
