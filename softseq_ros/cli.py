@@ -3,6 +3,7 @@
 import argparse
 from datetime import datetime, timezone
 import math
+import os
 from pathlib import Path
 import signal
 import sys
@@ -997,6 +998,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _output_gone() -> bool:
+    """Whether the standard output's reader has closed its end of the pipe."""
+    import select
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poller.poll(0))
+    except (OSError, ValueError):
+        return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """
     Run one subcommand; a user's mistake is one line on stderr and exit code 2.
@@ -1018,6 +1030,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, raise_terminated)
     try:
         return handler(args)
+    except BrokenPipeError as err:
+        if not _output_gone():
+            print(f'softseq {name}: error: {one_line(str(err))}', file=sys.stderr)
+            return 2
+        # The reader of the output left (``softseq info BAG | head``): stop as a filter does,
+        # quietly, with 128 + SIGPIPE, and nothing more written to the closed pipe at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
     except USER_ERRORS as err:
         # One line, also where the reason quotes a library's message of several lines; a
         # file the system refused is named first, as every other refusal names its input.

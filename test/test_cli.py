@@ -1,6 +1,7 @@
 """The softseq command as a user runs it: subcommands, output files, one-line errors."""
 
 import csv
+import os
 from pathlib import Path
 import subprocess
 import sys
@@ -221,3 +222,30 @@ def test_scenes_lists_each_shipped_scene_with_its_description():
         kind = '[in time, a network]' if 'network' in data else '[quasi-static]'
         assert line.split(None, 1)[1] == f'{kind} ' + ' '.join(data['description'].split())
     assert any('[in time, a network]' in line for line in lines)
+
+
+@pytest.mark.parametrize('args', [('scenes',), ('classify', 'fig1_asymmetric')])
+def test_a_reader_that_leaves_the_pipe_ends_the_command_quietly(args):
+    # `softseq scenes | head -1`: the reader closes its end; the command stops as a filter does
+    # (128 + SIGPIPE), with nothing on stderr, not "error: [Errno 32] Broken pipe".
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        done = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', *args], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                              timeout=120)
+    finally:
+        os.close(write_end)
+    assert (done.returncode, done.stderr) == (141, '')
+
+
+def test_a_broken_pipe_that_is_not_the_output_is_still_an_error(monkeypatch, capsys):
+    from softseq_ros import cli
+
+    def handler(args):
+        raise BrokenPipeError(32, 'Broken pipe')
+    parser = cli.build_parser()
+    monkeypatch.setattr(cli, 'build_parser', lambda: parser)
+    parser.commands['scenes'].set_defaults(handler=handler)
+    assert cli.main(['scenes']) == 2
+    assert capsys.readouterr().err == 'softseq scenes: error: [Errno 32] Broken pipe\n'
