@@ -31,7 +31,14 @@ from softseq_ros.segments.fit import (
     sphere_pressure,
     sphere_stretch,
 )
-from softseq_ros.segments.materials import Gent, MooneyRivlin, NeoHookean, Ogden
+from softseq_ros.segments.materials import (
+    ArrudaBoyce,
+    Gent,
+    MooneyRivlin,
+    NeoHookean,
+    Ogden,
+    Yeoh,
+)
 
 RADIUS = 0.01       # m
 THICKNESS = 1e-3    # m
@@ -51,6 +58,10 @@ TRUTHS = {
     'ogden': (Ogden((300e3,), (5.0,)), 3.0, {'mu_h_over_r_pa': 30e3, 'alpha': 5.0}),
     'mooney_rivlin': (MooneyRivlin(150e3, 15e3), 4.0,
                       {'c1_h_over_r_pa': 15e3, 'c2_h_over_r_pa': 1.5e3}),
+    'yeoh': (Yeoh(150e3, -3e3, 300.0), 3.5,
+             {'c1_h_over_r_pa': 15e3, 'c2_h_over_r_pa': -300.0, 'c3_h_over_r_pa': 30.0}),
+    'arruda_boyce': (ArrudaBoyce(150e3, 3.0), 2.8,
+                     {'shear_modulus_h_over_r_pa': 15e3, 'lambda_m': 3.0}),
 }
 
 
@@ -100,6 +111,9 @@ DISTINCT = {
     'gent': (Gent(300e3, 8.0), 2.2),
     'ogden': (Ogden((100e3,), (6.0,)), 3.0),
     'mooney_rivlin': (MooneyRivlin(150e3, 15e3), 4.0),
+    'yeoh': (Yeoh(150e3, -3e3, 300.0), 3.5),
+    # Stretched far enough that Gent's locking and the five-term series part beyond the noise.
+    'arruda_boyce': (ArrudaBoyce(100e3, 3.0), 3.8),
 }
 
 
@@ -302,7 +316,7 @@ def test_the_commands_refusals_are_one_line_and_exit_2(gent_tables, tmp_path, ca
                                                               inflation.pressure))
     assert 'is it in mL?' in refusal(capsys, in_ml, '--radius-m', RADIUS, '--out', out)
     for option, value, words in (('--radius-m', '-1', '--radius-m: must be a finite length > 0'),
-                                 ('--laws', 'gent,yeoh', '--laws: unknown law yeoh'),
+                                 ('--laws', 'gent,hencky', '--laws: unknown law hencky'),
                                  ('--bootstrap', '-5', '--bootstrap: a number of resamples')):
         assert words in refusal(capsys, gent_tables[0], option, value, '--out', out)
     assert not out.exists()

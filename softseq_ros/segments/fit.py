@@ -40,11 +40,13 @@ from scipy.optimize import least_squares
 
 from softseq_ros.errors import UserError
 from softseq_ros.segments.materials import (
+    ArrudaBoyce,
     Gent,
     Material,
     MooneyRivlin,
     NeoHookean,
     Ogden,
+    Yeoh,
     material_parameter_names,
 )
 from softseq_ros.segments.models import BalloonSegment
@@ -217,6 +219,15 @@ SPHERE_LAWS = {
                       lambda g, lam: 2.0 * lam**2 + lam**-4 - 3.0 >= g[1]),
     'ogden': SphereLaw('ogden', ('mu_h_over_r_pa', 'alpha'), 1, (True, True),
                        tuple(np.geomspace(0.2, 20.0, 41)), lambda g: Ogden((g[0],), (g[1],))),
+    # Yeoh: the three moduli enter linearly; C1 > 0 (the initial shear modulus is 2 C1), C2
+    # and C3 of either sign (C2 < 0 softens before C3 stiffens, as filled rubbers do).
+    'yeoh': SphereLaw('yeoh', ('c1_h_over_r_pa', 'c2_h_over_r_pa', 'c3_h_over_r_pa'), 3,
+                      (True, False, False), (), lambda g: Yeoh(g[0], g[1], g[2])),
+    # Arruda-Boyce (Abaqus' five terms): lambda_m from chains near full extension at rest to
+    # nearly neo-Hookean.
+    'arruda_boyce': SphereLaw('arruda_boyce', ('shear_modulus_h_over_r_pa', 'lambda_m'), 1,
+                              (True, True), tuple(np.geomspace(1.05, 50.0, 41)),
+                              lambda g: ArrudaBoyce(g[0], g[1])),
 }
 FIT_LAWS = tuple(SPHERE_LAWS)
 
