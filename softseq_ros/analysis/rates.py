@@ -194,11 +194,13 @@ def rate_point(point: RatePoint) -> dict:
     row.update(sequence_of(path.injected, path.pressure, path.volumes, signs,
                            scene.segment_names))
     directions = {1: 'inflation', -1: 'deflation', 0: 'hold'}
+    peaks = profile.injected_at(np.array([s.peak_s for s in path.snaps]))
     row['snaps'] = [{'injected_m3': s.injected, 'start_s': s.start_s,
+                     'peak_injected_m3': float(peak),
                      'direction': directions[int(leg_signs(profile, np.array([s.start_s]))[0])],
                      'duration_s': s.duration_s, 'fluid_moved_m3': s.fluid_moved_m3,
                      'peak_exchange_m3_per_s': s.peak_exchange_m3_per_s}
-                    for s in path.snaps]
+                    for s, peak in zip(path.snaps, peaks) if s.snap_through]
     row['peak_reynolds'] = max(path.peak_reynolds) if path.peak_reynolds else 0.0
     row['drained_at_injected_m3'] = float(path.injected[-1]) if path.drained else None
     row['integrator_steps'] = path.steps

@@ -521,8 +521,8 @@ def _peak_channel(peaks: dict, show: object) -> str:
 def _delay(snap: dict) -> str:
     if snap['delay_injected_m3'] is None:
         return ''
-    return (f'; late by {_ml(snap["delay_injected_m3"], 3)} injected after the quasi-static '
-            f'snap at {_ml(snap["quasi_static_injected_m3"], 3)}')
+    return (f'; its exchange peaks late by {_ml(snap["delay_injected_m3"], 3)} injected after '
+            f'the quasi-static snap at {_ml(snap["quasi_static_injected_m3"], 3)}')
 
 
 def parties(snap: dict) -> str:
@@ -542,6 +542,13 @@ def _reynolds_line(transients: dict, sentence: bool = False) -> str:
     return 'P' + line[1:] + '.' if sentence else line
 
 
+def _exchange_text(exchange: dict) -> str:
+    """One exchange of fluid that was no snap-through, for humans."""
+    return (f'{exchange["direction"]} at {_ml(exchange["injected_m3"], 3)}, '
+            f't = {exchange["start_time_s"]:.3f} s: {_ml(exchange["fluid_moved_m3"], 3)} moved '
+            f'({parties(exchange)}), 10-90 % in {duration_text(exchange["duration_s"])}')
+
+
 def _transient_lines(transients: dict) -> list[str]:
     """The summary's lines on a dynamic recording's transients."""
     snaps = transients['snaps']
@@ -559,6 +566,11 @@ def _transient_lines(transients: dict) -> list[str]:
             f'    peak channel flow {_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)}'
             f', peak pressure drop {_peak_channel(snap["peak_pressure_drop_pa"], _kpa)}'
             + _delay(snap))
+    others = transients.get('exchanges') or []
+    if others:
+        lines.append(f'  other exchanges of fluid between the segments (no instability: the '
+                     f'fluid lagging the pump or evening out): {len(others)}')
+        lines += [f'    {_exchange_text(e)}' for e in others]
     lines.append('  ' + _reynolds_line(transients))
     lag = transients['lag']
     if lag is None:
@@ -735,7 +747,7 @@ def _transient_markdown(transients: dict) -> list[str]:
              'of the fluid moved; from -> to: the segments that gave the fluid and those that '
              'took it; peak channel flow (positive towards the tip) and pressure drop within '
              'the window shown in `transients.png`; late by: injected volume pumped between '
-             'the quasi-static snap and the start of this one.', '']
+             "the quasi-static snap and the peak of this one's exchange.", '']
     if transients['snaps']:
         lines += ['| snap | direction | start | injected | duration | fluid moved | from -> to | '
                   'peak exchange | gauge pressure | peak channel flow | peak pressure drop | '
@@ -752,6 +764,11 @@ def _transient_markdown(transients: dict) -> list[str]:
                 f'{_ml(snap["delay_injected_m3"], 3)} |')
     else:
         lines.append('No snap-through in time was reported.')
+    others = transients.get('exchanges') or []
+    if others:
+        lines += ['', 'Other exchanges of fluid between the segments, without instability (the '
+                  'fluid lagging the pump or evening out; docs/dynamic.md):', '']
+        lines += [f'- {_exchange_text(e)}' for e in others]
     lines += ['', _reynolds_line(transients, sentence=True)]
     lag = transients['lag']
     lines += ['', 'Lag behind the quasi-static path: the largest difference of a segment '
