@@ -26,6 +26,7 @@ import numpy as np
 
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import (
+    LEAD_SHARE,
     Trace,
     TraceError,
     analyse,
@@ -604,10 +605,18 @@ def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
     lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording'
                  + (', cut short' if cut_short else '') + ')'
                  + (f'; scene: {scene_type}' if scene_type else ''))
+    lead = metrics.get('lead')
+    if lead:
+        lines.append(f'lead: {lead["segment_leading"]} leads the inflow from '
+                     f'{_ml(lead["injected_m3"])} injected (the first to take '
+                     f'{LEAD_SHARE * 100:.0f} % of it)')
+    elif 'lead' in metrics:
+        lines.append(f'lead: {_not_applied(metrics, "lead")}')
     switch = metrics.get('switch')
     if switch:
         lines.append(f'switch: at {_ml(switch["injected_m3"])} injected, '
-                     f'{switch["segment_taking_over"]} takes over the inflow')
+                     f'{switch["segment_taking_over"]} takes over the inflow (the largest change '
+                     "of a segment's share)")
     else:
         lines.append(f'switch: {_not_applied(metrics, "switch")}')
     peak = metrics['peak_injection']
@@ -826,6 +835,11 @@ def markdown(metrics: dict) -> str:
     if metrics.get('sequence_type_of_scene'):
         lines.append(f'| sequence type (scene `{metrics["scene"]}`) | '
                      f'{metrics["sequence_type_of_scene"]} |')
+    lead = metrics.get('lead')
+    if 'lead' in metrics:
+        lines.append(f'| lead (first to take {LEAD_SHARE * 100:.0f} % of the inflow) | '
+                     + (f'{lead["segment_leading"]} leads from {_ml(lead["injected_m3"])}'
+                        if lead else _not_applied(metrics, 'lead')) + ' |')
     switch = metrics.get('switch')
     lines.append("| switch (largest change of a segment's share of the inflow) | "
                  + (f'{_ml(switch["injected_m3"])}, {switch["segment_taking_over"]} takes over'
