@@ -145,12 +145,14 @@ def _write_network_path(args: argparse.Namespace, scene: Any, path: Any, timed: 
         pushed = f'pump at {scene.pump.profile.flow_rate * 1e6:g} mL/s'
 
     print(f'{scene.name}: {path.time_s.size} samples of the network in time, {pushed} -> '
-          f'{args.out} (snap-throughs: {len(path.snaps)} -> {snaps_out}; fold crossings: '
+          f'{args.out} (exchanges: {len(path.snaps)}, snap-throughs: '
+          f'{sum(s.snap_through for s in path.snaps)} -> {snaps_out}; fold crossings: '
           f'{len(path.folds)} -> {folds_out})')
     for crossing in path.folds:
         print(f'  {fold_crossing_line(crossing)}')
     for snap in path.snaps:
-        print(f'  snap-through at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
+        what = 'snap-through' if snap.snap_through else 'exchange (no instability)'
+        print(f'  {what} at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
               f'{snap.fluid_moved_m3 * 1e6:.3f} mL moved, peak '
               f'{snap.peak_exchange_m3_per_s * 1e6:.4g} mL/s, 10-90 % in '
               f'{duration_text(snap.duration_s)}')

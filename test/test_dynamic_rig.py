@@ -29,10 +29,16 @@ FIG1 = Path(__file__).resolve().parents[1] / 'config' / 'fig1_asymmetric.yaml'
 
 
 def fig1_with_network(tmp_path: Path, network: dict, flow: float = 2e-7,
-                      top: float = 3.0e-5):
-    """The Fig. 1 asymmetric pair with ``network``, inflated at ``flow`` to ``top``."""
+                      top: float = 3.0e-5, hold: float = 30.0):
+    """
+    The Fig. 1 asymmetric pair with ``network``, inflated at ``flow`` to ``top``, then held.
+
+    The hold lets the snap-through's exchange, still under way at 30 mL, run its course: an
+    exchange goes out on the events topic when it has.
+    """
     data = yaml.load(FIG1.read_text(), Loader=YamlLoader)
-    data['pump'].update({'flow_rate_m3_per_s': flow, 'legs': [{'inflate_to_m3': top}]})
+    data['pump'].update({'flow_rate_m3_per_s': flow,
+                         'legs': [{'inflate_to_m3': top}] + ([{'hold_s': hold}] if hold else [])})
     data['camera'] = {'rate_hz': 1}
     data['network'] = network
     # Written out too, for the commands that take a scene file.
@@ -66,13 +72,15 @@ def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_p
         assert law.resistance == pytest.approx(resistance, rel=1e-14)
         assert message.msg.velocity[0] == pytest.approx(drop / resistance, rel=1e-12,
                                                         abs=1e-30)
-    events = [json.loads(m.msg.data) for m in read_bag(bag, ['/actuator/events'])]
-    assert len(events) == 1
-    event = events[0]
+    events = [(m.log_time_ns, json.loads(m.msg.data))
+              for m in read_bag(bag, ['/actuator/events'])]
+    # Every exchange is an event: the bottom giving the top some fluid past its peak (no
+    # snap-through), then the snap-through.
+    assert [e['snap_through'] for _, e in events] == [False, True]
+    published, event = events[1]
     moved = event['to_volumes_m3'][0] - event['from_volumes_m3'][0]
     # The snap started before it was published, lasted a positive time, and moved at least
     # what the bottom's volume gained beyond the pump's own push in that time.
-    published = next(m.log_time_ns for m in read_bag(bag, ['/actuator/events']))
     assert 0 < event['start_ns'] < published
     assert 0.0 < event['duration_s'] < (published - event['start_ns']) / 1e9
     assert event['fluid_moved_m3'] > 0.5 * moved > 2 * ML
@@ -178,9 +186,10 @@ def test_a_channel_that_leaves_the_laminar_range_is_warned_about_once(tmp_path, 
     scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 50})
     blasius = softseq_ros.run(scene, tmp_path / 'blasius', start_time_ns=0)
     assert any('follows Blasius' in line for line in blasius.warnings)
-    durations = [json.loads(m.msg.data)['duration_s']
-                 for bag in ('bag', 'blasius')
-                 for m in read_bag(tmp_path / bag, ['/actuator/events'])]
+    durations = [event['duration_s'] for bag in ('bag', 'blasius')
+                 for event in map(json.loads, (m.msg.data for m in read_bag(
+                     tmp_path / bag, ['/actuator/events'])))
+                 if event['snap_through']]
     assert len(durations) == 2 and durations[1] > durations[0]
 
 
@@ -209,8 +218,14 @@ def test_near_zero_resistance_stays_well_posed_and_lands_on_the_quasi_static_pat
         distances.append(np.max(np.abs(np.array(path)[far] - quasistatic.volumes[far])))
         # A few steps per output, not millions for the microsecond time constant.
         assert flow.steps < 3 * len(grid)
-        assert [s.injected for s in flow.take_snaps()] == pytest.approx(
-            [e.injected for e in quasistatic.events], abs=0.02 * ML)
+        # Each snap-through's exchange starts near the quasi-static fold (the first a little
+        # before it, where the top starts to give on the stable branch) and peaks just after
+        # it (the passage through the saddle-node, late by a delay the pump's rate sets).
+        snaps = [s for s in flow.take_snaps() if s.snap_through]
+        assert len(snaps) == len(quasistatic.events)
+        for snap, event in zip(snaps, quasistatic.events):
+            assert snap.injected == pytest.approx(event.injected, abs=0.3 * ML)
+            assert 0.0 < 1e-7 * snap.peak_s - event.injected < 0.1 * ML
     assert distances[1] < distances[0] / 20
     assert distances[1] < 1e-6 * emap.v_scale
 
@@ -375,7 +390,7 @@ def test_a_held_pump_stays_held_while_the_fluid_evens_out_and_resumes_when_asked
     # feedback: the pump neither times out nor trips) and, between them, says the fluid still
     # moving at the network's rate, with the injected volume held.
     scene = fig1_with_network(tmp_path, {'channels': [{'length_m': 0.02, 'radius_m': 0.2e-3}],
-                                         'rate_hz': 200}, top=4.0e-6)
+                                         'rate_hz': 200}, top=4.0e-6, hold=0.0)
     pump, _ = pump_core(scene, feedback_timeout_s=0.5, feedback_clock=lambda: now)
     actuator = actuator_core(scene)
     rest = sum(s.rest_volume for s in scene.segments)

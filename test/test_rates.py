@@ -49,11 +49,15 @@ def test_a_slow_pump_reproduces_the_quasistatic_classification(tmp_path, inflate
     assert slow['sequence_type'] == reference['sequence_type']
     assert slow['leading_segment'] == reference['leading_segment']
     assert slow['lead_injected_m3'] == pytest.approx(reference['lead_injected_m3'], abs=0.7 * ML)
-    # The same snap-throughs, where the quasi-static solver finds them.
+    # The same snap-throughs, their exchanges peaking where the quasi-static solver finds
+    # them, each moving the quasi-static jump's fluid or more: an exchange starts where a
+    # segment first gives fluid, on deflation 3.4 mL before the fold (one segment gives the
+    # other fluid along the stable branch, then the pair snaps), and counts that too.
     assert len(slow['snaps']) == len(reference['snaps'])
     for snap, expected in zip(slow['snaps'], reference['snaps']):
-        assert snap['injected_m3'] == pytest.approx(expected['injected_m3'], abs=0.3 * ML)
-        assert snap['fluid_moved_m3'] == pytest.approx(expected['fluid_moved_m3'], rel=0.1)
+        assert snap['peak_injected_m3'] == pytest.approx(expected['injected_m3'], abs=0.3 * ML)
+        assert snap['fluid_moved_m3'] > 0.95 * expected['fluid_moved_m3']
+        assert snap['fluid_moved_m3'] < 1.5 * expected['fluid_moved_m3']
         assert snap['duration_s'] > 0.0
 
 

@@ -54,6 +54,12 @@ def _rows(metrics: dict) -> dict[str, tuple[object, str]]:
     area = metrics['hysteresis_area_j']
     rows['hysteresis area'] = (_value(metrics, 'hysteresis_area_j',
                                       None if area is None else area * 1e3), 'mJ')
+    lead = metrics.get('lead')
+    if 'lead' in metrics:
+        rows['segment leading the inflow (first to take 90 %)'] = (
+            _value(metrics, 'lead', lead['segment_leading'] if lead else None), '')
+        rows['leads from'] = (_value(metrics, 'lead',
+                                     lead['injected_m3'] * 1e6 if lead else None), 'mL')
     switch = metrics.get('switch')
     rows['switch volume'] = (_value(metrics, 'switch',
                                     switch['injected_m3'] * 1e6 if switch else None), 'mL')

@@ -10,6 +10,12 @@ cycle); every value is SI (m^3, Pa, J, m) and every pressure is gauge.
 A metric that does not apply to a run is None, never a number, and ``not_applicable`` names it
 with the reason: a switch in a sequence where no segment takes over, a plateau on a straight,
 peaked or still steepening curve, a hysteresis area without a deflation.
+
+Two numbers say who takes the inflow, both from its shares (dv_i/du on bins of the first
+inflation leg): the *lead* is where a segment first takes LEAD_SHARE of the inflow or more over
+one of LEAD_BINS bins (who fills first: ``lead``, "leads from"), the *switch* where a segment's
+share changes most over a tenth of the leg (where the filling changes hands: ``switch``, "takes
+over at"). A segment can lead from the start and another take over late: both are said.
 """
 
 from dataclasses import dataclass, field
@@ -39,6 +45,10 @@ SNAP_EXCHANGE_PER_STEP = 5.0
 SNAP_SHARE_OF_RANGE = 1e-3
 # A chord turning less than this [rad] is straight: its arc is its chord.
 STRAIGHT_RAD = 1e-9
+# A segment leads the inflow once it takes this share of it (or more: the others give fluid
+# back) over one of this many equal bins of the first inflation leg.
+LEAD_SHARE = 0.9
+LEAD_BINS = 100
 # The plateau is reached where the pressure first comes within this share of its level.
 PLATEAU_SHARE = 0.95
 # A plateau is level: somewhere after its steepest rise the pressure's slope (over a tenth of
@@ -217,6 +227,9 @@ def analyse(trace: Trace, v_range: float | None = None,
     result['switch'], why = _switch(middle, share, trace.segment_names)
     if why:
         not_applicable['switch'] = why
+    result['lead'], why = _lead(u_up, v_up, trace.segment_names)
+    if why:
+        not_applicable['lead'] = why
     result['plateau'], why = _plateau(u_up, p_up)
     if why:
         not_applicable['plateau'] = why
@@ -282,6 +295,32 @@ def _switch(middle: FloatArray, share: FloatArray,
         'shares_after': [float(x) for x in share[row + 2 * half]],
         'window_m3': float(middle[2 * half] - middle[0]),
     }, ''
+
+
+def _lead(u: FloatArray, volumes: FloatArray,
+          names: tuple[str, ...]) -> tuple[dict | None, str]:
+    """
+    The segment that first takes LEAD_SHARE of the inflow, and where; or None and why not.
+
+    Over one of LEAD_BINS equal bins of the leg's injected volume (more than all of it when the
+    others give fluid back; a snap it gains by counts), placed at the bin's centre.
+    """
+    if u.size < 2 or not np.ptp(u) > 0.0:
+        return None, (f'the inflation leg has {u.size} distinct volumes, too few to follow the '
+                      'shares of the inflow')
+    grid = np.linspace(u[0], u[-1], LEAD_BINS + 1)
+    sampled = np.column_stack([np.interp(grid, u, volumes[:, k])
+                               for k in range(volumes.shape[1])])
+    share = np.diff(sampled, axis=0) / np.diff(grid)[:, None]
+    taking = np.argwhere(share >= LEAD_SHARE)
+    if not taking.size:
+        return None, (f'no segment takes {LEAD_SHARE * 100:.0f} % of the inflow over any '
+                      f'{LEAD_BINS}th of the inflation: the inflow stays split')
+    row, segment = (int(x) for x in taking[0])
+    return {'segment_leading': names[segment] if segment < len(names) else segment,
+            'injected_m3': float(0.5 * (grid[row] + grid[row + 1])),
+            'share': float(share[row, segment]),
+            'bin_m3': float(grid[1] - grid[0])}, ''
 
 
 def _plateau(u: FloatArray, p: FloatArray) -> tuple[dict | None, str]:

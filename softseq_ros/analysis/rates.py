@@ -8,12 +8,15 @@ run_jobs`: local processes, or a Dask scheduler). Each run is the dynamic path
 (:mod:`softseq_ros.dynamic.path`), measured with the same metrics as a recording
 (:func:`softseq_ros.analysis.metrics.analyse`), so its sequence type comes from the one
 classifier (:func:`softseq_ros.quasistatic.sequence.sequence_type`) with the tolerance of a
-sampled path, and its *leading segment* is the one that takes over the inflow at the switch
-(the largest change of a segment's share of the inflow on inflation). The quasi-static path
-along the same programme is measured the same way, for reference.
+sampled path. Who takes the inflow is said twice, as the report says it (the same definitions,
+:mod:`softseq_ros.analysis.metrics`): the *leading segment* is the first to take 90 % of the
+inflow ("leads from": who fills first), the *switch* is where a segment's share changes most
+("takes over at": where the filling changes hands). The quasi-static path along the same
+programme is measured the same way, for reference.
 
 The table (``rates.csv``) has one row per grid point: flow [m^3/s], radius [m], sequence type,
-leading segment, switch volume, the snap-throughs the network lived (start [m^3 injected],
+leading segment and where it leads from, the segment taking over at the switch and where, the
+snap-throughs the network lived (start [m^3 injected],
 direction, 10-90 % duration [s], fluid moved [m^3], peak exchange flow [m^3/s]; several
 snap-throughs of one run are separated by ``;`` in the same order in each column), the largest
 Reynolds number of any channel, and where a deflation drew a suction beyond vacuum in a
@@ -46,10 +49,6 @@ FloatArray = NDArray[np.float64]
 # Samples of the path per leg of the programme: 2 % of the shares' bins each at the least
 # (analysis.metrics takes the shares on 200 bins of the inflation leg).
 SAMPLES_PER_LEG = 600
-# A segment leads once it takes this share of the inflow (or more: the others give fluid
-# back), over bins of this share of the inflation leg.
-LEAD_SHARE = 0.9
-LEAD_BINS = 100
 COLUMNS = ('flow_rate_m3_per_s', 'channel_radius_m', 'sequence_type', 'leading_segment',
            'lead_injected_m3', 'switch_injected_m3', 'switch_segment', 'snap_injected_m3',
            'snap_direction', 'snap_duration_s',
@@ -116,53 +115,24 @@ def leg_signs(profile: Any, times: FloatArray) -> NDArray[np.int8]:
     return np.sign(profile.flow_at(times)).astype(np.int8)
 
 
-def leading_segment(injected: FloatArray, volumes: FloatArray, signs: NDArray[np.int8],
-                    names: Sequence[str]) -> tuple[str, float | None]:
-    """
-    The segment that first takes over the inflow on the first inflation, and where [m^3].
-
-    It is the first to take LEAD_SHARE of the inflow over one of LEAD_BINS equal bins of the
-    leg's injected volume (more than all of it when the others give fluid back; a snap it
-    gains by counts). ``('', None)`` when no segment ever takes that share (the inflow stays
-    split, as between two linear segments).
-    """
-    rising = np.flatnonzero(signs > 0)
-    if rising.size < 2:
-        return '', None
-    falling = np.flatnonzero(signs[rising[0]:] < 0)
-    end = rising[0] + int(falling[0]) if falling.size else signs.size
-    leg = np.arange(rising[0], end)
-    leg = leg[signs[leg] > 0]
-    u, v = injected[leg], volumes[leg]
-    keep = np.append(np.diff(u) > 0, True)
-    u, v = u[keep], v[keep]
-    if u.size < 2:
-        return '', None
-    grid = np.linspace(u[0], u[-1], LEAD_BINS + 1)
-    sampled = np.column_stack([np.interp(grid, u, v[:, k]) for k in range(v.shape[1])])
-    share = np.diff(sampled, axis=0) / np.diff(grid)[:, None]
-    taking = np.argwhere(share >= LEAD_SHARE)
-    if not taking.size:
-        return '', None
-    row, segment = taking[0]
-    return names[int(segment)], float(0.5 * (grid[row] + grid[row + 1]))
-
-
 def sequence_of(injected: FloatArray, pressure: FloatArray, volumes: FloatArray,
-                signs: NDArray[np.int8], names: Sequence[str]) -> dict:
+                signs: NDArray[np.int8], names: Sequence[str],
+                snaps: list[dict] | None = None) -> dict:
     """
     Sequence type, leading segment and switch of a path, measured as a recording's.
 
     The path's rows are in time order; holds (sign 0) count with the inflation before them,
-    so what the fluid does while the pump stands still is part of the sequence.
+    so what the fluid does while the pump stands still is part of the sequence. ``snaps``: the
+    snap-throughs in time of a dynamic path, as a recording's report takes its actuator's
+    (None: found in the volumes, as quasi-statically).
     """
     span = float(np.ptp(injected)) if injected.size else 0.0
     metrics = analyse(Trace(injected, pressure, volumes, signs, segment_names=tuple(names)),
-                      v_range=span if span > 0.0 else None)
-    switch = metrics['switch']
-    lead, lead_at = leading_segment(injected, volumes, signs, names)
-    return {'sequence_type': metrics['sequence_type'], 'leading_segment': lead,
-            'lead_injected_m3': lead_at,
+                      v_range=span if span > 0.0 else None, snaps=snaps)
+    switch, lead = metrics['switch'], metrics['lead']
+    return {'sequence_type': metrics['sequence_type'],
+            'leading_segment': lead['segment_leading'] if lead else '',
+            'lead_injected_m3': lead['injected_m3'] if lead else None,
             'switch_injected_m3': switch['injected_m3'] if switch else None,
             'switch_segment': switch['segment_taking_over'] if switch else ''}
 
@@ -191,14 +161,24 @@ def rate_point(point: RatePoint) -> dict:
                     'wall_s': time.perf_counter() - start})
         return row
     signs = leg_signs(profile, path.time_s)
+    # The snap-throughs in time, as the report of a recording of this run takes them.
+    in_time = [{'injected_m3': s.injected,
+                'direction': 'deflation' if leg_signs(profile, np.array([s.start_s]))[0] < 0
+                else 'inflation',
+                'fluid_moved_m3': s.fluid_moved_m3, 'from_volumes_m3': list(s.from_volumes),
+                'to_volumes_m3': list(s.to_volumes), 'from_pressure_pa': s.from_pressure,
+                'to_pressure_pa': s.to_pressure, 'start_time_s': s.start_s,
+                'duration_s': s.duration_s} for s in path.snaps if s.snap_through]
     row.update(sequence_of(path.injected, path.pressure, path.volumes, signs,
-                           scene.segment_names))
+                           scene.segment_names, in_time or None))
     directions = {1: 'inflation', -1: 'deflation', 0: 'hold'}
+    peaks = profile.injected_at(np.array([s.peak_s for s in path.snaps]))
     row['snaps'] = [{'injected_m3': s.injected, 'start_s': s.start_s,
+                     'peak_injected_m3': float(peak),
                      'direction': directions[int(leg_signs(profile, np.array([s.start_s]))[0])],
                      'duration_s': s.duration_s, 'fluid_moved_m3': s.fluid_moved_m3,
                      'peak_exchange_m3_per_s': s.peak_exchange_m3_per_s}
-                    for s in path.snaps]
+                    for s, peak in zip(path.snaps, peaks) if s.snap_through]
     row['peak_reynolds'] = max(path.peak_reynolds) if path.peak_reynolds else 0.0
     row['drained_at_injected_m3'] = float(path.injected[-1]) if path.drained else None
     row['integrator_steps'] = path.steps
@@ -235,7 +215,7 @@ def run_rates(scene: Any, flows: Sequence[float], radii: Sequence[float],
     def report(done: int, total: int, row: dict) -> None:
         if progress is not None:
             progress.write(f'rates: {done}/{total} {_point_text(row)}: '
-                           f'{row["sequence_type"]}, leads {row["leading_segment"] or "-"}\n')
+                           f'{row["sequence_type"]}, {_who(row)}\n')
             progress.flush()
 
     return run_jobs(rate_point, points, workers=workers,
@@ -283,14 +263,20 @@ def csv_row(row: dict) -> dict:
     return cells
 
 
+def _who(row: dict, digits: int = 2) -> str:
+    """'tip leads from 2.70 mL, base takes over at 45.10 mL' (the report's two numbers)."""
+    lead, switch = row['lead_injected_m3'], row['switch_injected_m3']
+    return ((f'{row["leading_segment"]} leads from {lead * 1e6:.{digits}f} mL'
+             if lead is not None else 'no segment leads')
+            + (f', {row["switch_segment"]} takes over at {switch * 1e6:.{digits}f} mL'
+               if switch is not None else ', none takes over'))
+
+
 def reference_line(reference: dict) -> str:
     """The quasi-static reference in one line (mL for humans)."""
-    lead = reference['lead_injected_m3']
     snaps = ', '.join(f'{s["injected_m3"] * 1e6:.2f} mL' for s in reference['snaps']) or 'none'
     return (f'quasi-static along the same programme: {reference["sequence_type"]}, '
-            + (f'{reference["leading_segment"]} leads from {lead * 1e6:.2f} mL'
-               if lead is not None else 'no segment leads')
-            + f', snap-throughs at {snaps}')
+            f'{_who(reference)}, snap-throughs at {snaps}')
 
 
 def write_rates_csv(path: Path, rows: list[dict], scene_name: str, reference: dict) -> Path:
@@ -310,21 +296,24 @@ def write_rates_csv(path: Path, rows: list[dict], scene_name: str, reference: di
 
 def rates_markdown(rows: list[dict]) -> str:
     """The table for humans (mL/s, mm, mL, s)."""
-    lines = ['| pump flow | channel radius | sequence | leads (from) | snap-throughs (start, '
-             'i: inflation, h: hold, d: deflation; duration; fluid moved) | peak Reynolds |',
-             '|---:|---:|---|---|---|---:|']
+    lines = ['| pump flow | channel radius | sequence | leads (from) | takes over (at) | '
+             'snap-throughs (start, i: inflation, h: hold, d: deflation; duration; fluid '
+             'moved) | peak Reynolds |',
+             '|---:|---:|---|---|---|---|---:|']
     for row in rows:
         point = (f'| {row["flow_rate_m3_per_s"] * 1e6:g} mL/s | '
                  f'{row["channel_radius_m"] * 1e3:g} mm |')
         if row['refused']:
-            lines.append(f'{point} refused: {row["refused"]} | | | |')
+            lines.append(f'{point} refused: {row["refused"]} | | | | |')
             continue
-        lead = row['lead_injected_m3']
+        lead, switch = row['lead_injected_m3'], row['switch_injected_m3']
         leads = f'{row["leading_segment"]} ({lead * 1e6:.1f} mL)' if lead is not None else '-'
+        takes = (f'{row["switch_segment"]} ({switch * 1e6:.1f} mL)' if switch is not None
+                 else '-')
         snaps = '; '.join(f'{s["injected_m3"] * 1e6:.1f} mL {s["direction"][0]}, '
                           f'{_seconds(s["duration_s"])}, {s["fluid_moved_m3"] * 1e6:.1f} mL'
                           for s in row['snaps']) or '-'
-        lines.append(f'{point} {row["sequence_type"]} | {leads} | {snaps} | '
+        lines.append(f'{point} {row["sequence_type"]} | {leads} | {takes} | {snaps} | '
                      f'{row["peak_reynolds"]:.0f} |')
     return '\n'.join(lines) + '\n'
 

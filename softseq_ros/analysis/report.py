@@ -26,6 +26,7 @@ import numpy as np
 
 from softseq_ros.analysis.experiment import Experiment, compare, read_experiment
 from softseq_ros.analysis.metrics import (
+    LEAD_SHARE,
     Trace,
     TraceError,
     analyse,
@@ -522,8 +523,8 @@ def _peak_channel(peaks: dict, show: object) -> str:
 def _delay(snap: dict) -> str:
     if snap['delay_injected_m3'] is None:
         return ''
-    return (f'; late by {_ml(snap["delay_injected_m3"], 3)} injected after the quasi-static '
-            f'snap at {_ml(snap["quasi_static_injected_m3"], 3)}')
+    return (f'; its exchange peaks late by {_ml(snap["delay_injected_m3"], 3)} injected after '
+            f'the quasi-static snap at {_ml(snap["quasi_static_injected_m3"], 3)}')
 
 
 def parties(snap: dict) -> str:
@@ -543,6 +544,13 @@ def _reynolds_line(transients: dict, sentence: bool = False) -> str:
     return 'P' + line[1:] + '.' if sentence else line
 
 
+def _exchange_text(exchange: dict) -> str:
+    """One exchange of fluid that was no snap-through, for humans."""
+    return (f'{exchange["direction"]} at {_ml(exchange["injected_m3"], 3)}, '
+            f't = {exchange["start_time_s"]:.3f} s: {_ml(exchange["fluid_moved_m3"], 3)} moved '
+            f'({parties(exchange)}), 10-90 % in {duration_text(exchange["duration_s"])}')
+
+
 def _transient_lines(transients: dict) -> list[str]:
     """The summary's lines on a dynamic recording's transients."""
     snaps = transients['snaps']
@@ -560,6 +568,11 @@ def _transient_lines(transients: dict) -> list[str]:
             f'    peak channel flow {_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)}'
             f', peak pressure drop {_peak_channel(snap["peak_pressure_drop_pa"], _kpa)}'
             + _delay(snap))
+    others = transients.get('exchanges') or []
+    if others:
+        lines.append(f'  other exchanges of fluid between the segments (no instability: the '
+                     f'fluid lagging the pump or evening out): {len(others)}')
+        lines += [f'    {_exchange_text(e)}' for e in others]
     lines.append('  ' + _reynolds_line(transients))
     lag = transients['lag']
     if lag is None:
@@ -593,10 +606,18 @@ def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
     lines.append(f'sequence type: {metrics["sequence_type"]} (from the recording'
                  + (', cut short' if cut_short else '') + ')'
                  + (f'; scene: {scene_type}' if scene_type else ''))
+    lead = metrics.get('lead')
+    if lead:
+        lines.append(f'lead: {lead["segment_leading"]} leads the inflow from '
+                     f'{_ml(lead["injected_m3"])} injected (the first to take '
+                     f'{LEAD_SHARE * 100:.0f} % of it)')
+    elif 'lead' in metrics:
+        lines.append(f'lead: {_not_applied(metrics, "lead")}')
     switch = metrics.get('switch')
     if switch:
         lines.append(f'switch: at {_ml(switch["injected_m3"])} injected, '
-                     f'{switch["segment_taking_over"]} takes over the inflow')
+                     f'{switch["segment_taking_over"]} takes over the inflow (the largest change '
+                     "of a segment's share)")
     else:
         lines.append(f'switch: {_not_applied(metrics, "switch")}')
     peak = metrics['peak_injection']
@@ -736,7 +757,7 @@ def _transient_markdown(transients: dict) -> list[str]:
              'of the fluid moved; from -> to: the segments that gave the fluid and those that '
              'took it; peak channel flow (positive towards the tip) and pressure drop within '
              'the window shown in `transients.png`; late by: injected volume pumped between '
-             'the quasi-static snap and the start of this one.', '']
+             "the quasi-static snap and the peak of this one's exchange.", '']
     if transients['snaps']:
         lines += ['| snap | direction | start | injected | duration | fluid moved | from -> to | '
                   'peak exchange | gauge pressure | peak channel flow | peak pressure drop | '
@@ -753,6 +774,11 @@ def _transient_markdown(transients: dict) -> list[str]:
                 f'{_ml(snap["delay_injected_m3"], 3)} |')
     else:
         lines.append('No snap-through in time was reported.')
+    others = transients.get('exchanges') or []
+    if others:
+        lines += ['', 'Other exchanges of fluid between the segments, without instability (the '
+                  'fluid lagging the pump or evening out; docs/dynamic.md):', '']
+        lines += [f'- {_exchange_text(e)}' for e in others]
     lines += ['', _reynolds_line(transients, sentence=True)]
     lag = transients['lag']
     lines += ['', 'Lag behind the quasi-static path: the largest difference of a segment '
@@ -810,6 +836,11 @@ def markdown(metrics: dict) -> str:
     if metrics.get('sequence_type_of_scene'):
         lines.append(f'| sequence type (scene `{metrics["scene"]}`) | '
                      f'{metrics["sequence_type_of_scene"]} |')
+    lead = metrics.get('lead')
+    if 'lead' in metrics:
+        lines.append(f'| lead (first to take {LEAD_SHARE * 100:.0f} % of the inflow) | '
+                     + (f'{lead["segment_leading"]} leads from {_ml(lead["injected_m3"])}'
+                        if lead else _not_applied(metrics, 'lead')) + ' |')
     switch = metrics.get('switch')
     lines.append("| switch (largest change of a segment's share of the inflow) | "
                  + (f'{_ml(switch["injected_m3"])}, {switch["segment_taking_over"]} takes over'

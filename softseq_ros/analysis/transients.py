@@ -61,6 +61,8 @@ class TimedSnap:
     taking: tuple[str, ...] | None = None   # the segments that took it
     from_volumes: tuple[float, ...] = ()    # per segment, at its start and end [m^3]
     to_volumes: tuple[float, ...] = ()
+    snap_through: bool = True    # False: an exchange without instability (lag, evening out)
+    peak_injected: float = math.nan   # the pump's injected volume where its exchange peaked
 
 
 @dataclass(frozen=True)
@@ -121,9 +123,10 @@ def analyse_transients(recording: Recording, emap: object | None = None,
     """
     if not is_dynamic(recording):
         return None
-    snaps = timed_snaps(recording)
+    exchanges = timed_snaps(recording, every_exchange=True)
+    snaps = [snap for snap in exchanges if snap.snap_through]
     warnings = []
-    earlier = sum(_timed(event) for event in recording.events) - len(snaps)
+    earlier = sum(_timed(event) for event in recording.events) - len(exchanges)
     if earlier:
         warnings.append(f'left out of the transients: {earlier} snap-through(s) in time that '
                         'started before the first pump command (latched from an earlier run)')
@@ -154,6 +157,7 @@ def analyse_transients(recording: Recording, emap: object | None = None,
                       'at the same injected volume',
         'channels': list(names),
         'snaps': entries,
+        'exchanges': [_exchange_entry(snap) for snap in exchanges if not snap.snap_through],
         'peak_reynolds': reynolds,
         'lag': lag,
     }
@@ -178,13 +182,22 @@ def _peak_reynolds(flows: object | None, network: object | None) -> dict | None:
             for name, tube, peak in zip(flows.names, network.channels, peaks)}
 
 
-def timed_snaps(recording: Recording) -> list[TimedSnap]:
-    """The snap-throughs in time that ``actuator/events`` reported for this run, in order."""
+def timed_snaps(recording: Recording, every_exchange: bool = False) -> list[TimedSnap]:
+    """
+    The snap-throughs in time that ``actuator/events`` reported for this run, in order.
+
+    ``every_exchange``: every exchange of fluid between the segments it reported, the
+    snap-throughs and the others (``snap_through`` False: no instability drove them).
+    """
     times = recording.state_time_s
     snaps = []
     for event in recording.events:
         # Only a snap in time carries its start: one from before this run can be told apart.
         if not _timed(event) or int(event['start_ns']) < recording.start_ns:
+            continue
+        # An exchange in time without the key (an older bag) was reported as a snap-through.
+        snap_through = event.get('snap_through') is not False
+        if not (snap_through or every_exchange):
             continue
         number = len(snaps) + 1
         start = (int(event['start_ns']) - recording.start_ns) / NS_PER_S
@@ -200,8 +213,17 @@ def timed_snaps(recording: Recording) -> list[TimedSnap]:
                   zip(event['from_volumes_m3'], event['to_volumes_m3'])),
             _names(event.get('giving_segments')), _names(event.get('taking_segments')),
             tuple(float(v) for v in event['from_volumes_m3']),
-            tuple(float(v) for v in event['to_volumes_m3'])))
+            tuple(float(v) for v in event['to_volumes_m3']), snap_through,
+            _peak_injected(recording, event.get('peak_ns'))))
     return snaps
+
+
+def _peak_injected(recording: Recording, peak_ns: object) -> float:
+    """The pump's injected volume [m^3] when an exchange peaked (nan: an older bag's event)."""
+    if peak_ns is None or not recording.pump_time_s.size:
+        return math.nan
+    at = (int(peak_ns) - recording.start_ns) / NS_PER_S
+    return float(np.interp(at, recording.pump_time_s, recording.pump_injected))
 
 
 def _names(value: object) -> tuple[str, ...] | None:
@@ -218,6 +240,15 @@ def _window(times: FloatArray, row: int, start: float, duration: float) -> tuple
     step = float(np.median(np.diff(near))) if near.size > 1 else 0.0
     return (start - max(WINDOW_BEFORE * duration, WINDOW_MIN_SAMPLES * step),
             start + max(WINDOW_AFTER * duration, WINDOW_MIN_SAMPLES * step))
+
+
+def _exchange_entry(snap: TimedSnap) -> dict:
+    """An exchange of fluid that was no snap-through, as metrics.json holds it."""
+    return {'start_time_s': snap.start_s, 'injected_m3': snap.injected,
+            'direction': snap.direction, 'duration_s': snap.duration_s,
+            'fluid_moved_m3': snap.fluid_moved, 'peak_exchange_m3_per_s': snap.peak_exchange,
+            'giving_segments': None if snap.giving is None else list(snap.giving),
+            'taking_segments': None if snap.taking is None else list(snap.taking)}
 
 
 def _snap_entry(snap: TimedSnap, recording: Recording) -> dict:
@@ -265,18 +296,20 @@ def _lag(recording: Recording, emap: object, snaps: list[TimedSnap],
     for snap, entry in zip(snaps, entries):
         first = int(np.searchsorted(times, snap.window_s[0]))
         last = int(np.searchsorted(times, snap.window_s[1], side='right'))
+        # Where its exchange peaked: an exchange in time starts where a segment first gives
+        # fluid, which can be before the fold; it peaks past it, by the fold passage's delay.
+        at = snap.injected if math.isnan(snap.peak_injected) else snap.peak_injected
         # The quasi-static snap this one follows moves fluid the same way, and came first
         # (or within the window: a path can also snap early).
         candidates = [q for q in unpaired if q.direction == snap.direction and q.row < last
                       and np.dot(q.volume_change, snap.volume_change) > 0]
         if candidates:
-            partner = min(candidates, key=lambda q: abs(q.injected - snap.injected))
+            partner = min(candidates, key=lambda q: abs(q.injected - at))
             unpaired.remove(partner)
             later = 1.0 if snap.direction == INFLATION else -1.0
             entry['quasi_static_injected_m3'] = partner.injected
-            entry['delay_injected_m3'] = later * (snap.injected - partner.injected)
-            first = min(first, _approach(injected, partner, later,
-                                         abs(snap.injected - partner.injected)))
+            entry['delay_injected_m3'] = later * (at - partner.injected)
+            first = min(first, _approach(injected, partner, later, abs(at - partner.injected)))
         at_snaps[first:last] = True
     for never_followed in unpaired:
         at_snaps[never_followed.row:] = True

@@ -15,11 +15,11 @@ tolerance tightens instead of depending on where the steps fall:
 - the exchange between the segments, half of sum_i |dv_i/dt| less the pump's |Q| (behind a
   compliant supply line the line is one more member, its ds/dt in the sum, as it is in the
   quasi-static equilibrium): a piecewise quadratic (the pieces end where a rate changes
-  sign); a snap-through is an episode where it exceeds SNAP_EXCHANGE_PER_FLOW |Q|
-  (:class:`SnapWatcher`), whose start and end are roots, whose fluid moved is the exchange's
-  integral (piecewise cubic), whose 10 % and 90 % times invert that integral, and whose peak
-  is found where the quadratic peaks (its value there from the equations themselves, at the
-  state the step's cubic gives);
+  sign), positive exactly where some member moves against the pump. An exchange episode
+  (:class:`ExchangeWatcher`) is where it is under way, ringing included; its start and end
+  are roots, its fluid moved is the exchange's integral (piecewise cubic), its 10 % and 90 %
+  times invert that integral, and its peak is found where the quadratic peaks (its value
+  there from the equations themselves, at the state the step's cubic gives);
 - each channel's peak flow (for its Reynolds number): a quadratic's largest magnitude.
 
 Unlike event location that tests a function's sign at the step points (scipy's solve_ivp
@@ -34,19 +34,17 @@ from dataclasses import dataclass, field
 import math
 from typing import Callable, Sequence
 
+import numpy as np
 from scipy.optimize import brentq
 
 from softseq_ros.segments.models import Segment
 
-# A snap-through, as the network lives it: fluid exchanged between the segments faster than
-# this many times the pump's flow, and more of it than this share of the volume scale.
-SNAP_EXCHANGE_PER_FLOW = 5.0
-SNAP_SHARE_OF_SCALE = 1e-3
-# An episode that begins with a change of the pump's flow is a snap-through only if its
-# exchange then rises to more than this many times where it began (an instability gathers
-# speed; fluid evening out after the change does not).
-SNAP_ACCELERATION = 2.0
-# A segment gives (takes) fluid in a snap-through when it loses (gains), beyond the pump's
+# An exchange episode must move more than this many times the volume tolerance the integrator
+# holds a volume of the volume scale to (its relative tolerance times the volume scale): less
+# is within the solution's own error, no exchange the volumes show. The same fluid ends an
+# exchange's tail: what is left of it at the pace it falls.
+EXCHANGE_TOLERANCES = 10.0
+# A segment gives (takes) fluid in an exchange when it loses (gains), beyond the pump's
 # own push, more than this share of the fluid moved: a segment the fluid only passes
 # through is neither.
 SNAP_PARTY_SHARE = 0.01
@@ -280,20 +278,26 @@ def fold_crossing_line(crossing: FoldCrossing, clock_s: float = 0.0) -> str:
             f'{crossing.time_s + clock_s:.6g} s, {crossing.injected * 1e6:.4f} mL injected')
 
 
-# ---------------------------------------------------------------------- snap-throughs
+# ---------------------------------------------------------------------- exchanges
 
 @dataclass
 class DynamicSnap:
     """
-    A snap-through in time: where it started and ended, the fluid it moved, how fast, how long.
+    An exchange of fluid between the segments in time, a snap-through or not.
 
-    ``injected`` [m^3] and ``start_s`` [s]: where the exchange first outran the pump
-    SNAP_EXCHANGE_PER_FLOW-fold; ``end_s``: where it stopped doing so; ``duration_s``: from
-    10 % to 90 % of the fluid moved; ``peak_exchange_m3_per_s`` and ``peak_s``: the fastest
-    exchange and when; ``fluid_moved_m3``: the fluid exchanged between the segments beyond
-    what the pump pushed; volumes and pressures (gauge, at the segment the pump feeds) before
-    and after; ``exchanged_m3``: per segment, the fluid it gained from the others (negative:
-    gave), its volume's change less the pump's push into it.
+    Where it started and ended, the fluid it moved, how fast, how long:
+
+    ``injected`` [m^3] and ``start_s`` [s]: where fluid began to move between the segments
+    (some member against the pump's direction); ``end_s``: where the exchange, its ringing
+    included, stopped; ``duration_s``: from 10 % to 90 % of the fluid moved;
+    ``peak_exchange_m3_per_s`` and ``peak_s``: the fastest exchange and when;
+    ``fluid_moved_m3``: the fluid exchanged between the segments beyond what the pump pushed;
+    volumes and pressures (gauge, at the segment the pump feeds) before and after;
+    ``exchanged_m3``: per segment, the fluid it gained from the others (negative: gave), its
+    volume's change less the pump's push into it. ``snap_through``: the state passed where
+    the segments' equilibrium is unstable (the stored energy's Hessian on the plane of
+    constant volume is not positive definite): the exchange an instability drives, not the
+    fluid lagging the pump or evening out.
 
     Behind a compliant supply line the line is one more member (the pump pushes into it, not
     into the fed segment): ``exchanged_line_m3`` is what the line gained from the segments
@@ -314,6 +318,7 @@ class DynamicSnap:
     exchanged_m3: list[float] = field(default_factory=list)
     peak_s: float = math.nan
     exchanged_line_m3: float | None = None
+    snap_through: bool = True
 
     def giving(self) -> list[int]:
         """The segments (indices) that gave fluid to the others."""
@@ -331,21 +336,36 @@ def exchange_flow(volume_rates: Sequence[float], supply_flow: float) -> float:
     Fluid moving between the members beyond the pump's flow [m^3/s].
 
     ``volume_rates``: every member's rate, the segments' and, behind a compliant line, the
-    line's; ``supply_flow``: the pump's flow into them all.
+    line's; ``supply_flow``: the pump's flow into them all. Positive exactly when some member
+    moves against the pump (any member moves, with the pump stopped).
     """
     return 0.5 * max(sum(abs(r) for r in volume_rates) - abs(supply_flow), 0.0)
 
 
+def unstable_stiffness(k: Sequence[float]) -> bool:
+    """
+    True when the members' stiffnesses dp_i/dv_i make their equilibrium unstable.
+
+    The Hessian of the stored energy, diag(k), on sum dv = 0 is positive definite exactly when
+    at most one k_i is negative and D = sum_i prod_(j != i) k_j > 0
+    (softseq_ros.quasistatic.equilibrium).
+    """
+    if sum(1 for x in k if x < 0.0) > 1:
+        return True
+    d = 0.0
+    for i in range(len(k)):
+        d += math.prod(x for j, x in enumerate(k) if j != i)
+    return not d > 0.0
+
+
 @dataclass
 class _Episode:
-    """An episode of fast exchange under way: its start and the exchange's pieces so far."""
+    """An exchange episode under way or paused: its start, its pieces, its last end."""
 
     start_s: float
     injected: float
     volumes: list[float]
     pressure: float
-    fresh: bool
-    first_exchange: float
     line_held: float | None
     # (t at x = 0, h, lo, hi, (a, b, c) of the exchange in x, integral before lo [m^3])
     pieces: list[tuple[float, float, float, float, tuple[float, float, float], float]] = \
@@ -354,6 +374,11 @@ class _Episode:
     polynomial_peak: float = 0.0
     peak: float = 0.0
     peak_s: float = math.nan
+    unstable: bool = False
+    # Where its last stretch ended: time, injected volume, volumes, pressure, line's fluid.
+    end_s: float = math.nan
+    end_state: tuple[float, list[float], float, float | None] | None = None
+    feed: int = 0
 
 
 def _integral(e: tuple[float, float, float], lo: float, x: float) -> float:
@@ -367,44 +392,100 @@ def _integral(e: tuple[float, float, float], lo: float, x: float) -> float:
 StateAt = Callable[[StepCurve, float], tuple[float, list[float], float]]
 # The exchange [m^3/s] from the equations' rates at the state at a point of the step watched.
 ExchangeAt = Callable[[StepCurve, float], float]
+# Whether the members' equilibrium is unstable at the state at a point of the step watched.
+UnstableAt = Callable[[StepCurve, float], bool]
+# Whether the network rings at a point of the step watched: some channel's inertia, not the
+# pressures, sets how its flow changes (its inertial drop outweighs its steady one).
+RingingAt = Callable[[StepCurve, float], bool]
 
 
-class SnapWatcher:
-    """Finds snap-throughs on the continuous solution: episodes of fast exchange, timed."""
+def _real_roots(descending: Sequence[float], lo: float, hi: float) -> list[float]:
+    """The real roots of a polynomial (coefficients highest first) strictly inside (lo, hi)."""
+    coefficients = list(descending)
+    while coefficients and coefficients[0] == 0.0:
+        coefficients.pop(0)
+    if len(coefficients) < 2:
+        return []
+    found = []
+    for root in np.roots(coefficients):
+        if abs(root.imag) <= 1e-9 * (1.0 + abs(root.real)) and lo < root.real < hi:
+            found.append(float(root.real))
+    return found
 
-    def __init__(self, v_scale: float) -> None:
-        """Episodes must move more than SNAP_SHARE_OF_SCALE of ``v_scale``."""
-        self.v_scale = v_scale
+
+class ExchangeWatcher:
+    """
+    Finds the exchanges of fluid between the segments on the continuous solution, timed.
+
+    The exchange e(t) (:func:`exchange_flow`) is under way while e > 0 and, where it falls,
+    the fluid its fall would still move at the present pace, e^2 / |de/dt|, exceeds the
+    tolerance (an exponential tail ends where what is left of it is within the tolerance);
+    once a tail is let go, it is under way again only where e rises above where it was let
+    go, or after it stopped (every member moving with the pump). An episode is a run of such
+    stretches joined across pauses in which the network rings all through (a channel's inertia
+    carries its flow through the pump's own range: the next swing is the same exchange), each
+    shorter than the episode had lasted, with no change of the pump's flow. It is reported
+    once its exchange stops and the network does not ring, its pause outlasts it, the pump's
+    flow changes, or a stretch starts that cannot join it, when it moved more than the
+    tolerance.
+    """
+
+    def __init__(self, tolerance_m3: float) -> None:
+        """Episodes must move more than ``tolerance_m3`` [m^3]."""
+        self.tolerance = tolerance_m3
         self.found: list[DynamicSnap] = []
         self._episode: _Episode | None = None
+        self._active = False
+        # The exchange [m^3/s] a let-go tail must rise above to be under way again (until every
+        # member moves with the pump, or the pump's flow changes).
+        self._floor = 0.0
 
-    def watch(self, curve: StepCurve, lo: float, hi: float, fresh: bool,
-              state_at: StateAt, exchange_at: ExchangeAt) -> list[DynamicSnap]:
-        """
-        The stretch [lo, hi] of a step; the snap-throughs that ended in it.
+    @property
+    def pending(self) -> bool:
+        """Whether an episode is under way or paused (not yet reported)."""
+        return self._episode is not None
 
-        ``fresh``: the flow or the state changed at once where the stretch starts, so an
-        episode that is fast there begins there (and must then gather speed to count).
-        """
+    def flow_changed(self) -> list[DynamicSnap]:
+        """The pump's flow changed at once (or the state jumped): a paused episode is reported."""
+        self._floor = 0.0
+        if self._episode is None or self._active:
+            return []
+        return self._publish()
+
+    def finish(self) -> list[DynamicSnap]:
+        """Report a paused episode now (the run ends); one still under way stays open."""
+        if self._episode is None or self._active:
+            return []
+        return self._publish()
+
+    def watch(self, curve: StepCurve, lo: float, hi: float, state_at: StateAt,
+              exchange_at: ExchangeAt, unstable_at: UnstableAt,
+              ringing_at: RingingAt) -> list[DynamicSnap]:
+        """The stretch [lo, hi] of a step; the episodes reported in it."""
         if hi <= lo:
             return []
-        flow = abs(curve.flow)
-        threshold = SNAP_EXCHANGE_PER_FLOW * flow
+        ended: list[DynamicSnap] = []
         rates = curve.member_rates()
-        if self._episode is None:
-            # Nothing under way and no exchange anywhere near the threshold: the usual step.
-            bound = sum(_largest_magnitude(a, b, c, lo, hi) for a, b, c in rates)
-            if 0.5 * (bound - flow) <= threshold:
-                return []
         breaks = [lo, hi]
         for a, b, c in rates:
             breaks += quadratic_roots(a, b, c, lo, hi)
         breaks.sort()
-        ended = []
+        if self._episode is None and len(breaks) == 2 and \
+                _with_pump(rates, curve.flow, 0.5 * (lo + hi)):
+            # Every member moves with the pump all through: the usual step.
+            self._floor = 0.0
+            return ended
+        flow = abs(curve.flow)
         for a_x, b_x in zip(breaks, breaks[1:]):
             if b_x <= a_x:
                 continue
             middle = 0.5 * (a_x + b_x)
+            if _with_pump(rates, curve.flow, middle):
+                # The exchange is zero (by mass), not round-off above it: it stopped, and a
+                # tail let go is over.
+                self._floor = 0.0
+                self._off(curve, a_x, b_x, state_at, ringing_at, ended)
+                continue
             e = [-0.5 * flow, 0.0, 0.0]
             for a, b, c in rates:
                 sign = 0.5 if a + b * middle + c * middle * middle >= 0.0 else -0.5
@@ -412,32 +493,78 @@ class SnapWatcher:
                 e[1] += sign * b
                 e[2] += sign * c
             exchange = (e[0], e[1], e[2])
-            cuts = [a_x, *quadratic_roots(e[0] - threshold, e[1], e[2], a_x, b_x), b_x]
-            for u, w in zip(cuts, cuts[1:]):
-                if w <= u:
-                    continue
-                mid = 0.5 * (u + w)
-                value = e[0] + e[1] * mid + e[2] * mid * mid
-                fast = value > threshold and value > 0.0
-                if fast:
-                    self._extend(curve, u, w, exchange, fresh and u == lo, state_at,
-                                 exchange_at)
-                elif self._episode is not None:
-                    snap = self._close(curve, u, state_at)
-                    if snap is not None:
-                        ended.append(snap)
+            for u, w, on in self._spans(exchange, a_x, b_x, curve.h):
+                if on:
+                    if not self._active:
+                        self._begin(curve, u, state_at, ended)
+                    self._extend(curve, u, w, exchange, exchange_at, unstable_at)
+                else:
+                    self._off(curve, u, w, state_at, ringing_at, ended)
         return ended
 
-    def _extend(self, curve: StepCurve, lo: float, hi: float,
-                exchange: tuple[float, float, float], fresh: bool, state_at: StateAt,
-                exchange_at: ExchangeAt) -> None:
+    def _spans(self, e: tuple[float, float, float], lo: float, hi: float,
+               h: float) -> list[tuple[float, float, bool]]:
+        """[lo, hi] cut where the exchange ``e`` (in x) starts or stops being under way."""
+        scale = max(abs(e[0]), abs(e[1]), abs(e[2]))
+        if scale == 0.0:
+            self._floor = 0.0
+            return [(lo, hi, False)]
+        a, b, c = (x / scale for x in e)
+        f = self.tolerance / (h * scale)
+        # The tail's rest, e^2 / |de/dt|, exceeds the tolerance where g >= 0 (g: quartic in x).
+        tail = (c * c, 2.0 * b * c, b * b + 2.0 * a * c, 2.0 * a * b + 2.0 * f * c, a * a + f * b)
+        spans: list[tuple[float, float, bool]] = []
+        was_on = self._active
+        start = lo
+        while start < hi:
+            floor = self._floor / scale
+            cuts = sorted({start, hi, *quadratic_roots(a - floor, b, c, start, hi),
+                           *quadratic_roots(a, b, c, start, hi), *_real_roots(tail, start, hi)})
+            restart = None
+            for u, w in zip(cuts, cuts[1:]):
+                x = 0.5 * (u + w)
+                value = a + x * (b + x * c)
+                on = value > floor and value * value + f * (b + 2.0 * c * x) >= 0.0
+                if was_on and not on and value > 0.0:
+                    # A tail let go here: under way again only above this exchange.
+                    self._floor, restart = max(scale * (a + u * (b + u * c)), 0.0), u
+                if restart is not None:
+                    was_on = False
+                    break
+                spans.append((u, w, on))
+                was_on = on
+            start = hi if restart is None else restart
+        merged: list[tuple[float, float, bool]] = []
+        for u, w, on in spans:
+            if merged and merged[-1][2] == on:
+                merged[-1] = (merged[-1][0], w, on)
+            else:
+                merged.append((u, w, on))
+        return merged
+
+    def _begin(self, curve: StepCurve, x: float, state_at: StateAt,
+               ended: list[DynamicSnap]) -> None:
+        """
+        A stretch starts at ``x``: it resumes the paused episode, or starts one.
+
+        A paused episode is still there only while the network rang all through the pause; it
+        is resumed when the pause was shorter than the episode.
+        """
+        self._active = True
         episode = self._episode
-        if episode is None:
-            injected, volumes, pressure = state_at(curve, lo)
-            a, b, c = exchange
-            line_held = None if curve.line_cubic is None else curve.line_held(lo)
-            episode = self._episode = _Episode(curve.time(lo), injected, volumes, pressure,
-                                               fresh, a + b * lo + c * lo * lo, line_held)
+        t = curve.time(x)
+        if episode is not None and t - episode.end_s < episode.end_s - episode.start_s:
+            return
+        if episode is not None:
+            ended.extend(self._publish())
+        injected, volumes, pressure = state_at(curve, x)
+        line_held = None if curve.line_cubic is None else curve.line_held(x)
+        self._episode = _Episode(t, injected, volumes, pressure, line_held, feed=curve.feed)
+
+    def _extend(self, curve: StepCurve, lo: float, hi: float,
+                exchange: tuple[float, float, float], exchange_at: ExchangeAt,
+                unstable_at: UnstableAt) -> None:
+        episode = self._episode
         episode.pieces.append((curve.t_old, curve.h, lo, hi, exchange, episode.moved))
         episode.moved += curve.h * _integral(exchange, lo, hi)
         peak, where = quadratic_extreme(*exchange, lo, hi)
@@ -447,33 +574,62 @@ class SnapWatcher:
             # of its place changes the value to second order only.
             episode.polynomial_peak = peak
             episode.peak, episode.peak_s = exchange_at(curve, where), curve.time(where)
+        if not episode.unstable:
+            episode.unstable = any(unstable_at(curve, x) for x in (lo, 0.5 * (lo + hi), hi))
 
-    def _close(self, curve: StepCurve, x: float, state_at: StateAt) -> DynamicSnap | None:
+    def _off(self, curve: StepCurve, lo: float, hi: float, state_at: StateAt,
+             ringing_at: RingingAt, ended: list[DynamicSnap]) -> None:
+        """
+        No exchange under way on [lo, hi]: a stretch ends at ``lo``.
+
+        The episode is reported unless the network rings there (a channel's inertia carries
+        its flow through the pump's range) and the pause is still shorter than the episode.
+        """
+        episode = self._episode
+        if episode is None:
+            return
+        if self._active:
+            self._active = False
+            injected, volumes, pressure = state_at(curve, lo)
+            line_held = None if curve.line_cubic is None else curve.line_held(lo)
+            episode.end_s = curve.time(lo)
+            episode.end_state = (injected, volumes, pressure, line_held)
+            episode.feed = curve.feed
+        if curve.time(hi) - episode.end_s >= episode.end_s - episode.start_s \
+                or not ringing_at(curve, 0.5 * (lo + hi)):
+            ended.extend(self._publish())
+
+    def _publish(self) -> list[DynamicSnap]:
         episode, self._episode = self._episode, None
-        total = episode.moved
-        if total <= SNAP_SHARE_OF_SCALE * self.v_scale:
-            return None
-        # An episode that began with a change of the flow (or a jump of the state) is the
-        # fluid evening out, fastest where it begins, unless its exchange then gathers speed
-        # as an instability's does. One that began while the flow stayed is a snap-through.
-        if episode.fresh and episode.peak <= SNAP_ACCELERATION * episode.first_exchange:
-            return None
-        injected, volumes, pressure = state_at(curve, x)
+        self._active = False
+        if episode is None or episode.end_state is None or episode.moved <= self.tolerance:
+            return []
+        injected, volumes, pressure, line_held = episode.end_state
         pumped = injected - episode.injected
         exchanged = [after - before for after, before in zip(volumes, episode.volumes)]
         line_exchanged = None
         if episode.line_held is None:
-            exchanged[curve.feed] -= pumped
+            exchanged[episode.feed] -= pumped
         else:
             # The pump pushed into the line: what the line gained beyond that came from the
             # segments (the segments' own changes are all exchange).
-            line_exchanged = curve.line_held(x) - episode.line_held - pumped
+            line_exchanged = line_held - episode.line_held - pumped
+        total = episode.moved
         t10, t90 = (_time_at_share(episode, share * total) for share in (0.1, 0.9))
-        snap = DynamicSnap(episode.injected, episode.start_s, curve.time(x), t90 - t10, total,
+        snap = DynamicSnap(episode.injected, episode.start_s, episode.end_s, t90 - t10, total,
                            episode.peak, episode.volumes, volumes, episode.pressure, pressure,
-                           exchanged, episode.peak_s, line_exchanged)
+                           exchanged, episode.peak_s, line_exchanged, episode.unstable)
         self.found.append(snap)
-        return snap
+        return [snap]
+
+
+def _with_pump(rates: Sequence[tuple[float, float, float]], flow: float, x: float) -> bool:
+    """Every member's rate at ``x`` has the pump's sign or is zero: no exchange, by mass."""
+    for a, b, c in rates:
+        r = a + x * (b + x * c)
+        if r != 0.0 and (flow == 0.0 or (r > 0.0) != (flow > 0.0)):
+            return False
+    return True
 
 
 def _time_at_share(episode: _Episode, target: float) -> float:

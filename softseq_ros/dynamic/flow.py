@@ -43,15 +43,17 @@ from numpy.typing import NDArray
 
 from softseq_ros.dynamic.events import (
     EMPTYING,
+    EXCHANGE_TOLERANCES,
     FILLING,
     DynamicSnap,
+    ExchangeWatcher,
     FoldCrossing,
-    SnapWatcher,
     StepCurve,
     crossings,
     exchange_flow,
     first_beyond,
     segment_folds,
+    unstable_stiffness,
 )
 from softseq_ros.dynamic.integrators import (
     METHODS,
@@ -158,7 +160,7 @@ class NetworkFlow:
         self.y = np.concatenate([self.rest[:-1], np.zeros(len(self.inertial) + self._line_size)])
         self.peak_reynolds = [0.0] * len(self.laws)
         self.steps = 0
-        self.snaps = SnapWatcher(self.v_scale)
+        self.snaps = ExchangeWatcher(EXCHANGE_TOLERANCES * self.rtol * self.v_scale)
         self.new_snaps: list[DynamicSnap] = []
         self.new_fold_crossings: list[FoldCrossing] = []
         self._origin = (0.0, 0.0)   # (time, injected) where the current supply flow began
@@ -194,8 +196,6 @@ class NetworkFlow:
         self._watched_to = 0.0
         self._leaves_at = math.inf
         self._leaves_why = ''
-        # The next stretch watched starts where the flow or the state changed at once.
-        self._fresh = False
         self._steady = [None if law.inertance > 0.0 else law.flow for law in self.laws]
         # Volumes, pressures and flows of the state now, computed once per state: the rig
         # asks for them several times per output.
@@ -727,14 +727,18 @@ class NetworkFlow:
         """
         The flow or the state changed at once: the rates now are new.
 
-        What the exchange was before (a calm step long ago, say) says nothing about it after:
-        an episode that is fast where the next stretch starts starts there.
+        What the exchange was before (a calm step long ago, say) says nothing about it after,
+        and a paused exchange episode cannot go on across the change: it is reported.
         """
-        self._fresh = True
+        self.new_snaps.extend(self.snaps.flow_changed())
         _, _, flows, rates = self._balance(self.t, self.y)
         for j, flow in enumerate(flows.tolist()):
             self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(flow))
         self._note_exchange(rates.tolist())
+
+    def finish_exchanges(self) -> None:
+        """The run ends: a paused exchange episode is reported (one under way stays open)."""
+        self.new_snaps.extend(self.snaps.finish())
 
     def _watch_step(self, solver: Integrator) -> None:
         """The rest of the last step, now that time has reached its end."""
@@ -782,7 +786,6 @@ class NetworkFlow:
         self._watched_to = until
         if not x_until > lo:
             return
-        fresh, self._fresh = self._fresh, False
         for j, peak in enumerate(curve.peak_flows(lo, x_until)):
             self.peak_reynolds[j] = max(self.peak_reynolds[j], self.laws[j].reynolds(peak))
         passed = []
@@ -795,8 +798,9 @@ class NetworkFlow:
                         FILLING if rising > 0 else EMPTYING, curve.time(x),
                         curve.injected_at(x)))
         self.new_fold_crossings.extend(sorted(passed, key=lambda c: c.time_s))
-        self.new_snaps.extend(self.snaps.watch(curve, lo, x_until, fresh, self._state_at,
-                                               self._exchange_at))
+        self.new_snaps.extend(self.snaps.watch(curve, lo, x_until, self._state_at,
+                                               self._exchange_at, self._unstable_at,
+                                               self._ringing_at))
 
     def _exchange_at(self, curve: StepCurve, x: float) -> float:
         """The exchange the equations give at the state at ``x`` in the last step."""
@@ -806,6 +810,26 @@ class NetworkFlow:
         rates_of = self._rates if self.line is None else self._line_rates
         rates = rates_of(t, np.asarray(self._dense(t), dtype=float)).tolist()
         return exchange_flow(self._member_rates(rates, curve.flow), curve.flow)
+
+    def _unstable_at(self, curve: StepCurve, x: float) -> bool:
+        """Whether the members' equilibrium is unstable at the state at ``x`` in a step."""
+        stiffness = [float(s.stiffness(v)) for s, v in zip(self.segments, curve.volumes(x))]
+        if self.line is not None:
+            stiffness.append(float(self.line.stiffness(max(curve.line_held(x), 0.0))))
+        return unstable_stiffness(stiffness)
+
+    def _ringing_at(self, curve: StepCurve, x: float) -> bool:
+        """Whether an inertial channel's inertia outweighs its steady drop at ``x`` in a step."""
+        if not self.inertial:
+            return False
+        flows = curve.channel_flows()
+        for j in self.inertial:
+            a, b, c = flows[j]
+            law = self.laws[j]
+            q, slope = a + x * (b + x * c), (b + 2.0 * c * x) / curve.h
+            if law.inertance * abs(slope) > abs(law.drop(q)):
+                return True
+        return False
 
     def _state_at(self, curve: StepCurve, x: float) -> tuple[float, list[float], float]:
         """Injected volume, volumes and the fed segment's gauge pressure at ``x`` in a step."""

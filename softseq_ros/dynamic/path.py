@@ -73,7 +73,8 @@ class DynamicPath:
     own [Pa, gauge];
     ``channel_flows[:, j]`` flows from segment j to j + 1 [m^3/s]; ``snap[i]`` says a
     snap-through started after sample i - 1 and by sample i; ``snaps`` are all the
-    snap-throughs that ran their course by the last sample; ``peak_reynolds[j]`` is channel
+    exchanges of fluid between the segments (snap-throughs or not) that ran their course by
+    the last sample; ``peak_reynolds[j]`` is channel
     j's largest Reynolds number over the samples; ``steps`` the integrator's steps.
 
     ``folds``: each segment's passages through the folds of its own curve by the last sample
@@ -268,6 +269,10 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
         if drained is not None:
             break
         i = stop
+    if drained is None:
+        # The last exchange, if its ringing paused it, has run its course by the end.
+        fluid.finish_exchanges()
+        snaps.extend(fluid.take_snaps())
     samples, volumes, flows = samples[:reached], volumes[:reached], flows[:reached]
     line_rows = line_rows[:reached]
     pressure, injected = pressure[:reached], injected[:reached]
@@ -275,6 +280,8 @@ def run_schedule(segments: Sequence[Segment], network: NetworkSettings,
                                   for k, s in enumerate(fluid.segments)])
     snap = np.zeros(samples.size, dtype=bool)
     for found in snaps:
+        if not found.snap_through:
+            continue
         row = int(np.searchsorted(samples, found.start_s, side='left'))
         if row < samples.size:
             snap[row] = True
@@ -386,20 +393,23 @@ def snaps_file(out: str | Path) -> Path:
 
 def snap_columns(names: Sequence[str], line: bool = False) -> list[str]:
     """
-    Column names of the snap-throughs' CSV for segments ``names`` (base to tip).
+    Column names of the exchanges' CSV for segments ``names`` (base to tip).
 
-    Numbers, then ``giving`` and ``taking``: the names of the segments that gave and took the
-    fluid, separated by spaces. ``exchanged_<name>_m3`` is what a segment gained from the
-    others (its volume's change less the pump's push into it; negative: it gave). Behind a
-    compliant supply line (``line``) the pump pushes into the line, and
-    ``supply_exchanged_m3``, after the segments', is what the line gained from them beyond
-    that push (negative: its gas expanded into them).
+    One row per exchange of fluid between the segments (docs/dynamic.md). Numbers, then
+    ``giving`` and ``taking``: the names of the segments that gave and took the fluid,
+    separated by spaces, and ``snap_through``: 1 when the state passed where the equilibrium
+    is unstable (a snap-through), 0 for an exchange without instability.
+    ``exchanged_<name>_m3`` is what a segment gained from the others (its volume's change
+    less the pump's push into it; negative: it gave). Behind a compliant supply line
+    (``line``) the pump pushes into the line, and ``supply_exchanged_m3``, after the
+    segments', is what the line gained from them beyond that push (negative: its gas expanded
+    into them).
     """
     return (['start_s', 'end_s', 'injected_m3', 'duration_s', 'fluid_moved_m3',
              'peak_exchange_m3_per_s', 'peak_s', 'from_pressure_pa', 'to_pressure_pa']
             + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names]
             + [f'exchanged_{n}_m3' for n in names]
-            + (['supply_exchanged_m3'] if line else []) + ['giving', 'taking'])
+            + (['supply_exchanged_m3'] if line else []) + ['giving', 'taking', 'snap_through'])
 
 
 def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str]]) -> None:
@@ -413,13 +423,14 @@ def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str
 
 def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[str],
                 line: bool = False) -> None:
-    """One row per snap-through (the header alone when there was none); ``line``: behind one."""
+    """One row per exchange (the header alone when there was none); ``line``: behind one."""
     _write_table(out, snap_columns(names, line), ([repr(float(x)) for x in (
         snap.start_s, snap.end_s, snap.injected, snap.duration_s, snap.fluid_moved_m3,
         snap.peak_exchange_m3_per_s, snap.peak_s, snap.from_pressure, snap.to_pressure,
         *snap.from_volumes, *snap.to_volumes, *snap.exchanged_m3,
         *([snap.exchanged_line_m3] if line else []))]
-        + [' '.join(names[i] for i in snap.giving()), ' '.join(names[i] for i in snap.taking())]
+        + [' '.join(names[i] for i in snap.giving()), ' '.join(names[i] for i in snap.taking()),
+           str(int(snap.snap_through))]
         for snap in snaps))
 
 

@@ -6,7 +6,8 @@ equilibrium at the commanded injected volume); a model that moves between comman
 advanced on a timer at its rate. The node publishes the outputs the ``outputs`` parameter
 lists (default: the scene's): ``actuator/pressure`` (absolute: gauge +
 ``ambient_pressure_pa``), ``actuator/volumes`` (position = volumes, effort = gauge pressure),
-``actuator/curvatures`` and one JSON object per snap-through on ``actuator/events``, each
+``actuator/curvatures`` and one JSON object per snap-through (in time: per exchange of fluid
+between the segments) on ``actuator/events``, each
 stamped with the command it answers; once at start, latched, ``actuator/scene``: which scene's
 segments it runs (name and digest); and once it knows it starts at rest and no command came
 yet, its rest state, so a controller or camera that starts first sees it.

@@ -232,6 +232,10 @@ class ActuatorCore:
                                 float(snap.from_pressure), float(snap.to_pressure))
             said = f'snap-through at {snap.injected * 1e6:.4f} mL injected'
             if isinstance(snap, TimedSnap):
+                event.snap_through = bool(snap.snap_through)
+                event.peak_ns = snap.peak_ns
+                if not snap.snap_through:
+                    said = f'exchange of fluid at {snap.injected * 1e6:.4f} mL injected'
                 event.start_ns = snap.start_ns
                 event.duration_s = float(snap.duration_s)
                 event.fluid_moved_m3 = float(snap.fluid_moved_m3)

@@ -76,10 +76,13 @@ class TimedSnap:
     """
     A snap-through that took time (the dynamic model): a :class:`Snap` and its timing.
 
+    Every exchange of fluid between the segments is one, a snap-through or not
+    (``snap_through``: the state passed where the equilibrium is unstable).
     ``start_ns``: when the exchange began, on the driver's clock; ``duration_s``: 10 % to 90 %
     of the fluid moved; ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``: between the
     segments, beyond the pump's own flow; ``giving`` and ``taking``: the names of the segments
-    that gave the fluid and took it (softseq_ros.dynamic.events.DynamicSnap).
+    that gave the fluid and took it; ``peak_ns``: when the exchange peaked
+    (softseq_ros.dynamic.events.DynamicSnap).
     """
 
     injected: float
@@ -93,6 +96,8 @@ class TimedSnap:
     peak_exchange_m3_per_s: float
     giving: tuple[str, ...] = ()
     taking: tuple[str, ...] = ()
+    snap_through: bool = True
+    peak_ns: int | None = None
 
 
 class ActuatorModel(Protocol):
@@ -426,7 +431,8 @@ class DynamicModel:
                           snap.to_pressure, origin + round(snap.start_s * NS_PER_S),
                           snap.duration_s, snap.fluid_moved_m3, snap.peak_exchange_m3_per_s,
                           tuple(self.names[i] for i in snap.giving()),
-                          tuple(self.names[i] for i in snap.taking()))
+                          tuple(self.names[i] for i in snap.taking()), snap.snap_through,
+                          origin + round(snap.peak_s * NS_PER_S))
                 for snap in self.flow_network.take_snaps()]
 
     def channel_state(self) -> tuple[list[float], list[float]]:

@@ -124,9 +124,10 @@ CHANNEL_FLOWS = Topic(
 EVENTS = Topic(
     'actuator/events', 'std_msgs/msg/String', Qos(100, latched=True), ACTUATOR, (), 'events',
     'JSON per snap-through: injected_m3, from/to_volumes_m3, from/to_pressure_pa (gauge); in '
-    'time (a scene with a network) also start_ns, duration_s (10 % to 90 % of the fluid '
-    'moved), fluid_moved_m3, peak_exchange_m3_per_s, giving_segments and taking_segments '
-    '(names)')
+    'time (a scene with a network) one per exchange of fluid between the segments, with also '
+    'start_ns, duration_s (10 % to 90 % of the fluid moved), fluid_moved_m3, '
+    'peak_exchange_m3_per_s, giving_segments and taking_segments (names), snap_through and '
+    'peak_ns')
 # Which scene's segments the actuator runs, as ROS keeps a robot's description: latched, so
 # a recorder that starts later still gets it, and every bag can name the physics behind it.
 SCENE = Topic(

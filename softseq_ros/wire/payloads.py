@@ -99,6 +99,7 @@ _KINDS: dict[str, tuple[str, Callable[[Any], bool], Callable[[Any], Any]]] = {
                lambda item: [float(x) for x in item]),
     'strs': ('a list of strings',
              lambda item: type(item) is list and all(type(x) is str for x in item), tuple),
+    'bool': ('true or false', lambda item: type(item) is bool, bool),
 }
 
 
@@ -254,7 +255,7 @@ SNAP_THROUGH_JSON = JsonPayload(
     # A snap-through in time: a quasi-static one has none of these (and its bytes stay).
     optional=(('start_ns', 'int'), ('duration_s', 'float'), ('fluid_moved_m3', 'float'),
               ('peak_exchange_m3_per_s', 'float'), ('giving_segments', 'strs'),
-              ('taking_segments', 'strs')))
+              ('taking_segments', 'strs'), ('snap_through', 'bool'), ('peak_ns', 'int')))
 SCENE_IDENTITY_JSON = JsonPayload(
     SceneIdentity, 'scene identity',
     (('scene', 'str'), ('segments', 'strs'), ('segments_sha256', 'str'), (STAMP_KEY, 'int')),

@@ -116,11 +116,14 @@ class SnapThrough:
     """
     A snap-through at ``injected_m3``: from one state to another (gauge pressures).
 
-    A snap-through in time (the dynamic model) says more: when it started (``start_ns``), how
-    long it took (``duration_s``, 10 % to 90 % of the fluid moved), the fluid it moved between
-    the segments, its peak exchange flow, and which segments gave the fluid and which took it
-    (``giving_segments``, ``taking_segments``: names, base to tip); None for a quasi-static one
-    (instantaneous).
+    An exchange in time (the dynamic model: every exchange of fluid between the segments,
+    docs/dynamic.md) says more: when it started (``start_ns``), how long it took
+    (``duration_s``, 10 % to 90 % of the fluid moved), the fluid it moved between the segments,
+    its peak exchange flow, which segments gave the fluid and which took it
+    (``giving_segments``, ``taking_segments``: names, base to tip), and whether it was a
+    snap-through (``snap_through``: the state passed where the equilibrium is unstable; an
+    exchange in time without the key, from an older bag, was one) and when its exchange
+    peaked (``peak_ns``); None for a quasi-static one (instantaneous, always a snap-through).
     """
 
     topic: ClassVar[Topic] = contract.EVENTS
@@ -136,6 +139,8 @@ class SnapThrough:
     peak_exchange_m3_per_s: float | None = None
     giving_segments: list[str] | None = None
     taking_segments: list[str] | None = None
+    snap_through: bool | None = None
+    peak_ns: int | None = None
 
 
 @dataclass(slots=True)
