@@ -656,6 +656,9 @@ def _scenes(args: argparse.Namespace) -> int:
             described = ' '.join(str(text.get('description', '')).split())
             # A network puts time into the physics: its sequence depends on the pump's rate.
             kind = 'in time, a network' if text.get('network') is not None else 'quasi-static'
+            if isinstance(text.get('supply'), dict) and 'regulator' in text['supply']:
+                # Not on the rig: softseq run refuses it, solve and graph take it.
+                kind += ', a pressure regulator'
         except (OSError, ValueError, AttributeError, yaml.YAMLError):
             described, kind = '', '?'
         print(f'  {name:<{width}}  [{kind}] {described}'.rstrip())

@@ -219,9 +219,12 @@ def test_scenes_lists_each_shipped_scene_with_its_description():
     for name, line in zip(shipped_scenes(), lines):
         data = yaml.safe_load((config_dir() / f'{name}.yaml').read_text())
         # Which scenes run in time (a network: the pump's rate matters), and their description.
-        kind = '[in time, a network]' if 'network' in data else '[quasi-static]'
-        assert line.split(None, 1)[1] == f'{kind} ' + ' '.join(data['description'].split())
+        kind = 'in time, a network' if 'network' in data else 'quasi-static'
+        # A regulator's scene says so: the rig refuses it.
+        kind += ', a pressure regulator' if 'regulator' in data.get('supply', {}) else ''
+        assert line.split(None, 1)[1] == f'[{kind}] ' + ' '.join(data['description'].split())
     assert any('[in time, a network]' in line for line in lines)
+    assert any('[in time, a network, a pressure regulator]' in line for line in lines)
 
 
 @pytest.mark.parametrize('args', [('scenes',), ('classify', 'fig1_asymmetric')])
