@@ -36,6 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from softseq_ros.segments.fit import (  # noqa: E402
+    BOOTSTRAP_RESAMPLES,
     FIT_LAWS,
     Inflation,
     estimate_noise_std,
@@ -45,7 +46,14 @@ from softseq_ros.segments.fit import (  # noqa: E402
     sphere_pressure,
     sphere_stretch,
 )
-from softseq_ros.segments.materials import Gent, MooneyRivlin, NeoHookean, Ogden  # noqa: E402
+from softseq_ros.segments.materials import (  # noqa: E402
+    ArrudaBoyce,
+    Gent,
+    MooneyRivlin,
+    NeoHookean,
+    Ogden,
+    Yeoh,
+)
 from softseq_ros.segments.smoothing import estimate_noise  # noqa: E402
 
 RADIUS, THICKNESS = 0.01, 1e-3
@@ -57,12 +65,18 @@ TRUTHS = {
     'ogden': (Ogden((300e3,), (5.0,)), 3.0, {'mu_h_over_r_pa': 30e3, 'alpha': 5.0}),
     'mooney_rivlin': (MooneyRivlin(150e3, 15e3), 4.0,
                       {'c1_h_over_r_pa': 15e3, 'c2_h_over_r_pa': 1.5e3}),
+    'yeoh': (Yeoh(150e3, -3e3, 300.0), 3.5,
+             {'c1_h_over_r_pa': 15e3, 'c2_h_over_r_pa': -300.0, 'c3_h_over_r_pa': 30.0}),
+    'arruda_boyce': (ArrudaBoyce(150e3, 3.0), 2.8,
+                     {'shear_modulus_h_over_r_pa': 15e3, 'lambda_m': 3.0}),
 }
 CRITERION_TRUTHS = {
     'neo_hookean': (NeoHookean(300e3), 3.0),
     'gent': (Gent(300e3, 20.0), 2.6),
     'ogden': (Ogden((300e3,), (5.0,)), 3.0),
     'mooney_rivlin': (MooneyRivlin(150e3, 15e3), 4.0),
+    'yeoh': (Yeoh(150e3, -3e3, 300.0), 3.5),
+    'arruda_boyce': (ArrudaBoyce(100e3, 3.0), 3.8),
 }
 # (rows, noise as a share of the largest pressure)
 SETTINGS = ((80, 0.01), (30, 0.05))
@@ -136,7 +150,7 @@ def noise_rows(seeds: int) -> list[str]:
 
 def criterion_rows(trials: int) -> list[str]:
     lines = ['## The criterion names the law', '',
-             f'{trials} seeded trials per true law, 80 rows, 1 % noise, R given, all four laws '
+             f'{trials} seeded trials per true law, 80 rows, 1 % noise, R given, every law '
              'fitted.', '', '| true law | AICc names it | BIC names it | AICc chose instead |',
              '|---|---:|---:|---|']
     print('\n'.join(lines), flush=True)
@@ -177,6 +191,18 @@ def timing_rows(repeats: int) -> list[str]:
         lines.append(f'| {law} | {times[0] * 1e3:.1f} ms | {times[1] * 1e3:.1f} ms | '
                      f'{times[2]:.2f} s |')
         print(lines[-1], flush=True)
+    # The promise: a 600-row measurement with every law, as softseq fit runs it (the
+    # radius fitted, the default bootstrap), under 5 s.
+    measured, _ = inflation(*CRITERION_TRUTHS['gent'], 600, 0.01, 0)
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fit_sphere([measured])
+        best = min(best, time.perf_counter() - start)
+    lines += ['', f'600 rows, every law ({len(FIT_LAWS)}), radius fitted, the default '
+              f'{BOOTSTRAP_RESAMPLES} bootstrap resamples each: {best:.2f} s (best of '
+              f'{repeats}; the promise: under 5 s).']
+    print(lines[-1], flush=True)
     return lines + ['']
 
 
