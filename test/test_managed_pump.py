@@ -133,12 +133,15 @@ def test_a_transition_the_state_has_not_is_refused_and_the_node_lives_on(context
 
 def test_a_pump_configured_again_starts_where_its_plunger_stands(context):
     # Cleanup does not empty the actuator: the fluid pushed stays, and so does the plunger.
-    pump = ManagedSyringePumpNode(context=context, parameter_overrides=[
+    # In a namespace of its own: a pump another test left in this domain, still publishing
+    # on /pump/command, must not answer for this one.
+    pump = ManagedSyringePumpNode(context=context, cli_args=[
+        '--ros-args', '-r', '__ns:=/plunger'], parameter_overrides=[
         Parameter('scene', value='fig1_none'), Parameter('autostart', value=True),
         Parameter('open_loop', value=True), Parameter('flow_rate_m3_per_s', value=2e-6),
         Parameter('legs', value='[{inflate_to_m3: 4.0e-6}, {deflate_to_m3: 0.0}]')])
-    rig = Collector(['pump/command', 'pump/status'], context)
-    operator = Operator(rig, '/syringe_pump')
+    rig = Collector(['pump/command', 'pump/status'], context, namespace='/plunger')
+    operator = Operator(rig, '/plunger/syringe_pump')
     with spinning(context, pump, rig):
         assert operator.set(Transition.TRANSITION_CONFIGURE)
         assert operator.set(Transition.TRANSITION_ACTIVATE)
@@ -153,7 +156,7 @@ def test_a_pump_configured_again_starts_where_its_plunger_stands(context):
         assert pump.get_parameter('start_injected_m3').value == held
         before = len(rig.messages('pump/command'))
         assert operator.set(Transition.TRANSITION_ACTIVATE)
-        assert call_trigger(rig, 'syringe_pump/start').success
+        assert call_trigger(rig, '/plunger/syringe_pump/start').success
         rig.wait_for_count('pump/command', before + 5)
         # The commands go on from the volume held, never back to 0 with fluid in the actuator.
         after = [m.position[0] for m in rig.messages('pump/command')[before:]]
