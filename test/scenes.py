@@ -117,6 +117,16 @@ NEO_HOOKEAN_PEAK = 12.0 / 7.0 * 7.0 ** (-1.0 / 6.0)   # a thin sphere's p* / (mu
 FLIP_H = FLIP_P_MAX * FLIP_RADIUS / (NEO_HOOKEAN_PEAK * FLIP_MU)
 
 
+def fast_asymmetric_bag(folder: Path, name: str, start_time_ns: int) -> Path:
+    """A real rig bag of :func:`fast_asymmetric` (over 5 s, two snaps each way), in ``folder``."""
+    import softseq_ros
+
+    scene = fast_asymmetric(folder, name, file_name='scene.yaml')
+    softseq_ros.run(scene, folder / 'bag', start_time_ns=start_time_ns)
+    return folder / 'bag'
+
+
+
 def flip_document(thickness: float = FLIP_H) -> dict:
     """The flip pair as a scene's parsed YAML, its balloon ``thickness`` [m] thick."""
     return {'name': 'flip', 'segments': [

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
-from scenes import fast_asymmetric
+from scenes import fast_asymmetric_bag
 
 import softseq_ros
 from softseq_ros.analysis.recording import MAX_PAYLOAD_BYTES
@@ -33,10 +33,7 @@ Edit = Callable[[str, int, bytes], Iterable[Message]]
 @pytest.fixture(scope='module')
 def rig_bag(tmp_path_factory) -> Path:
     """A real rig bag: the Fig. 1 asymmetric pair over 5 s, two snaps each way."""
-    directory = tmp_path_factory.mktemp('rig')
-    path = fast_asymmetric(directory, 'foreign_asymmetric', file_name='scene.yaml')
-    softseq_ros.run(path, directory / 'bag', start_time_ns=START_NS)
-    return directory / 'bag'
+    return fast_asymmetric_bag(tmp_path_factory.mktemp('rig'), 'foreign_asymmetric', START_NS)
 
 
 def rewrite(source: Path, target: Path, edit: Edit) -> Path:

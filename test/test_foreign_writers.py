@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
-from scenes import fast_asymmetric
+from scenes import fast_asymmetric_bag
 
 import softseq_ros
 from softseq_ros.nodes.player import BagPlayer
@@ -73,10 +73,7 @@ class Memory {
 @pytest.fixture(scope='module')
 def rig_bag(tmp_path_factory) -> Path:
     """A real rig bag: the Fig. 1 asymmetric pair over 5 s, two snaps each way."""
-    directory = tmp_path_factory.mktemp('rig')
-    path = fast_asymmetric(directory, 'foreign_writers', file_name='scene.yaml')
-    softseq_ros.run(path, directory / 'bag', start_time_ns=START_NS)
-    return directory / 'bag'
+    return fast_asymmetric_bag(tmp_path_factory.mktemp('rig'), 'foreign_writers', START_NS)
 
 
 def _read(bag: Path) -> tuple[list, dict, dict]:
