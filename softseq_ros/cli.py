@@ -842,7 +842,7 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('--length-m', type=float, metavar='L', help='segment length [m] written '
                      "into segment.csv's # length_m: line (default: the sphere's diameter)")
     fit.add_argument('--laws', metavar='LAW,...', help='laws to fit, comma-separated (default: '
-                     'neo_hookean,mooney_rivlin,gent,ogden)')
+                     'neo_hookean,mooney_rivlin,gent,ogden,yeoh,arruda_boyce)')
     fit.add_argument('--bootstrap', type=int, default=200, metavar='N', help='parametric '
                      'bootstrap resamples per law (default 200; 0: none)')
     fit.add_argument('--seed', type=int, default=0, help="the bootstrap's random seed "

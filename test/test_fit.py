@@ -334,3 +334,9 @@ def test_an_out_folder_under_a_file_is_refused_before_any_fit(gent_tables, tmp_p
     blocker.write_text('')
     err = refusal(capsys, gent_tables[0], '--out', blocker / 'fit')
     assert f'--out {blocker / "fit"}: {blocker} is a regular file, not a folder' in err
+
+
+def test_the_command_s_help_names_every_law_it_fits_by_default():
+    # Without white space: argparse wraps the list where it likes.
+    help_text = ''.join(cli.build_parser().commands['fit'].format_help().split())
+    assert f'(default:{",".join(FIT_LAWS)})' in help_text
