@@ -1823,7 +1823,10 @@ def _softseq_signal(bench: Workbench, command: str, signum: int, delay_s: float)
     env = dict(os.environ, PYTHONUNBUFFERED='1')
     if command == 'run':
         out = folder / 'bag'
-        scene = _read_yaml(_config('fig1_none.yaml'))   # 2610 s of rig time: a few seconds
+        # 20 cycles of 2610 s of rig time: the batch runner takes tens of seconds over them,
+        # so every signal of the battery finds it running (one cycle ends within a second).
+        scene = _read_yaml(_config('fig1_none.yaml'))
+        scene['pump']['cycles'] = 20
         (folder / 'scene.yaml').write_text(_yaml(scene), encoding='utf-8')
         argv = [sys.executable, '-m', 'softseq_ros.cli', 'run', str(folder / 'scene.yaml'),
                 '--out', str(out), '--no-report', '--start-time', '0']

@@ -197,19 +197,26 @@ class Recorder(ParameterNode):
                 raise
             # The folder cannot be made: say which parameter gave it.
             raise BagWriterError(f'parameter output: {err}') from None
-        self._subscriptions_by_topic: dict[str, Any] = {}
-        self._reported: set[str] = set()
-        self.bytes_written = 0                 # CDR payload bytes handed to the bag
-        self.failed_topics: dict[str, str] = {}   # topic -> why it is not recorded
-        self.write_failures = 0
-        self.diagnostics = DiagnosticsPublisher(self, self.DIAGNOSTIC_TASK, self.health)
-        self.get_logger().info(
-            f'recording {len(self._wanted)} topics into {self._output}')
-        # Wall-clock discovery: with use_sim_time the node clock stands still until /clock
-        # arrives, and the topics must be found before that.
-        self.create_timer(DISCOVERY_PERIOD_S, self._discover,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._discover()
+        try:
+            self._subscriptions_by_topic: dict[str, Any] = {}
+            self._reported: set[str] = set()
+            self.bytes_written = 0                 # CDR payload bytes handed to the bag
+            self.failed_topics: dict[str, str] = {}   # topic -> why it is not recorded
+            self.write_failures = 0
+            self.diagnostics = DiagnosticsPublisher(self, self.DIAGNOSTIC_TASK, self.health)
+            self.get_logger().info(
+                f'recording {len(self._wanted)} topics into {self._output}')
+            # Wall-clock discovery: with use_sim_time the node clock stands still until /clock
+            # arrives, and the topics must be found before that.
+            self.create_timer(DISCOVERY_PERIOD_S, self._discover,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self._discover()
+        except BaseException:
+            # A signal while the node starts shuts the context down under whatever rclpy call
+            # runs then, and the node is never handed back to be closed: the bag it opened is
+            # closed here, whole, with its metadata, before the start-up fails.
+            self._bag.close()
+            raise
 
     def _read_only(self, name: str, default: Any, kind: int, description: str,
                    **descriptor: Any) -> Any:
