@@ -11,10 +11,10 @@ decides nothing, however small it is.
 
 Each feature is compared with its segment's noise: the ``noise_std_pa`` a segment declares (its
 ``smoothing`` block in the scene, or a ``# noise_std_pa: X`` comment line in its table), else an
-estimate from the table's rows (:func:`estimated_noise`: the residuals of local cubic fits, which
-a smooth curve keeps near zero however curved it is). A closed-form law has no noise. The
-verdict is flagged when even the most significant feature it rests on (the deepest against its
-noise) is within NOISE_FACTOR noise deviations.
+estimate from the table's rows (:func:`~softseq_ros.segments.smoothing.estimated_noise`: the
+residuals of local cubic fits, which a smooth curve keeps near zero however curved it is). A
+closed-form law has no noise. The verdict is flagged when even the most significant feature it
+rests on (the deepest against its noise) is within NOISE_FACTOR noise deviations.
 """
 
 from dataclasses import dataclass, field
@@ -22,26 +22,15 @@ from pathlib import Path
 import re
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from softseq_ros.segments.models import TabulatedSegment
+from softseq_ros.segments.smoothing import estimated_noise
 
 # A feature below this many noise deviations may be noise itself.
 NOISE_FACTOR = 3.0
 CLOSED_FORM = 'a closed-form law'   # a segment's noise source when it is no table
 ESTIMATED = 'estimated from the table rows'
 _NOISE_LINE = re.compile(r'^\s*#\s*noise_std_pa\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
-# The local fits of the noise estimate: a cubic through this many rows either side of a row
-# (the row itself left out), so a smooth curve's residual is of the order h^4 p''''.
-FIT_SIDE = 3
-FIT_DEGREE = 3
-# Residuals beyond this many deviations are the curve's own sharp corners, not noise: they are
-# left out, and the deviation of what remains is scaled to a normal distribution's (3-sigma
-# clipping keeps 0.9866 of its deviation).
-CLIP_DEVIATIONS = 3.0
-CLIPPED_DEVIATION_SHARE = 0.9866
-# The clipping has converged when the deviation changes by less than this share of itself.
-CLIP_CONVERGED = 1e-12
 # Features listed per verdict; the others are counted.
 FEATURES_SHOWN = 4
 
@@ -115,44 +104,6 @@ def peak_valleys(segment: object) -> list[tuple[float, float, float, float]]:
                 stretches.append([piece.v_lo, piece.p_at_lo, piece.v_hi, piece.p_at_hi])
         previous = piece.direction
     return [tuple(float(x) for x in stretch) for stretch in stretches]
-
-
-def estimated_noise(volumes: ArrayLike, pressures: ArrayLike) -> float | None:
-    """
-    The deviation of a table's pressure noise [Pa], from leave-one-out local cubic fits.
-
-    Each row's pressure is predicted by a cubic through the FIT_SIDE rows either side of it; the
-    residual, divided by its standard deviation in units of the noise's (the fit's own
-    uncertainty included, for rows spaced however unevenly), is noise plus what the cubic
-    cannot follow. A smooth curve leaves next to nothing (of the order h^4 p''''); its sharpest
-    corners, a few rows, are clipped at CLIP_DEVIATIONS. None with too few rows.
-    """
-    v = np.asarray(volumes, dtype=float)
-    p = np.asarray(pressures, dtype=float)
-    if v.size < 2 * FIT_SIDE + 3:
-        return None
-    rows = np.arange(FIT_SIDE, v.size - FIT_SIDE)
-    offsets = np.concatenate([np.arange(-FIT_SIDE, 0), np.arange(1, FIT_SIDE + 1)])
-    neighbours = rows[:, None] + offsets[None, :]
-    half_span = 0.5 * (v[rows + FIT_SIDE] - v[rows - FIT_SIDE])[:, None]
-    x = (v[neighbours] - v[rows][:, None]) / half_span
-    design = x[..., None] ** np.arange(FIT_DEGREE + 1)
-    normal = np.einsum('nki,nkj->nij', design, design)
-    inverse = np.linalg.inv(normal)
-    coefficients = np.einsum('nij,nkj,nk->ni', inverse, design, p[neighbours])
-    # Var(p_i - fit(v_i)) = s^2 (1 + [(X^T X)^-1]_00): the row's noise and the fit's.
-    residual = (p[rows] - coefficients[:, 0]) / np.sqrt(1.0 + inverse[:, 0, 0])
-    deviation = 1.4826 * float(np.median(np.abs(residual)))
-    for _ in range(50):
-        kept = residual[np.abs(residual) <= CLIP_DEVIATIONS * deviation]
-        if not kept.size:
-            break
-        clipped = float(np.sqrt(np.mean(kept**2))) / CLIPPED_DEVIATION_SHARE
-        if abs(clipped - deviation) <= CLIP_CONVERGED * max(deviation, 1e-300):
-            deviation = clipped
-            break
-        deviation = clipped
-    return deviation
 
 
 def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
