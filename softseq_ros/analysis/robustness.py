@@ -11,10 +11,13 @@ decides nothing, however small it is.
 
 Each feature is compared with its segment's noise: the ``noise_std_pa`` a segment declares (its
 ``smoothing`` block in the scene, or a ``# noise_std_pa: X`` comment line in its table), else an
-estimate from the table's rows (:func:`~softseq_ros.segments.smoothing.estimated_noise`: the
-residuals of local cubic fits, which a smooth curve keeps near zero however curved it is). A
-closed-form law has no noise. The verdict is flagged when even the most significant feature it
-rests on (the deepest against its noise) is within NOISE_FACTOR noise deviations.
+estimate from the table's rows as read (:func:`~softseq_ros.segments.smoothing.estimated_noise`:
+the residuals of local cubic fits, which a smooth curve keeps near zero however curved it is).
+A smoothed table is judged by the noise of its rows before the smoothing, never by what is left
+of it after (a fraction of it: the features would look many times more significant than they
+are). A closed-form law has no noise. The verdict is flagged when even the most significant
+feature it rests on (the deepest against its
+noise) is within NOISE_FACTOR noise deviations.
 """
 
 from dataclasses import dataclass, field
@@ -30,6 +33,7 @@ from softseq_ros.segments.smoothing import estimated_noise
 NOISE_FACTOR = 3.0
 CLOSED_FORM = 'a closed-form law'   # a segment's noise source when it is no table
 ESTIMATED = 'estimated from the table rows'
+ESTIMATED_RAW = 'estimated from the table rows as read, before smoothing'
 _NOISE_LINE = re.compile(r'^\s*#\s*noise_std_pa\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
 # Features listed per verdict; the others are counted.
 FEATURES_SHOWN = 4
@@ -107,6 +111,10 @@ def peak_valleys(segment: object) -> list[tuple[float, float, float, float]]:
 
 
 def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
+    # The smoothing's options travel with a smoothed table; a scene entry is read for the rest.
+    for options in reversed(getattr(segment, 'smoothing', ())):
+        if options.get('noise_std_pa') is not None:
+            return float(options['noise_std_pa'])
     smoothing = (scene_entry or {}).get('smoothing') or {}
     if isinstance(smoothing, dict) and smoothing.get('noise_std_pa') is not None:
         return float(smoothing['noise_std_pa'])
@@ -120,12 +128,19 @@ def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
 
 
 def segment_noise(segment: object, scene_entry: dict | None = None) -> tuple[float | None, str]:
-    """A segment's pressure noise [Pa] and where it comes from (declared, estimated, a law)."""
+    """
+    A segment's pressure noise [Pa] and where it comes from (declared, estimated, a law).
+
+    A table's noise is estimated from its rows as read: a smoothed table's ``table_pressures``,
+    not the smoothed ones, whose residual wiggle is a fraction of the measurement's noise.
+    """
     noise = _declared_noise(segment, scene_entry)
     if noise is not None:
         return noise, 'declared'
     if not isinstance(segment, TabulatedSegment):
         return 0.0, CLOSED_FORM   # a law's curve has no measurement noise
+    if segment.smoothing:
+        return estimated_noise(segment.volumes, segment.table_pressures), ESTIMATED_RAW
     return estimated_noise(segment.volumes, segment.pressures), ESTIMATED
 
 
