@@ -188,12 +188,13 @@ def test_quantisation_reads_as_the_quantisation_noise():
 
 
 def _classified_pair(path: Path, base: tuple[str, Path], tip: tuple[str, Path],
-                     length: float = 0.111) -> tuple:
+                     length: float = 0.111, smoothing: str | None = None) -> tuple:
     """A scene of two table segments: its verdict, the features used and not, lines, warnings."""
     from softseq_ros.analysis.robustness import scene_features
     from softseq_ros.scene.loader import load_scene
 
-    rows = '\n'.join(f'  - {{name: {name}, length_m: {length}, table: {table}}}'
+    smoothed = '' if smoothing is None else f', smoothing: {smoothing}'
+    rows = '\n'.join(f'  - {{name: {name}, length_m: {length}, table: {table}{smoothed}}}'
                      for name, table in (base, tip))
     path.write_text(f'name: {path.stem}\nsegments:\n{rows}\npump:\n'
                     '  flow_rate_m3_per_s: 1.0e-6\n'
@@ -256,24 +257,12 @@ def _noisy_balloon_table(path: Path, deviation: float, scale: float = 1.0,
 ])
 def test_a_smoothed_table_is_judged_by_the_noise_of_its_rows_as_read(tmp_path, smoothing,
                                                                      source):
-    from softseq_ros.analysis.robustness import scene_features
-    from softseq_ros.scene.loader import load_scene
-
     deviation = 300.0
     strong = _noisy_balloon_table(tmp_path / 'strong.csv', deviation, seed=1)
     weak = _noisy_balloon_table(tmp_path / 'weak.csv', deviation, scale=0.95, seed=2)
-    scene_file = tmp_path / 'smoothed_pair.yaml'
-    scene_file.write_text(
-        'name: smoothed_pair\nsegments:\n'
-        f'  - {{name: strong, length_m: 0.1, table: {strong}, smoothing: {smoothing}}}\n'
-        f'  - {{name: weak, length_m: 0.1, table: {weak}, smoothing: {smoothing}}}\n'
-        'pump:\n  flow_rate_m3_per_s: 1.0e-6\n'
-        '  legs: [{inflate_to_m3: 2.0e-5}, {deflate_to_m3: 0.0}]\n')
-    scene = load_scene(scene_file)
-    emap = EquilibriumMap(scene.segments)
-    verdict = classify(emap)
-    used, unused = scene_features(scene, emap)
-    lines, _ = robustness_lines(verdict, used, unused)
+    verdict, used, _, lines, _ = _classified_pair(
+        tmp_path / 'smoothed_pair.yaml', ('strong', strong), ('weak', weak), length=0.1,
+        smoothing=smoothing)
     assert verdict == 'asymmetric' and sorted(f.segment for f in used) == ['strong', 'weak']
     # The noise put on the rows, not what the smoothing left of it (a fraction: the features
     # would read many times more significant than they are).
