@@ -188,12 +188,13 @@ def test_quantisation_reads_as_the_quantisation_noise():
 
 
 def _classified_pair(path: Path, base: tuple[str, Path], tip: tuple[str, Path],
-                     length: float = 0.111) -> tuple:
+                     length: float = 0.111, smoothing: str | None = None) -> tuple:
     """A scene of two table segments: its verdict, the features used and not, lines, warnings."""
     from softseq_ros.analysis.robustness import scene_features
     from softseq_ros.scene.loader import load_scene
 
-    rows = '\n'.join(f'  - {{name: {name}, length_m: {length}, table: {table}}}'
+    smoothed = '' if smoothing is None else f', smoothing: {smoothing}'
+    rows = '\n'.join(f'  - {{name: {name}, length_m: {length}, table: {table}{smoothed}}}'
                      for name, table in (base, tip))
     path.write_text(f'name: {path.stem}\nsegments:\n{rows}\npump:\n'
                     '  flow_rate_m3_per_s: 1.0e-6\n'
@@ -236,3 +237,37 @@ def test_a_verdict_resting_on_noise_sized_features_is_flagged(tmp_path):
     assert verdict in ('symmetric', 'asymmetric') and used
     assert all(f.segment == 'top' and f.depth_pa < NOISE_FACTOR * f.noise_pa for f in used)
     assert len(warnings) == 1 and 'may be noise' in warnings[0] and 'segment top' in warnings[0]
+
+
+def _noisy_balloon_table(path: Path, deviation: float, scale: float = 1.0,
+                         seed: int = 0) -> Path:
+    """The latex balloon's 56 rows (not quantised) with seeded Gaussian noise, the first kept."""
+    volume, pressure = _balloon(np.linspace(1.0, 5.0, 56), scale, quantum=None)
+    noisy = pressure + np.random.default_rng(seed).normal(0.0, deviation, pressure.size)
+    noisy[0] = pressure[0]
+    rows = ['volume_m3,pressure_pa,curvature_per_m']
+    rows += [f'{v:.17g},{p:.17g},{2e5 * (v - REST_M3):.17g}' for v, p in zip(volume, noisy)]
+    path.write_text('\n'.join(rows) + '\n')
+    return path
+
+
+@pytest.mark.parametrize('smoothing, source', [
+    ('{}', 'estimated from the table rows as read, before smoothing'),
+    ('{noise_std_pa: 300.0}', 'declared'),
+])
+def test_a_smoothed_table_is_judged_by_the_noise_of_its_rows_as_read(tmp_path, smoothing,
+                                                                     source):
+    deviation = 300.0
+    strong = _noisy_balloon_table(tmp_path / 'strong.csv', deviation, seed=1)
+    weak = _noisy_balloon_table(tmp_path / 'weak.csv', deviation, scale=0.95, seed=2)
+    verdict, used, _, lines, _ = _classified_pair(
+        tmp_path / 'smoothed_pair.yaml', ('strong', strong), ('weak', weak), length=0.1,
+        smoothing=smoothing)
+    assert verdict == 'asymmetric' and sorted(f.segment for f in used) == ['strong', 'weak']
+    # The noise put on the rows, not what the smoothing left of it (a fraction: the features
+    # would read many times more significant than they are).
+    for feature in used:
+        assert 0.6 * deviation < feature.noise_pa < 1.5 * deviation
+        assert feature.significance < 29.0e3 / (0.6 * deviation)
+        assert feature.noise_source == source
+    assert all(f'({source})' in line for line in lines if line.startswith('robustness: the'))

@@ -11,9 +11,12 @@ decides nothing, however small it is.
 
 Each feature is compared with its segment's noise: the ``noise_std_pa`` a segment declares (its
 ``smoothing`` block in the scene, or a ``# noise_std_pa: X`` comment line in its table), else an
-estimate from the table's rows (:func:`estimated_noise`: the residuals of local cubic fits, which
-a smooth curve keeps near zero however curved it is). A closed-form law has no noise. The
-verdict is flagged when even the most significant feature it rests on (the deepest against its
+estimate from the table's rows as read (:func:`~softseq_ros.segments.smoothing.estimated_noise`:
+the residuals of local cubic fits, which a smooth curve keeps near zero however curved it is).
+A smoothed table is judged by the noise of its rows before the smoothing, never by what is left
+of it after (a fraction of it: the features would look many times more significant than they
+are). A closed-form law has no noise. The verdict is flagged when even the most significant
+feature it rests on (the deepest against its
 noise) is within NOISE_FACTOR noise deviations.
 """
 
@@ -22,26 +25,16 @@ from pathlib import Path
 import re
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from softseq_ros.segments.models import TabulatedSegment
+from softseq_ros.segments.smoothing import estimated_noise
 
 # A feature below this many noise deviations may be noise itself.
 NOISE_FACTOR = 3.0
 CLOSED_FORM = 'a closed-form law'   # a segment's noise source when it is no table
 ESTIMATED = 'estimated from the table rows'
+ESTIMATED_RAW = 'estimated from the table rows as read, before smoothing'
 _NOISE_LINE = re.compile(r'^\s*#\s*noise_std_pa\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
-# The local fits of the noise estimate: a cubic through this many rows either side of a row
-# (the row itself left out), so a smooth curve's residual is of the order h^4 p''''.
-FIT_SIDE = 3
-FIT_DEGREE = 3
-# Residuals beyond this many deviations are the curve's own sharp corners, not noise: they are
-# left out, and the deviation of what remains is scaled to a normal distribution's (3-sigma
-# clipping keeps 0.9866 of its deviation).
-CLIP_DEVIATIONS = 3.0
-CLIPPED_DEVIATION_SHARE = 0.9866
-# The clipping has converged when the deviation changes by less than this share of itself.
-CLIP_CONVERGED = 1e-12
 # Features listed per verdict; the others are counted.
 FEATURES_SHOWN = 4
 
@@ -117,45 +110,11 @@ def peak_valleys(segment: object) -> list[tuple[float, float, float, float]]:
     return [tuple(float(x) for x in stretch) for stretch in stretches]
 
 
-def estimated_noise(volumes: ArrayLike, pressures: ArrayLike) -> float | None:
-    """
-    The deviation of a table's pressure noise [Pa], from leave-one-out local cubic fits.
-
-    Each row's pressure is predicted by a cubic through the FIT_SIDE rows either side of it; the
-    residual, divided by its standard deviation in units of the noise's (the fit's own
-    uncertainty included, for rows spaced however unevenly), is noise plus what the cubic
-    cannot follow. A smooth curve leaves next to nothing (of the order h^4 p''''); its sharpest
-    corners, a few rows, are clipped at CLIP_DEVIATIONS. None with too few rows.
-    """
-    v = np.asarray(volumes, dtype=float)
-    p = np.asarray(pressures, dtype=float)
-    if v.size < 2 * FIT_SIDE + 3:
-        return None
-    rows = np.arange(FIT_SIDE, v.size - FIT_SIDE)
-    offsets = np.concatenate([np.arange(-FIT_SIDE, 0), np.arange(1, FIT_SIDE + 1)])
-    neighbours = rows[:, None] + offsets[None, :]
-    half_span = 0.5 * (v[rows + FIT_SIDE] - v[rows - FIT_SIDE])[:, None]
-    x = (v[neighbours] - v[rows][:, None]) / half_span
-    design = x[..., None] ** np.arange(FIT_DEGREE + 1)
-    normal = np.einsum('nki,nkj->nij', design, design)
-    inverse = np.linalg.inv(normal)
-    coefficients = np.einsum('nij,nkj,nk->ni', inverse, design, p[neighbours])
-    # Var(p_i - fit(v_i)) = s^2 (1 + [(X^T X)^-1]_00): the row's noise and the fit's.
-    residual = (p[rows] - coefficients[:, 0]) / np.sqrt(1.0 + inverse[:, 0, 0])
-    deviation = 1.4826 * float(np.median(np.abs(residual)))
-    for _ in range(50):
-        kept = residual[np.abs(residual) <= CLIP_DEVIATIONS * deviation]
-        if not kept.size:
-            break
-        clipped = float(np.sqrt(np.mean(kept**2))) / CLIPPED_DEVIATION_SHARE
-        if abs(clipped - deviation) <= CLIP_CONVERGED * max(deviation, 1e-300):
-            deviation = clipped
-            break
-        deviation = clipped
-    return deviation
-
-
 def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
+    # The smoothing's options travel with a smoothed table; a scene entry is read for the rest.
+    for options in reversed(getattr(segment, 'smoothing', ())):
+        if options.get('noise_std_pa') is not None:
+            return float(options['noise_std_pa'])
     smoothing = (scene_entry or {}).get('smoothing') or {}
     if isinstance(smoothing, dict) and smoothing.get('noise_std_pa') is not None:
         return float(smoothing['noise_std_pa'])
@@ -169,12 +128,19 @@ def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
 
 
 def segment_noise(segment: object, scene_entry: dict | None = None) -> tuple[float | None, str]:
-    """A segment's pressure noise [Pa] and where it comes from (declared, estimated, a law)."""
+    """
+    A segment's pressure noise [Pa] and where it comes from (declared, estimated, a law).
+
+    A table's noise is estimated from its rows as read: a smoothed table's ``table_pressures``,
+    not the smoothed ones, whose residual wiggle is a fraction of the measurement's noise.
+    """
     noise = _declared_noise(segment, scene_entry)
     if noise is not None:
         return noise, 'declared'
     if not isinstance(segment, TabulatedSegment):
         return 0.0, CLOSED_FORM   # a law's curve has no measurement noise
+    if segment.smoothing:
+        return estimated_noise(segment.volumes, segment.table_pressures), ESTIMATED_RAW
     return estimated_noise(segment.volumes, segment.pressures), ESTIMATED
 
 
