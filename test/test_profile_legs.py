@@ -82,3 +82,22 @@ def test_a_bad_profile_is_refused_in_one_line_naming_the_leg(tmp_path, rows, leg
         load_scene(path)
     message = str(caught.value)
     assert '\n' not in message and f'{path}: {key}: ' in message and words in message, message
+
+
+def test_a_programme_too_long_to_hold_is_refused_before_it_is_built(tmp_path):
+    # A profile of a thousand rows repeated 100,000 times took 49 s and 12.6 GB to load, and a
+    # million cycles (which pump.cycles takes) would exhaust the memory: refused at once.
+    from softseq_ros.scene.programme import MAX_BREAKPOINTS
+    rows = [(float(t), 1e-8 * t) for t in range(1000)]
+    path = profile_scene(tmp_path, rows)
+    text = path.read_text().replace('rate_hz: 10', 'rate_hz: 10\n  cycles: 100000')
+    path.write_text(text)
+    with pytest.raises(SceneError) as caught:
+        load_scene(path)
+    message = str(caught.value)
+    assert f'{path}: pump.cycles: 100000 cycles of 1000 breakpoints each' in message, message
+    assert f'{MAX_BREAKPOINTS:.0e}' in message
+    # The programme itself refuses it too, whoever builds it (a pump node's parameters).
+    leg = Leg.profile([r[0] for r in rows], [r[1] for r in rows])
+    with pytest.raises(ValueError, match='^cycles: 100000 cycles of 1000 breakpoints'):
+        PumpProfile(legs=(leg, Leg.deflate(0.0)), cycles=100000)

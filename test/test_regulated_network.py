@@ -174,6 +174,8 @@ def test_a_profile_leg_and_rates_per_leg_make_the_target(tmp_path):
      'only an inflate_to_pa or deflate_to_pa leg'),
     ({}, {'legs': [{'profile': 'bad.csv'}]}, 'pump.legs[0].profile', 'does not come after'),
     ({}, {'legs': [{'profile': 'late.csv'}]}, 'pump.legs[0].profile', 'not at the target'),
+    ({}, {'cycles': 1000000, 'legs': [{'inflate_to_pa': 1000.0}, {'deflate_to_pa': 0.0}] * 5
+          + [{'hold_s': 1.0}]}, 'pump.cycles', '1000000 cycles of 11 breakpoints each'),
 ])
 def test_a_bad_regulator_or_programme_is_refused_in_one_line(tmp_path, regulator, pump_change,
                                                               where, says):

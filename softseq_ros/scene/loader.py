@@ -70,6 +70,7 @@ from softseq_ros.scene.programme import (
     Leg,
     ProgrammeError,
     PumpProfile,
+    breakpoints_problem,
     check_capacity,
 )
 from softseq_ros.scene.regulator import Regulator, read_regulator
@@ -471,6 +472,10 @@ def _pump(ctx: Context, value: object, capacity: float,
                 raise ctx.error(where, f'{leg.to_m3:g} m^3 must be below the injected volume '
                                        f'the leg starts from ({now:g} m^3{in_cycle})')
             now = leg.to_m3
+    too_long = breakpoints_problem(
+        [len(leg.times) - 1 if leg.action == 'profile' else 1 for leg in legs], cycles)
+    if too_long is not None:
+        raise ctx.error('pump.cycles', too_long)
     try:
         profile = PumpProfile(legs=tuple(legs), flow_rate=flow, cycles=cycles,
                               start_injected=start, start_history=history)

@@ -31,6 +31,10 @@ MAX_SAMPLES = 10**8
 # What a batch run (softseq run) takes on without being told to insist: 1e6 s of rig time
 # (11.6 days; the paper's programme is 2610 s), as many messages as solve's samples, and a
 # bag of 10 GB. A rig's own pump node is not bound by them: a real rig may run for weeks.
+# A programme holds its breakpoints for every cycle (times and targets, exact): ten million of
+# them take some 0.5 GB with what is kept beside them, and a programme longer than that (a
+# profile of thousands of rows repeated a million times) would exhaust the memory as it loads.
+MAX_BREAKPOINTS = 10**7
 MAX_RUN_S = 1.0e6
 MAX_RUN_MESSAGES = MAX_SAMPLES
 MAX_RUN_BYTES = 10.0e9
@@ -145,6 +149,21 @@ class Leg:
         return cls('hold', duration_s=duration_s)
 
 
+def breakpoints_problem(per_leg: Sequence[int], cycles: int) -> str | None:
+    """
+    Why a programme of legs with these breakpoints each, repeated ``cycles`` times, is too long.
+
+    None when it holds at most :data:`MAX_BREAKPOINTS`.
+    """
+    per_cycle = sum(per_leg)
+    total = per_cycle * cycles
+    if total <= MAX_BREAKPOINTS:
+        return None
+    return (f"{cycles} cycles of {per_cycle} breakpoints each (the legs, a profile's rows) make "
+            f'{total:.3g}, more than the {MAX_BREAKPOINTS:.0e} a programme holds: give fewer '
+            'cycles, or a profile of fewer rows')
+
+
 @dataclass(frozen=True)
 class PumpProfile:
     """
@@ -173,6 +192,12 @@ class PumpProfile:
             if not isinstance(leg, Leg):
                 raise ValueError(f'legs[{index}] must be a Leg, got {type(leg).__name__}')
         object.__setattr__(self, 'legs', legs)
+        if isinstance(self.cycles, int) and not isinstance(self.cycles, bool):
+            too_long = breakpoints_problem(
+                [len(leg.times) - 1 if leg.action == 'profile' else 1 for leg in legs],
+                self.cycles)
+            if too_long is not None:
+                raise ValueError(f'cycles: {too_long}')
         flow = _finite(self.flow_rate, 'flow_rate')
         if flow <= 0.0:
             raise ValueError(f'flow_rate must be > 0, got {flow}')

@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from softseq_ros.errors import UserError
 from softseq_ros.scene.csv_columns import read_columns
 from softseq_ros.scene.limits import RELIEF_MARGIN
+from softseq_ros.scene.programme import breakpoints_problem
 from softseq_ros.scene.validation import Context, join
 from softseq_ros.segments.models import Segment
 
@@ -195,6 +196,10 @@ def _legs(ctx: Context, value: object, default_rate: float, cycles: int, highest
             if value > highest:
                 raise ctx.error(at, f'{value:g} Pa is above {why_highest}')
         parsed.append((index, key, value, rate))
+    too_long = breakpoints_problem(
+        [len(value[0]) - 1 if key == 'profile' else 1 for _, key, value, _ in parsed], cycles)
+    if too_long is not None:
+        raise ctx.error('pump.cycles', too_long)
     times, pressures, corners = [0.0], [0.0], [0.0]
     for cycle in range(1, cycles + 1):
         in_cycle = f' in cycle {cycle}' if cycles > 1 else ''
