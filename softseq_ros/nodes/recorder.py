@@ -368,8 +368,13 @@ def _check_types_parameter(parameters: list[Parameter]) -> SetParametersResult:
     return SetParametersResult(successful=True)
 
 
-def _stop_by_shutdown(_signum: int, _frame: object) -> None:
-    """SIGINT is left to rclpy's shutdown of the context."""
+# The signals that stopped the recorder (rclpy's shutdown of the context did the stopping).
+_STOPPED_BY: list[int] = []
+
+
+def _stop_by_shutdown(signum: int, _frame: object) -> None:
+    """SIGINT is left to rclpy's shutdown of the context; which signal it was is kept."""
+    _STOPPED_BY.append(signum)
 
 
 def main(args: list[str] | None = None) -> None:
@@ -404,6 +409,11 @@ def main(args: list[str] | None = None) -> None:
         # call runs then; that is a normal stop, anything else is a bug to show.
         if rclpy.ok():
             raise
+        if not built and _STOPPED_BY:
+            # Stopped before it recorded: it ends as any executable a signal ends while it
+            # loads, quietly with 128 + the signal, and leaves no bag to look for (a bag it
+            # had opened is closed whole: Recorder.__init__).
+            exit_code = 128 + _STOPPED_BY[0]
     finally:
         node = built[0] if built else None
         if node is not None:
