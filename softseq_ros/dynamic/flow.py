@@ -264,14 +264,25 @@ class NetworkFlow:
         volumes = self._volume_list(state, self._injected_at(t))
         pressures = self._pressure_list(volumes)
         flows = self._flow_list(state, pressures)
+        rates = self.segment_rates(flows, pressures, self.flow)
+        return np.array(volumes), np.array(pressures), np.array(flows), np.array(rates)
+
+    def segment_rates(self, flows: list[float], pressures: list[float],
+                      inflow: float) -> list[float]:
+        """
+        The state's rates of the volumes but the tip's, then of the inertial channels' flows.
+
+        ``inflow`` [m^3/s] enters the fed segment (the pump's flow, the supply tube's, or a
+        regulator's); each channel carries ``flows`` between the segments at ``pressures``.
+        """
         last = self.n - 1
-        rates = [-flows[0]] + [flows[i - 1] - flows[i] for i in range(1, last)]
+        rates = [(flows[i - 1] if i else 0.0) - flows[i] for i in range(last)]
         if self.feed < last:
-            rates[self.feed] += self.flow
+            rates[self.feed] += inflow
         for j in self.inertial:
             law = self.laws[j]
             rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
-        return np.array(volumes), np.array(pressures), np.array(flows), np.array(rates)
+        return rates
 
     def _rates(self, t: float, y: FloatArray) -> FloatArray:
         """
@@ -286,15 +297,8 @@ class NetworkFlow:
         volumes = others + [self.rest_total + (start_injected + self.flow * (t - start_t))
                             - sum(others)]
         pressures = self._pressure_list(volumes)
-        flows = self._flow_list(state, pressures)
-        rates = [-flows[0]]
-        rates += [flows[i - 1] - flows[i] for i in range(1, last)]
-        if self.feed < last:
-            rates[self.feed] += self.flow
-        for j in self.inertial:
-            law = self.laws[j]
-            rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
-        return np.array(rates)
+        return np.array(self.segment_rates(self._flow_list(state, pressures), pressures,
+                                           self.flow))
 
     def _line_balance(self, t: float, state: list[float]) -> tuple[
             list[float], list[float], list[float], float, float, list[float]]:
@@ -321,12 +325,7 @@ class NetworkFlow:
         feed_drop = line_pressure - pressures[self.feed]
         supply_flow = (state[self._line_at + 1] if self._supply_inertial
                        else self._supply_flow(feed_drop))
-        rates = [(flows[i - 1] if i else 0.0) - flows[i] for i in range(last)]
-        if self.feed < last:
-            rates[self.feed] += supply_flow
-        for j in self.inertial:
-            law = self.laws[j]
-            rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
+        rates = self.segment_rates(flows, pressures, supply_flow)
         rates.append(self.flow - supply_flow)
         if self._supply_inertial:
             rates.append((feed_drop - self.supply.drop(supply_flow)) / self.supply.inertance)

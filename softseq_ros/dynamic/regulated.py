@@ -100,13 +100,7 @@ class RegulatedNetwork:
         outlet = self._outlet(t, state, target)
         drop = outlet - float(pressures[self.feed])
         supply = self._tube_flow(state, drop)
-        last = self.n - 1
-        rates = [(flows[i - 1] if i else 0.0) - flows[i] for i in range(last)]
-        if self.feed < last:
-            rates[self.feed] += supply
-        for j in members.inertial:
-            law = members.laws[j]
-            rates.append((pressures[j] - pressures[j + 1] - law.drop(flows[j])) / law.inertance)
+        rates = members.segment_rates(flows.tolist(), pressures.tolist(), supply)
         rates.append(supply)
         if self.lagged:
             rates.append((target(t) - outlet) / self.regulator.time_constant_s)
