@@ -525,6 +525,7 @@ class _BatchRun:
                 for other in clocks:
                     if other is not clock:
                         self._record(router.run(other[2].tick(now)))
+                self._record(router.run(self.actuator.finish(now)))
                 return
             if self.progress is not None and time.perf_counter() >= next_report:
                 next_report += PROGRESS_PERIOD_S

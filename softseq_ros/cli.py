@@ -155,7 +155,8 @@ def _write_network_path(args: argparse.Namespace, scene: Any, path: Any, timed: 
         print(f'  {what} at {snap.start_s:.6g} s, {snap.injected * 1e6:.3f} mL injected: '
               f'{snap.fluid_moved_m3 * 1e6:.3f} mL moved, peak '
               f'{snap.peak_exchange_m3_per_s * 1e6:.4g} mL/s, 10-90 % in '
-              f'{duration_text(snap.duration_s)}')
+              f'{duration_text(snap.duration_s)}'
+              + (', still under way at the last sample' if snap.cut_short else ''))
     channels = channel_names(scene.segment_names)
     print('  peak Reynolds number per channel: ' + ', '.join(
         f'{name} {peak:.0f}' for name, peak in zip(channels, path.peak_reynolds)))

@@ -15,6 +15,7 @@ import yaml
 
 import softseq_ros
 from softseq_ros import cli
+from softseq_ros.analysis.report import write_report
 from softseq_ros.bag.reader import bag_summary, read_bag
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import LAMINAR_REYNOLDS, tube_law
@@ -91,6 +92,42 @@ def test_the_rig_records_channel_flows_and_snap_throughs_with_their_timing(tmp_p
     assert np.max(np.diff(during)) <= 1e9 / 200 * 1.001
     command_times = {m.log_time_ns for m in read_bag(bag, ['/pump/command'])}
     assert len(set(during) - command_times) > 0.5 * len(during)
+
+
+def test_an_exchange_under_way_when_a_batch_run_ends_goes_out_cut_short(tmp_path):
+    # No hold: the programme ends at 30 mL while the snap-through's exchange still moves fluid.
+    # A batch run's time stops with its pump; before, that exchange never reached the bag.
+    channel = {'length_m': 0.01, 'radius_m': 0.5e-3}
+    scene = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 200}, hold=0.0)
+    softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
+    events = [(m.log_time_ns, json.loads(m.msg.data))
+              for m in read_bag(tmp_path / 'bag', ['/actuator/events'])]
+    held = fig1_with_network(tmp_path, {'channels': [channel], 'rate_hz': 200})
+    softseq_ros.run(held, tmp_path / 'held', start_time_ns=0)
+    whole = [json.loads(m.msg.data) for m in read_bag(tmp_path / 'held', ['/actuator/events'])]
+    assert [e['snap_through'] for _, e in events] == [e['snap_through'] for e in whole] \
+        == [False, True]
+    # The one that ran its course carries no cut_short key (its bytes as before).
+    assert 'cut_short' not in events[0][1] and 'cut_short' not in whole[1]
+    published, cut = events[1]
+    assert cut['cut_short'] is True
+    # It started where the held run's did; it went out at the run's last instant, with the
+    # state there and the fluid the recorded volumes moved from its start to there.
+    assert cut['start_ns'] == whole[1]['start_ns']
+    volumes = list(read_bag(tmp_path / 'bag', ['/actuator/volumes']))
+    assert published == volumes[-1].log_time_ns
+    assert cut['to_volumes_m3'] == pytest.approx(list(volumes[-1].msg.position), rel=1e-9)
+    during = [m for m in volumes if m.log_time_ns >= cut['start_ns']]
+    v = np.array([m.msg.position for m in during])
+    pumped = np.array([m.msg.position for m in read_bag(tmp_path / 'bag', ['/pump/command'])
+                       if m.log_time_ns >= cut['start_ns']])[:, 0]
+    moved = 0.5 * (np.abs(np.diff(v, axis=0)).sum() - abs(pumped[-1] - pumped[0]))
+    assert cut['fluid_moved_m3'] == pytest.approx(moved, rel=0.02)
+    assert cut['fluid_moved_m3'] < whole[1]['fluid_moved_m3']
+    # The report says so beside its numbers, and metrics.json marks it.
+    metrics, text = write_report(tmp_path / 'bag', tmp_path / 'report', figures=False)
+    assert 'still under way when the run ended' in text
+    assert [s['cut_short'] for s in metrics['transients']['snaps']] == [True]
 
 
 def test_a_quasi_static_scene_has_no_channel_flows_topic(tmp_path):

@@ -82,11 +82,12 @@ def test_pumped_slowly_the_written_snaps_are_where_the_quasistatic_ones_are(tmp_
     # Every exchange is a row: past the bottom's peak at 2.6 mL it gives the top some fluid on
     # the stable branch (no snap-through), then the pair snaps.
     assert len(rows) == 2
-    # Numbers, then the names of the segments that gave the fluid and took it, and whether
-    # it was a snap-through.
-    assert header[-3:] == ['giving', 'taking', 'snap_through']
-    assert rows[0][-3:] == ['bottom', 'top', '0'] and rows[1][-3:] == ['top', 'bottom', '1']
-    snap = dict(zip(header[:-3], map(float, rows[1][:-3])))
+    # Numbers, then the names of the segments that gave the fluid and took it, whether it
+    # was a snap-through, and whether the path's end cut it short.
+    assert header[-4:] == ['giving', 'taking', 'snap_through', 'cut_short']
+    assert rows[0][-4:] == ['bottom', 'top', '0', '0']
+    assert rows[1][-4:] == ['top', 'bottom', '1', '0']
+    snap = dict(zip(header[:-4], map(float, rows[1][:-4])))
     gained = [snap[f'exchanged_{name}_m3'] for name in scene_names(scene_file)]
     assert gained[0] == pytest.approx(-gained[1], rel=1e-9) and gained[0] > 0.0
     assert gained[0] == pytest.approx(snap['fluid_moved_m3'], rel=1e-6)
@@ -162,7 +163,7 @@ def test_the_columns_are_si_and_the_volumes_keep_the_mass(tmp_path, capsys):
     snap_header, snaps = read_csv(tmp_path / 'path_snaps.csv')
     assert snap_header[:6] == ['start_s', 'end_s', 'injected_m3', 'duration_s',
                                'fluid_moved_m3', 'peak_exchange_m3_per_s']
-    assert [row[-1] for row in snaps] == ['0', '1'] and 26.0 * ML < float(snaps[1][2]) < 28.0 * ML
+    assert [row[-2] for row in snaps] == ['0', '1'] and 26.0 * ML < float(snaps[1][2]) < 28.0 * ML
 
 
 def test_a_negative_history_row_is_refused_in_one_line(tmp_path, capsys):

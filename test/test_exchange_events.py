@@ -109,3 +109,38 @@ def test_a_ringing_chain_gives_one_event_per_exchange_not_one_per_swing():
     assert [e.snap_through for e in exchanges] == [False, True, True]
     assert exchanges[0].end_s < first.start_s and exchanges[0].giving() == [0]
     assert first is exchanges[1]
+
+
+def test_an_exchange_still_under_way_when_the_path_ends_is_reported_cut_short():
+    # The same slow exchange, the path's samples ending halfway through it: the tip is still
+    # drawing fluid from the base at the last sample. Before, that exchange was never
+    # reported (an episode was said only once it had run its course).
+    scene = scene_at(load_scene('rate_inversion'), 3.0e-8, 0.2e-3)
+    profile = scene.pump.profile
+    times = programme_times(profile, 6000)
+    whole = programme_path(scene.segments, scene.network, profile, times=times,
+                           line=scene.supply)
+    slow = max(whole.snaps, key=lambda e: e.fluid_moved_m3)
+    cut_at = 0.5 * (slow.start_s + slow.end_s)
+    path = programme_path(scene.segments, scene.network, profile,
+                          times=times[times <= cut_at], line=scene.supply)
+    last = path.time_s[-1]
+    *before, cut = path.snaps
+    # Those that ended before the cut are the whole path's, and none of them is cut short.
+    ended = [e for e in whole.snaps if e.end_s < last]
+    assert len(before) == len(ended) >= 1
+    assert [e.fluid_moved_m3 for e in before] == pytest.approx(
+        [e.fluid_moved_m3 for e in ended], rel=1e-9)
+    assert not any(e.cut_short for e in before) and not any(e.cut_short for e in whole.snaps)
+    # The cut one: where the whole one starts, ending at the last sample, with the fluid the
+    # volumes moved up to there (less than the whole exchange's), its own end state.
+    assert cut.cut_short
+    assert cut.start_s == pytest.approx(slow.start_s, abs=1e-6 * last)
+    assert cut.end_s == pytest.approx(last, rel=1e-12)
+    (episode,) = [e for e in volume_episodes(path.time_s, path.injected, path.volumes, 1e-12)
+                  if e[1] > cut.start_s and e[2] > 0.01 * ML]
+    assert episode[1] == last
+    assert cut.fluid_moved_m3 == pytest.approx(episode[2], rel=0.01)
+    assert cut.fluid_moved_m3 < 0.9 * slow.fluid_moved_m3
+    assert cut.to_volumes == pytest.approx(path.volumes[-1].tolist(), rel=1e-6)
+    assert cut.giving() == [0] and cut.taking() == [1]

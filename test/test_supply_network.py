@@ -409,7 +409,8 @@ def test_solve_writes_the_line_s_state_and_the_volumes_keep_the_mass(fig1_behind
     # is made or lost.
     snaps = np.atleast_1d(np.genfromtxt(tmp_path / 'path_snaps.csv', delimiter=',',
                                         names=True, dtype=None, encoding='utf-8'))
-    assert snaps.dtype.names[-4:] == ('supply_exchanged_m3', 'giving', 'taking', 'snap_through')
+    assert snaps.dtype.names[-5:] == ('supply_exchanged_m3', 'giving', 'taking', 'snap_through',
+                                    'cut_short')
     balance = sum(snaps[f'exchanged_{name}_m3'] for name in scene.segment_names)
     assert np.all(np.abs(balance + snaps['supply_exchanged_m3']) < 1e-12 * scene.capacity)
 

@@ -548,7 +548,14 @@ def _exchange_text(exchange: dict) -> str:
     """One exchange of fluid that was no snap-through, for humans."""
     return (f'{exchange["direction"]} at {_ml(exchange["injected_m3"], 3)}, '
             f't = {exchange["start_time_s"]:.3f} s: {_ml(exchange["fluid_moved_m3"], 3)} moved '
-            f'({parties(exchange)}), 10-90 % in {duration_text(exchange["duration_s"])}')
+            f'({parties(exchange)}), 10-90 % in {duration_text(exchange["duration_s"])}'
+            + _cut_text(exchange))
+
+
+def _cut_text(exchange: dict) -> str:
+    """Said of an exchange the run's end cut short: its numbers stop there."""
+    return (' (still under way when the run ended: its numbers are up to there)'
+            if exchange.get('cut_short') else '')
 
 
 def _transient_lines(transients: dict) -> list[str]:
@@ -563,7 +570,8 @@ def _transient_lines(transients: dict) -> list[str]:
             f't = {snap["start_time_s"]:.3f} s: 10-90 % in {duration_text(snap["duration_s"])}, '
             f'{_ml(snap["fluid_moved_m3"], 3)} moved ({parties(snap)}), peak exchange '
             f'{_ml_per_s(snap["peak_exchange_m3_per_s"])}, gauge pressure '
-            f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])}')
+            f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])}'
+            + _cut_text(snap))
         lines.append(
             f'    peak channel flow {_peak_channel(snap["peak_channel_flow_m3_per_s"], _ml_per_s)}'
             f', peak pressure drop {_peak_channel(snap["peak_pressure_drop_pa"], _kpa)}'
@@ -765,7 +773,8 @@ def _transient_markdown(transients: dict) -> list[str]:
         for number, snap in enumerate(transients['snaps'], start=1):
             lines.append(
                 f'| {number} | {snap["direction"]} | {snap["start_time_s"]:.3f} s | '
-                f'{_ml(snap["injected_m3"], 3)} | {duration_text(snap["duration_s"])} | '
+                f'{_ml(snap["injected_m3"], 3)} | {duration_text(snap["duration_s"])}'
+                f'{" (cut short by the end of the run)" if snap.get("cut_short") else ""} | '
                 f'{_ml(snap["fluid_moved_m3"], 3)} | {parties(snap)} | '
                 f'{_ml_per_s(snap["peak_exchange_m3_per_s"])} | '
                 f'{_kpa(snap["from_pressure_pa"])} -> {_kpa(snap["to_pressure_pa"])} | '

@@ -63,6 +63,7 @@ class TimedSnap:
     to_volumes: tuple[float, ...] = ()
     snap_through: bool = True    # False: an exchange without instability (lag, evening out)
     peak_injected: float = math.nan   # the pump's injected volume where its exchange peaked
+    cut_short: bool = False      # the run ended while it was under way: numbers up to there
 
 
 @dataclass(frozen=True)
@@ -214,7 +215,7 @@ def timed_snaps(recording: Recording, every_exchange: bool = False) -> list[Time
             _names(event.get('giving_segments')), _names(event.get('taking_segments')),
             tuple(float(v) for v in event['from_volumes_m3']),
             tuple(float(v) for v in event['to_volumes_m3']), snap_through,
-            _peak_injected(recording, event.get('peak_ns'))))
+            _peak_injected(recording, event.get('peak_ns')), event.get('cut_short') is True))
     return snaps
 
 
@@ -248,7 +249,8 @@ def _exchange_entry(snap: TimedSnap) -> dict:
             'direction': snap.direction, 'duration_s': snap.duration_s,
             'fluid_moved_m3': snap.fluid_moved, 'peak_exchange_m3_per_s': snap.peak_exchange,
             'giving_segments': None if snap.giving is None else list(snap.giving),
-            'taking_segments': None if snap.taking is None else list(snap.taking)}
+            'taking_segments': None if snap.taking is None else list(snap.taking),
+            'cut_short': snap.cut_short}
 
 
 def _snap_entry(snap: TimedSnap, recording: Recording) -> dict:
@@ -261,7 +263,8 @@ def _snap_entry(snap: TimedSnap, recording: Recording) -> dict:
              'taking_segments': None if snap.taking is None else list(snap.taking),
              'window_s': list(snap.window_s),
              'peak_channel_flow_m3_per_s': {}, 'peak_pressure_drop_pa': {},
-             'quasi_static_injected_m3': None, 'delay_injected_m3': None}
+             'quasi_static_injected_m3': None, 'delay_injected_m3': None,
+             'cut_short': snap.cut_short}
     flows = recording.channel_flows
     if flows is not None:
         inside = (flows.time_s >= snap.window_s[0]) & (flows.time_s <= snap.window_s[1])

@@ -303,6 +303,9 @@ class DynamicSnap:
     into the fed segment): ``exchanged_line_m3`` is what the line gained from the segments
     beyond the pump's push (negative: its gas expanded into them), and the fluid moved counts
     its share; None without a line.
+
+    ``cut_short``: the run ended while the exchange was still under way; ``end_s`` is then the
+    run's end and the fluid moved, the duration and the peak are those up to there.
     """
 
     injected: float
@@ -319,6 +322,7 @@ class DynamicSnap:
     peak_s: float = math.nan
     exchanged_line_m3: float | None = None
     snap_through: bool = True
+    cut_short: bool = False
 
     def giving(self) -> list[int]:
         """The segments (indices) that gave fluid to the others."""
@@ -379,6 +383,7 @@ class _Episode:
     end_s: float = math.nan
     end_state: tuple[float, list[float], float, float | None] | None = None
     feed: int = 0
+    cut_short: bool = False
 
 
 def _integral(e: tuple[float, float, float], lo: float, x: float) -> float:
@@ -452,10 +457,22 @@ class ExchangeWatcher:
             return []
         return self._publish()
 
-    def finish(self) -> list[DynamicSnap]:
-        """Report a paused episode now (the run ends); one still under way stays open."""
-        if self._episode is None or self._active:
+    def finish(self, end_s: float,
+               state: tuple[float, list[float], float, float | None]) -> list[DynamicSnap]:
+        """
+        The run ends at ``end_s``: report the episode paused or under way.
+
+        ``state``: injected volume, volumes, the fed segment's gauge pressure and the line's
+        fluid (None without a line) at ``end_s``. An episode still under way ends there, cut
+        short (:attr:`DynamicSnap.cut_short`).
+        """
+        episode = self._episode
+        if episode is None:
             return []
+        if self._active:
+            self._active = False
+            episode.end_s, episode.end_state = end_s, state
+            episode.cut_short = True
         return self._publish()
 
     def watch(self, curve: StepCurve, lo: float, hi: float, state_at: StateAt,
@@ -618,7 +635,8 @@ class ExchangeWatcher:
         t10, t90 = (_time_at_share(episode, share * total) for share in (0.1, 0.9))
         snap = DynamicSnap(episode.injected, episode.start_s, episode.end_s, t90 - t10, total,
                            episode.peak, episode.volumes, volumes, episode.pressure, pressure,
-                           exchanged, episode.peak_s, line_exchanged, episode.unstable)
+                           exchanged, episode.peak_s, line_exchanged, episode.unstable,
+                           episode.cut_short)
         self.found.append(snap)
         return [snap]
 

@@ -736,8 +736,20 @@ class NetworkFlow:
         self._note_exchange(rates.tolist())
 
     def finish_exchanges(self) -> None:
-        """The run ends: a paused exchange episode is reported (one under way stays open)."""
-        self.new_snaps.extend(self.snaps.finish())
+        """
+        The run ends now: the exchange episode paused or still under way is reported.
+
+        One still under way is cut short here (:attr:`DynamicSnap.cut_short`): a run that
+        ends while fluid still moves between the segments says so, and how much moved.
+        """
+        if self._curve is not None and self._watched_to < self.t:
+            self._watch(self.t, self._curve.x_of(self.t))
+        if not self.snaps.pending:
+            return
+        volumes, pressures, _ = self.now()
+        line_held = None if self.line is None else float(self._state_list()[self._line_at])
+        self.new_snaps.extend(self.snaps.finish(
+            self.t, (self.injected, list(volumes), pressures[self.feed], line_held)))
 
     def _watch_step(self, solver: Integrator) -> None:
         """The rest of the last step, now that time has reached its end."""

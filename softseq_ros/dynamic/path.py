@@ -73,8 +73,8 @@ class DynamicPath:
     own [Pa, gauge];
     ``channel_flows[:, j]`` flows from segment j to j + 1 [m^3/s]; ``snap[i]`` says a
     snap-through started after sample i - 1 and by sample i; ``snaps`` are all the
-    exchanges of fluid between the segments (snap-throughs or not) that ran their course by
-    the last sample; ``peak_reynolds[j]`` is channel
+    exchanges of fluid between the segments (snap-throughs or not), one still under way at the
+    last sample cut short there (``cut_short``); ``peak_reynolds[j]`` is channel
     j's largest Reynolds number over the samples; ``steps`` the integrator's steps.
 
     ``folds``: each segment's passages through the folds of its own curve by the last sample
@@ -397,8 +397,9 @@ def snap_columns(names: Sequence[str], line: bool = False) -> list[str]:
 
     One row per exchange of fluid between the segments (docs/dynamic.md). Numbers, then
     ``giving`` and ``taking``: the names of the segments that gave and took the fluid,
-    separated by spaces, and ``snap_through``: 1 when the state passed where the equilibrium
-    is unstable (a snap-through), 0 for an exchange without instability.
+    separated by spaces, ``snap_through``: 1 when the state passed where the equilibrium
+    is unstable (a snap-through), 0 for an exchange without instability, and ``cut_short``: 1
+    when the path ended while the exchange was still under way (its numbers up to there).
     ``exchanged_<name>_m3`` is what a segment gained from the others (its volume's change
     less the pump's push into it; negative: it gave). Behind a compliant supply line
     (``line``) the pump pushes into the line, and ``supply_exchanged_m3``, after the
@@ -409,7 +410,8 @@ def snap_columns(names: Sequence[str], line: bool = False) -> list[str]:
              'peak_exchange_m3_per_s', 'peak_s', 'from_pressure_pa', 'to_pressure_pa']
             + [f'from_volume_{n}_m3' for n in names] + [f'to_volume_{n}_m3' for n in names]
             + [f'exchanged_{n}_m3' for n in names]
-            + (['supply_exchanged_m3'] if line else []) + ['giving', 'taking', 'snap_through'])
+            + (['supply_exchanged_m3'] if line else [])
+            + ['giving', 'taking', 'snap_through', 'cut_short'])
 
 
 def _write_table(out: str | Path, header: Sequence[str], rows: Iterable[list[str]]) -> None:
@@ -430,7 +432,7 @@ def write_snaps(out: str | Path, snaps: Sequence[DynamicSnap], names: Sequence[s
         *snap.from_volumes, *snap.to_volumes, *snap.exchanged_m3,
         *([snap.exchanged_line_m3] if line else []))]
         + [' '.join(names[i] for i in snap.giving()), ' '.join(names[i] for i in snap.taking()),
-           str(int(snap.snap_through))]
+           str(int(snap.snap_through)), str(int(snap.cut_short))]
         for snap in snaps))
 
 

@@ -206,6 +206,23 @@ class ActuatorCore:
             self._changed(outputs)
         return outputs
 
+    def finish(self, now: int) -> list[Output]:
+        """
+        The run ends at ``now``: the exchange of fluid paused or still under way is said.
+
+        A batch run's time stops with its pump; an exchange it would not see end is published
+        cut short (``cut_short``), so the bag does not hide fluid moving at its end.
+        """
+        # A model of one's own from before the seam asked for it may have no finish.
+        finish = getattr(self.model, 'finish', None)
+        if self.waiting or finish is None:
+            return []
+        try:
+            snaps = finish(now)
+        except CommandRefusedError as err:
+            return self.refuse('domain', f'state held: {err}')
+        return self._events(now, snaps)
+
     def refuse(self, key: str, text: str) -> list[Output]:
         """Count a refused command and warn (throttled per kind of refusal)."""
         self.rejected_commands += 1
@@ -225,6 +242,16 @@ class ActuatorCore:
         if self._send_flows:
             flows, drops = self.model.channel_state()
             out.append(ChannelFlows(stamp, self.model.channel_names, flows, drops))
+        out += self._events(stamp, snaps)
+        for line in self.model.take_notes():
+            out.append(Notice(self.role, INFO, line))
+        for line in self.model.take_warnings():
+            out.append(Notice(self.role, WARNING, line))
+        return out
+
+    def _events(self, stamp: int, snaps: list[Snap]) -> list[Output]:
+        """Each snap-through or exchange: its log line, and its event when events are sent."""
+        out: list[Output] = []
         for snap in snaps:
             event = SnapThrough(stamp, float(snap.injected),
                                 [float(v) for v in snap.from_volumes],
@@ -234,6 +261,8 @@ class ActuatorCore:
             if isinstance(snap, TimedSnap):
                 event.snap_through = bool(snap.snap_through)
                 event.peak_ns = snap.peak_ns
+                if snap.cut_short:
+                    event.cut_short = True
                 if not snap.snap_through:
                     said = f'exchange of fluid at {snap.injected * 1e6:.4f} mL injected'
                 event.start_ns = snap.start_ns
@@ -246,13 +275,11 @@ class ActuatorCore:
                          f'{" and ".join(snap.giving) or "-"} to '
                          f'{" and ".join(snap.taking) or "-"} in {snap.duration_s:.3g} s '
                          '(10-90 %)')
+                if snap.cut_short:
+                    said += ', still under way when the run ended'
             out.append(Notice(self.role, INFO, said))
             if self._send_events:
                 out.append(event)
-        for line in self.model.take_notes():
-            out.append(Notice(self.role, INFO, line))
-        for line in self.model.take_warnings():
-            out.append(Notice(self.role, WARNING, line))
         return out
 
     # ---------------------------------------------------------------- state

@@ -81,8 +81,8 @@ class TimedSnap:
     ``start_ns``: when the exchange began, on the driver's clock; ``duration_s``: 10 % to 90 %
     of the fluid moved; ``fluid_moved_m3`` and ``peak_exchange_m3_per_s``: between the
     segments, beyond the pump's own flow; ``giving`` and ``taking``: the names of the segments
-    that gave the fluid and took it; ``peak_ns``: when the exchange peaked
-    (softseq_ros.dynamic.events.DynamicSnap).
+    that gave the fluid and took it; ``peak_ns``: when the exchange peaked; ``cut_short``: the
+    run ended while it was still under way (softseq_ros.dynamic.events.DynamicSnap).
     """
 
     injected: float
@@ -98,6 +98,7 @@ class TimedSnap:
     taking: tuple[str, ...] = ()
     snap_through: bool = True
     peak_ns: int | None = None
+    cut_short: bool = False
 
 
 class ActuatorModel(Protocol):
@@ -122,6 +123,14 @@ class ActuatorModel(Protocol):
 
     def advance(self, now_ns: int) -> list[Snap] | None:
         """Move time to ``now_ns``; ``None`` when the state did not change."""
+
+    def finish(self, now_ns: int) -> list[Snap]:
+        """
+        The run ends at ``now_ns``: the exchanges paused or still under way, reported now.
+
+        One still under way is cut short there (``cut_short``). Optional: a model without it
+        has nothing left at the end.
+        """
 
     def state(self) -> ModelState:
         """The state now."""
@@ -258,6 +267,10 @@ class QuasiStaticModel:
     def advance(self, now_ns: int) -> None:
         """Time alone moves nothing in a quasi-static actuator."""
         return None
+
+    def finish(self, now_ns: int) -> list[Snap]:
+        """A quasi-static snap-through is over the instant it starts: nothing is left."""
+        return []
 
     def state(self) -> ModelState:
         """The equilibrium state of the last command (at rest before the first)."""
@@ -423,6 +436,14 @@ class DynamicModel:
             return [] if network.exchanging else None
         return self._take_snaps()
 
+    def finish(self, now_ns: int) -> list[Snap]:
+        """The run ends at ``now_ns``: the exchange paused or under way, cut short if so."""
+        t = self._seconds(now_ns)
+        if t > self.flow_network.t:
+            self._run_to(t)
+        self.flow_network.finish_exchanges()
+        return self._take_snaps()
+
     def _take_snaps(self) -> list[TimedSnap]:
         if not self.flow_network.new_snaps:
             return []
@@ -432,7 +453,7 @@ class DynamicModel:
                           snap.duration_s, snap.fluid_moved_m3, snap.peak_exchange_m3_per_s,
                           tuple(self.names[i] for i in snap.giving()),
                           tuple(self.names[i] for i in snap.taking()), snap.snap_through,
-                          origin + round(snap.peak_s * NS_PER_S))
+                          origin + round(snap.peak_s * NS_PER_S), snap.cut_short)
                 for snap in self.flow_network.take_snaps()]
 
     def channel_state(self) -> tuple[list[float], list[float]]:

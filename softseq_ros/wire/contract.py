@@ -127,7 +127,7 @@ EVENTS = Topic(
     'time (a scene with a network) one per exchange of fluid between the segments, with also '
     'start_ns, duration_s (10 % to 90 % of the fluid moved), fluid_moved_m3, '
     'peak_exchange_m3_per_s, giving_segments and taking_segments (names), snap_through and '
-    'peak_ns')
+    'peak_ns; cut_short (true) on one the run ended while it was under way')
 # Which scene's segments the actuator runs, as ROS keeps a robot's description: latched, so
 # a recorder that starts later still gets it, and every bag can name the physics behind it.
 SCENE = Topic(

@@ -255,7 +255,8 @@ SNAP_THROUGH_JSON = JsonPayload(
     # A snap-through in time: a quasi-static one has none of these (and its bytes stay).
     optional=(('start_ns', 'int'), ('duration_s', 'float'), ('fluid_moved_m3', 'float'),
               ('peak_exchange_m3_per_s', 'float'), ('giving_segments', 'strs'),
-              ('taking_segments', 'strs'), ('snap_through', 'bool'), ('peak_ns', 'int')))
+              ('taking_segments', 'strs'), ('snap_through', 'bool'), ('peak_ns', 'int'),
+              ('cut_short', 'bool')))
 SCENE_IDENTITY_JSON = JsonPayload(
     SceneIdentity, 'scene identity',
     (('scene', 'str'), ('segments', 'strs'), ('segments_sha256', 'str'), (STAMP_KEY, 'int')),

@@ -124,6 +124,8 @@ class SnapThrough:
     snap-through (``snap_through``: the state passed where the equilibrium is unstable; an
     exchange in time without the key, from an older bag, was one) and when its exchange
     peaked (``peak_ns``); None for a quasi-static one (instantaneous, always a snap-through).
+    ``cut_short`` is True when the run ended while the exchange was still under way (its
+    numbers are those up to the run's end), and absent otherwise.
     """
 
     topic: ClassVar[Topic] = contract.EVENTS
@@ -141,6 +143,7 @@ class SnapThrough:
     taking_segments: list[str] | None = None
     snap_through: bool | None = None
     peak_ns: int | None = None
+    cut_short: bool | None = None
 
 
 @dataclass(slots=True)
