@@ -65,31 +65,44 @@ def _rising(segment: Segment) -> list[Piece]:
     return [piece for piece in segment.monotone_pieces() if piece.direction > 0]
 
 
-def regulated_path(segments: Sequence[Segment], pressures: ArrayLike) -> RegulatedPath:
+class HysteronTracker:
     """
-    Follow gauge pressures [Pa] from rest, each segment on its own rising pieces.
+    The segments under a held pressure, one command after another: each on its rising pieces.
 
-    Every segment starts on its first rising piece. A pressure above the top of a segment's
-    piece moves it up to the first rising piece above that reaches the pressure, one below
-    the bottom of its piece down to the last rising piece below that does (:class:`Flip`
-    each time); a pressure no rising piece of a segment reaches raises
-    :class:`PressureDomainError`, naming the row and the segment.
+    Every segment starts on its first rising piece (at rest), or on the piece that holds the
+    volume :meth:`place` gives it. :meth:`move` takes the next gauge pressure.
     """
-    p = np.asarray(pressures, dtype=float).ravel()
-    if not np.all(np.isfinite(p)):
-        raise PressureDomainError(f'row {int(np.argmax(~np.isfinite(p)))}: a commanded '
-                                  'pressure must be finite')
-    pieces = [_rising(segment) for segment in segments]
-    for segment, rising in zip(segments, pieces):
-        if not rising:
-            raise PressureDomainError(f'segment {segment.name!r} never rises: no state of it is '
-                                      'stable at a held pressure')
-    current = [0] * len(segments)
-    volumes = np.empty((p.size, len(segments)))
-    flips: list[Flip] = []
-    for row, target in enumerate(p.tolist()):
-        for i, (segment, rising) in enumerate(zip(segments, pieces)):
-            at = current[i]
+
+    def __init__(self, segments: Sequence[Segment]) -> None:
+        self.segments = tuple(segments)
+        self.pieces = [_rising(segment) for segment in self.segments]
+        for segment, rising in zip(self.segments, self.pieces):
+            if not rising:
+                raise PressureDomainError(f'segment {segment.name!r} never rises: no state of '
+                                          'it is stable at a held pressure')
+        self.current = [0] * len(self.segments)
+
+    def place(self, volumes: Sequence[float]) -> None:
+        """Each segment on the rising piece nearest its volume [m^3] (a resumed state)."""
+        for i, (rising, volume) in enumerate(zip(self.pieces, volumes)):
+            self.current[i] = min(range(len(rising)), key=lambda k: max(
+                rising[k].v_lo - volume, volume - rising[k].v_hi, 0.0))
+
+    def move(self, target: float, row: int = 0) -> tuple[list[float], list[Flip]]:
+        """
+        Each segment's volume [m^3] at the gauge pressure ``target`` [Pa], and its flips.
+
+        A pressure above the top of a segment's piece moves it up to the first rising piece
+        above that reaches the pressure, one below the bottom of its piece down to the last
+        rising piece below that does (a :class:`Flip` each, at ``row``); a pressure no rising
+        piece of a segment reaches raises :class:`PressureDomainError` (naming ``row`` and the
+        segment) and leaves every segment where it was.
+        """
+        if not np.isfinite(target):
+            raise PressureDomainError(f'row {row}: a commanded pressure must be finite')
+        places = list(self.current)
+        for i, (segment, rising) in enumerate(zip(self.segments, self.pieces)):
+            at = places[i]
             if target > rising[at].p_max:
                 above = [k for k in range(at + 1, len(rising))
                          if rising[k].p_min <= target <= rising[k].p_max]
@@ -103,22 +116,46 @@ def regulated_path(segments: Sequence[Segment], pressures: ArrayLike) -> Regulat
                     f'row {row}: {target:.6g} Pa is beyond what segment {segment.name!r} '
                     f'holds on a stable piece ({rising[0].p_min:.6g} to '
                     f'{max(r.p_max for r in rising):.6g} Pa)')
-            volume = float(segment.invert(rising[at], np.array([target]))[0])
-            if at != current[i]:
-                before = rising[current[i]]
+            places[i] = at
+        volumes, flips = [], []
+        for i, (segment, rising) in enumerate(zip(self.segments, self.pieces)):
+            at = places[i]
+            volumes.append(float(segment.invert(rising[at], np.array([target]))[0]))
+            if at != self.current[i]:
+                before = rising[self.current[i]]
                 # A pressure raised or lowered steadily jumps where it passes the piece's end.
                 up = target > before.p_max
                 edge_p, edge_v = (before.p_max, before.v_hi) if up else (before.p_min,
                                                                          before.v_lo)
                 landed = float(segment.invert(rising[at], np.array([edge_p]))[0])
                 flips.append(Flip(row, i, edge_p, edge_v, landed))
-                current[i] = at
-            volumes[row, i] = volume
+        self.current = places
+        return volumes, flips
+
+
+def regulated_path(segments: Sequence[Segment], pressures: ArrayLike) -> RegulatedPath:
+    """
+    Follow gauge pressures [Pa] from rest, each segment on its own rising pieces.
+
+    Every segment starts on its first rising piece (:class:`HysteronTracker`); a pressure no
+    rising piece of a segment reaches raises :class:`PressureDomainError`, naming the row and
+    the segment.
+    """
+    p = np.asarray(pressures, dtype=float).ravel()
+    if not np.all(np.isfinite(p)):
+        raise PressureDomainError(f'row {int(np.argmax(~np.isfinite(p)))}: a commanded '
+                                  'pressure must be finite')
+    tracker = HysteronTracker(segments)
+    volumes = np.empty((p.size, len(tracker.segments)))
+    flips: list[Flip] = []
+    for row, target in enumerate(p.tolist()):
+        volumes[row], found = tracker.move(target, row)
+        flips += found
     curvatures = np.column_stack([np.asarray(s.curvature(volumes[:, i]), dtype=float)
-                                  for i, s in enumerate(segments)]) if p.size else \
-        np.empty((0, len(segments)))
+                                  for i, s in enumerate(tracker.segments)]) if p.size else \
+        np.empty((0, len(tracker.segments)))
     return RegulatedPath(p, volumes, curvatures, flips,
-                         float(sum(segment.rest_volume for segment in segments)))
+                         float(sum(segment.rest_volume for segment in tracker.segments)))
 
 
 @dataclass(frozen=True)
