@@ -1042,5 +1042,15 @@ def fit_cycles(cycles: Sequence[Cycle], radius: float | None = None,
         return loading
     unloading = fit_sphere(deflations, radius, thickness, laws, bootstrap, seed)
     unloading.notes[:] = [f'unloading: {note}' for note in unloading.notes]
-    loop = hysteresis(loading.best, unloading.best, shared_volumes(cycles), cycles)
+    low, high = shared_volumes(cycles)
+    best = unloading.best
+    if best.curve is not None and not np.all(np.isfinite(best.curve(best.internal,
+                                                                    np.array([high])))):
+        # A Gent unloading law may lock in the one row's step between its data and the turn.
+        top = max(float(np.max(d.volume)) for d in deflations)
+        unloading.notes.append(f'unloading: the {unloading.chosen} law has no pressure at the '
+                               f'turn ({high:.6g} m^3); the loop is measured up to the '
+                               f'largest deflation volume ({top:.6g} m^3)')
+        high = top
+    loop = hysteresis(loading.best, unloading.best, (low, high), cycles)
     return CycleFit(cycles, loading, unloading, loop)
