@@ -493,8 +493,8 @@ def _rates(args: argparse.Namespace) -> int:
 def _fit(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.fit_outputs import summary_lines, write_fit_outputs
     from softseq_ros.errors import check_output_folder
-    from softseq_ros.scene.tables import read_inflation
-    from softseq_ros.segments.fit import FIT_LAWS, FitError, fit_sphere
+    from softseq_ros.scene.tables import read_cycle
+    from softseq_ros.segments.fit import FIT_LAWS, FitError, fit_cycles
 
     # Every option before any file is read: a mistake costs no fit.
     for option, value in (('--radius-m', args.radius_m), ('--thickness-m', args.thickness_m),
@@ -513,8 +513,8 @@ def _fit(args: argparse.Namespace) -> int:
     # The volumes' unit is checked against the segment's size where it is known.
     size = args.length_m if args.length_m is not None else (
         None if args.radius_m is None else 2.0 * args.radius_m)
-    inflations = [read_inflation(path, size) for path in args.tables]
-    fit = fit_sphere(inflations, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
+    cycles = [read_cycle(path, size) for path in args.tables]
+    fit = fit_cycles(cycles, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
                      bootstrap=args.bootstrap, seed=args.seed)
     written = write_fit_outputs(fit, args.out, args.length_m, style)
     for line in summary_lines(fit, written):
@@ -826,13 +826,16 @@ def build_parser() -> argparse.ArgumentParser:
                          description='Fit neo-Hookean, Mooney-Rivlin, Gent and one-term Ogden '
                          'membrane laws on a thin sphere to measured inflations of one segment '
                          '(each CSV: volume_m3 = the whole segment volume, pressure_pa = gauge, '
-                         'in rising volume), by weighted least squares with the noise '
+                         'in rising volume; a file whose volume then falls holds a deflation '
+                         'too, and both branches and the hysteresis between them are fitted), '
+                         'by weighted least squares with the noise '
                          'estimated from the raw rows; 95 % intervals from the Jacobian and a '
                          'seeded parametric bootstrap; the law chosen by AICc. Writes fit.json, '
-                         'segment.csv (the chosen curve as a segment table) and fit.png '
-                         '(docs/fit.md).')
+                         'segment.csv (the chosen curve as a segment table; with deflations also '
+                         'segment_unloading.csv) and fit.png (docs/fit.md).')
     fit.add_argument('tables', nargs='+', type=Path, metavar='TABLE.csv',
-                     help='measured inflations of one segment (volume_m3, pressure_pa)')
+                     help='measured inflations of one segment (volume_m3, pressure_pa), each '
+                     'optionally followed by its deflation')
     fit.add_argument('--geometry', choices=('sphere',), default='sphere',
                      help="the segment's shape: a thin sphere (the balloon), the only one yet")
     fit.add_argument('--radius-m', type=float, metavar='R', help="the sphere's reference "

@@ -1,5 +1,7 @@
 """
-What ``softseq fit`` writes: fit.json, segment.csv and fit.png (docs/fit.md).
+What ``softseq fit`` writes: fit.json, segment.csv, fit.png and segment_unloading.csv.
+
+Each is described in docs/fit.md; the last only where the files hold deflations.
 
 - ``fit.json``: every number of :class:`~softseq_ros.segments.fit.SphereFit`, SI units: each
   inflation's noise, per law its parameters with standard errors, Jacobian and bootstrap
@@ -8,8 +10,10 @@ What ``softseq fit`` writes: fit.json, segment.csv and fit.png (docs/fit.md).
   curvature_per_m``), read by :func:`softseq_ros.scene.tables.read_table` as any other; its
   ``#`` lines say where it comes from (the files, the noise, the law and its intervals) and
   give its ``length_m``, as ``softseq library`` reads it.
+- ``segment_unloading.csv``: where the files hold deflations, the unloading branch's chosen
+  curve, as segment.csv is the loading branch's: a scene runs with either.
 - ``fit.png``: the measured rows, each law's curve, and below their residuals beside the
-  noise, in the report's figure styles.
+  noise, in the report's figure styles; with deflations, their rows and the unloading curve.
 """
 
 import json
@@ -31,10 +35,11 @@ from softseq_ros.analysis.figures import (
     save_figure,
 )
 from softseq_ros.errors import write_text
-from softseq_ros.segments.fit import Estimate, SphereFit
+from softseq_ros.segments.fit import CycleFit, Estimate, SphereFit
 
 FIT_JSON = 'fit.json'
 SEGMENT_CSV = 'segment.csv'
+UNLOADING_CSV = 'segment_unloading.csv'
 FIT_PNG = 'fit.png'
 # The laws' colours in the figure, one each, always the same.
 LAW_COLOURS = {'neo_hookean': SEGMENT_COLOURS[3], 'mooney_rivlin': SEGMENT_COLOURS[1],
@@ -43,22 +48,37 @@ LAW_LABELS = {'neo_hookean': 'neo-Hookean', 'mooney_rivlin': 'Mooney-Rivlin', 'g
               'ogden': 'Ogden'}
 MEASURED_MARKERS = ('o', 's', '^', 'v', 'D')
 CURVE_POINTS = 400
+UNLOADING_COLOUR = '#D55E00'
+MJ = 1e3
 
 
-def write_fit_outputs(fit: SphereFit, out: Path, length: float | None = None,
+def write_fit_outputs(fit: SphereFit | CycleFit, out: Path, length: float | None = None,
                       style: FigureStyle = PAPER) -> list[Path]:
     """
     fit.json, segment.csv and fit.png of ``fit`` in the folder ``out`` (made when missing).
 
-    ``length`` [m]: the segment's, for the table's ``# length_m:`` line (default: the
-    sphere's diameter). A failed write is one line naming the file.
+    With deflations (a :class:`CycleFit`) also segment_unloading.csv, and the unloading
+    fit and the hysteresis in fit.json and fit.png. ``length`` [m]: the segment's, for the
+    tables' ``# length_m:`` line (default: the sphere's diameter). A failed write is one line
+    naming the file.
     """
     out.mkdir(parents=True, exist_ok=True)
-    written = [out / FIT_JSON, out / SEGMENT_CSV, out / FIT_PNG]
-    write_text(written[0], json.dumps(finite_json(fit.to_dict()), indent=1, allow_nan=False)
-               + '\n')
-    write_text(written[1], segment_table_text(fit, length))
-    plot_fit(fit, written[2], style)
+    loading = fit.loading if isinstance(fit, CycleFit) else fit
+    report = loading.to_dict()
+    written = [out / FIT_JSON, out / SEGMENT_CSV]
+    tables = [segment_table_text(loading, length)]
+    if isinstance(fit, CycleFit):
+        unloading = fit.unloading.to_dict()
+        unloading['deflations'] = unloading.pop('inflations')
+        report['unloading'] = unloading
+        report['hysteresis'] = fit.hysteresis.to_dict()
+        written.append(out / UNLOADING_CSV)
+        tables.append(segment_table_text(fit.unloading, length, branch='deflation'))
+    write_text(written[0], json.dumps(finite_json(report), indent=1, allow_nan=False) + '\n')
+    for path, text in zip(written[1:], tables):
+        write_text(path, text)
+    written.append(out / FIT_PNG)
+    plot_fit(fit, written[-1], style)
     return written
 
 
@@ -82,8 +102,14 @@ def estimate_text(estimate: Estimate) -> str:
     return text + ')'
 
 
-def segment_table_text(fit: SphereFit, length: float | None = None) -> str:
-    """The chosen law's curve as a segment table, its provenance in ``#`` lines."""
+def segment_table_text(fit: SphereFit, length: float | None = None,
+                       branch: str = 'inflation') -> str:
+    """
+    The chosen law's curve as a segment table, its provenance in ``#`` lines.
+
+    ``branch``: what was fitted, ``inflation`` (the loading branch) or ``deflation`` (the
+    unloading branch, its rows read in rising volume).
+    """
     best = fit.best
     volume, pressure = fit.table()
     length = 2.0 * best.radius if length is None else length
@@ -91,9 +117,10 @@ def segment_table_text(fit: SphereFit, length: float | None = None) -> str:
                         for i, s in zip(fit.inflations, fit.noise_std))
     lines = [
         f'# softseq fit: the {best.law.name} law on a thin sphere, fitted to measured '
-        'inflations (docs/fit.md); rows from its closed form',
+        + ('inflations' if branch == 'inflation' else 'deflations (the unloading branch)')
+        + ' (docs/fit.md); rows from its closed form',
         f'# source: {sources}',
-        f"# measured_noise_std_pa: {fit.pooled_noise_std:.6g} (pooled; each inflation's from "
+        f'# measured_noise_std_pa: {fit.pooled_noise_std:.6g} (pooled; each {branch}' + "'s from "
         'its raw rows)',
         f'# noise_std_pa: {fit.table_noise_std():.6g} (the uncertainty of these rows at their '
         "peaks and valleys: the fitted curve's standard error, from the fit's covariance)",
@@ -114,13 +141,19 @@ def segment_table_text(fit: SphereFit, length: float | None = None) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def plot_fit(fit: SphereFit, out: Path, style: FigureStyle = PAPER) -> list[Path]:
-    """fit.png: the rows and each law's curve above, their residuals below (kPa, mL)."""
+def plot_fit(fit: SphereFit | CycleFit, out: Path, style: FigureStyle = PAPER) -> list[Path]:
+    """
+    fit.png: the rows and each law's curve above, their residuals below (kPa, mL).
+
+    With deflations, their rows (filled markers) and the unloading branch's chosen curve and
+    residuals too.
+    """
     with style.context():
         return _plot_fit(fit, out, style)
 
 
-def _plot_fit(fit: SphereFit, out: Path, style: FigureStyle) -> list[Path]:
+def _plot_fit(cycle: SphereFit | CycleFit, out: Path, style: FigureStyle) -> list[Path]:
+    fit = cycle.loading if isinstance(cycle, CycleFit) else cycle
     fig, axes = new_figure(*style.size(COLUMN_IN, 3.6), rows=2, sharex=True,
                            margins={'left': 0.16, 'right': 0.97, 'top': 0.97, 'bottom': 0.2,
                                     'hspace': 0.08},
@@ -149,11 +182,18 @@ def _plot_fit(fit: SphereFit, out: Path, style: FigureStyle) -> list[Path]:
         handles.append(line)
         residual_ax.plot(volume * ML, (pressure - law.pressure(volume)) * KPA, '.',
                          ms=2.0 if chosen else 1.4, color=colour, zorder=3 if chosen else 2)
+    worst = float(np.max(np.abs(pressure - fit.best.pressure(volume)))) * KPA
+    if isinstance(cycle, CycleFit):
+        handles += _plot_unloading(cycle, curve_ax, residual_ax)
+        unloading = cycle.unloading
+        volume = np.concatenate([i.volume for i in unloading.inflations])
+        pressure = np.concatenate([i.pressure for i in unloading.inflations])
+        worst = max(worst, float(np.max(np.abs(pressure - unloading.best.pressure(volume))))
+                    * KPA)
     band = 2.0 * fit.pooled_noise_std * KPA
     residual_ax.axhspan(-band, band, color='0.88', lw=0, zorder=0)
     residual_ax.axhline(0.0, color='0.5', lw=0.5, zorder=1)
     # The residuals within a few noise deviations fill the panel; a law far off leaves it.
-    worst = float(np.max(np.abs(pressure - fit.best.pressure(volume)))) * KPA
     reach = max(3.0 * band, 1.3 * worst)
     residual_ax.set_ylim(-reach, reach)
     curve_ax.set_ylabel('gauge pressure [kPa]')
@@ -163,8 +203,39 @@ def _plot_fit(fit: SphereFit, out: Path, style: FigureStyle) -> list[Path]:
         ax.grid(alpha=0.3)
     handles.append(_band_handle(band))
     legend_below(fig, handles, ncol=1)
-    style.title(curve_ax, f'Membrane laws fitted to a sphere; {fit.chosen} chosen by AICc')
+    title = f'Membrane laws fitted to a sphere; {fit.chosen} chosen by AICc'
+    if isinstance(cycle, CycleFit):
+        title += (f'; loop {cycle.hysteresis.dissipated.value * MJ:.3g} mJ, unloading '
+                  f'{cycle.unloading.chosen}')
+    style.title(curve_ax, title)
     return save_figure(fig, out, False, style)
+
+
+def _plot_unloading(cycle: CycleFit, curve_ax: object, residual_ax: object) -> list:
+    """The deflations' rows and the unloading branch's chosen curve and residuals."""
+    unloading = cycle.unloading
+    handles = []
+    for k, (deflation, sigma) in enumerate(zip(unloading.inflations, unloading.noise_std)):
+        marker = MEASURED_MARKERS[k % len(MEASURED_MARKERS)]
+        (line,) = curve_ax.plot(deflation.volume * ML, deflation.pressure * KPA, marker,
+                                ls='none', ms=2.2, mew=0, color=UNLOADING_COLOUR, alpha=0.45,
+                                zorder=1, label=f'{Path(deflation.source).name}, deflation '
+                                f'({sigma:.3g} Pa noise)')
+        handles.append(line)
+    best = unloading.best
+    volume = np.concatenate([i.volume for i in unloading.inflations])
+    pressure = np.concatenate([i.pressure for i in unloading.inflations])
+    grid = np.linspace(float(volume.min()), float(volume.max()), CURVE_POINTS)
+    law = LAW_LABELS.get(unloading.chosen, unloading.chosen)
+    (line,) = curve_ax.plot(grid * ML, best.pressure(grid) * KPA, color=UNLOADING_COLOUR,
+                            lw=1.6, ls=(0, (6, 1.5, 1.5, 1.5)), zorder=3,
+                            label=f'unloading, {law} chosen, $\\chi^2_\\nu$ '
+                            f'{best.reduced_chi_square:.3g}; loop '
+                            f'{cycle.hysteresis.dissipated.value * MJ:.3g} mJ')
+    handles.append(line)
+    residual_ax.plot(volume * ML, (pressure - best.pressure(volume)) * KPA, '.', ms=2.0,
+                     color=UNLOADING_COLOUR, zorder=3)
+    return handles
 
 
 def _band_handle(band_kpa: float) -> object:
@@ -173,12 +244,14 @@ def _band_handle(band_kpa: float) -> object:
     return Patch(color='0.88', label=f'$\\pm$2 noise deviations ({band_kpa:.3g} kPa)')
 
 
-def summary_lines(fit: SphereFit, written: Sequence[Path]) -> list[str]:
+def summary_lines(cycle: SphereFit | CycleFit, written: Sequence[Path]) -> list[str]:
     """What ``softseq fit`` prints: the choice, each law's fit and parameters, the files.
 
-    The fit's notes (a law that did not converge, a parameter at its bound) are not among
-    them: the command says those as warnings.
+    With deflations, then the unloading branch's chosen law and the hysteresis. The fit's
+    notes (a law that did not converge, a parameter at its bound) are not among them: the
+    command says those as warnings.
     """
+    fit = cycle.loading if isinstance(cycle, CycleFit) else cycle
     rows = sum(i.volume.size for i in fit.inflations)
     lines = [f'{len(fit.inflations)} inflation(s), {rows} rows, noise '
              f'{fit.pooled_noise_std:.4g} Pa: {fit.chosen} chosen by AICc'
@@ -189,4 +262,29 @@ def summary_lines(fit: SphereFit, written: Sequence[Path]) -> list[str]:
                      f'{law.aicc - fit.best.aicc:.4g}')
         for estimate in law.estimates.values():
             lines.append(f'    {estimate.name}: {estimate_text(estimate)}')
+    if isinstance(cycle, CycleFit):
+        lines += unloading_lines(cycle)
+    return lines
+
+
+def unloading_lines(cycle: CycleFit) -> list[str]:
+    """The unloading branch's choice and parameters, and the hysteresis, in a few lines."""
+    unloading, loop = cycle.unloading, cycle.hysteresis
+    best = unloading.best
+    rows = sum(i.volume.size for i in unloading.inflations)
+    lines = [f'unloading: {len(unloading.inflations)} deflation(s), {rows} rows, noise '
+             f'{unloading.pooled_noise_std:.4g} Pa: {unloading.chosen} chosen by AICc'
+             + ('' if unloading.by_bic() == unloading.chosen
+                else f' (BIC would choose {unloading.by_bic()})')
+             + f', reduced chi-square {best.reduced_chi_square:.4g}']
+    for estimate in best.estimates.values():
+        lines.append(f'    {estimate.name}: {estimate_text(estimate)}')
+    energy, share, softening = loop.dissipated, loop.dissipated_share, loop.softening
+    lines.append(
+        f'hysteresis: {energy.value * MJ:.4g} mJ dissipated per cycle (95 % CI '
+        f'{energy.interval[0] * MJ:.4g} to {energy.interval[1] * MJ:.4g}), '
+        f'{100.0 * share.value:.3g} % of the loading work '
+        f'({100.0 * share.interval[0]:.3g} to {100.0 * share.interval[1]:.3g} %); unloading '
+        f'over loading pressure {softening.value:.4g} (95 % CI {softening.interval[0]:.4g} to '
+        f'{softening.interval[1]:.4g})')
     return lines

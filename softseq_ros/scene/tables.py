@@ -27,7 +27,7 @@ from softseq_ros.segments.models import TableError, TabulatedSegment
 
 if TYPE_CHECKING:
     # For the annotation only: the fit pulls in more of scipy than a scene needs.
-    from softseq_ros.segments.fit import Inflation
+    from softseq_ros.segments.fit import Cycle, Inflation
 
 TABLE_COLUMNS = ('volume_m3', 'pressure_pa', 'curvature_per_m')
 INFLATION_COLUMNS = ('volume_m3', 'pressure_pa')
@@ -101,3 +101,19 @@ def read_inflation(path: str | Path, length: float | None = None) -> 'Inflation'
     columns = read_columns(path, INFLATION_COLUMNS, TableError, 'measured inflation')
     _check_units(path, columns['volume_m3'], columns['pressure_pa'], length)
     return Inflation(columns['volume_m3'], columns['pressure_pa'], source=str(path))
+
+
+def read_cycle(path: str | Path, length: float | None = None) -> 'Cycle':
+    """
+    One measured cycle of a segment: an inflation, and its deflation when the volume falls.
+
+    The file is :func:`read_inflation`'s; rows whose volume rises to the end are an inflation
+    alone, rows whose volume rises and then falls are an inflation up to the largest volume
+    and a deflation from it (:func:`~softseq_ros.segments.fit.split_cycle`).
+    """
+    from softseq_ros.segments.fit import split_cycle
+
+    path = Path(path)
+    columns = read_columns(path, INFLATION_COLUMNS, TableError, 'measured inflation')
+    _check_units(path, columns['volume_m3'], columns['pressure_pa'], length)
+    return split_cycle(columns['volume_m3'], columns['pressure_pa'], source=str(path))

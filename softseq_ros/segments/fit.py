@@ -756,3 +756,301 @@ def fit_sphere(inflations: Sequence[Inflation], radius: float | None = None,
                          'do not hold')
     return SphereFit(inflations, tuple(noise), pooled, radius, thickness, fits, chosen,
                      bootstrap, seed, notes)
+
+
+# ---------------------------------------------------------------------------------------------
+# Inflation and deflation: the unloading branch and the hysteresis between the two
+
+# A cycle's deflation must end within this share of its swept volume of where its inflation
+# began: a loop left open has no area that means a cycle's dissipation.
+LOOP_CLOSURE_SHARE = 0.05
+# The softening is averaged where the loading pressure is at least this share of its largest
+# over the shared volumes: near the rest volume both pressures vanish and their ratio says
+# nothing.
+SOFTENING_FLOOR = 0.2
+# Points of the Gauss-Legendre rule that integrates the fitted curves (smooth, so far more than
+# enough) and of the grid the softening is averaged on.
+LOOP_QUADRATURE_POINTS = 64
+SOFTENING_POINTS = 401
+
+
+@dataclass(frozen=True)
+class Deflation:
+    """
+    One measured deflation of the segment: volumes [m^3] strictly falling, gauge Pa.
+
+    The rows after the cycle's largest volume, which its inflation ends on: at the turn the
+    pressure drops at nearly the same volume (a viscoelastic membrane relaxes), so that row
+    is the loading's. :meth:`rising` gives the same rows in rising volume, as the fit takes a
+    branch.
+    """
+
+    volume: FloatArray
+    pressure: FloatArray
+    source: str = 'deflation'
+
+    def __post_init__(self) -> None:
+        """Check the rows are usable: enough, finite and in falling volume."""
+        volume = np.asarray(self.volume, dtype=float)
+        pressure = np.asarray(self.pressure, dtype=float)
+        object.__setattr__(self, 'volume', volume)
+        object.__setattr__(self, 'pressure', pressure)
+        if volume.ndim != 1 or volume.shape != pressure.shape:
+            raise FitError(f'{self.source}: volume and pressure need one row each, as many')
+        if volume.size < MIN_ROWS:
+            raise FitError(f'{self.source}: the deflation (the rows after the largest volume) has '
+                           f'{volume.size} rows, too few to fit: at least {MIN_ROWS} (its '
+                           'noise is estimated from its own rows)')
+        if not (np.all(np.isfinite(volume)) and np.all(np.isfinite(pressure))):
+            raise FitError(f'{self.source}: volumes and pressures must be finite')
+        steps = np.diff(volume)
+        if np.any(steps >= 0.0):
+            row = int(np.argmax(steps >= 0.0)) + 2
+            raise FitError(f'{self.source}: volume_m3 must fall strictly in the deflation '
+                           f'(after the largest volume; one cycle per file); deflation row '
+                           f'{row} ({volume[row - 1]:.6g}) is not below row {row - 1} '
+                           f'({volume[row - 2]:.6g})')
+        if volume[-1] <= 0.0:
+            raise FitError(f"{self.source}: volume_m3 must be > 0 (the segment's whole "
+                           f'volume, not the volume injected), got {volume[-1]:.6g} at the '
+                           "deflation's end")
+
+    def rising(self) -> Inflation:
+        """The rows in rising volume: the unloading branch as the fit takes it."""
+        return Inflation(self.volume[::-1].copy(), self.pressure[::-1].copy(), self.source)
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """One measured file: its inflation, and its deflation when the volume falls again."""
+
+    inflation: Inflation
+    deflation: Deflation | None = None
+
+    @property
+    def source(self) -> str:
+        """The file the cycle was read from."""
+        return self.inflation.source
+
+    def loop_area(self) -> float:
+        """
+        The measured loop's area, the integral of p dv around it [J], by trapezoids.
+
+        From the raw rows, with no law: a check on the fitted curves' number. The deflation's
+        last row is joined to the inflation's first by a straight line (the cycle closes
+        there within :data:`LOOP_CLOSURE_SHARE`), as the turn joins their other ends.
+        """
+        if self.deflation is None:
+            raise FitError(f'{self.source}: an inflation alone has no loop')
+        volume = np.concatenate([self.inflation.volume, self.deflation.volume,
+                                 self.inflation.volume[:1]])
+        pressure = np.concatenate([self.inflation.pressure, self.deflation.pressure,
+                                   self.inflation.pressure[:1]])
+        return float(np.sum(0.5 * (pressure[1:] + pressure[:-1]) * np.diff(volume)))
+
+
+def split_cycle(volume: ArrayLike, pressure: ArrayLike, source: str = 'measurement') -> Cycle:
+    """
+    One file's rows as a cycle: the inflation up to the largest volume, the deflation after.
+
+    Rows whose volume rises to its end are an inflation alone, as before. Rows whose volume
+    rises and then falls are an inflation up to the largest volume and a deflation of the rows
+    after it; the deflation must fall strictly, have :data:`MIN_ROWS` rows and close the loop
+    (end within :data:`LOOP_CLOSURE_SHARE` of the swept volume of where the inflation
+    began). FitError, one line naming ``source``, otherwise.
+    """
+    v = np.asarray(volume, dtype=float)
+    p = np.asarray(pressure, dtype=float)
+    if v.ndim != 1 or v.shape != p.shape:
+        raise FitError(f'{source}: volume and pressure need one row each, as many')
+    if v.size == 0 or not np.all(np.isfinite(v)):
+        return Cycle(Inflation(v, p, source))   # Inflation names what is wrong
+    top = int(np.argmax(v))
+    if top == v.size - 1:
+        return Cycle(Inflation(v, p, source))
+    inflation = Inflation(v[:top + 1], p[:top + 1], source)
+    deflation = Deflation(v[top + 1:], p[top + 1:], source)
+    swept = float(v[top] - v[0])
+    gap = float(deflation.volume[-1] - v[0])
+    if abs(gap) > LOOP_CLOSURE_SHARE * swept:
+        raise FitError(f'{source}: the loop does not close: the deflation ends at '
+                       f'{deflation.volume[-1]:.6g} m^3, {100.0 * abs(gap) / swept:.3g} % of the '
+                       f'swept volume from where the inflation began ({v[0]:.6g} m^3); at most '
+                       f'{100.0 * LOOP_CLOSURE_SHARE:g} %')
+    return Cycle(inflation, deflation)
+
+
+@dataclass(frozen=True)
+class Hysteresis:
+    """
+    What the loop between the loading and unloading fits says, from their chosen laws.
+
+    Over the volumes both branches measured (``volume_range``): ``dissipated`` [J], the
+    integral of the loading minus the unloading pressure, the energy one cycle turns into heat;
+    ``loading_work`` [J], the integral of the loading pressure there; ``dissipated_share``,
+    their ratio; ``softening``, the volume-mean of the unloading over the loading pressure
+    where the loading pressure is at least :data:`SOFTENING_FLOOR` of its largest
+    (``softening_range``). Intervals by the delta method on both fits' covariances, the two
+    branches measured independently, with the normal quantile. ``measured_loops``: each
+    file's loop area from its raw rows, with no law.
+    """
+
+    loading_law: str
+    unloading_law: str
+    volume_range: tuple[float, float]
+    softening_range: tuple[float, float]
+    dissipated: Estimate
+    loading_work: Estimate
+    dissipated_share: Estimate
+    softening: Estimate
+    measured_loops: tuple[tuple[str, float], ...]
+
+    def to_dict(self) -> dict[str, object]:
+        """The numbers as fit.json holds them (J, m^3; the share and ratio without unit)."""
+        return {
+            'loading_law': self.loading_law, 'unloading_law': self.unloading_law,
+            'volume_range_m3': list(self.volume_range),
+            'dissipated_energy_j': self.dissipated.to_dict(),
+            'loading_work_j': self.loading_work.to_dict(),
+            'dissipated_share_of_loading_work': self.dissipated_share.to_dict(),
+            'softening_ratio': self.softening.to_dict(),
+            'softening_volume_range_m3': list(self.softening_range),
+            'measured_loop_area_j': [{'source': source, 'value': area}
+                                     for source, area in self.measured_loops],
+        }
+
+
+def hysteresis(loading: LawFit, unloading: LawFit, volume_range: tuple[float, float],
+               cycles: Sequence[Cycle] = ()) -> Hysteresis:
+    """
+    The loop between a loading and an unloading fit over ``volume_range`` [m^3].
+
+    See :class:`Hysteresis`. ``cycles``: the measured files, for their raw loop areas.
+    """
+    low, high = volume_range
+    if not high > low:
+        raise FitError(f'the loading and unloading branches share no volumes (from {low:.6g} '
+                       f'to {high:.6g} m^3)')
+    if loading.curve is None or unloading.curve is None:
+        raise ValueError('the hysteresis needs fits that keep their curves')
+    nodes, weights = np.polynomial.legendre.leggauss(LOOP_QUADRATURE_POINTS)
+    volume = 0.5 * (high - low) * nodes + 0.5 * (high + low)
+    weights = 0.5 * (high - low) * weights
+    grid = np.linspace(low, high, SOFTENING_POINTS)
+    loading_grid = loading.pressure(grid)
+    kept = grid[loading_grid >= SOFTENING_FLOOR * float(np.max(loading_grid))]
+    if kept.size == 0:
+        raise FitError('the loading pressure is nowhere above zero over the shared volumes: '
+                       'no softening to measure')
+
+    def work(x: FloatArray) -> float:
+        return float(weights @ loading.curve(x, volume))
+
+    def dissipated(x: FloatArray, y: FloatArray) -> float:
+        return float(weights @ (loading.curve(x, volume) - unloading.curve(y, volume)))
+
+    def share(x: FloatArray, y: FloatArray) -> float:
+        return dissipated(x, y) / work(x)
+
+    def softening(x: FloatArray, y: FloatArray) -> float:
+        return float(np.mean(unloading.curve(y, kept) / loading.curve(x, kept)))
+
+    def estimate(name: str, function: Callable[[FloatArray, FloatArray], float]) -> Estimate:
+        x, y = loading.internal, unloading.internal
+        value = float(function(x, y))
+        variance = 0.0
+        for fit, gradient in ((loading, _gradient(lambda at: function(at, y), x, False)),
+                              (unloading, _gradient(lambda at: function(x, at), y, False))):
+            variance += float(gradient @ fit.covariance @ gradient)
+        error = math.sqrt(max(variance, 0.0))
+        quantile = _normal_quantile()
+        return Estimate(name, value, error, (value - quantile * error, value + quantile * error),
+                        None, False)
+
+    loops = tuple((c.source, c.loop_area()) for c in cycles if c.deflation is not None)
+    return Hysteresis(loading.law.name, unloading.law.name, (float(low), float(high)),
+                      (float(kept[0]), float(kept[-1])),
+                      estimate('dissipated_energy_j', dissipated),
+                      estimate('loading_work_j', lambda x, _y: work(x)),
+                      estimate('dissipated_share_of_loading_work', share),
+                      estimate('softening_ratio', softening), loops)
+
+
+def _normal_quantile() -> float:
+    from scipy.stats import norm  # as student_t in fit_law: only where a fit runs
+
+    return float(norm.ppf(0.5 + CONFIDENCE / 2.0))
+
+
+@dataclass
+class CycleFit:
+    """
+    The laws fitted to both branches of measured cycles, and the hysteresis between them.
+
+    ``loading``: the fit of the inflations (every file's), as without deflations;
+    ``unloading``: the same laws fitted to the deflations, each file's rows weighted by their
+    own noise; ``hysteresis``: the loop between the two chosen laws.
+    """
+
+    cycles: tuple[Cycle, ...]
+    loading: SphereFit
+    unloading: SphereFit
+    hysteresis: Hysteresis
+
+    @property
+    def notes(self) -> list[str]:
+        """Both branches' warnings, the unloading's marked so."""
+        return self.loading.notes + self.unloading.notes
+
+
+def shared_volumes(cycles: Sequence[Cycle]) -> tuple[float, float]:
+    """
+    The volumes [m^3] the loop spans, from the two branches' smallest to the turn.
+
+    From the higher of the branches' smallest volumes to the turn, the smallest largest
+    volume of the cycles with a deflation. The unloading curve reaches the turn from its
+    first row, one row's step below: the loop's top belongs to it, and a law's closed form
+    extrapolates that far without harm.
+    """
+    inflations = [c.inflation for c in cycles]
+    deflations = [c.deflation for c in cycles if c.deflation is not None]
+    low = max(min(float(np.min(i.volume)) for i in inflations),
+              min(float(np.min(d.volume)) for d in deflations))
+    high = min(float(np.max(c.inflation.volume)) for c in cycles if c.deflation is not None)
+    return low, high
+
+
+def fit_cycles(cycles: Sequence[Cycle], radius: float | None = None,
+               thickness: float | None = None, laws: Sequence[str] = FIT_LAWS,
+               bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> SphereFit | CycleFit:
+    """
+    Every law fitted to the measured cycles of one segment, loading and unloading.
+
+    The loading branch always; where any file has a deflation, the unloading branch too and
+    the hysteresis between them.
+
+    Inflations alone give the :class:`SphereFit` of :func:`fit_sphere`, as ever; with
+    deflations, a :class:`CycleFit`. The options are :func:`fit_sphere`'s, for both branches
+    (each rest volume fitted on its own when ``radius`` is not given: a softened membrane
+    may keep a residual stretch).
+    """
+    cycles = tuple(cycles)
+    loading = fit_sphere([c.inflation for c in cycles], radius, thickness, laws, bootstrap,
+                         seed)
+    deflations = [c.deflation.rising() for c in cycles if c.deflation is not None]
+    if not deflations:
+        return loading
+    unloading = fit_sphere(deflations, radius, thickness, laws, bootstrap, seed)
+    unloading.notes[:] = [f'unloading: {note}' for note in unloading.notes]
+    low, high = shared_volumes(cycles)
+    best = unloading.best
+    if best.curve is not None and not np.all(np.isfinite(best.curve(best.internal,
+                                                                    np.array([high])))):
+        # A Gent unloading law may lock in the one row's step between its data and the turn.
+        top = max(float(np.max(d.volume)) for d in deflations)
+        unloading.notes.append(f'unloading: the {unloading.chosen} law has no pressure at the '
+                               f'turn ({high:.6g} m^3); the loop is measured up to the '
+                               f'largest deflation volume ({top:.6g} m^3)')
+        high = top
+    loop = hysteresis(loading.best, unloading.best, (low, high), cycles)
+    return CycleFit(cycles, loading, unloading, loop)
