@@ -85,14 +85,16 @@ PUMP_COMMAND = Topic(
     # Deep: a command the actuator's queue drops is skipped physics-wise (the jump rule), but
     # its answer is missing from the recording; a stalled process must not lose any.
     Qos(ANSWER_DEPTH), PUMP, (ACTUATOR,), None,
-    'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]; at the '
-    'pump rate while running, else on a change and once a second')
+    'joint syringe: position = injected volume [m^3], velocity = signed flow [m^3/s]; behind a '
+    'pressure regulator, joint regulator: effort = target gauge pressure [Pa] (nothing else); '
+    'at the pump rate while running, else on a change and once a second')
 # What a controller asks of the pump, taken in its setpoint mode (the pump's ~/setpoint_mode):
 # the same joint as pump/command, so a controller commands the pump as the pump commands the
 # actuator. Reliable and deep enough that a burst of setpoints is not lost before the pump reads.
 PUMP_SETPOINT = Topic(
     'pump/setpoint', 'sensor_msgs/msg/JointState', Qos(10), CONTROLLER, (PUMP,), None,
-    'joint syringe with exactly one field given: position = target injected volume [m^3] '
+    'joint syringe (or regulator) with exactly one field given: position = target injected '
+    'volume [m^3] '
     "(reached at the pump's flow rate), velocity = flow [m^3/s] (signed, + inflates), effort = "
     'target gauge pressure [Pa] (a pressure supply only); taken in setpoint mode')
 PUMP_STATUS = Topic(

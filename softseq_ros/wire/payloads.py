@@ -48,9 +48,12 @@ from softseq_ros.wire.values import (
     SnapshotStep,
     SnapThrough,
     TopicValue,
+    regulator_command,
 )
 
 SYRINGE_JOINT = 'syringe'
+# A pressure regulator's command: its target gauge pressure, as the joint's effort.
+REGULATOR_JOINT = 'regulator'
 MARKER_WIDTH_M = 0.015  # the paper's 15 x 15 mm section
 LINE_STRIP = 4
 _SYRINGE = (SYRINGE_JOINT,)
@@ -280,8 +283,14 @@ JSON_PAYLOADS_BY_TOPIC: dict[str, JsonPayload] = {
 _COMMAND_PACK, _COMMAND_BLOCK = joint_state_packer('', _SYRINGE, (1, 1, 0))
 
 
+_REGULATOR_PACK, _REGULATOR_BLOCK = joint_state_packer('', (REGULATOR_JOINT,), (0, 0, 1))
+
+
 def _pump_command(value: PumpCommand) -> bytes:
     sec, nanosec = divmod(value.stamp_ns, NS_PER_S)
+    if value.gauge_pa is not None:
+        return ENCAPSULATION + _REGULATOR_PACK(sec, nanosec, _REGULATOR_BLOCK, 0, 0, 1,
+                                               value.gauge_pa)
     return ENCAPSULATION + _COMMAND_PACK(sec, nanosec, _COMMAND_BLOCK, 1, value.injected_m3, 1,
                                          value.flow_m3_per_s, 0)
 
@@ -490,7 +499,7 @@ def row_layout(value: TopicValue) -> RowLayout | None:
     """
     template = ENCODERS[type(value)](value)
     stamp = (4,)
-    if type(value) is PumpCommand:
+    if type(value) is PumpCommand and value.gauge_pa is None:
         offsets = joint_state_blocks('', _SYRINGE, (1, 1, 0))
         return RowLayout(template, stamp, ((offsets[0], 8), (offsets[1], 8)))
     if type(value) is Pressure:
@@ -525,8 +534,21 @@ def _floats(values: Any) -> list[float]:
 
 
 def pump_command(msg: Any) -> PumpCommand:
-    """A received sensor_msgs/JointState as a pump command; InputError when it is not one."""
+    """
+    A received sensor_msgs/JointState as a pump command; InputError when it is not one.
+
+    Joint ``syringe`` with one position (and a velocity, the flow), or joint ``regulator``
+    with one effort (its target gauge pressure) and nothing else.
+    """
     names, position = list(msg.name), msg.position
+    if names == [REGULATOR_JOINT]:
+        effort = msg.effort
+        if len(effort) != 1 or len(position) or len(msg.velocity):
+            raise InputError('shape', f'command refused: a {REGULATOR_JOINT} command gives one '
+                                      f'effort (target gauge pressure) and nothing else, got '
+                                      f'{len(position)} positions, {len(msg.velocity)} '
+                                      f'velocities and {len(effort)} efforts')
+        return regulator_command(_stamp_ns(msg.header), float(effort[0]))
     if len(names) != 1 or len(position) != 1:
         raise InputError('shape', f'command refused: expected one joint ({SYRINGE_JOINT}) with '
                                   f'one position, got names {names} and {len(position)} '
@@ -547,14 +569,15 @@ def pump_setpoint(msg: Any) -> PumpSetpoint:
     """
     A received sensor_msgs/JointState as a setpoint; InputError when it is not one.
 
-    Joint ``syringe``, exactly one of position (target volume), velocity (flow) and effort
-    (target gauge pressure) holding one value. Whether the value is in range is the pump's to
-    say.
+    Joint ``syringe`` (or ``regulator``, the same), exactly one of position (target volume),
+    velocity (flow) and effort (target gauge pressure) holding one value. Whether the value is
+    in range is the pump's to say.
     """
     names = list(msg.name)
-    if names != [SYRINGE_JOINT]:
+    if names not in ([SYRINGE_JOINT], [REGULATOR_JOINT]):
         raise InputError('setpoint name', f'setpoint refused: expected one joint named '
-                                          f'{SYRINGE_JOINT}, got names {names}')
+                                          f'{SYRINGE_JOINT} (or {REGULATOR_JOINT}), got names '
+                                          f'{names}')
     given = [(field, getattr(msg, field)) for field, _ in SETPOINT_FIELDS]
     filled = [(field, values) for field, values in given if len(values)]
     if len(filled) != 1 or len(filled[0][1]) != 1:

@@ -9,6 +9,7 @@ nanoseconds on the driver's clock (ROS time, sim time or the batch runner's cloc
 """
 
 from dataclasses import dataclass
+import math
 from typing import ClassVar
 
 import numpy as np
@@ -19,12 +20,29 @@ from softseq_ros.wire.contract import Topic
 
 @dataclass(slots=True)
 class PumpCommand:
-    """The syringe's commanded injected volume [m^3] and signed flow [m^3/s]."""
+    """
+    The syringe's commanded injected volume [m^3] and signed flow [m^3/s].
+
+    Behind a pressure regulator (a scene whose supply is one) the command is its target gauge
+    pressure ``gauge_pa`` [Pa] instead, and the volume and flow are NaN: a regulator sets the
+    pressure, the segments take the fluid it needs (:attr:`regulated`).
+    """
 
     topic: ClassVar[Topic] = contract.PUMP_COMMAND
     stamp_ns: int
     injected_m3: float
     flow_m3_per_s: float
+    gauge_pa: float | None = None
+
+    @property
+    def regulated(self) -> bool:
+        """A regulator's target pressure, not a syringe's volume."""
+        return self.gauge_pa is not None
+
+
+def regulator_command(stamp_ns: int, gauge_pa: float) -> PumpCommand:
+    """A regulator's command: its target gauge pressure [Pa] at ``stamp_ns``."""
+    return PumpCommand(stamp_ns, math.nan, math.nan, gauge_pa)
 
 
 @dataclass(slots=True)
