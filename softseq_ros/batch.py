@@ -26,10 +26,15 @@ from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
 from softseq_ros.progress import is_terminal, write_progress
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
-from softseq_ros.rig.model import ActuatorModel, CommandBlock, load_rig_scene
+from softseq_ros.rig.model import (
+    ActuatorModel,
+    CommandBlock,
+    load_rig_scene,
+    require_quasi_static_regulator,
+)
 from softseq_ros.rig.pump import FINISHED, HELD, STOPPED
 from softseq_ros.rig.routing import Router
-from softseq_ros.scene.loader import Scene, require_syringe
+from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import (
     MAX_RUN_BYTES,
     MAX_RUN_MESSAGES,
@@ -304,7 +309,8 @@ class _BatchRun:
         refused here (LongRunError), before anything is written, unless ``allow_long``.
         """
         self.scene = scene if isinstance(scene, Scene) else load_rig_scene(scene)
-        require_syringe(self.scene, 'softseq run')
+        if self.scene.regulator is not None:
+            require_quasi_static_regulator(self.scene)
         self.out = Path(out)
         self.wrap = wrap
         overrides = overrides or {}
@@ -392,9 +398,10 @@ class _BatchRun:
         where = f'{self.scene.path or self.scene.name}: '
         insist = 'shorten the programme, or insist with --allow-long (allow_long=True)'
         if duration > MAX_RUN_S and not allow_long:
+            part = 'pump.legs' if self.scene.regulator is not None else \
+                longest_part(profile, 'pump.')
             raise LongRunError(f'{where}the programme runs {duration:.3g} s of rig time, more '
-                               f'than {MAX_RUN_S:.0e} s ({longest_part(profile, "pump.")}): '
-                               f'{insist}')
+                               f'than {MAX_RUN_S:.0e} s ({part}): {insist}')
         if self.start_time_ns < 0 or self.start_time_ns + duration * NS_PER_S > LAST_NS:
             raise LongRunError(f'{where}start time {self.start_time_ns} ns plus the '
                                f"programme's {duration:.6g} s is outside what a bag can carry "

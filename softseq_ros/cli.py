@@ -375,7 +375,8 @@ def _compare(args: argparse.Namespace) -> int:
         from softseq_ros.scene.loader import require_syringe
 
         scene = load_scene(args.scene)
-        require_syringe(scene, 'a rig recording')
+        require_syringe(scene, 'softseq compare --scene (the volume-controlled equilibrium '
+                               'beside the recordings)')
     metrics_a, metrics_b, table = compare_bags(args.a, args.b, args.namespace_a,
                                                args.namespace_b, scene=scene)
     print(table, end='')

@@ -849,6 +849,8 @@ def thinned(recording: Recording) -> Recording:
     return replace(
         recording,
         pump_time_s=recording.pump_time_s[pump], pump_injected=recording.pump_injected[pump],
+        target_pressure=(None if recording.target_pressure is None
+                         else recording.target_pressure[pump]),
         state_time_s=recording.state_time_s[states],
         state_injected=recording.state_injected[states], pressure=recording.pressure[states],
         volumes=recording.volumes[states], state_flow_sign=recording.state_flow_sign[states],

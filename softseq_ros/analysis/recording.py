@@ -55,6 +55,7 @@ from softseq_ros.wire import contract
 from softseq_ros.wire.contract import NS_PER_S
 from softseq_ros.wire.payloads import (
     PUMP_STATUS_JSON,
+    REGULATOR_JOINT,
     SCENE_IDENTITY_JSON,
     SNAP_THROUGH_JSON,
     SNAPSHOT_STEP_JSON,
@@ -146,6 +147,10 @@ class Recording:
     start_ns: int = 0
     # Rows a snap-through lands on, when already known (a thinned copy keeps the original's).
     snap_rows: NDArray[np.intp] | None = None
+    # Behind a pressure regulator: its target gauge pressure per pump command [Pa] (None: a
+    # syringe's bag). The injected volume is then what the segments took since the first
+    # recorded state, from their volumes.
+    target_pressure: FloatArray | None = None
     # The distinct scenes the actuator said it runs, in the order said (none in older bags;
     # more than one when an actuator was restarted on other segments during the recording).
     scenes: list[SceneIdentity] = field(default_factory=list)
@@ -204,6 +209,8 @@ class Recording:
                  min(hi, float(self.pump_time_s[-1])))
         return replace(
             self, pump_time_s=self.pump_time_s[pump], pump_injected=self.pump_injected[pump],
+            target_pressure=(None if self.target_pressure is None
+                             else self.target_pressure[pump]),
             state_time_s=self.state_time_s[state], state_injected=self.state_injected[state],
             pressure=self.pressure[state], volumes=self.volumes[state],
             state_flow_sign=self.state_flow_sign[state],
@@ -395,9 +402,16 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     for decoder in decoders:
         for why, count in getattr(decoder, 'skipped', {}).items():
             _count_skipped(skipped, decoder.topic, why, count)
-    commands = _finite_rows(pump.release(), ('position',), names[contract.PUMP_COMMAND],
-                            skipped)
-    _refuse_unusable(path, names[contract.PUMP_COMMAND], commands, skipped,
+    command_topic = names[contract.PUMP_COMMAND]
+    commands = _finite_rows(pump.release(), ('position',), command_topic, skipped)
+    targets = None
+    if not commands.get('stamp_ns', np.zeros(0)).size \
+            and skipped.get(command_topic, {}).get('no position'):
+        # No command gives a volume: a pressure regulator's bag gives target pressures.
+        targets = _regulator_commands(bag, command_topic, skipped)
+        if targets is not None:
+            commands = targets
+    _refuse_unusable(path, command_topic, commands, skipped,
                      'not a rig recording, or the pump never ran')
     states = _finite_rows(state.release(), ('position', 'effort'), names[contract.VOLUMES],
                           skipped)
@@ -406,12 +420,20 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
     # Arrays are taken as views where possible and converted in place: on a long bag every
     # extra column is tens of MB.
     pump_stamp = commands['stamp_ns']
-    pump_u = commands['position'][:, 0]
-    pump_flow = commands['velocity'][:, 0] if commands['velocity'].size else \
-        np.sign(np.gradient(pump_u)).astype(np.int8)
+    if targets is None:
+        pump_u = commands['position'][:, 0]
+        pump_flow = commands['velocity'][:, 0] if commands['velocity'].size else \
+            np.sign(np.gradient(pump_u)).astype(np.int8)
+        target = None
+    else:
+        target = commands['effort'][:, 0]
+        pump_u = _regulated_injected(pump_stamp, states['stamp_ns'], states['position'])
+        pump_flow = np.sign(np.gradient(target)).astype(np.int8) if target.size > 1 else \
+            np.zeros(target.size, np.int8)
     if np.any(pump_stamp[1:] < pump_stamp[:-1]):
         order = np.argsort(pump_stamp, kind='stable')
         pump_stamp, pump_u, pump_flow = pump_stamp[order], pump_u[order], pump_flow[order]
+        target = None if target is None else target[order]
     t0 = int(pump_stamp[0])
     ignored: dict[str, int] = {}
     flow_sign = _leg_sign(pump_flow)
@@ -431,7 +453,7 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         curvature_time_s=np.zeros(0), curvatures=np.zeros((0, volumes.shape[1])),
         namespace=ns, state_flow_sign=flow_sign[index],
         counts={topic: info.message_count for topic, info in bag.channels.items()},
-        ignored=ignored, start_ns=t0, skipped=skipped)
+        ignored=ignored, start_ns=t0, skipped=skipped, target_pressure=target)
     del index
     recording.backbone_count = bag.channels[names[contract.BACKBONE]].message_count \
         if names[contract.BACKBONE] in bag.channels else 0
@@ -486,10 +508,53 @@ def load_recording(directory: str | os.PathLike, namespace: str | None = None) -
         recording.channel_flows = _channel_flows(optional[contract.CHANNEL_FLOWS],
                                                  names[contract.CHANNEL_FLOWS], t0, ignored)
     recording.pump_time_s = _seconds(pump_stamp, t0, in_place=True)
+    # Behind a regulator the volume jumps at every flip: a new run shows in the target.
     recording.run_starts = find_run_starts(
-        recording.pump_time_s, pump_u, flow_sign, recording.status, scene_stamps_s,
+        recording.pump_time_s, pump_u if target is None else target, flow_sign,
+        recording.status, scene_stamps_s,
         float(recording.state_time_s[0]) if recording.state_time_s.size else 0.0)
     return recording
+
+
+def _regulator_commands(bag: Any, topic: str,
+                        skipped: dict[str, dict[str, int]]) -> dict[str, np.ndarray] | None:
+    """
+    A pressure regulator's commands (joint ``regulator``, effort: target gauge pressure).
+
+    None when the topic holds none (its commands without positions were no regulator's).
+    The commands the syringe's reading skipped for want of a position are then not skipped.
+    """
+    decoder = JointStateDecoder(topic, ('effort',), log_times=False, required=('effort',))
+    try:
+        bag.read([decoder])
+    except BagArrayError:
+        return None
+    if decoder.names != (REGULATOR_JOINT,):
+        return None
+    columns = decoder.release()
+    if not columns.get('stamp_ns', np.zeros(0)).size:
+        return None
+    reasons = skipped[topic]
+    del reasons['no position']
+    if not reasons:
+        del skipped[topic]
+    for why, count in decoder.skipped.items():
+        _count_skipped(skipped, topic, why, count)
+    return _finite_rows(columns, ('effort',), topic, skipped)
+
+
+def _regulated_injected(command_stamps: NDArray[np.int64], state_stamps: NDArray[np.int64],
+                        volumes: FloatArray) -> FloatArray:
+    """
+    What a regulator had let in at each command [m^3]: the segments' fluid beyond the first state.
+
+    The actuator answers a command with its state stamped as the command: each command gets
+    the last state stamped at or before it (the first state before any).
+    """
+    order = np.argsort(state_stamps, kind='stable')
+    totals = volumes.sum(axis=1)[order]
+    row = np.searchsorted(state_stamps[order], command_stamps, side='right') - 1
+    return totals[np.maximum(row, 0)] - totals[0]
 
 
 def _channel_flows(decoder: JointStateDecoder, topic: str, t0: int,

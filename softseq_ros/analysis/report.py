@@ -235,6 +235,8 @@ def _snaps_in_time(recording: Recording) -> list[dict] | None:
     count the same ones: in time a snap is an exchange of fluid over many states, not a jump
     between two commands. A run's events are those of its span (Recording.runs).
     """
+    if recording.target_pressure is not None:
+        return _regulated_snaps(recording)
     said = timed_snaps(recording) if is_dynamic(recording) else []
     if not said:
         # Nothing said in time (an actuator that reports no events, or exchanges too fast
@@ -246,6 +248,40 @@ def _snaps_in_time(recording: Recording) -> list[dict] | None:
              'from_pressure_pa': snap.from_pressure, 'to_pressure_pa': snap.to_pressure,
              'start_time_s': snap.start_s, 'duration_s': snap.duration_s}
             for snap in said]
+
+
+def _ml_moved(snap: dict) -> str:
+    """Where a snap's fluid went: between the segments, or through the regulator."""
+    moved = _ml(snap['fluid_moved_m3'], 3)
+    if not snap.get('through_regulator'):
+        return f'{_kpa(snap["to_pressure_pa"])}, {moved} moved between segments'
+    way = 'given back to' if snap['direction'] == 'deflation' else 'taken from'
+    return f'{_kpa(snap["to_pressure_pa"])}, {moved} {way} the regulator'
+
+
+def _regulated_snaps(recording: Recording) -> list[dict]:
+    """
+    Behind a regulator: the flips the actuator said, each a segment's jump at one pressure.
+
+    The injected volume jumps with the segment (the regulator gives the fluid), so the jumps
+    the volumes show at one command are no test: the events are the snaps. Their fluid moved
+    went through the regulator (``through_regulator``), not between the segments.
+    """
+    snaps = []
+    times = recording.state_time_s
+    for event, at in zip(recording.events, recording.event_times_s.tolist()):
+        row = min(int(np.searchsorted(times, at)), times.size - 1)
+        sign = recording.state_flow_sign[row] if recording.state_flow_sign.size else 1
+        before, after = event['from_volumes_m3'], event['to_volumes_m3']
+        snaps.append({'injected_m3': float(event['injected_m3']),
+                      'direction': 'deflation' if sign < 0 else 'inflation',
+                      'fluid_moved_m3': float(sum(abs(b - a) for a, b in zip(before, after))),
+                      'from_volumes_m3': [float(v) for v in before],
+                      'to_volumes_m3': [float(v) for v in after],
+                      'from_pressure_pa': float(event['from_pressure_pa']),
+                      'to_pressure_pa': float(event['to_pressure_pa']),
+                      'through_regulator': True})
+    return snaps
 
 
 def pump_end(recording: Recording) -> dict | None:
@@ -437,6 +473,12 @@ def write_report(bag: str | os.PathLike, out: str | os.PathLike, scene_name: str
             stop_workers(own)
 
 
+REGULATED_SCENE_NOTE = (
+    "the scene's supply is a pressure regulator: each segment is a hysteron of its own at the "
+    'target pressure, so the volume-controlled equilibrium set and the quasi-static lag are '
+    'not drawn beside the recording (softseq solve SCENE follows the hysterons)')
+
+
 def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
                   experiment_csv: str | os.PathLike | None,
                   reference_file: str | os.PathLike | None, namespace: str | None, svg: bool,
@@ -445,16 +487,20 @@ def _write_report(bag: str | os.PathLike, out: Path, scene_name: str | None,
     experiment = read_experiment(experiment_csv) if experiment_csv is not None else None
     reference = load_reference(reference_file) if reference_file is not None else None
     scene = emap = None
+    notes = []
     if scene_name is not None:
         from softseq_ros.quasistatic.solve import segments_graph
-        from softseq_ros.scene.loader import load_scene, require_syringe
+        from softseq_ros.scene.loader import load_scene
 
         scene = load_scene(scene_name, segments_graph)
-        require_syringe(scene, 'a rig recording')
     recording = load_recording(bag, namespace)
     if reference is not None:
         check_reference_segments(reference_file, reference, recording.segment_names)
-    notes = []
+    if scene is not None and scene.regulator is not None:
+        # The scene's equilibrium set is the volume-controlled one: behind a regulator each
+        # segment is a hysteron of its own, and the set would mislead beside the recording.
+        notes.append(REGULATED_SCENE_NOTE)
+        scene = None
     if scene is not None:
         # Before the equilibrium set is assembled and before anything is written.
         notes = scene_notes(recording, scene)
@@ -645,8 +691,7 @@ def _run_lines(metrics: dict, segments: list[str]) -> list[str]:
         for snap in metrics['snaps']:
             lines.append(f'snap-through at {_ml(snap["injected_m3"], 3)} ({snap["direction"]}): '
                          f'gauge pressure {_kpa(snap["from_pressure_pa"])} -> '
-                         f'{_kpa(snap["to_pressure_pa"])}, {_ml(snap["fluid_moved_m3"], 3)} '
-                         'moved between segments')
+                         f'{_ml_moved(snap)}')
     else:
         lines.append('snap-throughs: none')
     lines.append(f'hysteresis area: {_mj(metrics, "hysteresis_area_j")}'

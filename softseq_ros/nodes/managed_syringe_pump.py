@@ -135,6 +135,13 @@ class ManagedSyringePumpNode(LifecycleNodeMixin, SyringePumpNode):
     def _start_at_the_plunger(self) -> None:
         """A pump configured again starts where its plunger stands (else NodeConfigError)."""
         held = self._plunger_m3
+        if self._scene.regulator is not None:
+            # A regulator has no plunger: its programme of pressures starts from 0 Pa.
+            if held:
+                self.get_logger().warning(
+                    f'configured again: the regulator held {held:.6g} Pa gauge before the '
+                    'cleanup, and its programme starts from 0 Pa (the segments deflate to it)')
+            return
         if held is None or held == self.get_parameter('start_injected_m3').value:
             return
         result, = self.set_parameters([Parameter('start_injected_m3', value=held)])

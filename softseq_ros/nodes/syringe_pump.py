@@ -117,6 +117,9 @@ class SyringePumpNode(CoreNode):
         self._timer: Any = None
         self._pump_services: list[Any] = []
         scene = self.declare_scene()
+        if scene.regulator is not None:
+            self._declare_regulator(scene)
+            return
         default = scene.pump.profile
         self.rate_hz = self.declare_number(
             'rate_hz', scene.pump.rate_hz, 'Command publishing rate [Hz].',
@@ -169,23 +172,60 @@ class SyringePumpNode(CoreNode):
             open_minimum=True)
         self.declarations_done = True
 
+    def _declare_regulator(self, scene: Any) -> None:
+        """
+        The scene's supply is a pressure regulator: the pump node drives it.
+
+        Its programme of target pressures is the scene's; the syringe's parameters (flow,
+        legs, end stop) do not exist here.
+        """
+        regulator = scene.regulator
+        self.rate_hz = self.declare_number(
+            'rate_hz', regulator.rate_hz, 'Command publishing rate [Hz].',
+            **LIMITS['pump.rate_hz'].bounds())
+        self.declare_flag(
+            'autostart', True, 'Start running at the first tick (else wait for ~/start).',
+            read_only=True)
+        self.declare_number(
+            'max_pressure_pa', regulator.max_pressure_pa,
+            "The regulator's relief: stop when the actuator gauge pressure exceeds this, and "
+            'hold a target setpoint above it at it [Pa] (default: '
+            'supply.regulator.max_pressure_pa of the scene).',
+            minimum=regulator.programme.highest(), open_minimum=False)
+        self.declare_number(
+            'feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S,
+            'Hold when no pressure came from the actuator for this long while running '
+            '[s, wall clock].', minimum=0.0, open_minimum=True, maximum=3600.0)
+        self.declare_flag(
+            'open_loop', False, 'Run without pressure feedback (no actuator behind the '
+            'regulator): no relief, no feedback timeout.', read_only=True)
+        self._scene = scene
+        self._model = actuator_model(scene)
+        self._pending = None
+        self.declarations_done = True
+
     def _configure_core(self) -> None:
         """The core from the parameters, its topics and services (no commands yet)."""
-        value = {name: self.get_parameter(name).value for name in (
-            'autostart', 'max_pressure_pa', 'feedback_timeout_s', 'open_loop',
-            'max_injected_m3', 'rate_hz', 'max_flow_m3_per_s')}
+        common = ('autostart', 'max_pressure_pa', 'feedback_timeout_s', 'open_loop', 'rate_hz')
+        regulated = self._scene.regulator is not None
+        value = {name: self.get_parameter(name).value for name in common + (
+            () if regulated else ('max_injected_m3', 'max_flow_m3_per_s'))}
         self.rate_hz = float(value['rate_hz'])
-        profile = self._programme({})
-        self._pending = None
-        self.core, _ = pump_core(
-            self._scene, self._model, flow_rate_m3_per_s=profile.flow_rate,
-            cycles=profile.cycles, start_injected_m3=profile.start_injected,
-            legs=profile.legs, autostart=value['autostart'],
-            max_pressure_pa=float(value['max_pressure_pa']),
-            feedback_timeout_s=float(value['feedback_timeout_s']),
-            open_loop=value['open_loop'])
-        self.core.max_injected_m3 = float(value['max_injected_m3'])
-        self.core.max_flow_m3_per_s = float(value['max_flow_m3_per_s'])
+        settings = {'autostart': value['autostart'],
+                    'max_pressure_pa': float(value['max_pressure_pa']),
+                    'feedback_timeout_s': float(value['feedback_timeout_s']),
+                    'open_loop': value['open_loop']}
+        if regulated:
+            self.core, _ = pump_core(self._scene, self._model, **settings)
+        else:
+            profile = self._programme({})
+            self._pending = None
+            self.core, _ = pump_core(
+                self._scene, self._model, flow_rate_m3_per_s=profile.flow_rate,
+                cycles=profile.cycles, start_injected_m3=profile.start_injected,
+                legs=profile.legs, **settings)
+            self.core.max_injected_m3 = float(value['max_injected_m3'])
+            self.core.max_flow_m3_per_s = float(value['max_flow_m3_per_s'])
         # Warnings name the feedback and setpoint topics as resolved here.
         self.connect(self._scene.outputs)
         volumes = self.subscription(contract.VOLUMES)
@@ -209,11 +249,13 @@ class SyringePumpNode(CoreNode):
         if self.core.state == IDLE:
             self.send(self.core.begin(self.now_ns()))
         core = self.core
+        stop = ('a pressure regulator: its programme of target gauge pressures'
+                if self._scene.regulator is not None else
+                f'end stop at {core.max_injected_m3 * 1e6:.4g} mL injected (max_injected_m3)')
         self.get_logger().info(
-            f'relief at {core.max_pressure_pa * 1e-3:.4g} kPa gauge (max_pressure_pa), end stop '
-            f'at {core.max_injected_m3 * 1e6:.4g} mL injected (max_injected_m3)'
+            f'relief at {core.max_pressure_pa * 1e-3:.4g} kPa gauge (max_pressure_pa), {stop}'
             + ('; open loop: no relief' if core.open_loop else ''))
-        if self.core.duration_s > MAX_RUN_S:
+        if self.core.duration_s > MAX_RUN_S and self._scene.regulator is None:
             # A rig may run for days, so this is said, not refused (softseq run refuses it).
             self.get_logger().warning(
                 f'the programme runs {self.core.duration_s:.6g} s of rig time, more than '
@@ -236,7 +278,9 @@ class SyringePumpNode(CoreNode):
         if reaction.level == WARNING:
             level = ERROR_LEVEL if reaction.state == STOPPED else WARN_LEVEL
         values: dict[str, object] = {
-            'state': core.state, 'reason': core.reason, 'injected_m3': core.volume_m3,
+            'state': core.state, 'reason': core.reason,
+            ('target_pa (gauge)' if self._scene.regulator is not None else 'injected_m3'):
+                core.volume_m3,
             'max_pressure_pa (gauge)': core.max_pressure_pa,
             'max_injected_m3': core.max_injected_m3,
             'open_loop': core.open_loop, 'mode': core.mode,

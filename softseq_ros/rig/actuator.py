@@ -146,6 +146,13 @@ class ActuatorCore:
                 self.skipped_while_waiting += 1
             self._buffered.append((value, now))
             return []
+        if value.regulated:
+            return self._handle_pressure(value, now)
+        if getattr(self.model, 'command_pressure', None) is not None:
+            return self.refuse('supply', f'command refused: injected volume '
+                                         f'{value.injected_m3:.6g} m^3, and the supply is a '
+                                         'pressure regulator, driven by a target gauge pressure '
+                                         '(joint regulator, effort)')
         injected = value.injected_m3
         if not math.isfinite(injected):
             return self.refuse('finite', f'command refused: injected volume {injected} is '
@@ -161,6 +168,27 @@ class ActuatorCore:
             # The model keeps the state it had.
             return self.refuse('domain', f'command refused: {err}')
         # A repeated command changes nothing: the same numbers go out with the new stamp.
+        outputs = self._outputs(stamp, snaps or [])
+        if snaps is not None and self.state_file is not None:
+            self._changed(outputs)
+        return outputs
+
+    def _handle_pressure(self, value: PumpCommand, now: int) -> list[Output]:
+        """A regulator's target gauge pressure: every segment held there (a regulated model)."""
+        gauge = value.gauge_pa
+        command_pressure = getattr(self.model, 'command_pressure', None)
+        if command_pressure is None:
+            return self.refuse('supply', f'command refused: target gauge pressure {gauge:.6g} '
+                                         "Pa, and this actuator's supply is a syringe, driven "
+                                         'by volume (joint syringe, position)')
+        if not math.isfinite(gauge):
+            return self.refuse('finite', f'command refused: target gauge pressure {gauge} is '
+                                         'not finite')
+        stamp = value.stamp_ns or now
+        try:
+            snaps = command_pressure(gauge, stamp)
+        except CommandRefusedError as err:
+            return self.refuse('domain', f'command refused: {err}')
         outputs = self._outputs(stamp, snaps or [])
         if snaps is not None and self.state_file is not None:
             self._changed(outputs)

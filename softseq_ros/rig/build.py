@@ -17,6 +17,7 @@ from softseq_ros.rig.pump import (
     DEFAULT_MAX_FLOW_M3_PER_S,
     PumpCore,
 )
+from softseq_ros.rig.regulator import PressureSchedule, RegulatorCore
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.loader import Scene
 from softseq_ros.scene.programme import Leg, ProgrammeError, PumpProfile, check_capacity
@@ -82,6 +83,42 @@ def end_stop(model: ActuatorModel, profile: PumpProfile) -> float:
     return max(model.end_stop_m3, profile.max_injected())
 
 
+# What a regulator's core takes: the pump's settings that do not belong to a syringe.
+REGULATOR_SETTINGS = ('rate_hz', 'autostart', 'max_pressure_pa', 'feedback_timeout_s',
+                      'open_loop', 'feedback_clock')
+
+
+def regulator_core(scene: Scene, **settings: Any) -> tuple[RegulatorCore, float]:
+    """
+    The scene's pressure regulator (its ``pump`` block the programme of pressures) and rate.
+
+    Its relief defaults to the scene's (``supply.regulator.max_pressure_pa``); a syringe's
+    setting is refused by name.
+    """
+    syringe = sorted(set(settings) & (set(PUMP_SETTINGS) - set(REGULATOR_SETTINGS)))
+    if syringe:
+        raise SettingError(f'pump: {", ".join(syringe)}: a syringe setting, and the supply '
+                           "is a pressure regulator (its programme is the scene's pressures)")
+    _unknown('pump', settings, REGULATOR_SETTINGS)
+    regulator = scene.regulator
+    rate_hz = float(settings.get('rate_hz', regulator.rate_hz))
+    reason = LIMITS['pump.rate_hz'].reason(rate_hz)
+    if reason is not None:
+        raise SettingError(f'pump: rate_hz {reason}')
+    relief = settings.get('max_pressure_pa', regulator.max_pressure_pa)
+    if relief < regulator.programme.highest():
+        raise SettingError(f"pump: max_pressure_pa {relief:.6g} Pa is below the programme's "
+                           f'highest target, {regulator.programme.highest():.6g} Pa')
+    core = RegulatorCore(
+        PressureSchedule(regulator.programme, regulator.pressure_rate_pa_per_s),
+        autostart=settings.get('autostart', True), max_pressure_pa=relief,
+        feedback_timeout_s=settings.get('feedback_timeout_s', DEFAULT_FEEDBACK_TIMEOUT_S),
+        open_loop=settings.get('open_loop', False), segment_names=scene.segment_names,
+        **({'feedback_clock': settings['feedback_clock']} if 'feedback_clock' in settings
+           else {}))
+    return core, rate_hz
+
+
 def pump_core(scene: Scene, model: ActuatorModel | None = None,
               **settings: Any) -> tuple[PumpCore, float]:
     """
@@ -89,7 +126,10 @@ def pump_core(scene: Scene, model: ActuatorModel | None = None,
 
     With the actuator's model the programme is checked against the model's domain first, and
     ``max_injected_m3`` defaults to where the inflation ends (else to what the segments hold).
+    Behind a pressure regulator, the regulator's core (:func:`regulator_core`).
     """
+    if scene.regulator is not None:
+        return regulator_core(scene, **settings)
     _unknown('pump', settings, PUMP_SETTINGS)
     rate_hz = float(settings.get('rate_hz', scene.pump.rate_hz))
     reason = LIMITS['pump.rate_hz'].reason(rate_hz)

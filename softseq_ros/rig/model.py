@@ -36,11 +36,12 @@ from softseq_ros.dynamic.events import fold_crossing_line
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import laminar_range_warning, tube_law
 from softseq_ros.errors import UserError
-from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, Tracker
+from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, SnapEvent, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
+from softseq_ros.quasistatic.regulator import HysteronTracker, PressureDomainError
 from softseq_ros.quasistatic.solve import scene_map, segments_graph
 from softseq_ros.scene.limits import RELIEF_MARGIN
-from softseq_ros.scene.loader import Scene, load_scene, require_syringe
+from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
 from softseq_ros.scene.validation import SceneError
@@ -507,6 +508,126 @@ class DynamicModel:
         self.reach.check_programme(scene, profile)
 
 
+@dataclass(frozen=True)
+class HysteronState:
+    """The segments under a held pressure: the pressure [Pa, gauge], volumes, curvatures."""
+
+    pressure: float
+    volumes: list[float]
+    curvatures: list[float]
+
+
+class RegulatedModel:
+    """
+    The segments behind a pressure regulator, quasi-statically: each an independent hysteron.
+
+    Its commands are target gauge pressures (:meth:`command_pressure`): each segment sits at
+    that pressure on a rising piece of its own curve and flips at its peak and back at its
+    valley (softseq_ros.quasistatic.regulator). A flip goes out as a snap-through at its
+    pressure, the fluid it takes coming from the regulator.
+    """
+
+    rate_hz = None   # nothing happens between commands
+    channel_names: tuple[str, ...] = ()
+    end_stop_m3 = math.inf   # a regulator has no syringe to run out of
+
+    def __init__(self, segments: Sequence[Segment], names: Sequence[str]) -> None:
+        self.segments = self.members = tuple(segments)
+        self.names = tuple(names)
+        self.rest_volume_m3 = float(sum(s.rest_volume for s in self.segments))
+        self.tracker = HysteronTracker(self.segments)
+        self._last_command: float | None = None
+        self._state = self._state_at(0.0, self.tracker.move(0.0)[0])
+
+    def _state_at(self, pressure: float, volumes: Sequence[float]) -> HysteronState:
+        return HysteronState(pressure, [float(v) for v in volumes],
+                             [float(s.curvature(v)) for s, v in zip(self.segments, volumes)])
+
+    @property
+    def injected_m3(self) -> float:
+        """What the regulator has let in since rest [m^3]."""
+        return sum(self._state.volumes) - self.rest_volume_m3
+
+    def command(self, injected_m3: float, now_ns: int) -> list[Snap] | None:
+        """A volume cannot drive segments behind a regulator: refused."""
+        raise CommandRefusedError(
+            f'injected volume {injected_m3:.6g} m^3 refused: the supply is a pressure '
+            'regulator, which is driven by a target gauge pressure (joint regulator, effort)')
+
+    def command_pressure(self, gauge_pa: float, now_ns: int) -> list[Snap] | None:
+        """
+        Hold every segment at ``gauge_pa`` [Pa]; the flips on the way, as snap-throughs.
+
+        ``None`` for a repeated command; CommandRefusedError when some segment holds the
+        pressure on no rising piece (its state stays as it was).
+        """
+        if gauge_pa == self._last_command:
+            return None
+        tracker = self.tracker
+        places = list(tracker.current)
+        rising = gauge_pa > self._state.pressure
+        try:
+            volumes, flips = tracker.move(gauge_pa)
+        except PressureDomainError as err:
+            raise CommandRefusedError(str(err).removeprefix('row 0: ')) from None
+        snaps = []
+        # In the order the pressure passes them: each flip sees the flips before it landed.
+        for flip in sorted(flips, key=lambda f: f.pressure, reverse=not rising):
+            at = [flip.from_volume if i == flip.segment else
+                  float(s.invert(tracker.pieces[i][places[i]], np.array([flip.pressure]))[0])
+                  for i, s in enumerate(self.segments)]
+            landed = list(at)
+            landed[flip.segment] = flip.to_volume
+            places[flip.segment] = tracker.current[flip.segment]
+            snaps.append(SnapEvent(sum(at) - self.rest_volume_m3, np.array(at),
+                                   np.array(landed), flip.pressure, flip.pressure))
+        self._last_command = gauge_pa
+        self._state = self._state_at(gauge_pa, volumes)
+        return snaps
+
+    def advance(self, now_ns: int) -> None:
+        """Time alone moves nothing in a quasi-static actuator."""
+        return None
+
+    def finish(self, now_ns: int) -> list[Snap]:
+        """A flip is over the instant it starts: nothing is left."""
+        return []
+
+    def state(self) -> ModelState:
+        """Every segment at the last target pressure (at rest before the first)."""
+        return self._state
+
+    def saved(self) -> dict[str, object]:
+        """What was let in and the segment volumes, enough to find each one's piece again."""
+        return {'injected_m3': self.injected_m3, 'volumes_m3': list(self._state.volumes)}
+
+    def resume(self, injected_m3: float, volumes_m3: Sequence[float]) -> None:
+        """Each segment on the rising piece nearest its saved volume, at that pressure."""
+        pressures = [float(s.pressure(v)) for s, v in zip(self.segments, volumes_m3)]
+        self.tracker.place(volumes_m3)
+        try:
+            volumes, _ = self.tracker.move(float(np.mean(pressures)))
+        except PressureDomainError as err:
+            raise CommandRefusedError(str(err).removeprefix('row 0: ')) from None
+        self._last_command = None
+        self._state = self._state_at(float(np.mean(pressures)), volumes)
+
+    def check_programme(self, scene: Scene, profile: object) -> None:
+        """The scene's programme was checked when it loaded (every target within reach)."""
+
+    def channel_state(self) -> tuple[list[float], list[float]]:
+        """No channels."""
+        return [], []
+
+    def take_warnings(self) -> list[str]:
+        """Nothing to doubt."""
+        return []
+
+    def take_notes(self) -> list[str]:
+        """The flips are its events; nothing else to note."""
+        return []
+
+
 def default_max_pressure_pa(scene: Scene) -> float:
     """
     The pump's relief by default [Pa, gauge], from the scene's own curves.
@@ -532,18 +653,38 @@ def load_rig_scene(path: str | Path) -> Scene:
     the transition graph of the process's shared map, the one the actuator's model runs on.
     """
     scene = load_scene(path, segments_graph)
-    require_syringe(scene, 'the rig')
+    if scene.regulator is not None:
+        require_quasi_static_regulator(scene)
     return scene
 
 
-def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel':
+def require_quasi_static_regulator(scene: Scene) -> None:
+    """
+    Refuse a rig behind a regulator in time: its actuator is quasi-static (so far).
+
+    Behind a regulator the rig's actuator holds each segment at the target pressure as an
+    independent hysteron; the fluid network in time behind one runs in ``softseq solve``.
+    """
+    if scene.network is not None:
+        where = scene.path if scene.path is not None else '<scene>'
+        raise SceneError(f'{where}: network: the rig behind a pressure regulator is '
+                         'quasi-static (each segment a hysteron at the target pressure); '
+                         'drop the network block to run it, or follow the network in time '
+                         'with softseq solve (docs/supply.md)')
+
+
+def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel | RegulatedModel':
     """
     The model a scene asks for, on the process's shared map of its segments.
 
     The fluid network in time when the scene declares one (``network``), else the quasi-static
     equilibrium (behind the scene's ``supply`` line, if any), at rest or where the
-    programme's ``start_history`` led.
+    programme's ``start_history`` led. Behind a pressure regulator, the segments as
+    independent hysterons (:class:`RegulatedModel`).
     """
+    if scene.regulator is not None:
+        require_quasi_static_regulator(scene)
+        return RegulatedModel(scene.segments, scene.segment_names)
     quasistatic = QuasiStaticModel(scene_map(scene),
                                    scene.segment_names)
     # A programme that starts from a stated history: the actuator is where it led.

@@ -191,6 +191,7 @@ class PumpCore:
         self.volume_m3 = profile.start_injected
         self.mode = PROGRAMME
         self._last_command: PumpCommand | None = None
+        self._last_values = (math.nan, math.nan)   # the last command's volume and flow
         self._settled = False       # the last command repeated the volume of the one before
         self.max_flow_m3_per_s = max_flow_m3_per_s
         self.setpoint_topic = contract.PUMP_SETPOINT.name
@@ -595,14 +596,7 @@ class PumpCore:
         setpoint = self.setpoint
         step_s = max(0, now - last) * 1e-9 if last is not None else 0.0
         if self.state == RUNNING and setpoint is not None and step_s > 0.0:
-            if setpoint.injected_m3 is not None:
-                reach = self.profile.flow_rate * step_s
-                target = setpoint.injected_m3
-                moved = min(target, volume + reach) if target >= volume else \
-                    max(target, volume - reach)
-            else:
-                # An empty syringe gives nothing back: the flow stops at 0 injected.
-                moved = max(0.0, volume + setpoint.flow_m3_per_s * step_s)
+            moved = self._setpoint_step(setpoint, volume, step_s)
             if moved > self.max_injected_m3:
                 moved = self.volume_m3 = self.max_injected_m3
                 self._stop(now, 'end_stop', limit=self.max_injected_m3)
@@ -610,6 +604,19 @@ class PumpCore:
             volume = moved
         self.volume_m3 = volume
         return self._command(now, volume, flow)
+
+    def _setpoint_step(self, setpoint: PumpSetpoint, here: float, step_s: float) -> float:
+        """Where a setpoint takes the syringe in ``step_s`` from ``here`` [m^3]."""
+        if setpoint.injected_m3 is not None:
+            reach = self.profile.flow_rate * step_s
+            target = setpoint.injected_m3
+            return min(target, here + reach) if target >= here else max(target, here - reach)
+        # An empty syringe gives nothing back: the flow stops at 0 injected.
+        return max(0.0, here + setpoint.flow_m3_per_s * step_s)
+
+    def _command_value(self, now: int, volume: float, flow: float) -> PumpCommand:
+        """The command a tick sends: the syringe's volume and flow."""
+        return PumpCommand(now, volume, flow)
 
     def _command(self, now: int, volume: float, flow: float) -> list[Output]:
         """
@@ -621,11 +628,12 @@ class PumpCore:
         """
         last = self._last_command
         if self.state != RUNNING and not self._out and last is not None and self._settled \
-                and (volume, flow) == (last.injected_m3, last.flow_m3_per_s) \
+                and (volume, flow) == self._last_values \
                 and now - last.stamp_ns < HEARTBEAT_S * 1e9:
             return []
-        self._settled = last is not None and volume == last.injected_m3
+        self._settled = last is not None and volume == self._last_values[0]
         self._sent_command(now)
-        command = self._last_command = PumpCommand(now, volume, flow)
+        command = self._last_command = self._command_value(now, volume, flow)
+        self._last_values = (volume, flow)
         self._out.append(command)
         return self._take()

@@ -104,7 +104,9 @@ class Regulator:
     ``time_constant_s``: the outlet follows the target as a first-order lag (0: at once);
     ``max_flow_m3_per_s``: the most it delivers or vents (inf: no limit);
     ``max_pressure_pa``: its relief [Pa, gauge], above every target;
-    ``rate_hz``: how often a path is sampled.
+    ``rate_hz``: how often a path is sampled (and the rig's regulator commands);
+    ``pressure_rate_pa_per_s``: the programme's default rate, at which a controller's target
+    pressure is approached on the rig.
     """
 
     programme: PressureProgramme
@@ -112,6 +114,7 @@ class Regulator:
     max_flow_m3_per_s: float = math.inf
     max_pressure_pa: float = math.inf
     rate_hz: float = DEFAULT_REGULATOR_RATE_HZ
+    pressure_rate_pa_per_s: float = DEFAULT_PRESSURE_RATE_PA_PER_S
 
     def definition(self) -> dict[str, object]:
         """The regulator's numbers (its programme as breakpoints)."""
@@ -272,4 +275,4 @@ def read_regulator(ctx: Context, supply: object, pump: object,
         max_flow_m3_per_s=(ctx.limited(raw['max_flow_m3_per_s'],
                                        'supply.regulator.max_flow_m3_per_s')
                            if 'max_flow_m3_per_s' in raw else math.inf),
-        max_pressure_pa=relief, rate_hz=rate_hz)
+        max_pressure_pa=relief, rate_hz=rate_hz, pressure_rate_pa_per_s=default_rate)

@@ -1,0 +1,262 @@
+"""
+The rig behind a pressure regulator: its core commands target pressures, the actuator holds
+each segment there as an independent hysteron, and the recording reads back as a regulator's.
+
+Checked against the thin-walled Gent sphere's closed form (each segment's pressure at its
+recorded volume equals the commanded target; the flips at its peak and valley), and against
+the programme's own breakpoints.
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize_scalar
+import yaml
+
+import softseq_ros
+from softseq_ros import cli
+from softseq_ros.analysis.report import write_report
+from softseq_ros.bag.reader import read_bag
+from softseq_ros.rig.actuator import ActuatorCore
+from softseq_ros.rig.build import SettingError, pump_core
+from softseq_ros.rig.model import RegulatedModel, actuator_model
+from softseq_ros.rig.pump import RUNNING
+from softseq_ros.scene.loader import load_scene, scene_from_dict
+from softseq_ros.wire.payloads import DECODERS, InputError, encode
+from softseq_ros.wire.values import Notice, PumpCommand, PumpSetpoint, regulator_command
+
+ML = 1e-6
+R = 0.006
+# The Fig. 1 pair: (name, Jm, wall [m]), base to tip.
+PAIR = (('bottom', 40.0, 0.6e-3), ('top', 30.0, 0.564e-3))
+MU = 60e3
+UP_S, HOLD_S, RATE = 40.0, 5.0, 200.0     # to 8 kPa at 200 Pa/s, held, and back
+
+
+def gent(stretch: float, jm: float, wall: float) -> float:
+    """The thin-walled Gent sphere: p = 2 mu H / R (1/l - 1/l^7) / (1 - (2 l^2 + l^-4 - 3)/Jm)."""
+    return (2 * MU * wall / R * (1 / stretch - stretch**-7)
+            / (1 - (2 * stretch**2 + stretch**-4 - 3) / jm))
+
+
+def peak_and_valley(jm: float, wall: float) -> tuple[float, float]:
+    top = minimize_scalar(lambda s: -gent(s, jm, wall), bounds=(1.0, 2.5), method='bounded',
+                          options={'xatol': 1e-12})
+    bottom = minimize_scalar(lambda s: gent(s, jm, wall), bounds=(top.x, 3.5),
+                             method='bounded', options={'xatol': 1e-12})
+    return gent(top.x, jm, wall), gent(bottom.x, jm, wall)
+
+
+def regulated_scene(tmp_path, legs=None, rate=RATE):
+    data = {
+        'name': 'pair_behind_a_regulator',
+        'segments': [{'name': name, 'length_m': 0.111,
+                      'balloon': {'material': {'law': 'gent', 'shear_modulus_pa': MU,
+                                               'jm': jm},
+                                  'radius_m': R, 'thickness_m': wall,
+                                  'max_stretch': 4.0 if jm == 40.0 else 3.6,
+                                  'curvature_per_m_per_m3': 5.0e5}}
+                     for name, jm, wall in PAIR],
+        'supply': {'regulator': {}},
+        'pump': {'pressure_rate_pa_per_s': rate, 'rate_hz': 20,
+                 'legs': legs or [{'inflate_to_pa': 8000.0}, {'hold_s': HOLD_S},
+                                  {'deflate_to_pa': 0.0}]},
+        'camera': {'rate_hz': 2},
+    }
+    path = tmp_path / 'regulated.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return scene_from_dict(data, path)
+
+
+def programme_target(t: np.ndarray) -> np.ndarray:
+    return np.interp(t, [0.0, UP_S, UP_S + HOLD_S, 2 * UP_S + HOLD_S],
+                     [0.0, 8000.0, 8000.0, 0.0])
+
+
+def test_a_batch_run_behind_a_regulator_holds_each_segment_at_the_target(tmp_path):
+    scene = regulated_scene(tmp_path)
+    result = softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
+    assert result.pump_state == 'finished'
+    bag = tmp_path / 'bag'
+    commands = list(read_bag(bag, ['/pump/command']))
+    # Every command is the regulator's target at its instant, and nothing else.
+    assert {tuple(m.msg.name) for m in commands} == {('regulator',)}
+    assert all(len(m.msg.position) == len(m.msg.velocity) == 0 for m in commands)
+    stamps = np.array([m.msg.header.stamp.sec + 1e-9 * m.msg.header.stamp.nanosec
+                       for m in commands])
+    targets = np.array([m.msg.effort[0] for m in commands])
+    np.testing.assert_allclose(targets, programme_target(stamps), rtol=1e-12, atol=1e-9)
+    assert targets.max() == pytest.approx(8000.0, rel=1e-12)
+    # Every answer: each segment at the target on its curve (the closed form at the stretch
+    # of its recorded volume), on a rising piece (the curve climbs there).
+    by_stamp = dict(zip((m.log_time_ns for m in commands), targets))
+    volumes = [m for m in read_bag(bag, ['/actuator/volumes']) if m.log_time_ns in by_stamp]
+    assert len(volumes) >= len(commands) - 1
+    v0 = 4 / 3 * math.pi * R**3
+    for message in volumes[::7]:
+        target = by_stamp[message.log_time_ns]
+        for (_, jm, wall), volume, gauge in zip(PAIR, message.msg.position,
+                                                   message.msg.effort):
+            stretch = (volume / v0) ** (1 / 3)
+            assert gent(stretch, jm, wall) == pytest.approx(target, rel=1e-9, abs=1e-6)
+            assert gauge == pytest.approx(target, rel=1e-12, abs=1e-9)
+            assert gent(stretch * (1 + 1e-6), jm, wall) > gent(stretch, jm, wall) \
+                or target == 0.0
+    # Four flips: each segment at its own peak going up, at its own valley coming down, the
+    # thinner top first; the fluid comes from the regulator, not from the other segment.
+    events = [json.loads(m.msg.data) for m in read_bag(bag, ['/actuator/events'])]
+    (top_peak, top_valley), (bottom_peak, bottom_valley) = (peak_and_valley(jm, wall)
+                                                            for _, jm, wall in PAIR[::-1])
+    assert [e['from_pressure_pa'] for e in events] == pytest.approx(
+        [top_peak, bottom_peak, top_valley, bottom_valley], rel=1e-9)
+    for event, moving in zip(events, (1, 0, 1, 0)):
+        still = 1 - moving
+        assert event['to_volumes_m3'][still] == event['from_volumes_m3'][still]
+        change = event['to_volumes_m3'][moving] - event['from_volumes_m3'][moving]
+        assert abs(change) > 5 * ML
+    # The report reads the regulator's bag: the injected volume is what the segments took.
+    metrics, text = write_report(bag, tmp_path / 'report', scene_name=str(scene.path),
+                                 figures=False)
+    assert metrics['snap_count'] == 4
+    assert text.count('taken from the regulator') == 2
+    assert text.count('given back to the regulator') == 2
+    assert any('pressure regulator' in note for note in metrics['notes'])
+    last = volumes[-1].msg.position
+    rest = sum(scene.segments[i].rest_volume for i in range(2))
+    assert metrics['injected_range_m3'][0] == pytest.approx(0.0, abs=1e-15)
+    assert sum(last) - rest == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_regulator_in_setpoint_mode_holds_a_target_beyond_the_relief_at_the_relief(tmp_path):
+    scene = regulated_scene(tmp_path)
+    core, rate_hz = pump_core(scene, feedback_clock=None, open_loop=True)
+    relief = scene.regulator.max_pressure_pa
+    assert rate_hz == 20.0 and math.isinf(core.max_injected_m3)
+    core.begin(0)
+    assert core.set_mode(0, True).success
+    # A volume or a flow cannot drive a regulator, nor a pressure that is no number or below
+    # vacuum: refused, counted, warned (once per kind of setpoint).
+    warned = []
+    for refused in (PumpSetpoint(0, injected_m3=1e-6), PumpSetpoint(0, flow_m3_per_s=1e-7),
+                    PumpSetpoint(0, gauge_pa=math.nan), PumpSetpoint(0, gauge_pa=-2e5)):
+        warned += core.take_setpoint(refused, 0)
+    assert [n.level for n in warned] == ['warning'] * 3
+    assert all(isinstance(n, Notice) for n in warned)
+    assert 'regulator' in warned[0].text and 'not a finite number' in warned[2].text
+    assert core.setpoints_refused == 4 and core.setpoint is None
+    assert 'below vacuum' in core.last_refused_setpoint
+    # Beyond the relief: held at the relief, approached at the programme's rate.
+    core.take_setpoint(PumpSetpoint(0, gauge_pa=3 * relief), 0)
+    assert core.setpoints_refused == 5 and core.setpoints_held_at_relief == 1
+    step = 50_000_000
+    sent = []
+    for k in range(1, 4000):
+        sent += [v for v in core.tick(k * step) if isinstance(v, PumpCommand)]
+    assert core.state == RUNNING
+    assert sent[-1].regulated and sent[-1].gauge_pa == pytest.approx(relief, rel=1e-12)
+    rises = np.diff([c.gauge_pa for c in sent])
+    assert rises.max() == pytest.approx(RATE * step * 1e-9, rel=1e-9)
+    # Back to the programme only from 0 Pa, where it starts: no command jumps.
+    assert not core.set_mode(4000 * step, False).success
+    core.take_setpoint(PumpSetpoint(0, gauge_pa=0.0), 4000 * step)
+    for k in range(4001, 8000):
+        core.tick(k * step)
+    assert core.target_pa == 0.0
+    assert core.set_mode(8000 * step, False).success
+
+
+def test_a_syringe_setting_for_a_regulator_is_refused_by_name(tmp_path):
+    scene = regulated_scene(tmp_path)
+    with pytest.raises(SettingError, match='flow_rate_m3_per_s'):
+        pump_core(scene, flow_rate_m3_per_s=1e-7)
+    with pytest.raises(SettingError, match='max_pressure_pa'):
+        pump_core(scene, max_pressure_pa=1000.0)
+
+
+def test_each_actuator_refuses_the_other_supplys_command_and_keeps_its_state(tmp_path):
+    regulated = ActuatorCore(actuator_model(regulated_scene(tmp_path)), ('bottom', 'top'))
+    assert isinstance(regulated.model, RegulatedModel)
+    before = list(regulated.model.state().volumes)
+    said = regulated.handle(PumpCommand(1, 2e-6, 1e-7), 1)
+    assert [n.level for n in said] == ['warning'] and 'regulator' in said[0].text
+    assert regulated.model.state().volumes == before and regulated.rejected_commands == 1
+    syringe = ActuatorCore(actuator_model(load_scene('fig1_asymmetric')), ('bottom', 'top'))
+    said = syringe.handle(regulator_command(1, 5000.0), 1)
+    assert [n.level for n in said] == ['warning'] and 'syringe' in said[0].text
+    # A target beyond what a segment holds on a rising piece: refused, the state kept.
+    said = regulated.handle(regulator_command(2, 1e6), 2)
+    assert [n.level for n in said] == ['warning'] and regulated.rejected_commands == 2
+    assert regulated.model.state().volumes == before
+
+
+def test_the_regulator_command_is_a_joint_state_with_one_effort():
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    from softseq_ros.bag.forms import serialize
+
+    data = encode(regulator_command(1_500_000_000, 5000.0))
+    msg = deserialize_message(data, JointState)
+    assert list(msg.name) == ['regulator'] and list(msg.effort) == [5000.0]
+    assert not len(msg.position) and not len(msg.velocity)
+    assert serialize(msg) == data
+    decoded = DECODERS['pump/command'](msg)
+    assert decoded.regulated and decoded.gauge_pa == 5000.0
+    assert decoded.stamp_ns == 1_500_000_000
+    msg.position = [1.0]
+    with pytest.raises(InputError, match='one effort'):
+        DECODERS['pump/command'](msg)
+
+
+def test_a_rig_behind_a_regulator_in_time_is_refused_before_it_starts(tmp_path, capsys):
+    # The shipped scene has a network: the rig behind a regulator is quasi-static.
+    code = cli.main(['run', 'fig1_asymmetric_regulator', '--out', str(tmp_path / 'bag')])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'network' in err[0] and 'quasi-static' in err[0]
+    assert not (tmp_path / 'bag').exists()
+
+
+@pytest.mark.ros
+def test_the_pump_node_drives_a_regulator_and_takes_pressure_setpoints_over_dds(context,
+                                                                                tmp_path):
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import SetBool
+
+    from softseq_ros.nodes.actuator import ActuatorNode
+    from softseq_ros.nodes.syringe_pump import SyringePumpNode
+    from softseq_ros.testing import Collector, spinning, wait_for
+
+    # Fast enough for wall time: to 8 kPa in 2 s, held (both segments flipped on the way).
+    scene = regulated_scene(tmp_path, legs=[{'inflate_to_pa': 8000.0}, {'hold_s': 600.0}],
+                            rate=4000.0)
+    path = Parameter('scene', value=str(scene.path))
+    pump = SyringePumpNode(context=context, parameter_overrides=[path])
+    actuator = ActuatorNode(context=context, parameter_overrides=[
+        path, Parameter('resume_timeout_s', value=0.0), Parameter('state_file', value='')])
+    collector = Collector(['pump/command', 'actuator/volumes', 'actuator/events'], context)
+    commands = collector.messages('pump/command')
+    volumes = collector.messages('actuator/volumes')
+    with spinning(context, pump, actuator, collector):
+        events = collector.wait_for_count('actuator/events', 2, timeout=60.0)
+        wait_for(lambda: volumes and volumes[-1].effort[0] == 8000.0, 'the hold at 8 kPa')
+        # A controller takes the regulator over, its target reached at the programme's rate.
+        client = collector.create_client(SetBool, 'syringe_pump/setpoint_mode')
+        assert client.wait_for_service(timeout_sec=10.0)
+        future = client.call_async(SetBool.Request(data=True))
+        wait_for(future.done, 'the setpoint mode')
+        assert future.result().success
+        publisher = collector.create_publisher(JointState, 'pump/setpoint', 10)
+        setpoint = JointState(name=['regulator'], effort=[6000.0])
+        wait_for(lambda: publisher.get_subscription_count() > 0, 'the pump to listen')
+        publisher.publish(setpoint)
+        wait_for(lambda: volumes and volumes[-1].effort[0] == 6000.0, 'the hold at 6 kPa')
+        health = pump.health()
+    assert all(list(m.name) == ['regulator'] and len(m.position) == 0 for m in commands)
+    assert [json.loads(e.data)['from_pressure_pa'] for e in events[:2]] == pytest.approx(
+        [peak_and_valley(jm, wall)[0] for _, jm, wall in PAIR[::-1]], rel=1e-9)
+    assert health.values['mode'] == 'setpoint' and health.values['setpoints_taken'] == 1
+    assert health.values['target_pa (gauge)'] == 6000.0
