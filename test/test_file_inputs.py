@@ -10,6 +10,7 @@ class (bench/bench_adversarial.py) tries every file argument of every command so
 from contextlib import contextmanager
 import os
 from pathlib import Path
+import re
 import signal
 from typing import Iterator
 
@@ -106,3 +107,25 @@ def test_an_unreadable_csv_input_is_refused_naming_it(tmp_path, capsys):
                               '--out', str(tmp_path / 'p.csv')])
     assert line == (f'softseq solve: error: {history}: cannot read the volume history '
                     '(Permission denied)')
+
+
+@pytest.mark.parametrize('name, data, says', [
+    ('Latin-1', b'# Pr\xfcfstand\n/**:\n  ros__parameters:\n    rate_hz: 50\n',
+     'not UTF-8 text (byte 4)'),
+    ('nested', b'[' * 100_000 + b']' * 100_000, 'YAML nested too deeply'),
+    ('one word', b'a' * 10_000, 'no node parameters in it'),
+    ('empty', b'', 'no node parameters in it'),
+    ('no ros__parameters', b'/rig1/syringe_pump:\n  rate_hz: 50\n', 'no node parameters in it'),
+])
+def test_a_params_file_no_node_could_take_is_refused_before_the_rig_starts(tmp_path, name,
+                                                                          data, says):
+    from softseq_ros.ros_tools.launcher import check_inputs
+    from softseq_ros.ros_tools.session import RosToolError
+
+    # Each started the rig, whose nodes then failed one by one or ran without the file.
+    params = tmp_path / 'params.yaml'
+    params.write_bytes(data)
+    wanted = f'--params-file {re.escape(str(params))}: .*{re.escape(says)}'
+    with pytest.raises(RosToolError, match=wanted):
+        check_inputs(params, None)
+    check_inputs(CONFIG / 'params' / 'params_example.yaml', None)
