@@ -24,10 +24,11 @@ against the project's promise (docs/faults.md):
 - a damaged or foreign bag: ``info``, ``report``, ``compare`` succeed or refuse in one line;
   ``recover`` either writes a bag every reader opens or refuses in one line.
 
-Classes: scene, table, design, experiment, reference, history, bag, cli, node_parameter,
-topic, signal. Commands run in forked children of one process that has imported the package
-(a fresh interpreter per case costs a second of CPU on imports alone): the child is a real
-process with its own stdout, stderr and exit status, as the command line gives them.
+Classes: scene, table, design, experiment, reference, history, bag, cli, option, file,
+node_parameter, service, topic, signal. Commands run in forked children of one process that has
+imported the package (a fresh interpreter per case costs a second of CPU on imports alone): the
+child is a real process with its own stdout, stderr and exit status, as the command line gives
+them.
 
 The summary (tried, held, broken, by class, and every broken case with why) goes to
 bench/adversarial_results.md and between the markers of docs/faults.md. ``--quick`` tries a
@@ -60,7 +61,7 @@ RESULTS = ROOT / 'bench' / 'adversarial_results.md'
 FAULTS = ROOT / 'docs' / 'faults.md'
 BEGIN, END = '<!-- adversarial summary: begin -->', '<!-- adversarial summary: end -->'
 CLASSES = ('scene', 'table', 'design', 'experiment', 'reference', 'history', 'bag', 'cli',
-           'option', 'node_parameter', 'service', 'topic', 'signal')
+           'option', 'file', 'node_parameter', 'service', 'topic', 'signal')
 QUICK_PER_CLASS = 1
 COMMAND_TIMEOUT_S = 120.0
 # A refusal comes before any work: a FEM run or a playback still going after this did not.
@@ -77,6 +78,7 @@ class Verdict:
 
     held: bool
     why: str = ''
+    tried: bool = True
 
 
 HELD = Verdict(True)
@@ -86,6 +88,11 @@ def broken(why: str) -> Verdict:
     return Verdict(False, why)
 
 
+def not_tried(why: str) -> Verdict:
+    """A case this machine cannot try (counted apart, never as held)."""
+    return Verdict(False, why, tried=False)
+
+
 @dataclass
 class Case:
     """One bad input: its class, a name that says what it is, and how to try it."""
@@ -93,6 +100,9 @@ class Case:
     cls: str
     name: str
     run: Callable[['Workbench'], Verdict]
+    # Whether this machine can try it (a file of mode 000 cannot stop root): --quick samples
+    # only cases it can; the full run says the others were not tried.
+    can_try: Callable[[], bool] = lambda: True
 
 
 @dataclass
@@ -122,9 +132,11 @@ class Zygote:
         self.process = subprocess.Popen([sys.executable, __file__, '--zygote'], env=env,
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
 
-    def command(self, argv: list[str], cwd: Path, timeout: float = COMMAND_TIMEOUT_S) -> Outcome:
-        self.process.stdin.write(json.dumps({'argv': argv, 'cwd': str(cwd),
-                                             'timeout': timeout}) + '\n')
+    def command(self, argv: list[str], cwd: Path, timeout: float = COMMAND_TIMEOUT_S,
+                signum: int = 0, after: float = 0.0) -> Outcome:
+        """Run ``softseq ARGV`` in a child; with ``signum``, send it that signal ``after`` s."""
+        self.process.stdin.write(json.dumps({'argv': argv, 'cwd': str(cwd), 'timeout': timeout,
+                                             'signal': signum, 'after': after}) + '\n')
         self.process.stdin.flush()
         line = self.process.stdout.readline()
         if not line:
@@ -154,7 +166,8 @@ def zygote_main() -> None:
             pid = os.fork()
             if pid == 0:
                 _child(cli, request, out.fileno(), err.fileno())
-            code = _wait(pid, request['timeout'])
+            code = _wait(pid, request['timeout'], request.get('signal', 0),
+                         request.get('after', 0.0))
             seconds = time.monotonic() - start
             out.seek(0)
             err.seek(0)
@@ -177,6 +190,10 @@ def _child(cli: Any, request: dict, out_fd: int, err_fd: int) -> None:
         sys.stderr = io.TextIOWrapper(os.fdopen(2, 'wb', buffering=0), write_through=True)
         os.chdir(request['cwd'])
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        # The child is the command's own process: its SIGTERM handler must take it for the
+        # main process (it kills a forked worker, which the zygote's children are not).
+        import softseq_ros.stopping as stopping
+        stopping._MAIN_PID = os.getpid()
         code = cli.main(request['argv'])
     except SystemExit as exit_:
         code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
@@ -192,12 +209,16 @@ def _child(cli: Any, request: dict, out_fd: int, err_fd: int) -> None:
             os._exit(code if isinstance(code, int) else 1)
 
 
-def _wait(pid: int, timeout: float) -> int | None:
-    deadline = time.monotonic() + timeout
+def _wait(pid: int, timeout: float, signum: int = 0, after: float = 0.0) -> int | None:
+    start = time.monotonic()
+    deadline = start + timeout
     while True:
         done, status = os.waitpid(pid, os.WNOHANG)
         if done:
             return os.waitstatus_to_exitcode(status)
+        if signum and time.monotonic() - start > after:
+            os.kill(pid, signum)
+            signum = 0
         if time.monotonic() > deadline:
             try:
                 os.killpg(pid, signal.SIGKILL)
@@ -268,9 +289,9 @@ class Workbench:
                                      dir=self.root))
         return path
 
-    def softseq(self, argv: list[str], cwd: Path,
-                timeout: float = COMMAND_TIMEOUT_S) -> Outcome:
-        return self.zygote.command(argv, cwd, timeout)
+    def softseq(self, argv: list[str], cwd: Path, timeout: float = COMMAND_TIMEOUT_S,
+                signum: int = 0, after: float = 0.0) -> Outcome:
+        return self.zygote.command(argv, cwd, timeout, signum, after)
 
     def good(self, what: str) -> Path:
         """A good input made once: 'bag' (a short rig bag), 'scene', 'table_scene', 'design'."""
@@ -1193,6 +1214,267 @@ def cli_cases() -> list[Case]:
     return cases
 
 
+# ------------------------------------------------------------------------------ file inputs
+
+# Every file a command reads, as its parser names it: (command words, argument) -> (kind, the
+# command line with {file} where the file goes). A kind says what a good file of it holds and
+# which damages apply: 'scene' (a scene file or a shipped name), 'yaml', 'csv', 'bag' (a bag
+# folder: the folder itself, its metadata.yaml and its .mcap each get the battery).
+FILE_INPUTS: dict[tuple[str, str], tuple[str, list[str]]] = {
+    ('solve', 'scene'): ('scene', ['solve', '{file}', '--out', '{folder}/p.csv']),
+    ('solve', '--path'): ('csv', ['solve', '{scene}', '--path', '{file}',
+                                  '--out', '{folder}/p.csv']),
+    ('solve', '--pressure-path'): ('csv', ['solve', '{scene}', '--pressure-path', '{file}',
+                                           '--out', '{folder}/p.csv']),
+    ('classify', 'scene'): ('scene', ['classify', '{file}']),
+    ('run', 'scene'): ('scene', ['run', '{file}', '--out', '{folder}/b', '--quiet',
+                                 '--no-report', '--start-time', '0']),
+    ('report', 'bag'): ('bag', ['report', '{file}', '--out', '{folder}/r']),
+    ('report', '--scene'): ('scene', ['report', '{bag}', '--scene', '{file}',
+                                      '--out', '{folder}/r']),
+    ('report', '--experiment'): ('csv', ['report', '{bag}', '--experiment', '{file}',
+                                         '--out', '{folder}/r']),
+    ('report', '--reference'): ('yaml', ['report', '{bag}', '--reference', '{file}',
+                                         '--out', '{folder}/r']),
+    ('compare', 'a'): ('bag', ['compare', '{file}', '{bag}', '--out', '{folder}/c']),
+    ('compare', 'b'): ('bag', ['compare', '{bag}', '{file}', '--out', '{folder}/c']),
+    ('compare', '--scene'): ('scene', ['compare', '{bag}', '{bag}', '--scene', '{file}',
+                                       '--out', '{folder}/c']),
+    ('library', 'source'): ('scene', ['library', '{file}', '--out', '{folder}/l']),
+    ('rates', 'scene'): ('scene', ['rates', '{file}', '--flows', '1e-8', '--radii', '2e-4',
+                                   '--samples', '50', '--workers', '1', '--out', '{folder}/r']),
+    ('fit', 'tables'): ('csv', ['fit', '{file}', '--bootstrap', '0', '--out', '{folder}/f']),
+    ('scatter', 'scene'): ('scene', ['scatter', '{file}', '--vary', 'top.thickness_m=normal:5%',
+                                     '--samples', '10', '--sobol', '0', '--workers', '1',
+                                     '--quiet', '--out', '{folder}/s']),
+    ('scatter', '--spec'): ('yaml', ['scatter', 'fig1_symmetric', '--spec', '{file}',
+                                     '--samples', '10', '--sobol', '0', '--workers', '1',
+                                     '--quiet', '--out', '{folder}/s']),
+    ('play', 'bag'): ('bag', ['play', '{file}', '--rate', '100']),
+    ('play', '--qos-profile-overrides-path'): ('yaml', ['play', '{bag}', '--rate', '100',
+                                                        '--qos-profile-overrides-path',
+                                                        '{file}']),
+    ('recover', 'bag'): ('bag', ['recover', '{file}']),
+    ('info', 'bag'): ('bag', ['info', '{file}']),
+    ('fem', 'design'): ('yaml', ['fem', '{file}', '--out', '{folder}/t.csv', '--quiet',
+                                 '--cache-dir', '{folder}/cache']),
+    ('design', 'problem'): ('yaml', ['design', '{file}', '--out', '{folder}/d', '--quiet',
+                                     '--workers', '1', '--cache-dir', '{folder}/cache']),
+    ('graph', 'scene'): ('scene', ['graph', '{file}', '--out', '{folder}/g']),
+    ('ros rig', '--params-file'): ('yaml', ['ros', 'rig', '--namespace', '/adversarial_file',
+                                            '--scene', '{scene}', '--params-file', '{file}',
+                                            '--record', '{folder}/b']),
+    ('ros rig', '--scene'): ('scene', ['ros', 'rig', '--namespace', '/adversarial_file',
+                                       '--scene', '{file}', '--record', '{folder}/b']),
+}
+# Arguments the parser's words make look like files that no command reads, and why.
+NOT_FILE_INPUTS: dict[tuple[str, str], str] = {
+    **{(command, '--out'): 'written, not read' for command in (
+        'solve', 'run', 'report', 'compare', 'library', 'rates', 'fit', 'scatter', 'fem',
+        'design', 'graph')},
+    ('fem', '--out-dir'): 'a folder written, not read',
+    ('fem', '--cache-dir'): 'a folder of tables it writes, read back only by their hashes',
+    ('design', '--cache-dir'): 'a folder of tables it writes, read back only by their hashes',
+    ('ros rig', '--record'): 'a bag folder written, not read',
+    ('ros rig', '--namespace'): 'a ROS namespace (its help names the launch file)',
+}
+FILE_TIMEOUT_S = 20.0
+SIGNAL_AFTER_S = 2.5        # the command has parsed its arguments and reached the file by then
+HUGE_LINE_BYTES = 8 << 20
+DEEP = 100_000
+
+
+def file_arguments(parser: argparse.ArgumentParser) -> list[str]:
+    """The arguments of a command that name a file or a folder: Path-typed, or said so."""
+    found = []
+    for action in parser._actions:
+        if isinstance(action, argparse._HelpAction):
+            continue
+        kind = getattr(action.type, '__qualname__', '')
+        if (action.type is Path or kind.startswith('_given') or action.dest == 'scene'
+                or re.search(r'\b(file|folder|directory)\b', action.help or '', re.I)):
+            found.append(max(action.option_strings, key=len) if action.option_strings
+                         else action.dest)
+    return found
+
+
+GOOD_FILES = {'--reference': ('reference', 'milana2018.yaml'),
+              'design': ('designs', 'paper_top.yaml'),
+              'problem': ('design_targets', 'tiny.yaml'),
+              '--params-file': ('params', 'params_example.yaml')}
+GOOD_TEXTS = {'--path': 'injected_m3\n0\n1.0e-6\n2.0e-6\n',
+              '--pressure-path': 'gauge_pa\n0\n1000\n2000\n',
+              '--spec': 'vary:\n  top.thickness_m: normal:5%\n',
+              '--qos-profile-overrides-path': '/pump/status:\n  depth: 10\n'}
+
+
+def _good_text(kind: str, argument: str) -> str:
+    """A good file of ``kind`` for ``argument``: the base a damage starts from."""
+    if kind == 'scene':
+        return _yaml(_read_yaml(_config('fig1_none.yaml')))
+    if argument == '--experiment':
+        return _experiment_text()
+    if argument == 'tables':
+        return _top_table_text()
+    if argument in GOOD_FILES:
+        folder, name = GOOD_FILES[argument]
+        return (_config(folder) / name).read_text(encoding='utf-8')
+    return GOOD_TEXTS[argument]
+
+
+def _fifo(path: Path) -> None:
+    os.mkfifo(path)
+
+
+# The battery: (label, what it makes at a path from a good text, whether it must be refused).
+# 'must' damages leave nothing a command can read; the others may be taken if taken cleanly.
+FILE_DAMAGES: list[tuple[str, Callable[[Path, bytes], None], bool]] = [
+    ('a FIFO nobody writes', lambda p, good: _fifo(p), True),
+    ('unreadable (mode 000)', lambda p, good: (p.write_bytes(good), p.chmod(0)), True),
+    ('a folder', lambda p, good: p.mkdir(), True),
+    ('Latin-1', lambda p, good: p.write_bytes(b'# Pr\xfcfstand caf\xe9\n' + good), False),
+    ('empty', lambda p, good: p.write_bytes(b''), False),
+    ('nested 100000 deep', lambda p, good: p.write_bytes(b'[' * DEEP + b']' * DEEP), False),
+    ('one huge line', lambda p, good: p.write_bytes(b'a' * HUGE_LINE_BYTES), False),
+]
+TEXT_ONLY = {'Latin-1', 'nested 100000 deep'}
+YAML_ONLY = {'nested 100000 deep'}
+FILE_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _is_root() -> bool:
+    return hasattr(os, 'geteuid') and os.geteuid() == 0
+
+
+def _targets(kind: str) -> list[tuple[str, str]]:
+    """What of an input of ``kind`` gets the battery: (where, its text kind)."""
+    if kind == 'bag':
+        return [('the bag folder', 'folder'), ('metadata.yaml', 'metadata'),
+                ('the .mcap', 'mcap')]
+    return [('', 'csv' if kind == 'csv' else 'yaml')]
+
+
+def _damages_for(text_kind: str) -> list[tuple[str, Callable[[Path, bytes], None], bool]]:
+    found = []
+    for label, make, must in FILE_DAMAGES:
+        if label in YAML_ONLY and text_kind not in ('yaml', 'metadata'):
+            continue
+        if label in TEXT_ONLY and text_kind not in ('yaml', 'csv', 'metadata'):
+            continue
+        if text_kind == 'metadata':
+            # A bag whose metadata.yaml is no file is read from its .mcap, as a recording
+            # killed before it wrote one: taken cleanly, or refused in one line.
+            must = False
+        if text_kind == 'folder' and label == 'a folder':
+            label, make = 'a file', lambda p, good: p.write_bytes(b'not a bag\n')
+        if text_kind == 'folder' and label not in ('a FIFO nobody writes',
+                                                   'unreadable (mode 000)', 'a file'):
+            continue
+        found.append((label, make, must))
+    return found
+
+
+def file_case_names(words: tuple[str, ...], argument: str) -> list[str]:
+    """The names of the cases of one file argument (the registry test checks them)."""
+    kind, _ = FILE_INPUTS[(' '.join(words), argument)]
+    names = []
+    for where, text_kind in _targets(kind):
+        head = f'{" ".join(words)} {argument}' + (f' ({where})' if where else '')
+        names += [f'{head}: {label}' for label, _, _ in _damages_for(text_kind)]
+        names += [f'{head}: {signal.Signals(s).name} while it waits on a FIFO'
+                  for s in FILE_SIGNALS]
+    return names
+
+
+def _place(bench: Workbench, folder: Path, kind: str, where: str, argument: str
+           ) -> tuple[Path, Path, bytes]:
+    """Where the damaged file goes, the path given to the command, the good bytes there."""
+    if kind != 'bag':
+        suffix = '.csv' if kind == 'csv' else '.yaml'
+        path = folder / f'input_file{suffix}'
+        return path, path, _good_text(kind, argument).encode()
+    bag = folder / 'input_bag'
+    shutil.copytree(bench.good('bag'), bag)
+    if where == 'the bag folder':
+        shutil.rmtree(bag)
+        return bag, bag, b''
+    target = bag / 'metadata.yaml' if where == 'metadata.yaml' else _mcap(bag)
+    good = target.read_bytes()
+    target.unlink()
+    return target, bag, good
+
+
+def _judge_signal(outcome: Outcome, command: str, names: tuple[str, ...],
+                  signum: int, must: bool) -> Verdict:
+    """Refused before the signal came, or ended by it with 128 + signal, quietly."""
+    if outcome.code == 0 and not must:
+        return judge_clean(outcome, command, names)
+    if outcome.code == 2:
+        return judge_refusal(outcome, command, names)
+    expected = 128 + signum
+    if outcome.code != expected:
+        return broken(f'exit {outcome.code}, not 2 (refused) or {expected} (the signal)'
+                      + (f': {_lines(outcome.stderr)[-1][:160]!r}' if outcome.stderr.strip()
+                         else ''))
+    if 'Traceback' in outcome.stderr:
+        return broken('a traceback')
+    if len(_lines(outcome.stderr)) > 1:
+        return broken(f'{len(_lines(outcome.stderr))} lines on stderr')
+    return HELD
+
+
+def file_cases() -> list[Case]:
+    """Every file every command reads: a FIFO, unreadable, a folder, Latin-1, empty, ..."""
+    cases = []
+    for words, parser in parser_commands():
+        command = ' '.join(words)
+        for argument in file_arguments(parser):
+            if (command, argument) not in FILE_INPUTS:
+                continue
+            kind, template = FILE_INPUTS[(command, argument)]
+            for where, text_kind in _targets(kind):
+                head = f'{command} {argument}' + (f' ({where})' if where else '')
+                tries: list[tuple[str, Callable[[Path, bytes], None], bool, int]] = [
+                    (label, make, must, 0) for label, make, must in _damages_for(text_kind)]
+                tries += [(f'{signal.Signals(s).name} while it waits on a FIFO',
+                           lambda p, good: _fifo(p), text_kind != 'metadata', s)
+                          for s in FILE_SIGNALS]
+                for label, make, must, signum in tries:
+                    def run(bench: Workbench, kind=kind, template=template, where=where,
+                            argument=argument, command=command, label=label, make=make,
+                            must=must, signum=signum) -> Verdict:
+                        if label.startswith('unreadable') and _is_root():
+                            # Not counted as held: nothing was tried.
+                            return not_tried('running as root, who reads a file of mode 000 '
+                                             'all the same')
+                        folder = bench.folder('file')
+                        target, given, good = _place(bench, folder, kind, where, argument)
+                        make(target, good)
+                        fill = {'file': str(given), 'folder': str(folder),
+                                'scene': str(bench.good('scene')), 'bag': '{bag}'}
+                        argv = [w.format(**fill) for w in template]
+                        if '{bag}' in argv:
+                            argv = [str(bench.good('bag')) if w == '{bag}' else w
+                                    for w in argv]
+                        names = (target.name, given.name, argument)
+                        try:
+                            outcome = bench.softseq(argv, folder, FILE_TIMEOUT_S,
+                                                    signum=signum, after=SIGNAL_AFTER_S)
+                        finally:
+                            if target.exists() and not target.is_symlink():
+                                target.chmod(0o700 if target.is_dir() else 0o600)
+                        if signum:
+                            return _judge_signal(outcome, command, names, signum, must)
+                        if must:
+                            return judge_refusal(outcome, command, names)
+                        return judge_clean(outcome, command, names)
+                    unreadable = label.startswith('unreadable')
+                    cases.append(Case('file', f'{head}: {label}', run,
+                                      (lambda: not _is_root()) if unreadable
+                                      else (lambda: True)))
+    return cases
+
+
 # ------------------------------------------------------------------------------ nodes in-process
 
 class Ros:
@@ -1978,7 +2260,7 @@ def signal_cases() -> list[Case]:
 MAKERS: dict[str, Callable[[], list[Case]]] = {
     'scene': scene_cases, 'table': table_cases, 'design': design_cases,
     'experiment': experiment_cases, 'reference': reference_cases, 'history': history_cases,
-    'bag': bag_cases, 'cli': cli_cases, 'option': option_cases,
+    'bag': bag_cases, 'cli': cli_cases, 'option': option_cases, 'file': file_cases,
     'node_parameter': node_parameter_cases, 'service': service_cases,
     'topic': topic_cases, 'signal': signal_cases,
 }
@@ -1987,6 +2269,11 @@ WHAT = {
               'nested commands too) given NaN, infinity, -1, 0, 1e300, text, nothing and '
               'Latin-1, beside a file that is not there: refused in one line, never a '
               'traceback or a wait without end',
+    'file': 'every file and folder every command reads (read from the parser, checked against '
+            "bench_adversarial.FILE_INPUTS; a bag's folder, metadata.yaml and .mcap each) as a "
+            'FIFO nobody writes, unreadable (mode 000), a folder, Latin-1, empty, YAML nested '
+            '100,000 deep, one line of 8 MB, and SIGINT or SIGTERM while it would wait on a '
+            'FIFO: refused in one line naming the file, or ended by the signal with 130 or 143',
     'scene': 'every key of four shipped scenes (linear, balloon, network, tables) given a '
              'wrong type, NaN, infinity, an integer beyond a double, deleted or unknown; whole '
              'files that are no scene (`softseq classify`, `softseq run`)',
@@ -2022,6 +2309,7 @@ class Tally:
     held: int = 0
     broken: list[tuple[str, str]] = field(default_factory=list)
     seconds: float = 0.0
+    not_tried: list[tuple[str, str]] = field(default_factory=list)
 
 
 def select(classes: list[str], quick: bool, rng: random.Random) -> list[Case]:
@@ -2029,6 +2317,7 @@ def select(classes: list[str], quick: bool, rng: random.Random) -> list[Case]:
     for cls in classes:
         made = MAKERS[cls]()
         if quick:
+            made = [case for case in made if case.can_try()]
             made = rng.sample(made, min(QUICK_PER_CLASS, len(made)))
         cases += made
     return cases
@@ -2045,6 +2334,12 @@ def run_cases(cases: list[Case], bench: Workbench, verbose: bool = True) -> dict
         except Exception as err:  # noqa: BLE001 - a case that cannot even run is broken
             verdict = broken(f'the case itself failed: {type(err).__name__}: {str(err)[:200]}')
         tally.seconds += time.monotonic() - start
+        if not verdict.tried:
+            tally.not_tried.append((case.name, verdict.why))
+            if verbose:
+                print(f'[{number}/{len(cases)}] {case.cls}: {case.name}: not tried: '
+                      f'{verdict.why}', flush=True)
+            continue
         tally.tried += 1
         if verdict.held:
             tally.held += 1
@@ -2083,6 +2378,12 @@ def summary(tallies: dict[str, Tally], quick: bool, seed: int, wall_s: float) ->
         lines += ['', 'Broken:', '']
         for cls, tally in tallies.items():
             lines += [f'- {cls}: {name}: {why}' for name, why in tally.broken]
+    skipped = [(cls, name, why) for cls, tally in tallies.items()
+               for name, why in tally.not_tried]
+    if skipped:
+        reasons = sorted({why for _, _, why in skipped})
+        lines += ['', f'Not tried here ({len(skipped)} cases, not counted above): '
+                  + '; '.join(reasons) + '.']
     return '\n'.join(lines) + '\n'
 
 

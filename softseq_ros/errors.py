@@ -90,6 +90,20 @@ def file_kind(mode: int) -> str:
     return 'not a regular file'
 
 
+def not_a_file(path: str | os.PathLike, what: str) -> str:
+    """
+    Why ``path``, found to be no regular file, cannot be read as ``what``, for a message.
+
+    ``'<what> not found'`` when nothing is there; ``'a FIFO, not a regular file'`` (a folder,
+    a socket, ...) when something else is: a file that is there is never said "not found".
+    """
+    try:
+        kind = file_kind(os.stat(path).st_mode)
+    except OSError:
+        return f'{what} not found'
+    return f'{what} not found' if kind == 'a regular file' else f'{kind}, not a regular file'
+
+
 def read_regular_file(path: str | os.PathLike) -> bytes:
     """
     The bytes of ``path``, or NotRegularFileError when it is no regular file.

@@ -83,3 +83,33 @@ def test_every_node_and_every_lifecycle_transition_from_every_state_has_service_
     assert set(adversarial.LIFECYCLE_ALLOWED) == {s for s, _ in adversarial.LIFECYCLE_PATH}
     for allowed in adversarial.LIFECYCLE_ALLOWED.values():
         assert allowed <= set(adversarial.LIFECYCLE_IDS)
+
+
+def test_every_file_a_command_reads_has_the_file_battery():
+    # Found from the parser (Path-typed arguments, or arguments whose help names a file or a
+    # folder): each is in FILE_INPUTS, with its cases, or in NOT_FILE_INPUTS saying why not.
+    names = {case.name for case in adversarial.file_cases()}
+    found = set()
+    for words, parser in adversarial.parser_commands():
+        for argument in adversarial.file_arguments(parser):
+            key = (' '.join(words), argument)
+            found.add(key)
+            assert key in adversarial.FILE_INPUTS or key in adversarial.NOT_FILE_INPUTS, (
+                f'softseq {key[0]} {key[1]} names a file: give it the file battery '
+                '(bench_adversarial.FILE_INPUTS) or say in NOT_FILE_INPUTS why it reads none')
+            if key not in adversarial.FILE_INPUTS:
+                continue
+            wanted = adversarial.file_case_names(words, argument)
+            assert set(wanted) <= names
+            for label in ('a FIFO nobody writes', 'unreadable (mode 000)', 'empty',
+                          'one huge line', 'SIGINT while it waits on a FIFO',
+                          'SIGTERM while it waits on a FIFO'):
+                assert any(name.endswith(f': {label}') for name in wanted), (key, label)
+    # No entry for an argument the parser no longer has.
+    stale = (set(adversarial.FILE_INPUTS) | set(adversarial.NOT_FILE_INPUTS)) - found
+    assert not stale, f'FILE_INPUTS or NOT_FILE_INPUTS name arguments no command has: {stale}'
+    # The kinds of input every command reads are all there.
+    kinds = {kind for kind, _ in adversarial.FILE_INPUTS.values()}
+    assert kinds == {'scene', 'yaml', 'csv', 'bag'}
+    assert any(name.endswith('(metadata.yaml): nested 100000 deep') for name in names)
+    assert any(name.endswith('(the .mcap): a folder') for name in names)

@@ -142,6 +142,7 @@ QUICK = {
         ['| class | what is tried | tried | held | broken |', '(quick sample)'],
         [r'\*\*[1-9]\d* bad inputs tried, [1-9]\d* held, 0 broken\*\*',
          r'\| scene \| [^|]+ \| 1 \| 1 \| 0 \|', r'\| topic \| [^|]+ \| 1 \| 1 \| 0 \|',
+         r'\| file \| [^|]+ \| 1 \| 1 \| 0 \|',
          r'\| node_parameter \| [^|]+ \| 1 \| 1 \| 0 \|'],
         ['bench/adversarial_results.md', 'docs/faults.md']),
     'bench_fem_design.py': (

@@ -18,7 +18,6 @@ import math
 import os
 from pathlib import Path
 import re
-import stat
 import sys
 from typing import TextIO
 
@@ -42,7 +41,14 @@ from softseq_ros.analysis.figures import (
 from softseq_ros.analysis.metrics import sweep_metrics
 from softseq_ros.analysis.recording import DEFLATION, INFLATION
 from softseq_ros.analysis.text import millijoules_text
-from softseq_ros.errors import UserError, write_text, writing
+from softseq_ros.errors import (
+    NotRegularFileError,
+    UserError,
+    file_kind,
+    read_regular_file,
+    write_text,
+    writing,
+)
 from softseq_ros.parallel import run_jobs
 
 SWEEP_POINTS = 2001
@@ -67,21 +73,11 @@ class Entry:
 
 
 def _regular_text(path: Path) -> str | None:
-    """
-    The text of ``path`` if it is a regular file, else None.
-
-    Opened without blocking and checked on the open descriptor: a FIFO named like a table
-    would block ``open`` until a writer appears, and a check before opening could be raced.
-    """
-    descriptor = os.open(path, os.O_RDONLY | getattr(os, 'O_NONBLOCK', 0))
+    """The text of ``path`` if it is a regular file (a FIFO named like a table: None)."""
     try:
-        if not stat.S_ISREG(os.fstat(descriptor).st_mode):
-            return None
-        os.set_blocking(descriptor, True)
-        with open(descriptor, 'rb', closefd=False) as stream:
-            data = stream.read()
-    finally:
-        os.close(descriptor)
+        data = read_regular_file(path)
+    except NotRegularFileError:
+        return None
     try:
         return data.decode('utf-8-sig')
     except UnicodeDecodeError as err:
@@ -90,13 +86,7 @@ def _regular_text(path: Path) -> str | None:
 
 
 def _kind(path: Path) -> str:
-    mode = path.stat().st_mode
-    for test, name in ((stat.S_ISFIFO, 'a FIFO'), (stat.S_ISDIR, 'a folder'),
-                       (stat.S_ISSOCK, 'a socket'), (stat.S_ISCHR, 'a character device'),
-                       (stat.S_ISBLK, 'a block device')):
-        if test(mode):
-            return name
-    return 'not a regular file'
+    return file_kind(path.stat().st_mode)
 
 
 def library_entries(source: str | os.PathLike, length_m: float | None = None,

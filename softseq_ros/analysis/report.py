@@ -41,7 +41,13 @@ from softseq_ros.analysis.transients import (
     is_dynamic,
     timed_snaps,
 )
-from softseq_ros.errors import UserError, write_text, writing
+from softseq_ros.errors import (
+    NotRegularFileError,
+    UserError,
+    read_regular_file,
+    write_text,
+    writing,
+)
 from softseq_ros.segments.identity import segments_sha256, short
 from softseq_ros.wire import contract
 from softseq_ros.yaml_text import parse_yaml
@@ -338,7 +344,10 @@ def load_reference(path: str | os.PathLike) -> dict:
     """A reference file (YAML) of what a paper reports; see config/reference/."""
     path = Path(path)
     try:
-        text = path.read_text(encoding='utf-8')
+        text = read_regular_file(path).decode('utf-8')
+    except NotRegularFileError as err:
+        raise ReferenceFileError(f'{path}: the reference file is {err.kind}, not a regular '
+                                 'file') from None
     except OSError as err:
         raise ReferenceFileError(f'{path}: cannot read the reference file ({err.strerror})') \
             from None

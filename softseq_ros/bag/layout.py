@@ -12,7 +12,7 @@ from typing import Any
 
 import yaml
 
-from softseq_ros.errors import UserError, file_kind
+from softseq_ros.errors import NotRegularFileError, UserError, file_kind, read_regular_file
 from softseq_ros.yaml_text import parse_yaml
 
 METADATA_FILE = 'metadata.yaml'
@@ -88,13 +88,15 @@ def read_metadata(folder: Path, error: type[UserError]) -> dict[str, Any]:
     """
     metadata = folder / METADATA_FILE
     try:
-        text = metadata.read_text(encoding='utf-8')
+        text = read_regular_file(metadata).decode('utf-8')
         # libyaml's loader where it is built in: a tenth of a report's reading otherwise. It
         # nests C calls without a limit, and a file nested tens of thousands of levels deep
         # crashes the process (SIGSEGV), so only a file that cannot nest deeply is given to it.
         fast = getattr(yaml, 'CSafeLoader', None)
         loader = fast if fast is not None and _nesting_bound(text) < FAST_YAML_MAX_NESTING \
             else yaml.SafeLoader
+    except NotRegularFileError as err:
+        raise error(f'{metadata}: {err.kind}, not a regular file') from None
     except OSError as err:
         raise error(f'{metadata}: cannot read it ({err.strerror or err})') from None
     except UnicodeDecodeError as err:

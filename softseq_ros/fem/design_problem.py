@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import math
 from pathlib import Path
 
+from softseq_ros.errors import not_a_file
 from softseq_ros.quasistatic.sequence import SEQUENCE_TYPES
 from softseq_ros.scene.design import (
     Design,
@@ -294,7 +295,7 @@ def load_problem(path: str | Path) -> Problem:
     """Load and check a problem file; DesignError with one line."""
     path = Path(path)
     if not path.is_file():
-        raise DesignError(f'{path}: design problem file not found')
+        raise DesignError(f'{path}: {not_a_file(path, "design problem file")}')
     try:
         data = read_yaml(path, str(path))
     except SceneError as err:

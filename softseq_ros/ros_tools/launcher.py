@@ -24,6 +24,7 @@ import time
 
 from softseq_ros.errors import UserError, read_regular_file
 from softseq_ros.ros_tools.session import RosToolError, seconds_text
+from softseq_ros.yaml_text import parse_yaml
 
 # How long a child may take to stop after SIGINT before it is killed: a recorder closing a
 # large bag on a loaded machine takes seconds.
@@ -75,17 +76,44 @@ def check_inputs(params_file: Path | None, record: Path | None,
         except UserError as err:
             raise RosToolError(f'--scene {" ".join(str(err).split())}') from None
     if params_file is not None:
-        try:
-            read_regular_file(params_file)
-        except OSError as err:
-            raise RosToolError(f'--params-file {params_file}: cannot read it '
-                               f'({err.strerror or err})') from None
-        except UserError as err:   # a folder or a FIFO
-            raise RosToolError(f'--params-file {err}') from None
+        check_params_file(params_file)
     if record is not None and record.exists() and (not record.is_dir()
                                                    or any(record.iterdir())):
         raise RosToolError(f'--record {record}: already exists and is not an empty folder; '
                            'a recording never overwrites one')
+
+
+def check_params_file(path: Path) -> None:
+    """
+    Refuse a parameters file no node could take, before any node starts (RosToolError).
+
+    Read as the nodes' rcl reads it: UTF-8 YAML whose top level maps node names (or
+    namespaces holding them) to ``ros__parameters``. Handed on unread, a file of Latin-1
+    text, of YAML nested too deeply or of one word started the rig, whose nodes then failed
+    one by one (or ran with none of the parameters meant); a file without a single
+    ``ros__parameters`` sets nothing, as a misspelt ``-p`` would not.
+    """
+    shown = f'--params-file {path}'
+    try:
+        text = read_regular_file(path).decode('utf-8')
+    except OSError as err:
+        raise RosToolError(f'{shown}: cannot read it ({err.strerror or err})') from None
+    except UnicodeDecodeError as err:
+        raise RosToolError(f'{shown}: not UTF-8 text (byte {err.start})') from None
+    except UserError as err:   # a folder or a FIFO
+        raise RosToolError(f'--params-file {err}') from None
+    document = parse_yaml(text, shown, RosToolError)
+    if not isinstance(document, dict) or not _sets_parameters(document):
+        raise RosToolError(f'{shown}: no node parameters in it: a parameters file maps node '
+                           'names to ros__parameters (config/params/params_example.yaml)')
+
+
+def _sets_parameters(document: dict, depth: int = 0) -> bool:
+    """Whether some mapping of ``document`` (node names, namespaces) holds ros__parameters."""
+    if isinstance(document.get('ros__parameters'), dict):
+        return True
+    return depth < 32 and any(isinstance(value, dict) and _sets_parameters(value, depth + 1)
+                              for value in document.values())
 
 
 def _end_with_parent(parent: int) -> None:

@@ -16,6 +16,8 @@ from typing import Iterable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from softseq_ros.errors import NotRegularFileError, read_regular_file
+
 
 def read_rows(path: str | Path, error: type[ValueError], what: str,
               expected: Sequence[str]) -> tuple[list[str], list[str], list[list[str]]]:
@@ -27,7 +29,10 @@ def read_rows(path: str | Path, error: type[ValueError], what: str,
     path = Path(path)
     try:
         # utf-8-sig: spreadsheets save "CSV UTF-8" with a byte-order mark before the header.
-        text = path.read_text(encoding='utf-8-sig')
+        # Read only as a regular file: a FIFO would wait for a writer that never comes.
+        text = read_regular_file(path).decode('utf-8-sig')
+    except NotRegularFileError as err:
+        raise error(f'{path}: the {what} is {err.kind}, not a regular file') from None
     except OSError as err:
         raise error(f'{path}: cannot read the {what} ({err.strerror})') from None
     except UnicodeDecodeError as err:

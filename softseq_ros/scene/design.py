@@ -52,6 +52,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from softseq_ros.errors import not_a_file
 from softseq_ros.scene.paths import config_dir
 from softseq_ros.scene.validation import SCENE_NAME, Context, SceneError, read_yaml
 
@@ -317,7 +318,7 @@ def load_design(path: str | Path) -> Design:
     """Load and validate a design file; raises DesignError with one line."""
     path = Path(path)
     if not path.is_file():
-        raise DesignError(f'{path}: design file not found')
+        raise DesignError(f'{path}: {not_a_file(path, "design file")}')
     try:
         data = read_yaml(path, str(path))
     except SceneError as err:
@@ -379,7 +380,7 @@ def design_path(name_or_path: str) -> Path:
         known = ', '.join(sorted(p.stem for p in (config_dir() / 'designs').glob('*.yaml')))
         raise DesignError(f'{name_or_path}: no such design file and no shipped design of that '
                           f'name (shipped: {known})')
-    raise DesignError(f'{name_or_path}: design file not found')
+    raise DesignError(f'{name_or_path}: {not_a_file(path, "design file")}')
 
 
 def cached_table(design: Design, cache_dir: Path | None = None) -> Path:

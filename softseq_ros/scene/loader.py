@@ -47,7 +47,7 @@ import math
 from pathlib import Path
 from typing import Callable, Protocol, Sequence
 
-from softseq_ros.errors import UserError
+from softseq_ros.errors import UserError, not_a_file
 from softseq_ros.scene.csv_columns import read_columns
 from softseq_ros.scene.design import (
     SAME_LENGTH_RTOL,
@@ -227,7 +227,9 @@ def _segment(ctx: Context, value: object, key_path: str) -> Segment:
             relative = ctx.text(spec, where)
             table = (ctx.folder / relative) if not Path(relative).is_absolute() else Path(relative)
             if not table.is_file():
-                raise ctx.error(where, f'file not found: {table}')
+                why = not_a_file(table, 'file')
+                raise ctx.error(where, f'file not found: {table}' if why == 'file not found'
+                                else f'{table}: {why}')
             segment = read_table(table, name=name, length=length)
             if 'smoothing' not in raw:
                 return segment

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 import sys
 
+from softseq_ros.errors import not_a_file
 from softseq_ros.scene.validation import SceneError
 
 PACKAGE = 'softseq_ros'
@@ -64,6 +65,9 @@ def scene_path(name_or_path: str | Path) -> Path:
         shown = text if len(text) <= 80 else f'{text[:60]}... ({len(text)} characters)'
         raise SceneError(f'{shown}: not a scene file or a shipped scene name '
                          f'({getattr(err, "strerror", None) or err})') from None
+    if os.path.lexists(path):
+        # There, but no file to read (a folder, a FIFO): not "not found".
+        raise SceneError(f'{text}: {not_a_file(path, "scene file")}: not a scene file')
     if shipped is not None:
         known = ', '.join(shipped_scenes())
         raise SceneError(f'{text}: no such scene file and no shipped scene of that name '

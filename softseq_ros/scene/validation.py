@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from softseq_ros.errors import UserError
+from softseq_ros.errors import NotRegularFileError, UserError, read_regular_file
 from softseq_ros.scene.limits import LIMITS
 from softseq_ros.scene.plausibility import material_problem
 from softseq_ros.segments.materials import LAW_NAMES, make_material, material_parameter_names
@@ -60,7 +60,9 @@ YamlLoader.add_implicit_resolver(
 def read_yaml(path: Path, shown: str) -> Any:
     """A YAML file parsed, or SceneError naming ``shown`` and the line and column at fault."""
     try:
-        text = path.read_text(encoding='utf-8')
+        text = read_regular_file(path).decode('utf-8')
+    except NotRegularFileError as err:
+        raise SceneError(f'{shown}: {err.kind}, not a regular file') from None
     except OSError as err:
         raise SceneError(f'{shown}: cannot read the scene file ({err.strerror})') from None
     except UnicodeDecodeError:
