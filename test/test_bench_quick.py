@@ -122,6 +122,15 @@ QUICK = {
          r'\| mooney_rivlin \| \d+ / 10 \| \d+ / 10 \| [^|]+ \|',
          r'\| gent \| \d+\.\d ms \| \d+\.\d ms \| \d+\.\d\d s \|'],
         ['bench/fit_results.md']),
+    'bench_fit_fonsim.py': (
+        ["| law | c: volume at the syringe's zero [mL] (95 % profile) | fitted parameters"],
+        # FONSim's balloon when its own environment exists, a synthetic one otherwise.
+        [r'(rows from FONSim \d+\.\d+\.\d+|FONSim skipped: .*a synthetic balloon instead)',
+         r'\| (\*\*)?Gent(\*\*)? \| \d+\.\d\d \(\d+\.\d\d to \d+\.\d\d[^|]*\) \| '
+         r'shear_modulus_h_over_r_pa [\d.]+ kPa \([^|]*bootstrap [^|]*\); jm [^|]+ \| '
+         r'[\d.e+]+ \| \d+\.\d \([^|]+\) \| [\d.]+, [\d.]+, \d+ / 56 \|',
+         r'\| (\*\*)?Yeoh(\*\*)? \| \d+\.\d\d \([^|]+\) \| c1_h_over_r_pa [^|]+ \| [\d.e+]+ \|'],
+        ['docs/fit.md', 'docs/fit_fonsim.png']),
     'bench_fem.py': (
         ['## Unit cell: time, unknowns and memory per mesh density', '## Sweep throughput',
          '## The paper pair across Ecoflex 00-30 fits', 'fem_mesh.png'],

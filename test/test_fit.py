@@ -21,7 +21,7 @@ import pytest
 from scipy.integrate import quad
 
 from softseq_ros import cli
-from softseq_ros.analysis.robustness import segment_noise
+from softseq_ros.analysis.robustness import FITTED, robustness_lines, scene_features, segment_noise
 from softseq_ros.scene.tables import read_inflation, read_table
 from softseq_ros.segments.fit import (
     FIT_LAWS,
@@ -294,8 +294,58 @@ def test_the_command_writes_the_fit_the_segment_table_and_the_figure(gent_tables
     # softseq classify weighs the table's peak and valley against the curve's uncertainty
     # there, which 160 rows make far smaller than one row's noise.
     noise, source = segment_noise(segment)
-    assert source == 'declared' and noise == pytest.approx(report['table_noise_std_pa'], rel=1e-5)
+    assert source == FITTED and noise == pytest.approx(report['table_noise_std_pa'], rel=1e-5)
     assert noise < 0.3 * report['noise_std_pa']
+
+
+def test_classify_weighs_a_fitted_tables_features_against_the_fits_uncertainty(tmp_path):
+    # Two balloons measured with 1 % noise, the second 0.95 times as stiff, each fitted by
+    # softseq fit: a scene of the two fitted tables snaps, its verdict resting on their peaks
+    # (which snaps first is the noise's to decide; the verdict rests on peaks either way).
+    from softseq_ros.quasistatic.equilibrium import EquilibriumMap, classify
+    from softseq_ros.scene.loader import load_scene
+    from softseq_ros.segments.smoothing import estimated_noise
+
+    material, stretch, _ = TRUTHS['gent']
+    tables, reports = {}, {}
+    for name, scale in (('strong', 1.0), ('weak', 0.95)):
+        runs = []
+        for k in range(2):
+            inflation, _ = measured(material, stretch, seed=10 * k + int(scale * 100))
+            runs.append(write_inflation(tmp_path / f'{name}_{k}.csv', Inflation(
+                inflation.volume, scale * inflation.pressure)))
+        out = tmp_path / f'fit_{name}'
+        done = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'fit', *map(str, runs),
+                               '--radius-m', str(RADIUS), '--laws', 'gent', '--bootstrap', '0',
+                               '--out', str(out)], capture_output=True, text=True, timeout=120,
+                              stdin=subprocess.DEVNULL)
+        assert done.returncode == 0, done.stderr
+        tables[name] = out / 'segment.csv'
+        reports[name] = json.loads((out / 'fit.json').read_text())
+    scene_path = tmp_path / 'fitted_pair.yaml'
+    rows = '\n'.join(f'  - {{name: {name}, length_m: 0.02, table: {table}}}'
+                     for name, table in tables.items())
+    scene_path.write_text(f'name: fitted_pair\nsegments:\n{rows}\npump:\n'
+                          '  flow_rate_m3_per_s: 1.0e-6\n'
+                          '  legs: [{inflate_to_m3: 6.0e-5}, {deflate_to_m3: 0.0}]\n')
+    scene = load_scene(scene_path)
+    emap = EquilibriumMap(scene.segments)
+    verdict = classify(emap)
+    used, unused = scene_features(scene, emap)
+    lines, warnings = robustness_lines(verdict, used, unused)
+    assert verdict in ('symmetric', 'asymmetric') and used
+    for feature in used:
+        report = reports[feature.segment]
+        segment = next(s for s in scene.segments if s.name == feature.segment)
+        # The fit's uncertainty of the curve, named so: far below one measured row's noise,
+        # far above what the law's smooth rows would give as their scatter.
+        assert feature.noise_source == FITTED
+        assert feature.noise_pa == pytest.approx(report['table_noise_std_pa'], rel=1e-5)
+        assert feature.noise_pa < 0.3 * report['noise_std_pa']
+        assert estimated_noise(segment.volumes, segment.pressures) < 0.1 * feature.noise_pa
+    assert not warnings
+    quoted = f"{reports[used[0].segment]['table_noise_std_pa']:.3g} Pa ({FITTED})"
+    assert any(quoted in line for line in lines if line.startswith('robustness: the')), lines
 
 
 def refusal(capsys, *argv):

@@ -10,7 +10,9 @@ whose volume goes through one (losing volume while the total grows). A wiggle th
 decides nothing, however small it is.
 
 Each feature is compared with its segment's noise: the ``noise_std_pa`` a segment declares (its
-``smoothing`` block in the scene, or a ``# noise_std_pa: X`` comment line in its table), else an
+``smoothing`` block in the scene, or a ``# noise_std_pa: X`` comment line in its table; in a
+table written by ``softseq fit`` that line is the fitted curve's standard error, and is named
+so, since such rows are a law's and carry no scatter to estimate), else an
 estimate from the table's rows as read (:func:`~softseq_ros.segments.smoothing.estimated_noise`:
 the residuals of local cubic fits, which a smooth curve keeps near zero however curved it is).
 A smoothed table is judged by the noise of its rows before the smoothing, never by what is left
@@ -34,7 +36,13 @@ NOISE_FACTOR = 3.0
 CLOSED_FORM = 'a closed-form law'   # a segment's noise source when it is no table
 ESTIMATED = 'estimated from the table rows'
 ESTIMATED_RAW = 'estimated from the table rows as read, before smoothing'
+DECLARED = 'declared'
+FITTED = "the fitted curve's standard error, which softseq fit wrote"
 _NOISE_LINE = re.compile(r'^\s*#\s*noise_std_pa\s*:\s*([0-9.eE+-]+)', re.MULTILINE)
+# softseq fit's segment tables (softseq_ros/analysis/fit_outputs.py): a law's rows, their
+# # noise_std_pa: line the curve's uncertainty and the measured noise on a line of its own.
+_FIT_LINES = (re.compile(r'^\s*#\s*softseq fit:', re.MULTILINE),
+              re.compile(r'^\s*#\s*measured_noise_std_pa\s*:', re.MULTILINE))
 # Features listed per verdict; the others are counted.
 FEATURES_SHOWN = 4
 
@@ -110,33 +118,37 @@ def peak_valleys(segment: object) -> list[tuple[float, float, float, float]]:
     return [tuple(float(x) for x in stretch) for stretch in stretches]
 
 
-def _declared_noise(segment: object, scene_entry: dict | None) -> float | None:
+def _declared_noise(segment: object, scene_entry: dict | None) -> tuple[float | None, str]:
     # The smoothing's options travel with a smoothed table; a scene entry is read for the rest.
     for options in reversed(getattr(segment, 'smoothing', ())):
         if options.get('noise_std_pa') is not None:
-            return float(options['noise_std_pa'])
+            return float(options['noise_std_pa']), DECLARED
     smoothing = (scene_entry or {}).get('smoothing') or {}
     if isinstance(smoothing, dict) and smoothing.get('noise_std_pa') is not None:
-        return float(smoothing['noise_std_pa'])
+        return float(smoothing['noise_std_pa']), DECLARED
     source = getattr(segment, 'source', '')
     path = Path(source.replace(' (smoothed)', '')) if source else None
     if path is not None and path.is_file():
-        found = _NOISE_LINE.search(path.read_text())
+        text = path.read_text()
+        found = _NOISE_LINE.search(text)
         if found:
-            return float(found.group(1))
-    return None
+            fitted = all(line.search(text) for line in _FIT_LINES)
+            return float(found.group(1)), FITTED if fitted else DECLARED
+    return None, DECLARED
 
 
 def segment_noise(segment: object, scene_entry: dict | None = None) -> tuple[float | None, str]:
     """
-    A segment's pressure noise [Pa] and where it comes from (declared, estimated, a law).
+    A segment's pressure noise [Pa] and where it comes from (declared, fitted, estimated, a law).
 
     A table's noise is estimated from its rows as read: a smoothed table's ``table_pressures``,
-    not the smoothed ones, whose residual wiggle is a fraction of the measurement's noise.
+    not the smoothed ones, whose residual wiggle is a fraction of the measurement's noise. A
+    table ``softseq fit`` wrote declares its curve's standard error (:data:`FITTED`): its rows
+    are a law's, whose scatter is next to none and would make every feature look significant.
     """
-    noise = _declared_noise(segment, scene_entry)
+    noise, source = _declared_noise(segment, scene_entry)
     if noise is not None:
-        return noise, 'declared'
+        return noise, source
     if not isinstance(segment, TabulatedSegment):
         return 0.0, CLOSED_FORM   # a law's curve has no measurement noise
     if segment.smoothing:
