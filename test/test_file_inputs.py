@@ -97,12 +97,21 @@ def test_a_bags_metadata_yaml_that_is_a_fifo_is_refused_not_waited_on(tmp_path):
         read_metadata(tmp_path, UserError)
 
 
-@pytest.mark.skipif(hasattr(os, 'geteuid') and os.geteuid() == 0,
-                    reason='root reads a file of mode 000 all the same')
-def test_an_unreadable_csv_input_is_refused_naming_it(tmp_path, capsys):
+def test_an_unreadable_csv_input_is_refused_naming_it(tmp_path, capsys, monkeypatch):
     history = tmp_path / 'history.csv'
     history.write_text('injected_m3\n0\n1e-6\n')
     history.chmod(0)
+    if hasattr(os, 'geteuid') and os.geteuid() == 0:
+        # Root reads a file of mode 000 all the same: the system's refusal, as any other
+        # user gets it, comes from the open itself.
+        real_open = os.open
+
+        def refusing_open(path, flags, *args, **kwargs):
+            if os.fspath(path) == str(history):
+                raise PermissionError(13, 'Permission denied', str(history))
+            return real_open(path, flags, *args, **kwargs)
+
+        monkeypatch.setattr(os, 'open', refusing_open)
     line = _one_line(capsys, ['solve', 'fig1_none', '--path', str(history),
                               '--out', str(tmp_path / 'p.csv')])
     assert line == (f'softseq solve: error: {history}: cannot read the volume history '
