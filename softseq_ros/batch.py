@@ -56,6 +56,7 @@ from softseq_ros.wire.values import (
     PumpCommand,
     SegmentCurvatures,
     SegmentVolumes,
+    regulator_command,
 )
 
 PROGRESS_PERIOD_S = 0.25
@@ -160,7 +161,10 @@ class _Blocks:
         self.curvatures_sent = 'curvature' in actuator.outputs
         # The topics of a pump instant: its command, then the answers (as the actuator
         # sends them); of a camera instant: backbone, then markers.
-        samples = [(PumpCommand(0, 0.0, 0.0), True),
+        # A regulator's command is its target pressure alone (softseq_ros.rig.regulator).
+        self.regulated = pump.regulated
+        command = regulator_command(0, 0.0) if pump.regulated else PumpCommand(0, 0.0, 0.0)
+        samples = [(command, True),
                    (Pressure(0, 0.0), 'pressure' in actuator.outputs),
                    (SegmentVolumes(0, names, [0.0] * n, 0.0), self.volumes_sent),
                    (SegmentCurvatures(0, names, [0.0] * n), self.curvatures_sent)]
@@ -263,7 +267,7 @@ class _Blocks:
                 frame_rows: np.ndarray, poses: np.ndarray | None) -> list[RowBlock]:
         """The rows of records of a block's instants: one per pump instant, one per frame."""
         n = len(self.names)
-        values = {PumpCommand: [volumes, flows],
+        values = {PumpCommand: [volumes] if self.regulated else [volumes, flows],
                   Pressure: [block.pressure[:count] + self.ambient],
                   SegmentVolumes: [block.volumes[:count],
                                    np.repeat(block.pressure[:count, None], n, axis=1)],

@@ -106,6 +106,8 @@ CASES = {
     'few_outputs': ('paper', {'pump': {'legs': (Leg.inflate(5 * ML), Leg.deflate(0.0))},
                               'actuator': {'outputs': frozenset({'pressure', 'volumes'})},
                               'camera': {'outputs': frozenset()}}),
+    # Behind a pressure regulator: target pressures commanded, four flips as events.
+    'regulator': ('fig1_regulator_quasistatic', {}),
 }
 
 
@@ -152,6 +154,7 @@ def test_the_cases_reach_what_they_are_for(tmp_path):
     assert paper.message_counts['/camera/snapshots'] >= 2
     assert counts('end_stop').pump_state == 'stopped'
     assert counts('over_pressure').pump_state == 'stopped'
+    assert counts('regulator').message_counts['/actuator/events'] == 4
 
 
 def test_a_hook_that_changes_a_core_stage_runs_one_message_at_a_time(tmp_path):
@@ -208,3 +211,40 @@ def test_a_models_preview_gives_the_states_of_one_command_at_a_time(scene):
         assert by_blocks.state() == step_by_step.state()
     assert by_blocks.solves == step_by_step.solves
     assert previews > 10 and cut >= 2
+
+
+def test_a_regulated_models_preview_gives_the_states_of_one_target_at_a_time():
+    # Ramps of target pressures up and down through both segments' peaks and valleys, a hold,
+    # and a target beyond what the top holds: each preview stops at the first flip or refusal.
+    from softseq_ros.rig.build import actuator_core
+    from softseq_ros.scene.loader import load_scene
+    loaded = load_scene('fig1_regulator_quasistatic')
+    step_by_step = actuator_core(loaded).model
+    by_blocks = actuator_core(loaded).model
+    up = np.linspace(0.0, 8000.0, 2001)
+    commands = np.concatenate([up, np.full(50, 8000.0), up[::-1], up[:1900], [1e6],
+                               up[1900:]])
+    index, previews, cut = 0, 0, 0
+    while index < commands.size:
+        block = by_blocks.preview(commands[index:index + 257])
+        for row in range(block.count):
+            assert step_by_step.command_pressure(float(commands[index + row]), 0) in (None, [])
+            state = step_by_step.state()
+            assert list(block.volumes[row]) == list(state.volumes)
+            assert block.pressure[row] == state.pressure
+            assert list(block.curvatures[row]) == list(state.curvatures)
+        by_blocks.commit(block, block.count)
+        previews += block.count > 0
+        index += block.count
+        if index < commands.size and block.count < min(257, commands.size - index):
+            cut += 1
+            for model in (step_by_step, by_blocks):
+                try:
+                    model.command_pressure(float(commands[index]), 0)
+                except CommandRefusedError:
+                    pass
+            index += 1
+        assert by_blocks.state() == step_by_step.state()
+    # Both segments flip up, back down, up again (7.6 kPa passes both peaks), and the refusal:
+    # seven cuts.
+    assert previews > 10 and cut == 7

@@ -517,6 +517,16 @@ class HysteronState:
     curvatures: list[float]
 
 
+@dataclass(frozen=True)
+class RegulatedBlock:
+    """States of a block of target pressures (:meth:`RegulatedModel.preview`): ``count`` rows."""
+
+    count: int
+    pressure: 'np.ndarray'      # the targets [Pa, gauge]
+    volumes: 'np.ndarray'       # (count, N) [m^3]
+    curvatures: 'np.ndarray'    # (count, N) [1/m]
+
+
 class RegulatedModel:
     """
     The segments behind a pressure regulator, quasi-statically: each an independent hysteron.
@@ -584,6 +594,37 @@ class RegulatedModel:
         self._last_command = gauge_pa
         self._state = self._state_at(gauge_pa, volumes)
         return snaps
+
+    def preview(self, targets: 'np.ndarray') -> 'RegulatedBlock':
+        """
+        What :meth:`command_pressure` would give for each of ``targets``, without changing.
+
+        The states up to the first target that some segment's present piece does not hold
+        (a flip, or a refusal): the same numbers as one command at a time (the inversion is
+        elementwise).
+        """
+        count = targets.size
+        pieces = [rising[at] for rising, at in zip(self.tracker.pieces, self.tracker.current)]
+        for piece in pieces:
+            outside = np.flatnonzero(~((targets >= piece.p_min) & (targets <= piece.p_max)))
+            if outside.size:
+                count = min(count, int(outside[0]))
+        held = targets[:count]
+        volumes = np.empty((count, len(self.segments)))
+        curvatures = np.empty_like(volumes)
+        for i, (segment, piece) in enumerate(zip(self.segments, pieces)):
+            volumes[:, i] = segment.invert(piece, held)
+            curvatures[:, i] = segment.curvature(volumes[:, i])
+        return RegulatedBlock(count, held, volumes, curvatures)
+
+    def commit(self, block: 'RegulatedBlock', count: int) -> None:
+        """The state after the first ``count`` commands of ``block`` (a :meth:`preview`)."""
+        if not count:
+            return
+        last = count - 1
+        self._last_command = float(block.pressure[last])
+        self._state = HysteronState(self._last_command, block.volumes[last].tolist(),
+                                    block.curvatures[last].tolist())
 
     def advance(self, now_ns: int) -> None:
         """Time alone moves nothing in a quasi-static actuator."""

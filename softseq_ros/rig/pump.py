@@ -145,6 +145,7 @@ class PumpCore:
     """
 
     role = contract.PUMP
+    regulated = False   # commands volumes (a syringe), not target pressures
 
     def __init__(self, profile: PumpProfile, *, autostart: bool = True,
                  max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA,

@@ -87,6 +87,8 @@ class PressureSchedule:
 class RegulatorCore(PumpCore):
     """The pressure regulator without ROS: the pump core, commanding target pressures."""
 
+    regulated = True
+
     def __init__(self, schedule: PressureSchedule, *, max_pressure_pa: float,
                  autostart: bool = True,
                  feedback_timeout_s: float = DEFAULT_FEEDBACK_TIMEOUT_S,

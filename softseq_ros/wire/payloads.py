@@ -492,7 +492,8 @@ def row_layout(value: TopicValue) -> RowLayout | None:
     """
     The :class:`RowLayout` of every message like ``value`` (same names, sizes and lengths).
 
-    The float64 blocks of each type, in order: a pump command's injected volume and flow; a
+    The float64 blocks of each type, in order: a pump command's injected volume and flow (a
+    regulator's: its target gauge pressure); a
     pressure's absolute pressure (its variance stays 0); segment volumes' volumes and
     gauge pressure per joint; curvatures; a backbone's or snapshot's poses (n, 7); markers'
     points per line. None for a type without a fixed layout (JSON, images).
@@ -502,6 +503,9 @@ def row_layout(value: TopicValue) -> RowLayout | None:
     if type(value) is PumpCommand and value.gauge_pa is None:
         offsets = joint_state_blocks('', _SYRINGE, (1, 1, 0))
         return RowLayout(template, stamp, ((offsets[0], 8), (offsets[1], 8)))
+    if type(value) is PumpCommand:
+        offsets = joint_state_blocks('', (REGULATOR_JOINT,), (0, 0, 1))
+        return RowLayout(template, stamp, ((offsets[2], 8),))
     if type(value) is Pressure:
         return RowLayout(template, stamp, ((fluid_pressure_block(''), 8),))
     if type(value) is SegmentVolumes:
