@@ -26,12 +26,7 @@ from softseq_ros.bag.writer import BagWriter
 from softseq_ros.errors import UserError
 from softseq_ros.progress import is_terminal, write_progress
 from softseq_ros.rig.build import actuator_core, camera_core, pump_core
-from softseq_ros.rig.model import (
-    ActuatorModel,
-    CommandBlock,
-    load_rig_scene,
-    require_quasi_static_regulator,
-)
+from softseq_ros.rig.model import ActuatorModel, CommandBlock, load_rig_scene
 from softseq_ros.rig.pump import FINISHED, HELD, STOPPED
 from softseq_ros.rig.routing import Router
 from softseq_ros.scene.loader import Scene
@@ -313,8 +308,6 @@ class _BatchRun:
         refused here (LongRunError), before anything is written, unless ``allow_long``.
         """
         self.scene = scene if isinstance(scene, Scene) else load_rig_scene(scene)
-        if self.scene.regulator is not None:
-            require_quasi_static_regulator(self.scene)
         self.out = Path(out)
         self.wrap = wrap
         overrides = overrides or {}

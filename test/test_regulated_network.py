@@ -203,24 +203,20 @@ def test_a_regulator_with_a_syringe_line_or_without_a_supply_tube_is_refused(tmp
         _load(data, tmp_path)
 
 
-def test_the_rig_refuses_a_regulator_scene_in_time_before_anything_runs(tmp_path):
-    # The rig behind a regulator is quasi-static (test_regulated_rig.py): its network in time
-    # runs in softseq solve only.
-    out = tmp_path / 'bag'
-    with pytest.raises(SceneError, match=r'network: the rig behind a pressure regulator is '
-                                         r'quasi-static'):
-        softseq_ros.run(softseq_ros.load_scene('fig1_asymmetric_regulator'), out)
-    assert not out.exists()
+def test_a_syringes_jobs_refuse_a_regulator_scene_before_anything_runs(tmp_path):
+    # The rig runs behind a regulator (test_regulated_rig.py); the sequence types, a volume
+    # history and a syringe's flow rates do not apply to one.
     with pytest.raises(SceneError, match=r'supply\.regulator: the sequence types'):
         softseq_ros.classify('fig1_asymmetric_regulator')
     with pytest.raises(SceneError, match=r'a volume history is a syringe'):
         softseq_ros.solve('fig1_asymmetric_regulator', [1e-6])
-    done = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'run',
-                           'fig1_asymmetric_regulator', '--out', str(out)],
+    out = tmp_path / 'rates'
+    done = subprocess.run([sys.executable, '-m', 'softseq_ros.cli', 'rates',
+                           'fig1_asymmetric_regulator', '--flows', '1e-7', '--radii', '2e-4',
+                           '--out', str(out)],
                           capture_output=True, text=True, stdin=subprocess.DEVNULL)
-    assert done.returncode != 0
-    assert done.stderr.count('\n') == 1 and 'network: the rig behind a pressure regulator' \
-        in done.stderr
+    assert done.returncode == 2
+    assert done.stderr.count('\n') == 1 and 'supply.regulator: softseq rates' in done.stderr
     assert not out.exists()
 
 

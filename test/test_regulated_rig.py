@@ -16,7 +16,6 @@ from scipy.optimize import minimize_scalar
 import yaml
 
 import softseq_ros
-from softseq_ros import cli
 from softseq_ros.analysis.report import write_report
 from softseq_ros.bag.reader import read_bag
 from softseq_ros.rig.actuator import ActuatorCore
@@ -210,13 +209,107 @@ def test_the_regulator_command_is_a_joint_state_with_one_effort():
         DECODERS['pump/command'](msg)
 
 
-def test_a_rig_behind_a_regulator_in_time_is_refused_before_it_starts(tmp_path, capsys):
-    # The shipped scene has a network: the rig behind a regulator is quasi-static.
-    code = cli.main(['run', 'fig1_asymmetric_regulator', '--out', str(tmp_path / 'bag')])
-    assert code == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and 'network' in err[0] and 'quasi-static' in err[0]
-    assert not (tmp_path / 'bag').exists()
+STIFFNESS = 1.0e10           # Pa/m^3: C = 0.1 mL per kPa
+RAMP_PA_PER_S = 50.0
+
+
+def linear_behind_a_tube(tmp_path, regulator=None, legs=None, rtol=1e-9):
+    """
+    Two linear segments behind a 0.5 m tube of 0.4 mm radius, ramped by a regulator.
+
+    Their channel (5 mm of 5 mm radius) resists 4e-7 of the tube: the two are one compliance
+    2 C as far as the tube can tell.
+    """
+    linear = {'rest_volume_m3': 1.0e-6, 'stiffness_pa_per_m3': STIFFNESS,
+              'max_volume_m3': 1.0e-4}
+    data = {
+        'name': 'linear_behind_a_regulator',
+        'segments': [{'name': name, 'length_m': 0.05, 'linear': dict(linear)}
+                     for name in ('base', 'tip')],
+        'network': {'supply': {'length_m': 0.5, 'radius_m': 0.4e-3},
+                    'channels': [{'length_m': 5.0e-3, 'radius_m': 5.0e-3}],
+                    'rtol': rtol, 'rate_hz': 20.0},
+        'supply': {'regulator': regulator or {}},
+        'pump': {'pressure_rate_pa_per_s': RAMP_PA_PER_S, 'rate_hz': 20,
+                 'legs': legs or [{'inflate_to_pa': 5000.0}, {'hold_s': 60.0}]},
+        'camera': {'rate_hz': 1},
+        'outputs': ['pressure', 'volumes', 'events'],
+    }
+    path = tmp_path / 'linear.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return scene_from_dict(data, path)
+
+
+def test_the_rig_in_time_fills_a_linear_segment_behind_a_tube_as_the_closed_form(tmp_path):
+    # A ramp a t through the tube's R into a compliance 2 C: 2 R C dp/dt + p = a t, so
+    # p(t) = a (t - tau (1 - exp(-t / tau))), tau = 2 R C; then held at 5 kPa, p relaxes to it.
+    from softseq_ros.dynamic.network import tube_law
+    scene = linear_behind_a_tube(tmp_path)
+    tau = 2.0 * tube_law(scene.network.supply, scene.network.fluid).resistance / STIFFNESS
+    assert 0.5 < tau < 20.0
+    softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
+    states = list(read_bag(tmp_path / 'bag', ['/actuator/volumes']))
+    ramp_s = 5000.0 / RAMP_PA_PER_S
+    checked = 0
+    for message in states:
+        t = message.log_time_ns / 1e9
+        if t <= ramp_s:
+            exact = RAMP_PA_PER_S * (t - tau * -np.expm1(-t / tau))
+        else:
+            at_end = RAMP_PA_PER_S * (ramp_s - tau * -np.expm1(-ramp_s / tau))
+            exact = 5000.0 - (5000.0 - at_end) * np.exp(-(t - ramp_s) / tau)
+        for volume in message.msg.position:
+            assert (volume - 1.0e-6) * STIFFNESS == pytest.approx(exact, abs=1e-6 * 5000.0), t
+        checked += 1
+    assert checked > 2000
+    # The published pressure is the regulator's outlet's: the target itself (no lag).
+    pressures = [m.msg.effort[0] for m in states]
+    assert max(pressures) == pytest.approx(5000.0, rel=1e-12)
+
+
+def test_the_rig_in_time_follows_the_regulated_network_path(tmp_path):
+    # The Fig. 1 pair in time behind a lagging regulator (shipped), its ramp shortened: the
+    # rig's states, integrated command by command, are the path's (one integration per leg).
+    from softseq_ros.dynamic.regulated import regulated_network_path
+    scene = load_scene('fig1_asymmetric_regulator')
+    softseq_ros.run(scene, tmp_path / 'bag', start_time_ns=0)
+    states = list(read_bag(tmp_path / 'bag', ['/actuator/volumes']))
+    times = np.array([m.log_time_ns / 1e9 for m in states])
+    recorded = np.array([list(m.msg.position) for m in states])
+    path = regulated_network_path(scene.segments, scene.network, scene.regulator, times,
+                                  rtol=1e-10)
+    scale = float(np.ptp(path.volumes))
+    assert np.max(np.abs(recorded - path.volumes)) < 1e-5 * scale
+    outlet = np.array([m.msg.effort[0] for m in states])
+    assert np.max(np.abs(outlet - path.pressure)) < 1e-5 * scene.regulator.programme.highest()
+
+
+def test_the_rig_in_time_notes_each_fold_where_the_path_locates_it(tmp_path):
+    # The model driven as the regulator's core drives it (a command every 50 ms): the
+    # segments pass the folds of their curves where the path's events locate them.
+    from softseq_ros.dynamic.regulated import regulated_network_path
+    from softseq_ros.rig.model import RegulatedFlowModel
+    from softseq_ros.rig.regulator import PressureSchedule
+    scene = load_scene('fig1_asymmetric_regulator')
+    model = actuator_model(scene)
+    assert isinstance(model, RegulatedFlowModel) and model.end_stop_m3 == math.inf
+    schedule = PressureSchedule(scene.regulator.programme, 25.0)
+    step_ns = 50_000_000
+    notes = []
+    for k in range(int(schedule.duration() * 20) + 1):
+        model.command_pressure(schedule.command_at(k * step_ns / 1e9)[0], k * step_ns)
+        model.advance(k * step_ns + step_ns // 2)
+        notes += model.take_notes()
+    found = model.run.take_fold_crossings()
+    path = regulated_network_path(scene.segments, scene.network, scene.regulator,
+                                  rtol=1e-10)
+    assert notes and len(notes) == len(path.folds)
+    assert all('passes the' in line for line in notes)
+    assert found == []   # the notes took them
+    assert [line.split(' passes the ')[0] for line in notes] == \
+        [f'segment {c.segment}' for c in path.folds]
+    times = [float(line.split(', at ')[1].split(' s,')[0]) for line in notes]
+    assert times == pytest.approx([c.time_s for c in path.folds], abs=0.05)
 
 
 @pytest.mark.ros

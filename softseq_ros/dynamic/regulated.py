@@ -27,7 +27,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.integrate import solve_ivp
+from scipy.integrate import Radau, solve_ivp
+from scipy.optimize import brentq
 
 from softseq_ros.dynamic.events import EMPTYING, FILLING, FoldCrossing, segment_folds
 from softseq_ros.dynamic.flow import ATOL_SHARE, END_SLACK, NetworkDomainError, NetworkFlow
@@ -111,6 +112,12 @@ class RegulatedNetwork:
             rates.append(0.0 if held else push)
         return volumes, pressures, flows, outlet, supply, np.array(rates)
 
+    def rest_state(self) -> FloatArray:
+        """The state at rest with nothing let in, the outlet at 0 Pa gauge."""
+        y = np.zeros(self.at_tube + int(self.tube_inertial))
+        y[:self.n - 1] = [s.rest_volume for s in self.segments[:-1]]
+        return y
+
     def _volume_of(self, i: int) -> Callable[[FloatArray], float]:
         if i < self.n - 1:
             return lambda y: float(y[i])
@@ -157,8 +164,7 @@ class RegulatedNetwork:
         starts = corners[corners < end].tolist() or [0.0]
         stops = starts[1:] + [end]
         folds, which, ends = self._events()
-        y = np.zeros(self.at_tube + int(self.tube_inertial))
-        y[:self.n - 1] = [s.rest_volume for s in self.segments[:-1]]
+        y = self.rest_state()
         rows = np.empty((times.size, y.size))
         crossings: list[FoldCrossing] = []
         steps = 0
@@ -253,6 +259,156 @@ class RegulatedNetwork:
             curvatures=curvatures, channel_flows=flows, snap=np.zeros(times.size, dtype=bool),
             snaps=[], peak_reynolds=peak_reynolds, steps=steps, folds=crossings,
             segment_pressure=pressures, supply_flow=supply, target_pressure=target)
+
+
+class RegulatedRun:
+    """
+    The network behind the regulator driven one target at a time, as the rig drives it.
+
+    The target follows a line (its value at a time, its slope) up to where the line ends,
+    then holds; :meth:`follow` sets the next line, :meth:`advance` integrates to a time. The
+    integrator (scipy's Radau, on :meth:`RegulatedNetwork.balance`) steps on the line as if
+    it went on, and goes on across a new line that continues it (a ramp commanded tick by
+    tick); where the target's slope changes (a new slope, or the line's end) it starts afresh
+    from the state there, so no step's polynomial is used across a corner. Everything a step
+    says (folds passed, a segment off its curve, peak flows) is read on its polynomial up to
+    where the line holds so far only. A segment pushed past the end of its curve raises
+    NetworkDomainError; the state stays where the last advance left it.
+    """
+
+    def __init__(self, network: RegulatedNetwork) -> None:
+        """At rest at time 0, the target at 0 Pa and held."""
+        self.network = network
+        self.t = 0.0
+        self.y = network.rest_state()
+        self._line = (0.0, 0.0, 0.0, math.inf)   # (time, value there, slope, end) of the target
+        self._solver: Radau | None = None
+        # The last step's polynomial, and up to where what it says has been read.
+        self._dense: Callable[[float], FloatArray] | None = None
+        self._step_from = 0.0
+        self._read_to = 0.0
+        self._folds, self._which, self._ends = network._events()
+        self._fold_crossings: list[FoldCrossing] = []
+        self.peak_flows = [0.0] * len(network.members.laws)
+
+    def target(self, t: float) -> float:
+        """The target gauge pressure [Pa] at ``t`` [s] on the present line (held at its end)."""
+        t0, value, slope, end = self._line
+        return value + slope * (min(t, end) - t0) if slope else value
+
+    def _line_target(self, t: float) -> float:
+        """The present line as if it went on: what the integrator steps on."""
+        t0, value, slope, _ = self._line
+        return value + slope * (t - t0)
+
+    def follow(self, value: float, slope: float, until: float) -> None:
+        """From now the target is ``value`` [Pa] rising at ``slope`` [Pa/s] until ``until`` [s]."""
+        if not slope or until <= self.t:
+            slope, until = 0.0, math.inf
+        # A ramp commanded tick by tick gives slopes equal but for the last bits of its rows.
+        continues = (math.isclose(slope, self._line[2], rel_tol=1e-9, abs_tol=1e-12)
+                     and math.isclose(value, self.target(self.t), rel_tol=1e-9, abs_tol=1e-9))
+        if continues:
+            # The same line: its time and value stay, so the integrator's steps hold.
+            self._line = self._line[:3] + (until,)
+            return
+        self._line = (self.t, value, slope, until)
+        self._restart()
+
+    def _restart(self) -> None:
+        self._solver = self._dense = None
+        self._read_to = self._step_from = self.t
+
+    def set_rest(self, volumes: Sequence[float], injected: float) -> None:
+        """At rest at these volumes [m^3] with ``injected`` let in; the target at the fed one's."""
+        network = self.network
+        y = np.zeros_like(self.y)
+        y[:network.n - 1] = list(volumes)[:network.n - 1]
+        y[network.at_injected] = injected
+        fed = float(network.members.pressures(np.asarray(volumes, dtype=float))[network.feed])
+        if network.lagged:
+            y[network.at_outlet] = fed
+        self.y = y
+        self._line = (self.t, fed, 0.0, math.inf)
+        self._restart()
+
+    def state(self) -> tuple[FloatArray, FloatArray, FloatArray, float, float]:
+        """Volumes, gauge pressures, channel flows, outlet pressure and tube flow now."""
+        volumes, pressures, flows, outlet, supply, _ = self.network.balance(
+            self.t, self.y, self.target)
+        return volumes, pressures, flows, outlet, supply
+
+    def take_fold_crossings(self) -> list[FoldCrossing]:
+        """The segments' passages through folds of their curves since the last call."""
+        found, self._fold_crossings = self._fold_crossings, []
+        return found
+
+    def advance(self, t: float) -> None:
+        """Integrate to ``t`` [s], the target on its line (held where the line ends)."""
+        while self.t < t:
+            t0, value, slope, end = self._line
+            if slope and end <= self.t:
+                # The line ran out: the target holds from here, a corner.
+                self._line = (self.t, self.target(self.t), 0.0, math.inf)
+                self._restart()
+                continue
+            self._integrate_to(min(t, end))
+
+    def _integrate_to(self, stop: float) -> None:
+        network = self.network
+        if self._solver is None:
+            def rates(t: float, y: FloatArray) -> FloatArray:
+                return network.balance(t, y, self._line_target)[5]
+
+            self._solver = Radau(rates, self.t, self.y, self.t + 1.0e12, rtol=network.rtol,
+                                 atol=network.atol)
+        solver = self._solver
+        # What the last step says beyond where it was read, up to here.
+        if self._dense is not None and self._read_to < min(solver.t, stop):
+            self._read(min(solver.t, stop))
+        while solver.t < stop:
+            self._step_from = solver.t
+            message = solver.step()
+            if solver.status == 'failed':
+                self._restart()
+                raise NetworkDomainError(f'the regulated network integration failed at '
+                                         f'{solver.t:.6g} s: {message}')
+            self._dense = solver.dense_output()
+            self._read(min(solver.t, stop))
+        self.y = np.asarray(self._dense(stop), dtype=float) if solver.t > stop \
+            else solver.y.copy()
+        self.t = stop
+
+    def _read(self, upto: float) -> None:
+        """What the last step says from where it was read to ``upto``: folds, ends, flows."""
+        network, dense = self.network, self._dense
+        lo = max(self._read_to, self._step_from)
+        y_lo, y_hi = dense(lo), dense(upto)
+        for index, end in enumerate(self._ends):
+            if end(upto, y_hi) > 0.0:
+                at = brentq(lambda s, end=end: end(s, dense(s)), lo, upto,
+                            xtol=1e-12 * max(1.0, upto))
+                self._restart()
+                raise NetworkDomainError(
+                    f'segment {network.segments[index].name} passes the end of its curve at '
+                    f'{at:.6g} s (let in {float(dense(at)[network.at_injected]):.6g} m^3)',
+                    located=True)
+        found = []
+        for event, (i, fold) in zip(self._folds, self._which):
+            before, after = event(lo, y_lo), event(upto, y_hi)
+            if (before < 0.0) == (after < 0.0):
+                continue
+            at = brentq(lambda s, event=event: event(s, dense(s)), lo, upto,
+                        xtol=1e-12 * max(1.0, upto))
+            found.append(FoldCrossing(
+                network.segments[i].name, fold.volume, fold.pressure, fold.kind,
+                FILLING if after > before else EMPTYING, float(at),
+                float(dense(at)[network.at_injected])))
+        self._fold_crossings.extend(sorted(found, key=lambda c: c.time_s))
+        flows = network.balance(upto, y_hi, self._line_target)[2]
+        for j, flow in enumerate(flows.tolist()):
+            self.peak_flows[j] = max(self.peak_flows[j], abs(flow))
+        self._read_to = upto
 
 
 def regulated_network_path(segments: Sequence[Segment], network: NetworkSettings,

@@ -35,6 +35,7 @@ import numpy as np
 from softseq_ros.dynamic.events import fold_crossing_line
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import laminar_range_warning, tube_law
+from softseq_ros.dynamic.regulated import RegulatedNetwork, RegulatedRun
 from softseq_ros.errors import UserError
 from softseq_ros.quasistatic.equilibrium import DomainError, EquilibriumMap, SnapEvent, Tracker
 from softseq_ros.quasistatic.reach import beyond_domain, check_reach, check_scene_reach
@@ -44,6 +45,7 @@ from softseq_ros.scene.limits import RELIEF_MARGIN
 from softseq_ros.scene.loader import Scene, load_scene
 from softseq_ros.scene.network import LAMINAR, NetworkSettings, channel_names
 from softseq_ros.scene.programme import PumpProfile
+from softseq_ros.scene.regulator import Regulator
 from softseq_ros.scene.validation import SceneError
 from softseq_ros.segments.models import Segment
 from softseq_ros.segments.supply import CompliantSupply
@@ -669,6 +671,134 @@ class RegulatedModel:
         return []
 
 
+class RegulatedFlowModel:
+    """
+    The segments and channels behind a pressure regulator in time (softseq_ros.dynamic.regulated).
+
+    Its commands are target gauge pressures (:meth:`command_pressure`). Between two commands
+    the target follows the line through them (the catch-up: exactly the commanded target at
+    the command's instant); after the last it goes on at the rate of the last two for as long
+    as the last interval lasted, then holds, as the syringe's model does with volumes. The
+    regulator's outlet follows the target (with its time constant), the supply tube and the
+    channels carry the water; each segment's passage through a fold of its curve is a note
+    (a flip in time starts where a segment passes its peak). The pressure it says is the
+    outlet's, gauge. It advances at ``rate_hz`` on its driver's clock.
+    """
+
+    end_stop_m3 = math.inf   # a regulator has no syringe to run out of
+
+    def __init__(self, segments: Sequence[Segment], names: Sequence[str],
+                 network: NetworkSettings, regulator: Regulator) -> None:
+        """At rest; the clock starts at the first command or tick."""
+        self.run = RegulatedRun(RegulatedNetwork(segments, network, regulator))
+        self.names = tuple(names)
+        self.channel_names = channel_names(self.names)
+        self._turbulent = [tube.friction != LAMINAR for tube in network.channels]
+        self._warned = [False] * len(network.channels)
+        self._laws = [tube_law(tube, network.fluid) for tube in network.channels]
+        self.segments = self.members = tuple(segments)
+        self.rest_volume_m3 = self.run.network.rest_total
+        self.rate_hz = network.rate_hz
+        self._origin_ns: int | None = None
+        self._last_command: tuple[float, float] | None = None   # (time [s], target [Pa])
+        # A flow below this moves, in a second, no more than the integrator can tell [m^3/s].
+        self._quiet_flow = float(self.run.network.atol[0])
+
+    def _seconds(self, now_ns: int) -> float:
+        if self._origin_ns is None:
+            self._origin_ns = now_ns
+        return (now_ns - self._origin_ns) / NS_PER_S
+
+    def _run_to(self, t: float) -> None:
+        try:
+            self.run.advance(t)
+        except NetworkDomainError as err:
+            raise CommandRefusedError(str(err)) from None
+
+    def command(self, injected_m3: float, now_ns: int) -> list[Snap] | None:
+        """A volume cannot drive segments behind a regulator: refused."""
+        raise CommandRefusedError(
+            f'injected volume {injected_m3:.6g} m^3 refused: the supply is a pressure '
+            'regulator, which is driven by a target gauge pressure (joint regulator, effort)')
+
+    def command_pressure(self, gauge_pa: float, now_ns: int) -> list[Snap]:
+        """Follow the target to ``gauge_pa`` [Pa] at ``now_ns``; then on at the last rate."""
+        t = self._seconds(now_ns)
+        run = self.run
+        if t > run.t:
+            run.follow(run.target(run.t), (gauge_pa - run.target(run.t)) / (t - run.t), t)
+            self._run_to(t)
+        previous, self._last_command = self._last_command, (t, gauge_pa)
+        if previous is not None and t > previous[0]:
+            run.follow(gauge_pa, (gauge_pa - previous[1]) / (t - previous[0]),
+                       t + (t - previous[0]))
+        else:
+            run.follow(gauge_pa, 0.0, math.inf)
+        return []
+
+    def advance(self, now_ns: int) -> list[Snap] | None:
+        """Let the water move until ``now_ns``; None while nothing moves."""
+        t = self._seconds(now_ns)
+        if t <= self.run.t:
+            return None
+        self._run_to(t)
+        _, _, flows, outlet, supply = self.run.state()
+        moving = max([abs(supply)] + [abs(q) for q in flows.tolist()]) > self._quiet_flow
+        return [] if moving or outlet != self.run.target(self.run.t) else None
+
+    def finish(self, now_ns: int) -> list[Snap]:
+        """The run ends at ``now_ns``: no exchange events here (its folds are notes)."""
+        t = self._seconds(now_ns)
+        if t > self.run.t:
+            self._run_to(t)
+        return []
+
+    def state(self) -> ModelState:
+        """The regulator's outlet pressure (gauge), segment volumes and curvatures now."""
+        volumes, _, _, outlet, _ = self.run.state()
+        return FlowState(float(outlet), volumes.tolist(),
+                         [float(s.curvature(v)) for s, v in zip(self.segments, volumes)])
+
+    def saved(self) -> dict[str, object]:
+        """What was let in and the segment volumes (the channel flows are not kept)."""
+        volumes, *_ = self.run.state()
+        return {'injected_m3': float(self.run.y[self.run.network.at_injected]),
+                'volumes_m3': volumes.tolist()}
+
+    def resume(self, injected_m3: float, volumes_m3: Sequence[float]) -> None:
+        """Restart at rest at these volumes, the target at the fed segment's pressure."""
+        self.run.set_rest(volumes_m3, injected_m3)
+        self._last_command = None
+
+    def check_programme(self, scene: Scene, profile: object) -> None:
+        """The scene's programme was checked when it loaded (every target within reach)."""
+
+    def channel_state(self) -> tuple[list[float], list[float]]:
+        """Each channel's flow [m^3/s] towards the tip and pressure drop [Pa] now."""
+        _, pressures, flows, _, _ = self.run.state()
+        return flows.tolist(), [float(pressures[j] - pressures[j + 1])
+                                for j in range(flows.size)]
+
+    def take_warnings(self) -> list[str]:
+        """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
+        lines = []
+        for j, peak in enumerate(self.run.peak_flows):
+            if self._warned[j]:
+                continue
+            line = laminar_range_warning(self.channel_names[j], self._laws[j].reynolds(peak),
+                                         self._turbulent[j])
+            if line is not None:
+                self._warned[j] = True
+                lines.append(line)
+        return lines
+
+    def take_notes(self) -> list[str]:
+        """Each segment's passage through a fold of its own curve, located in time."""
+        origin = (self._origin_ns or 0) / NS_PER_S
+        return [fold_crossing_line(crossing, origin)
+                for crossing in self.run.take_fold_crossings()]
+
+
 def default_max_pressure_pa(scene: Scene) -> float:
     """
     The pump's relief by default [Pa, gauge], from the scene's own curves.
@@ -693,25 +823,7 @@ def load_rig_scene(path: str | Path) -> Scene:
     The rig's drivers know no physics, this seam does: a ``pump.start_branch`` is looked up in
     the transition graph of the process's shared map, the one the actuator's model runs on.
     """
-    scene = load_scene(path, segments_graph)
-    if scene.regulator is not None:
-        require_quasi_static_regulator(scene)
-    return scene
-
-
-def require_quasi_static_regulator(scene: Scene) -> None:
-    """
-    Refuse a rig behind a regulator in time: its actuator is quasi-static (so far).
-
-    Behind a regulator the rig's actuator holds each segment at the target pressure as an
-    independent hysteron; the fluid network in time behind one runs in ``softseq solve``.
-    """
-    if scene.network is not None:
-        where = scene.path if scene.path is not None else '<scene>'
-        raise SceneError(f'{where}: network: the rig behind a pressure regulator is '
-                         'quasi-static (each segment a hysteron at the target pressure); '
-                         'drop the network block to run it, or follow the network in time '
-                         'with softseq solve (docs/supply.md)')
+    return load_scene(path, segments_graph)
 
 
 def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel | RegulatedModel':
@@ -724,7 +836,9 @@ def actuator_model(scene: Scene) -> 'QuasiStaticModel | DynamicModel | Regulated
     independent hysterons (:class:`RegulatedModel`).
     """
     if scene.regulator is not None:
-        require_quasi_static_regulator(scene)
+        if scene.network is not None:
+            return RegulatedFlowModel(scene.segments, scene.segment_names, scene.network,
+                                      scene.regulator)
         return RegulatedModel(scene.segments, scene.segment_names)
     quasistatic = QuasiStaticModel(scene_map(scene),
                                    scene.segment_names)
