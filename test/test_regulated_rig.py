@@ -18,6 +18,7 @@ import yaml
 import softseq_ros
 from softseq_ros.analysis.report import write_report
 from softseq_ros.bag.reader import read_bag
+from softseq_ros.quasistatic.regulator import regulated_path
 from softseq_ros.rig.actuator import ActuatorCore
 from softseq_ros.rig.build import SettingError, pump_core
 from softseq_ros.rig.model import RegulatedModel, actuator_model
@@ -282,6 +283,32 @@ def test_the_rig_in_time_follows_the_regulated_network_path(tmp_path):
     assert np.max(np.abs(recorded - path.volumes)) < 1e-5 * scale
     outlet = np.array([m.msg.effort[0] for m in states])
     assert np.max(np.abs(outlet - path.pressure)) < 1e-5 * scene.regulator.programme.highest()
+    # Each flip is a snap-through event. The top's first: from its peak, passed filling where
+    # the path passes it, to where the hysteron lands (its upper rising piece at the peak's
+    # pressure), the water from the regulator.
+    published = {json.loads(m.msg.data)['start_ns']: (m.log_time_ns, json.loads(m.msg.data))
+                 for m in read_bag(tmp_path / 'bag', ['/actuator/events'])}
+    events = [event for _, event in published.values()]
+    first = min(events, key=lambda e: e['start_ns'])
+    peak = next(c for c in path.folds if c.segment == 'top' and c.kind == 'peak')
+    assert first['taking_segments'] == ['top'] and first['giving_segments'] == []
+    assert first['start_ns'] / 1e9 == pytest.approx(peak.time_s, abs=1e-3)
+    hysteron = regulated_path(scene.segments, [0.0, 7600.0]).flips[0]
+    assert hysteron.segment == 1
+    assert first['from_volumes_m3'][1] == pytest.approx(hysteron.from_volume, rel=1e-6)
+    assert first['to_volumes_m3'][1] == pytest.approx(hysteron.to_volume, rel=1e-9)
+    assert first['fluid_moved_m3'] == pytest.approx(hysteron.to_volume - hysteron.from_volume,
+                                                    rel=1e-6)
+    # It goes out when it has landed: its 10-90 % lies between its start and then.
+    landed_ns = published[first['start_ns']][0]
+    assert 0.0 < first['duration_s'] < (landed_ns - first['start_ns']) / 1e9
+    # Both segments flip up and back down: the report counts the flips in time.
+    up = {e['taking_segments'][0] for e in events if e['taking_segments']}
+    down = {e['giving_segments'][0] for e in events if e['giving_segments']}
+    assert up == down == {'bottom', 'top'}
+    metrics, text = write_report(tmp_path / 'bag', tmp_path / 'report', figures=False)
+    assert metrics['snap_count'] == len(events)
+    assert 'taken from the regulator' in text and 'given back to the regulator' in text
 
 
 def test_the_rig_in_time_notes_each_fold_where_the_path_locates_it(tmp_path):

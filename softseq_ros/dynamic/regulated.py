@@ -22,6 +22,7 @@ the folds of its curve located by the integrator's events. A segment pushed past
 curve stops the path there with :class:`NetworkDomainError`, as the syringe's network does.
 """
 
+from dataclasses import dataclass, field
 import math
 from typing import Callable, Sequence
 
@@ -261,6 +262,65 @@ class RegulatedNetwork:
             segment_pressure=pressures, supply_flow=supply, target_pressure=target)
 
 
+@dataclass
+class RegulatedFlip:
+    """
+    A segment's flip in time behind the regulator: from a fold of its curve to where it ends.
+
+    It starts where the segment passes a peak filling (or a valley emptying) and ends where
+    its volume reaches the next rising piece of its curve at that fold's pressure, as the
+    hysteron's jump does (softseq_ros.quasistatic.regulator), or turns back before (the
+    target fell before the tube let enough water through), whichever comes first.
+    ``duration_s`` is from 10 % to 90 % of its volume's change, ``peak_rate_m3_per_s`` its
+    fastest change (sampled along each step), at ``peak_s``. ``from_volumes``/``to_volumes``
+    are every segment's, ``from_pressure``/``to_pressure`` the regulator's outlet's (gauge),
+    ``injected`` what it had let in at the start. ``cut_short``: the run ended before it
+    did (its numbers up to there).
+    """
+
+    segment: int
+    filling: bool
+    start_s: float
+    injected: float
+    from_volumes: list[float]
+    from_pressure: float
+    fold_volume: float
+    landing_volume: float
+    end_s: float = math.nan
+    to_volumes: list[float] = field(default_factory=list)
+    to_pressure: float = math.nan
+    duration_s: float = math.nan
+    peak_rate_m3_per_s: float = 0.0
+    peak_s: float = math.nan
+    cut_short: bool = False
+    # The stretches it ran over: (from, to, the step's polynomial).
+    stretches: list = field(default_factory=list, repr=False)
+
+    @property
+    def moved_m3(self) -> float:
+        """What the segment took (filling) or gave (emptying) [m^3]."""
+        return abs(self.to_volumes[self.segment] - self.from_volumes[self.segment])
+
+
+def landing_volume(segment: Segment, fold: object, filling: bool) -> float | None:
+    """
+    Where a segment passing ``fold`` lands: its next rising piece at the fold's pressure.
+
+    Above for a peak passed filling, below for a valley passed emptying; None when no rising
+    piece there reaches the pressure (the curve ends).
+    """
+    rising = [piece for piece in segment.monotone_pieces() if piece.direction > 0]
+    pressure = fold.pressure
+    if filling:
+        pieces = [p for p in rising if p.v_lo >= fold.volume and p.p_min <= pressure <= p.p_max]
+    else:
+        pieces = [p for p in reversed(rising)
+                  if p.v_hi <= fold.volume and p.p_min <= pressure <= p.p_max]
+    if not pieces:
+        return None
+    return float(segment.invert(pieces[0], np.array([pressure]))[0])
+
+
 class RegulatedRun:
     """
     The network behind the regulator driven one target at a time, as the rig drives it.
@@ -290,6 +350,24 @@ class RegulatedRun:
         self._folds, self._which, self._ends = network._events()
         self._fold_crossings: list[FoldCrossing] = []
         self.peak_flows = [0.0] * len(network.members.laws)
+        # Per fold event: where a segment passing it fills or empties to (None: nowhere).
+        self._landings = [(landing_volume(network.segments[i], fold, True),
+                           landing_volume(network.segments[i], fold, False))
+                          for i, fold in self._which]
+        self._open: dict[int, RegulatedFlip] = {}      # per segment, a flip under way
+        self._flips: list[RegulatedFlip] = []
+
+    def take_flips(self) -> list[RegulatedFlip]:
+        """The flips that landed since the last call."""
+        found, self._flips = self._flips, []
+        return found
+
+    def finish(self) -> list[RegulatedFlip]:
+        """The run ends now: the flips landed, and those still under way cut short here."""
+        for i, flip in list(self._open.items()):
+            flip.cut_short = True
+            self._end_flip(i, self.t)
+        return self.take_flips()
 
     def target(self, t: float) -> float:
         """The target gauge pressure [Pa] at ``t`` [s] on the present line (held at its end)."""
@@ -393,23 +471,105 @@ class RegulatedRun:
                     f'segment {network.segments[index].name} passes the end of its curve at '
                     f'{at:.6g} s (let in {float(dense(at)[network.at_injected]):.6g} m^3)',
                     located=True)
+        self._read_flips(lo, upto, dense)
         found = []
-        for event, (i, fold) in zip(self._folds, self._which):
+        for index, (event, (i, fold)) in enumerate(zip(self._folds, self._which)):
             before, after = event(lo, y_lo), event(upto, y_hi)
             if (before < 0.0) == (after < 0.0):
                 continue
             at = brentq(lambda s, event=event: event(s, dense(s)), lo, upto,
                         xtol=1e-12 * max(1.0, upto))
-            found.append(FoldCrossing(
+            filling = after > before
+            crossing = FoldCrossing(
                 network.segments[i].name, fold.volume, fold.pressure, fold.kind,
-                FILLING if after > before else EMPTYING, float(at),
-                float(dense(at)[network.at_injected])))
+                FILLING if filling else EMPTYING, float(at),
+                float(dense(at)[network.at_injected]))
+            found.append(crossing)
+            landing = self._landings[index][0 if filling else 1]
+            starts = (fold.kind == 'peak') == filling
+            if starts and landing is not None and i not in self._open:
+                self._begin_flip(i, filling, float(at), fold.volume, landing, dense)
+                self._read_flips(float(at), upto, dense)
         self._fold_crossings.extend(sorted(found, key=lambda c: c.time_s))
-        flows = network.balance(upto, y_hi, self._line_target)[2]
-        for j, flow in enumerate(flows.tolist()):
+        balance = network.balance(upto, y_hi, self._line_target)
+        for j, flow in enumerate(balance[2].tolist()):
             self.peak_flows[j] = max(self.peak_flows[j], abs(flow))
         self._read_to = upto
 
+    def _begin_flip(self, i: int, filling: bool, at: float, fold_volume: float,
+                    landing: float, dense: Callable[[float], FloatArray]) -> None:
+        volumes, _, _, outlet, _, _ = self.network.balance(at, dense(at), self._line_target)
+        self._open[i] = RegulatedFlip(
+            i, filling, at, float(dense(at)[self.network.at_injected]), volumes.tolist(),
+            float(outlet), fold_volume, landing)
+
+    def _rate_of(self, i: int, t: float, dense: Callable[[float], FloatArray]) -> float:
+        """Segment ``i``'s volume rate [m^3/s] at ``t`` on a step's polynomial."""
+        rates = self.network.balance(t, dense(t), self._line_target)[5]
+        return self.network._volume_rate(i, rates)
+
+    def _read_flips(self, lo: float, upto: float, dense: Callable[[float], FloatArray]) -> None:
+        """The flips under way on [lo, upto]: where each lands or turns back."""
+        network = self.network
+        for i, flip in list(self._open.items()):
+            lo_i = max(lo, flip.start_s)
+            if upto <= lo_i:
+                continue
+            flip.stretches.append((lo_i, upto, dense))
+            volume = network._volume_of(i)
+            sign = 1.0 if flip.filling else -1.0
+            ends = []
+
+            def short(s: float, volume: Callable = volume, sign: float = sign,
+                      level: float = flip.landing_volume) -> float:
+                return (volume(dense(s)) - level) * sign
+
+            if short(upto) >= 0.0:
+                ends.append(brentq(short, lo_i, upto, xtol=1e-12 * max(1.0, upto))
+                            if short(lo_i) < 0.0 else lo_i)
+
+            def onward(s: float, i: int = i, sign: float = sign) -> float:
+                return self._rate_of(i, s, dense) * sign
+
+            if onward(upto) <= 0.0 < onward(lo_i):
+                ends.append(brentq(onward, lo_i, upto, xtol=1e-12 * max(1.0, upto)))
+            if ends:
+                self._end_flip(i, min(ends))
+
+    def _end_flip(self, i: int, at: float) -> None:
+        """Flip ``i`` ends at ``at``: its end state, 10 % to 90 % and peak rate, from its steps."""
+        network = self.network
+        flip = self._open.pop(i)
+        stretches = [(lo, min(hi, at), dense) for lo, hi, dense in flip.stretches if lo < at]
+        if stretches:
+            dense = stretches[-1][2]
+            state = dense(at)
+        else:
+            state = self.y
+        volumes, _, _, outlet, _, _ = network.balance(at, state, self._line_target)
+        flip.end_s, flip.to_volumes, flip.to_pressure = at, volumes.tolist(), float(outlet)
+        volume = network._volume_of(i)
+        change = flip.to_volumes[i] - flip.from_volumes[i]
+        times = []
+        for share in (0.1, 0.9):
+            level = flip.from_volumes[i] + share * change
+            found = at
+            for lo, hi, dense in stretches:
+                def beyond(s: float, dense: Callable = dense, level: float = level) -> float:
+                    return (volume(dense(s)) - level) * (1.0 if change >= 0.0 else -1.0)
+                if hi > lo and beyond(hi) >= 0.0:
+                    found = brentq(beyond, lo, hi, xtol=1e-12 * max(1.0, hi)) \
+                        if beyond(lo) < 0.0 else lo
+                    break
+            times.append(found)
+        flip.duration_s = times[1] - times[0]
+        for lo, hi, dense in stretches:
+            for s in np.linspace(lo, hi, 9).tolist():
+                rate = abs(self._rate_of(i, s, dense))
+                if rate > flip.peak_rate_m3_per_s:
+                    flip.peak_rate_m3_per_s, flip.peak_s = rate, s
+        flip.stretches = []
+        self._flips.append(flip)
 
 def regulated_network_path(segments: Sequence[Segment], network: NetworkSettings,
                            regulator: Regulator,

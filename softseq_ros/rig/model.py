@@ -680,9 +680,11 @@ class RegulatedFlowModel:
     the command's instant); after the last it goes on at the rate of the last two for as long
     as the last interval lasted, then holds, as the syringe's model does with volumes. The
     regulator's outlet follows the target (with its time constant), the supply tube and the
-    channels carry the water; each segment's passage through a fold of its curve is a note
-    (a flip in time starts where a segment passes its peak). The pressure it says is the
-    outlet's, gauge. It advances at ``rate_hz`` on its driver's clock.
+    channels carry the water; each segment's passage through a fold of its curve is a note,
+    and each flip (from a peak passed filling, or a valley passed emptying, to where the
+    segment lands on its next rising piece at that pressure) a snap-through in time, its fluid
+    given or taken by the regulator (softseq_ros.dynamic.regulated.RegulatedFlip). The pressure
+    it says is the outlet's, gauge. It advances at ``rate_hz`` on its driver's clock.
     """
 
     end_stop_m3 = math.inf   # a regulator has no syringe to run out of
@@ -734,7 +736,7 @@ class RegulatedFlowModel:
                        t + (t - previous[0]))
         else:
             run.follow(gauge_pa, 0.0, math.inf)
-        return []
+        return self._flips(run.take_flips())
 
     def advance(self, now_ns: int) -> list[Snap] | None:
         """Let the water move until ``now_ns``; None while nothing moves."""
@@ -742,16 +744,32 @@ class RegulatedFlowModel:
         if t <= self.run.t:
             return None
         self._run_to(t)
+        flips = self._flips(self.run.take_flips())
         _, _, flows, outlet, supply = self.run.state()
         moving = max([abs(supply)] + [abs(q) for q in flows.tolist()]) > self._quiet_flow
-        return [] if moving or outlet != self.run.target(self.run.t) else None
+        return flips if flips or moving or outlet != self.run.target(self.run.t) else None
 
     def finish(self, now_ns: int) -> list[Snap]:
-        """The run ends at ``now_ns``: no exchange events here (its folds are notes)."""
+        """The run ends at ``now_ns``: the flips landed, and those under way cut short."""
         t = self._seconds(now_ns)
         if t > self.run.t:
             self._run_to(t)
-        return []
+        return self._flips(self.run.finish())
+
+    def _flips(self, flips: list) -> list[TimedSnap]:
+        """Each flip as a snap-through in time: the regulator gave the fluid, or took it."""
+        origin = self._origin_ns or 0
+        snaps = []
+        for flip in flips:
+            name = (self.names[flip.segment],)
+            snaps.append(TimedSnap(
+                flip.injected, flip.from_volumes, flip.to_volumes, flip.from_pressure,
+                flip.to_pressure, origin + round(flip.start_s * NS_PER_S), flip.duration_s,
+                flip.moved_m3, flip.peak_rate_m3_per_s, () if flip.filling else name,
+                name if flip.filling else (), True,
+                origin + round(flip.peak_s * NS_PER_S) if math.isfinite(flip.peak_s) else None,
+                flip.cut_short))
+        return snaps
 
     def state(self) -> ModelState:
         """The regulator's outlet pressure (gauge), segment volumes and curvatures now."""
