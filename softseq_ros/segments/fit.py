@@ -227,6 +227,9 @@ def bulge_pressure(material: Material, rise: ArrayLike,
     return 2.0 * thickness_over_hole_radius * material.energy_derivative(lam) * s / lam**3
 
 
+Locked = Callable[[FloatArray], NDArray[np.bool_]]
+
+
 @dataclass(frozen=True)
 class MembraneLaw:
     """
@@ -259,6 +262,13 @@ class MembraneLaw:
     def law_parameter_names(self) -> tuple[str, ...]:
         """The law's own parameters as a scene file names them (``shear_modulus_pa``, ``jm``)."""
         return material_parameter_names(self.name)
+
+    def lock(self, groups: Sequence[float]) -> 'Locked | None':
+        """Where the law with these groups has no pressure, as a test of the stretch."""
+        if self.locked is None:
+            return None
+        locked = self.locked
+        return lambda lam: locked(groups, lam)
 
 
 # The name the sphere's fit has always had.
@@ -320,7 +330,8 @@ class Sphere:
         return law.groups
 
     def pressure_and_stretch(self, material: Material, volume: ArrayLike, rest_volume: float,
-                             walls: bool = True) -> tuple[FloatArray, FloatArray]:
+                             walls: bool = True, locked: Locked | None = None,
+                             ) -> tuple[FloatArray, FloatArray]:
         """The pressure [Pa] at ``volume`` and the membrane's stretch there."""
         lam = sphere_stretch(volume, rest_volume)
         return sphere_pressure(material, lam), lam
@@ -412,7 +423,8 @@ class Bulge:
         return tuple(name.replace(SPHERE_GROUP_SUFFIX, self.group_suffix) for name in law.groups)
 
     def pressure_and_stretch(self, material: Material, volume: ArrayLike, rest_volume: float,
-                             walls: bool = True) -> tuple[FloatArray, FloatArray]:
+                             walls: bool = True, locked: Locked | None = None,
+                             ) -> tuple[FloatArray, FloatArray]:
         """
         The pressure [Pa] at ``volume`` and the caps' stretch there.
 
@@ -420,23 +432,33 @@ class Bulge:
         pressure: their rise is the root of ``caps(s) + C p(s) = v - V0``, bracketed between
         0 and the rise of rigid walls (the walls only take volume from the caps), found by
         Newton's steps kept inside the bracket by bisection. ``walls`` False: as if rigid (a
-        start's linear solve).
+        start's linear solve). ``locked``: where the law has no pressure (past Gent's locking
+        stretch); the walls' solve takes the pressure there as infinite, as it grows towards
+        it, so that the root stays short of it.
         """
         injected = np.asarray(volume, dtype=float) - rest_volume
         rise = cap_rise(injected, self.caps_scale)
         if walls and self.wall_compliance > 0.0:
-            rise = self._compliant_rise(material, injected, rise)
+            rise = self._compliant_rise(material, injected, rise, locked)
         pressure = bulge_pressure(material, rise)
         return pressure, np.sqrt(1.0 + rise**2)
 
-    def _compliant_rise(self, material: Material, injected: FloatArray,
-                        rigid: FloatArray) -> FloatArray:
+    def _compliant_rise(self, material: Material, injected: FloatArray, rigid: FloatArray,
+                        locked: Locked | None) -> FloatArray:
         def excess(s: FloatArray) -> FloatArray:
-            return (caps_volume(s, self.caps_scale)
-                    + self.wall_compliance * bulge_pressure(material, s) - injected)
+            pressure = bulge_pressure(material, s)
+            if locked is not None:
+                pressure = np.where(locked(np.sqrt(1.0 + s**2)), np.sign(s) * np.inf, pressure)
+            return caps_volume(s, self.caps_scale) + self.wall_compliance * pressure - injected
 
         low, high = np.minimum(0.0, rigid), np.maximum(0.0, rigid)
         rise = rigid.copy()
+        with np.errstate(all='ignore'):   # a slope across a lock is no slope: bisected
+            return self._bracketed_root(excess, rise, low, high)
+
+    @staticmethod
+    def _bracketed_root(excess: Callable[[FloatArray], FloatArray], rise: FloatArray,
+                        low: FloatArray, high: FloatArray) -> FloatArray:
         for _ in range(WALL_SOLVE_STEPS):
             value = excess(rise)
             # The bracket keeps excess(low) <= 0 <= excess(high) whatever the curve's shape.
@@ -478,7 +500,8 @@ class Bulge:
     def table_volumes(self, fit: 'LawFit', top: float, rows: int) -> FloatArray:
         """The table's volumes, evenly spaced in the caps' stretch, as the sphere's."""
         material = fit.law.material(fit.groups)
-        _, lam_top = self.pressure_and_stretch(material, np.array([top]), fit.rest_volume)
+        _, lam_top = self.pressure_and_stretch(material, np.array([top]), fit.rest_volume,
+                                               locked=fit.law.lock(fit.groups))
         rise = np.sqrt(np.linspace(1.0, float(lam_top[0]), rows)**2 - 1.0)
         pressure = bulge_pressure(material, rise)
         return fit.rest_volume + self.wall_compliance * pressure + caps_volume(rise,
@@ -603,7 +626,8 @@ class LawFit:
     def pressure(self, volume: ArrayLike) -> FloatArray:
         """The fitted curve: gauge pressure [Pa] at ``volume`` [m^3]."""
         return self.geometry.pressure_and_stretch(self.law.material(self.groups), volume,
-                                                  self.rest_volume)[0]
+                                                  self.rest_volume,
+                                                  locked=self.law.lock(self.groups))[0]
 
     def pressure_standard_error(self, volume: ArrayLike) -> FloatArray:
         """
@@ -812,8 +836,9 @@ class _LawModel:
     def curve(self, internal: FloatArray, volume: FloatArray) -> FloatArray:
         material = self.law.material(self.groups(internal))
         with np.errstate(all='ignore'):
-            pressure, lam = self.geometry.pressure_and_stretch(material, volume,
-                                                               self.rest_volume(internal))
+            pressure, lam = self.geometry.pressure_and_stretch(
+                material, volume, self.rest_volume(internal),
+                locked=self.law.lock(self.groups(internal)))
         if self.law.locked is None:
             return pressure
         # Past a locking stretch (Gent) the law has no pressure: no step may go there.
