@@ -495,13 +495,39 @@ def _fit(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.fit_outputs import summary_lines, write_fit_outputs
     from softseq_ros.errors import check_output_folder
     from softseq_ros.scene.tables import read_cycle
-    from softseq_ros.segments.fit import FIT_LAWS, FitError, fit_cycles
+    from softseq_ros.segments.fit import FIT_LAWS, Bulge, FitError, fit_cycles
 
     # Every option before any file is read: a mistake costs no fit.
     for option, value in (('--radius-m', args.radius_m), ('--thickness-m', args.thickness_m),
-                          ('--length-m', args.length_m)):
+                          ('--length-m', args.length_m), ('--hole-radius-m', args.hole_radius_m)):
         if value is not None and not (math.isfinite(value) and value > 0.0):
             raise FitError(f'{option}: must be a finite length > 0 (m), got {value}')
+    bulge_options = (('--hole-radius-m', args.hole_radius_m),
+                     ('--membrane-count', args.membrane_count),
+                     ('--rest-volume-m3', args.rest_volume_m3),
+                     ('--wall-compliance-m3-per-pa', args.wall_compliance_m3_per_pa))
+    if args.geometry == 'sphere':
+        for option, value in bulge_options:
+            if value is not None:
+                raise FitError(f"{option}: a bulge's (--geometry bulge); a sphere's size is "
+                               '--radius-m')
+    else:
+        if args.radius_m is not None:
+            raise FitError("--radius-m: a sphere's; a bulge's holes are --hole-radius-m")
+        if args.hole_radius_m is None:
+            raise FitError('--geometry bulge needs --hole-radius-m: the radius of the holes the '
+                           'membranes bulge out of [m]')
+        if args.membrane_count is not None and args.membrane_count < 1:
+            raise FitError(f'--membrane-count: a number of membranes >= 1, got '
+                           f'{args.membrane_count}')
+        if args.rest_volume_m3 is not None and not (math.isfinite(args.rest_volume_m3)
+                                                    and args.rest_volume_m3 > 0.0):
+            raise FitError(f'--rest-volume-m3: must be a finite volume > 0 (m^3), got '
+                           f'{args.rest_volume_m3}')
+        compliance = args.wall_compliance_m3_per_pa
+        if compliance is not None and not (math.isfinite(compliance) and compliance >= 0.0):
+            raise FitError(f'--wall-compliance-m3-per-pa: must be a finite compliance >= 0 '
+                           f'(m^3/Pa), got {compliance}')
     if args.bootstrap < 0:
         raise FitError(f'--bootstrap: a number of resamples >= 0, got {args.bootstrap}')
     laws = [name.strip() for name in args.laws.split(',')] if args.laws else list(FIT_LAWS)
@@ -511,12 +537,18 @@ def _fit(args: argparse.Namespace) -> int:
                        f'{", ".join(FIT_LAWS)}')
     style = _figure_style(args)
     check_output_folder(args.out, '--out')
+    geometry = None
+    if args.geometry == 'bulge':
+        geometry = Bulge(args.hole_radius_m, args.membrane_count or 1, args.rest_volume_m3,
+                         args.wall_compliance_m3_per_pa or 0.0)
     # The volumes' unit is checked against the segment's size where it is known.
     size = args.length_m if args.length_m is not None else (
         None if args.radius_m is None else 2.0 * args.radius_m)
+    if size is None and geometry is not None:
+        size = 2.0 * geometry.hole_radius * geometry.membrane_count
     cycles = [read_cycle(path, size) for path in args.tables]
     fit = fit_cycles(cycles, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
-                     bootstrap=args.bootstrap, seed=args.seed)
+                     bootstrap=args.bootstrap, seed=args.seed, geometry=geometry)
     written = write_fit_outputs(fit, args.out, args.length_m, style)
     for line in summary_lines(fit, written):
         print(line)
@@ -824,8 +856,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     fit = sub.add_parser('fit', help='membrane laws fitted to measured inflations of a '
                          'segment, with intervals, and the best as a segment table',
-                         description='Fit neo-Hookean, Mooney-Rivlin, Gent and one-term Ogden '
-                         'membrane laws on a thin sphere to measured inflations of one segment '
+                         description='Fit neo-Hookean, Mooney-Rivlin, Gent, one-term Ogden, '
+                         'Yeoh and Arruda-Boyce membrane laws on a thin sphere, or on membranes '
+                         'bulging out of circular holes, to measured inflations of one segment '
                          '(each CSV: volume_m3 = the whole segment volume, pressure_pa = gauge, '
                          'in rising volume; a file whose volume then falls holds a deflation '
                          'too, and both branches and the hysteresis between them are fitted), '
@@ -837,15 +870,27 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('tables', nargs='+', type=Path, metavar='TABLE.csv',
                      help='measured inflations of one segment (volume_m3, pressure_pa), each '
                      'optionally followed by its deflation')
-    fit.add_argument('--geometry', choices=('sphere',), default='sphere',
-                     help="the segment's shape: a thin sphere (the balloon), the only one yet")
+    fit.add_argument('--geometry', choices=('sphere', 'bulge'), default='sphere',
+                     help="the segment's shape: a thin sphere (the balloon; default), or a "
+                     'cavity whose membranes bulge out of circular holes as spherical caps '
+                     '(bulge: needs --hole-radius-m)')
     fit.add_argument('--radius-m', type=float, metavar='R', help="the sphere's reference "
                      'radius [m]; without it the rest volume is fitted')
+    fit.add_argument('--hole-radius-m', type=float, metavar='A', help='bulge: the radius of the '
+                     'holes the membranes bulge out of [m] (a rectangular membrane of '
+                     'membrane_length_m b and cavity_width_m g: sqrt(b g / pi))')
+    fit.add_argument('--membrane-count', type=int, metavar='N', help='bulge: how many '
+                     'membranes bulge out of the one cavity (default 1)')
+    fit.add_argument('--rest-volume-m3', type=float, metavar='V0', help="bulge: the cavity's "
+                     'volume at rest [m^3]; without it the rest volume is fitted')
+    fit.add_argument('--wall-compliance-m3-per-pa', type=float, metavar='C', help="bulge: the "
+                     "side walls' compliance dV/dp [m^3/Pa] (default 0: rigid walls)")
     fit.add_argument('--thickness-m', type=float, metavar='H', help="the membrane's thickness "
                      "[m]: with it the law's own moduli are reported (p(v) fixes only moduli "
-                     'times H / R)')
+                     'times H / R, or H / A for a bulge)')
     fit.add_argument('--length-m', type=float, metavar='L', help='segment length [m] written '
-                     "into segment.csv's # length_m: line (default: the sphere's diameter)")
+                     "into segment.csv's # length_m: line (default: the sphere's diameter; "
+                     "a bulge's holes side by side, 2 A N)")
     fit.add_argument('--laws', metavar='LAW,...', help='laws to fit, comma-separated (default: '
                      'neo_hookean,mooney_rivlin,gent,ogden,yeoh,arruda_boyce)')
     fit.add_argument('--bootstrap', type=int, default=200, metavar='N', help='parametric '

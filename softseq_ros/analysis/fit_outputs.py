@@ -3,7 +3,7 @@ What ``softseq fit`` writes: fit.json, segment.csv, fit.png and segment_unloadin
 
 Each is described in docs/fit.md; the last only where the files hold deflations.
 
-- ``fit.json``: every number of :class:`~softseq_ros.segments.fit.SphereFit`, SI units: each
+- ``fit.json``: every number of :class:`~softseq_ros.segments.fit.MembraneFit`, SI units: each
   inflation's noise, per law its parameters with standard errors, Jacobian and bootstrap
   95 % intervals, chi-square, AICc, BIC, Akaike weight, and the law chosen.
 - ``segment.csv``: the chosen law's curve as a segment table (``volume_m3,pressure_pa,
@@ -35,7 +35,7 @@ from softseq_ros.analysis.figures import (
     save_figure,
 )
 from softseq_ros.errors import write_text
-from softseq_ros.segments.fit import CycleFit, Estimate, SphereFit
+from softseq_ros.segments.fit import CycleFit, Estimate, MembraneFit, Sphere
 
 FIT_JSON = 'fit.json'
 SEGMENT_CSV = 'segment.csv'
@@ -52,14 +52,15 @@ UNLOADING_COLOUR = '#D55E00'
 MJ = 1e3
 
 
-def write_fit_outputs(fit: SphereFit | CycleFit, out: Path, length: float | None = None,
+def write_fit_outputs(fit: MembraneFit | CycleFit, out: Path, length: float | None = None,
                       style: FigureStyle = PAPER) -> list[Path]:
     """
     fit.json, segment.csv and fit.png of ``fit`` in the folder ``out`` (made when missing).
 
     With deflations (a :class:`CycleFit`) also segment_unloading.csv, and the unloading
     fit and the hysteresis in fit.json and fit.png. ``length`` [m]: the segment's, for the
-    tables' ``# length_m:`` line (default: the sphere's diameter). A failed write is one line
+    tables' ``# length_m:`` line (default: the sphere's diameter, or the bulge's holes side by
+    side). A failed write is one line
     naming the file.
     """
     out.mkdir(parents=True, exist_ok=True)
@@ -102,7 +103,7 @@ def estimate_text(estimate: Estimate) -> str:
     return text + ')'
 
 
-def segment_table_text(fit: SphereFit, length: float | None = None,
+def segment_table_text(fit: MembraneFit, length: float | None = None,
                        branch: str = 'inflation') -> str:
     """
     The chosen law's curve as a segment table, its provenance in ``#`` lines.
@@ -112,11 +113,12 @@ def segment_table_text(fit: SphereFit, length: float | None = None,
     """
     best = fit.best
     volume, pressure = fit.table()
-    length = 2.0 * best.radius if length is None else length
+    length = fit.geometry.default_length(best) if length is None else length
     sources = ', '.join(f'{i.source} ({i.volume.size} rows, noise {s:.6g} Pa)'
                         for i, s in zip(fit.inflations, fit.noise_std))
     lines = [
-        f'# softseq fit: the {best.law.name} law on a thin sphere, fitted to measured '
+        f'# softseq fit: the {best.law.name} law on {fit.geometry.description}, fitted to '
+        'measured '
         + ('inflations' if branch == 'inflation' else 'deflations (the unloading branch)')
         + ' (docs/fit.md); rows from its closed form',
         f'# source: {sources}',
@@ -130,18 +132,21 @@ def segment_table_text(fit: SphereFit, length: float | None = None,
     for name, estimate in best.estimates.items():
         lines.append(f'# {name}: {estimate_text(estimate)}'
                      + ('' if estimate.fitted else ' (derived)'))
-    if fit.radius_given is not None:
-        lines.append(f'# radius_m: {fit.radius_given:.6g} (given)')
+    lines += fit.geometry.given_lines()
     if fit.thickness is not None:
         lines.append(f'# thickness_m: {fit.thickness:.6g} (given)')
-    lines.append('# curvature_per_m: 0 (a sphere does not bend)')
+    if isinstance(fit.geometry, Sphere):
+        lines.append('# curvature_per_m: 0 (a sphere does not bend)')
+    else:
+        lines.append('# curvature_per_m: 0 (p(v) says nothing of how the segment bends: give it '
+                     'a curvature of its own)')
     lines.append(f'# length_m: {length!r}')
     lines.append('volume_m3,pressure_pa,curvature_per_m')
     lines += [f'{v!r},{p!r},0.0' for v, p in zip(volume.tolist(), pressure.tolist())]
     return '\n'.join(lines) + '\n'
 
 
-def plot_fit(fit: SphereFit | CycleFit, out: Path, style: FigureStyle = PAPER) -> list[Path]:
+def plot_fit(fit: MembraneFit | CycleFit, out: Path, style: FigureStyle = PAPER) -> list[Path]:
     """
     fit.png: the rows and each law's curve above, their residuals below (kPa, mL).
 
@@ -152,7 +157,7 @@ def plot_fit(fit: SphereFit | CycleFit, out: Path, style: FigureStyle = PAPER) -
         return _plot_fit(fit, out, style)
 
 
-def _plot_fit(cycle: SphereFit | CycleFit, out: Path, style: FigureStyle) -> list[Path]:
+def _plot_fit(cycle: MembraneFit | CycleFit, out: Path, style: FigureStyle) -> list[Path]:
     fit = cycle.loading if isinstance(cycle, CycleFit) else cycle
     fig, axes = new_figure(*style.size(COLUMN_IN, 3.6), rows=2, sharex=True,
                            margins={'left': 0.16, 'right': 0.97, 'top': 0.97, 'bottom': 0.2,
@@ -203,7 +208,8 @@ def _plot_fit(cycle: SphereFit | CycleFit, out: Path, style: FigureStyle) -> lis
         ax.grid(alpha=0.3)
     handles.append(_band_handle(band))
     legend_below(fig, handles, ncol=1)
-    title = f'Membrane laws fitted to a sphere; {fit.chosen} chosen by AICc'
+    shape = 'a sphere' if isinstance(fit.geometry, Sphere) else 'a bulge'
+    title = f'Membrane laws fitted to {shape}; {fit.chosen} chosen by AICc'
     if isinstance(cycle, CycleFit):
         title += (f'; loop {cycle.hysteresis.dissipated.value * MJ:.3g} mJ, unloading '
                   f'{cycle.unloading.chosen}')
@@ -244,7 +250,7 @@ def _band_handle(band_kpa: float) -> object:
     return Patch(color='0.88', label=f'$\\pm$2 noise deviations ({band_kpa:.3g} kPa)')
 
 
-def summary_lines(cycle: SphereFit | CycleFit, written: Sequence[Path]) -> list[str]:
+def summary_lines(cycle: MembraneFit | CycleFit, written: Sequence[Path]) -> list[str]:
     """What ``softseq fit`` prints: the choice, each law's fit and parameters, the files.
 
     With deflations, then the unloading branch's chosen law and the hysteresis. The fit's

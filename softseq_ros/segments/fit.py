@@ -19,6 +19,15 @@ moduli times ``H / R`` times a function of the stretch, so p(v) alone fixes:
   interval opens upwards);
 - the rest volume ``v0`` (so ``R``), which sets the stretch scale, when ``R`` is not given.
 
+The segment may instead be a cavity whose n membranes bulge out of circular holes of radius
+``a`` as spherical caps (:class:`Bulge`, the paper's segment of
+:mod:`softseq_ros.segments.bulge`): the pressure is the moduli times ``H / a`` times a function
+of the caps' stretch, and the volume the cavity's rest volume ``V0``, plus what its side walls
+swell by (compliance ``C`` times p), plus the caps' volume, ``n a^3`` times a function of the
+stretch. p(v) then fixes the moduli times ``H / a``, the shape parameters, ``V0`` and ``n a^3``;
+``a`` and ``n`` are given (so ``n a^3`` is), ``C`` too (0: rigid walls), and ``V0`` is fitted
+when not given. Both are geometries of one fit (:class:`Sphere`, :class:`Bulge`).
+
 Only these identifiable groups are fitted, by weighted nonlinear least squares
 (``scipy.optimize.least_squares``); each inflation's rows are weighted by its own noise,
 estimated from its raw rows (:func:`estimate_noise_std`). Every fitted or derived number comes
@@ -79,6 +88,14 @@ INTERNAL_BOUND = 40.0
 # Rest volumes tried for a start when R is not given, as shares of the smallest volume
 # measured (a measurement that starts at rest has its first row there).
 REST_VOLUME_STARTS = np.geomspace(0.3, 1.0, 25)
+# A bulge's rest volume (its cavity's) is the smallest volume measured less some share of the
+# span measured, at most all of it: the shares tried for a start.
+BULGE_REST_VOLUME_STARTS = np.concatenate([[0.0], np.geomspace(1e-3, 1.0, 24)])
+# Compliant walls: the caps' rise is solved to this share of itself (or of 1), in at most so
+# many steps, each slope from a forward difference of this share.
+WALL_SOLVE_TOLERANCE = 1e-13
+WALL_SOLVE_STEPS = 60
+WALL_SOLVE_STEP = 1e-7
 # Rows of the segment table written from a fitted law.
 TABLE_ROWS = 201
 
@@ -175,13 +192,52 @@ def rest_volume_of(radius: float) -> float:
     return 4.0 / 3.0 * math.pi * radius**3
 
 
-@dataclass(frozen=True)
-class SphereLaw:
+def cap_rise(injected: ArrayLike, caps_scale: float) -> FloatArray:
     """
-    A membrane law as fitted to a sphere: its identifiable groups and how to build it.
+    The caps' rise ``s = h / a`` [-] when the caps together hold ``injected`` [m^3].
 
-    ``groups``: the fitted parameters' names (moduli first: each a law modulus times H / R,
-    in Pa; then the shape parameters). ``positive``: which are fitted as logarithms (they
+    The caps hold ``caps_scale pi s (3 + s^2) / 6`` with ``caps_scale`` = n a^3 (n caps on
+    holes of radius a), the volume of a spherical cap of height h = a s; its one real root by
+    Cardano's formula, written so that it neither cancels nor loses the sign: a volume below
+    rest turns the caps inwards (s < 0), as the same membranes pushed the other way.
+    """
+    q = 3.0 * np.asarray(injected, dtype=float) / (math.pi * caps_scale)
+    t = np.cbrt(np.abs(q) + np.sqrt(q**2 + 1.0))
+    return np.sign(q) * (t - 1.0 / t)
+
+
+def caps_volume(rise: ArrayLike, caps_scale: float) -> FloatArray:
+    """What caps of rise ``s = h / a`` hold together [m^3], ``caps_scale`` = n a^3."""
+    s = np.asarray(rise, dtype=float)
+    return caps_scale * math.pi * s * (3.0 + s**2) / 6.0
+
+
+def bulge_pressure(material: Material, rise: ArrayLike,
+                   thickness_over_hole_radius: float = 1.0) -> FloatArray:
+    """
+    Gauge pressure [Pa] of a membrane bulging out of a hole as a cap of rise ``s = h / a``.
+
+    ``2 (H / a) W'(lam) s / lam^3`` with ``lam = sqrt(1 + s^2)``, as
+    :func:`~softseq_ros.segments.bulge.cap_pressure` has it; odd in s (a cap turned inwards
+    pulls back as hard). With ``thickness_over_hole_radius`` 1 the moduli of ``material``
+    stand for the moduli times ``H / a``: the groups that p(v) determines.
+    """
+    s = np.asarray(rise, dtype=float)
+    lam = np.sqrt(1.0 + s**2)
+    return 2.0 * thickness_over_hole_radius * material.energy_derivative(lam) * s / lam**3
+
+
+Locked = Callable[[FloatArray], NDArray[np.bool_]]
+
+
+@dataclass(frozen=True)
+class MembraneLaw:
+    """
+    A membrane law as fitted: its identifiable groups and how to build it.
+
+    ``groups``: the fitted parameters' names on the sphere (moduli first: each a law modulus
+    times H / R, in Pa; then the shape parameters); :meth:`Geometry.group_names` renames the
+    moduli for another geometry. ``positive``: which are fitted as logarithms (they
     cannot change sign: an interval of a positive quantity stays positive). ``shape_starts``:
     values of the one shape parameter tried for a start, the moduli solved linearly for each.
     ``locked``: where the law has no pressure at the stretches given (past Gent's locking
@@ -198,7 +254,7 @@ class SphereLaw:
     locked: Callable[[Sequence[float], FloatArray], NDArray[np.bool_]] | None = None
 
     def material(self, groups: Sequence[float], thickness_over_radius: float = 1.0) -> Material:
-        """The law with moduli = groups over ``thickness_over_radius`` (H / R)."""
+        """The law with moduli = groups over ``thickness_over_radius`` (H / R, or H / a)."""
         values = [g / thickness_over_radius if i < self.moduli else g
                   for i, g in enumerate(groups)]
         return self.build(values)
@@ -207,29 +263,285 @@ class SphereLaw:
         """The law's own parameters as a scene file names them (``shear_modulus_pa``, ``jm``)."""
         return material_parameter_names(self.name)
 
+    def lock(self, groups: Sequence[float]) -> 'Locked | None':
+        """Where the law with these groups has no pressure, as a test of the stretch."""
+        if self.locked is None:
+            return None
+        locked = self.locked
+        return lambda lam: locked(groups, lam)
 
-SPHERE_LAWS = {
-    'neo_hookean': SphereLaw('neo_hookean', ('shear_modulus_h_over_r_pa',), 1, (True,), (),
-                             lambda g: NeoHookean(g[0])),
-    'mooney_rivlin': SphereLaw('mooney_rivlin', ('c1_h_over_r_pa', 'c2_h_over_r_pa'), 2,
-                               (False, False), (), lambda g: MooneyRivlin(g[0], g[1])),
+
+# The name the sphere's fit has always had.
+SphereLaw = MembraneLaw
+
+MEMBRANE_LAWS = {
+    'neo_hookean': MembraneLaw('neo_hookean', ('shear_modulus_h_over_r_pa',), 1, (True,), (),
+                               lambda g: NeoHookean(g[0])),
+    'mooney_rivlin': MembraneLaw('mooney_rivlin', ('c1_h_over_r_pa', 'c2_h_over_r_pa'), 2,
+                                 (False, False), (), lambda g: MooneyRivlin(g[0], g[1])),
     # Jm from nearly rigid chains to nearly neo-Hookean; alpha over what rubbers show.
-    'gent': SphereLaw('gent', ('shear_modulus_h_over_r_pa', 'jm'), 1, (True, True),
-                      tuple(np.geomspace(0.3, 3e3, 41)), lambda g: Gent(g[0], g[1]),
-                      lambda g, lam: 2.0 * lam**2 + lam**-4 - 3.0 >= g[1]),
-    'ogden': SphereLaw('ogden', ('mu_h_over_r_pa', 'alpha'), 1, (True, True),
-                       tuple(np.geomspace(0.2, 20.0, 41)), lambda g: Ogden((g[0],), (g[1],))),
+    'gent': MembraneLaw('gent', ('shear_modulus_h_over_r_pa', 'jm'), 1, (True, True),
+                        tuple(np.geomspace(0.3, 3e3, 41)), lambda g: Gent(g[0], g[1]),
+                        lambda g, lam: 2.0 * lam**2 + lam**-4 - 3.0 >= g[1]),
+    'ogden': MembraneLaw('ogden', ('mu_h_over_r_pa', 'alpha'), 1, (True, True),
+                         tuple(np.geomspace(0.2, 20.0, 41)), lambda g: Ogden((g[0],), (g[1],))),
     # Yeoh: the three moduli enter linearly; C1 > 0 (the initial shear modulus is 2 C1), C2
     # and C3 of either sign (C2 < 0 softens before C3 stiffens, as filled rubbers do).
-    'yeoh': SphereLaw('yeoh', ('c1_h_over_r_pa', 'c2_h_over_r_pa', 'c3_h_over_r_pa'), 3,
-                      (True, False, False), (), lambda g: Yeoh(g[0], g[1], g[2])),
+    'yeoh': MembraneLaw('yeoh', ('c1_h_over_r_pa', 'c2_h_over_r_pa', 'c3_h_over_r_pa'), 3,
+                        (True, False, False), (), lambda g: Yeoh(g[0], g[1], g[2])),
     # Arruda-Boyce (Abaqus' five terms): lambda_m from chains near full extension at rest to
     # nearly neo-Hookean.
-    'arruda_boyce': SphereLaw('arruda_boyce', ('shear_modulus_h_over_r_pa', 'lambda_m'), 1,
-                              (True, True), tuple(np.geomspace(1.05, 50.0, 41)),
-                              lambda g: ArrudaBoyce(g[0], g[1])),
+    'arruda_boyce': MembraneLaw('arruda_boyce', ('shear_modulus_h_over_r_pa', 'lambda_m'), 1,
+                                (True, True), tuple(np.geomspace(1.05, 50.0, 41)),
+                                lambda g: ArrudaBoyce(g[0], g[1])),
 }
-FIT_LAWS = tuple(SPHERE_LAWS)
+SPHERE_LAWS = MEMBRANE_LAWS
+FIT_LAWS = tuple(MEMBRANE_LAWS)
+# The sphere's groups name their length R; another geometry puts its own in its place.
+SPHERE_GROUP_SUFFIX = '_h_over_r_pa'
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """
+    A thin sphere of reference radius R, the project's balloon: the fit's first geometry.
+
+    ``lam = (v / v0)^(1/3)`` with ``v0 = 4/3 pi R^3``, ``p = (H / R) W'(lam) / lam^2``.
+    ``radius`` [m]: given, or None: the rest volume is fitted.
+    """
+
+    radius: float | None = None
+
+    name = 'sphere'
+    description = 'a thin sphere'
+    group_suffix = SPHERE_GROUP_SUFFIX
+
+    def __post_init__(self) -> None:
+        """A given radius is a length."""
+        _check_length('radius', self.radius)
+
+    @property
+    def rest_volume(self) -> float | None:
+        """The rest volume [m^3] the radius gives, or None: fitted."""
+        return None if self.radius is None else rest_volume_of(self.radius)
+
+    def group_names(self, law: MembraneLaw) -> tuple[str, ...]:
+        """The law's fitted groups as this geometry names them."""
+        return law.groups
+
+    def pressure_and_stretch(self, material: Material, volume: ArrayLike, rest_volume: float,
+                             walls: bool = True, locked: Locked | None = None,
+                             ) -> tuple[FloatArray, FloatArray]:
+        """The pressure [Pa] at ``volume`` and the membrane's stretch there."""
+        lam = sphere_stretch(volume, rest_volume)
+        return sphere_pressure(material, lam), lam
+
+    def rest_volume_starts(self, volume: FloatArray, volume_scale: float) -> list[float]:
+        """Rest volumes tried for a start when it is fitted."""
+        return list(volume_scale * REST_VOLUME_STARTS)
+
+    def length(self, rest_volume: float) -> float:
+        """The length [m] the moduli are divided by in the groups: R."""
+        return radius_of(rest_volume)
+
+    def derived_geometry(self, rest_volume: Callable[[FloatArray], float]) -> list[tuple]:
+        """What follows from a fitted rest volume: the radius."""
+        return [('radius_m', False, True, lambda x: radius_of(rest_volume(x)))]
+
+    def table_volumes(self, fit: 'LawFit', top: float, rows: int) -> FloatArray:
+        """The table's volumes, evenly spaced in stretch (the balloon's features sit low)."""
+        lam = np.linspace(1.0, np.cbrt(top / fit.rest_volume), rows)
+        return fit.rest_volume * lam**3
+
+    def default_length(self, fit: 'LawFit') -> float:
+        """The segment length a table gets when none is given: the sphere's diameter."""
+        return 2.0 * fit.radius
+
+    def report(self, fit: 'LawFit') -> dict[str, object]:
+        """The geometry, as fit.json holds it."""
+        return {'radius_m': {'given': self.radius, 'used_by_chosen_law': fit.radius}}
+
+    def given_lines(self) -> list[str]:
+        """The geometry given, as a table's ``#`` lines."""
+        return [] if self.radius is None else [f'# radius_m: {self.radius:.6g} (given)']
+
+    def measured_volume_note(self, smallest: float) -> str | None:
+        """A warning where the volumes look injected, not whole."""
+        if self.radius is None or smallest >= 0.5 * self.rest_volume:
+            return None
+        return (f'the smallest volume measured ({smallest:.6g} m^3) is less than half the rest '
+                f'volume of a sphere of radius {self.radius:g} m ({self.rest_volume:.6g} m^3): '
+                'is the volume column the injected volume? It must be the whole')
+
+
+@dataclass(frozen=True)
+class Bulge:
+    """
+    Membranes bulging as spherical caps out of circular holes in a cavity: the paper's segment.
+
+    As :class:`~softseq_ros.segments.bulge.BulgeSegment` has it: n caps of hole radius a, each
+    of rise ``s = h / a`` (stretch ``lam = sqrt(1 + s^2)``) at pressure
+    ``p = 2 (H / a) W'(lam) s / lam^3``, on a cavity of rest volume V0 whose side walls swell
+    by a compliance C: ``v = V0 + C p + n a^3 pi s (3 + s^2) / 6``. ``hole_radius`` a [m] and
+    ``membrane_count`` n give the caps' volume scale n a^3; ``rest_volume`` V0 [m^3] is fitted
+    when None; ``wall_compliance`` C [m^3/Pa], 0 for rigid walls.
+    """
+
+    hole_radius: float
+    membrane_count: int = 1
+    rest_volume: float | None = None
+    wall_compliance: float = 0.0
+
+    name = 'bulge'
+    description = 'membranes bulging out of circular holes'
+    group_suffix = '_h_over_a_pa'
+
+    def __post_init__(self) -> None:
+        """Every size a finite one: lengths and the rest volume > 0, the compliance >= 0."""
+        if self.hole_radius is None:
+            raise FitError('hole_radius: a bulge needs the radius of the holes its membranes '
+                           'bulge out of [m]')
+        _check_length('hole_radius', self.hole_radius)
+        count = self.membrane_count
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+            raise FitError(f'membrane_count: a whole number of membranes >= 1, got {count!r}')
+        if self.rest_volume is not None and not (math.isfinite(self.rest_volume)
+                                                 and self.rest_volume > 0.0):
+            raise FitError(f'rest_volume: must be a finite volume > 0 m^3, got '
+                           f'{self.rest_volume}')
+        if not (math.isfinite(self.wall_compliance) and self.wall_compliance >= 0.0):
+            raise FitError(f'wall_compliance: must be a finite compliance >= 0 m^3/Pa, got '
+                           f'{self.wall_compliance}')
+
+    @property
+    def caps_scale(self) -> float:
+        """The caps' volume scale n a^3 [m^3]: they hold it times pi s (3 + s^2) / 6."""
+        return self.membrane_count * self.hole_radius**3
+
+    def group_names(self, law: MembraneLaw) -> tuple[str, ...]:
+        """The law's fitted groups as this geometry names them: moduli times H / a."""
+        return tuple(name.replace(SPHERE_GROUP_SUFFIX, self.group_suffix) for name in law.groups)
+
+    def pressure_and_stretch(self, material: Material, volume: ArrayLike, rest_volume: float,
+                             walls: bool = True, locked: Locked | None = None,
+                             ) -> tuple[FloatArray, FloatArray]:
+        """
+        The pressure [Pa] at ``volume`` and the caps' stretch there.
+
+        With compliant walls the caps hold what the walls do not, which depends on the
+        pressure: their rise is the root of ``caps(s) + C p(s) = v - V0``, bracketed between
+        0 and the rise of rigid walls (the walls only take volume from the caps), found by
+        Newton's steps kept inside the bracket by bisection. ``walls`` False: as if rigid (a
+        start's linear solve). ``locked``: where the law has no pressure (past Gent's locking
+        stretch); the walls' solve takes the pressure there as infinite, as it grows towards
+        it, so that the root stays short of it.
+        """
+        injected = np.asarray(volume, dtype=float) - rest_volume
+        rise = cap_rise(injected, self.caps_scale)
+        if walls and self.wall_compliance > 0.0:
+            rise = self._compliant_rise(material, injected, rise, locked)
+        pressure = bulge_pressure(material, rise)
+        return pressure, np.sqrt(1.0 + rise**2)
+
+    def _compliant_rise(self, material: Material, injected: FloatArray, rigid: FloatArray,
+                        locked: Locked | None) -> FloatArray:
+        def excess(s: FloatArray) -> FloatArray:
+            pressure = bulge_pressure(material, s)
+            if locked is not None:
+                pressure = np.where(locked(np.sqrt(1.0 + s**2)), np.sign(s) * np.inf, pressure)
+            return caps_volume(s, self.caps_scale) + self.wall_compliance * pressure - injected
+
+        low, high = np.minimum(0.0, rigid), np.maximum(0.0, rigid)
+        rise = rigid.copy()
+        with np.errstate(all='ignore'):   # a slope across a lock is no slope: bisected
+            return self._bracketed_root(excess, rise, low, high)
+
+    @staticmethod
+    def _bracketed_root(excess: Callable[[FloatArray], FloatArray], rise: FloatArray,
+                        low: FloatArray, high: FloatArray) -> FloatArray:
+        for _ in range(WALL_SOLVE_STEPS):
+            value = excess(rise)
+            # The bracket keeps excess(low) <= 0 <= excess(high) whatever the curve's shape.
+            high = np.where(value > 0.0, rise, high)
+            low = np.where(value < 0.0, rise, low)
+            step = WALL_SOLVE_STEP * np.maximum(1.0, np.abs(rise))
+            slope = (excess(rise + step) - value) / step
+            newton = rise - value / slope
+            inside = np.isfinite(newton) & (newton > low) & (newton < high)
+            following = np.where(inside, newton, 0.5 * (low + high))
+            done = np.abs(following - rise) <= WALL_SOLVE_TOLERANCE * np.maximum(1.0,
+                                                                               np.abs(rise))
+            rise = following
+            if np.all(done | (value == 0.0)):
+                break
+        return rise
+
+    def rest_volume_starts(self, volume: FloatArray, volume_scale: float) -> list[float]:
+        """
+        Rest volumes tried for a start when it is fitted.
+
+        At the smallest volume measured and below it by shares of the span measured (a
+        measurement may start after some injection), and shares of the smallest as the
+        sphere's.
+        """
+        span = float(np.max(volume)) - volume_scale
+        below = volume_scale - BULGE_REST_VOLUME_STARTS * span
+        return sorted({float(v) for v in np.concatenate([below, volume_scale
+                                                         * REST_VOLUME_STARTS]) if v > 0.0})
+
+    def length(self, rest_volume: float) -> float:
+        """The length [m] the moduli are divided by in the groups: a."""
+        return self.hole_radius
+
+    def derived_geometry(self, rest_volume: Callable[[FloatArray], float]) -> list[tuple]:
+        """A fitted rest volume gives no other size: the caps' scale is given."""
+        return []
+
+    def table_volumes(self, fit: 'LawFit', top: float, rows: int) -> FloatArray:
+        """The table's volumes, evenly spaced in the caps' stretch, as the sphere's."""
+        material = fit.law.material(fit.groups)
+        _, lam_top = self.pressure_and_stretch(material, np.array([top]), fit.rest_volume,
+                                               locked=fit.law.lock(fit.groups))
+        rise = np.sqrt(np.linspace(1.0, float(lam_top[0]), rows)**2 - 1.0)
+        pressure = bulge_pressure(material, rise)
+        return fit.rest_volume + self.wall_compliance * pressure + caps_volume(rise,
+                                                                               self.caps_scale)
+
+    def default_length(self, fit: 'LawFit') -> float:
+        """The segment length a table gets when none is given: the holes side by side."""
+        return 2.0 * self.hole_radius * self.membrane_count
+
+    def report(self, fit: 'LawFit') -> dict[str, object]:
+        """The geometry, as fit.json holds it."""
+        return {'hole_radius_m': self.hole_radius, 'membrane_count': int(self.membrane_count),
+                'wall_compliance_m3_per_pa': self.wall_compliance,
+                'rest_volume_m3': {'given': self.rest_volume,
+                                   'used_by_chosen_law': fit.rest_volume}}
+
+    def given_lines(self) -> list[str]:
+        """The geometry given, as a table's ``#`` lines."""
+        lines = [f'# hole_radius_m: {self.hole_radius:.6g} (given)',
+                 f'# membrane_count: {int(self.membrane_count)} (given)',
+                 f'# wall_compliance_m3_per_pa: {self.wall_compliance:.6g} (given)']
+        if self.rest_volume is not None:
+            lines.append(f'# rest_volume_m3: {self.rest_volume:.6g} (given)')
+        return lines
+
+    def measured_volume_note(self, smallest: float) -> str | None:
+        """A warning where the volumes look injected, not whole."""
+        if self.rest_volume is None or smallest >= 0.5 * self.rest_volume:
+            return None
+        return (f'the smallest volume measured ({smallest:.6g} m^3) is less than half the rest '
+                f'volume given ({self.rest_volume:.6g} m^3): is the volume column the injected '
+                'volume? It must be the whole')
+
+
+Geometry = Sphere | Bulge
+
+
+def _check_length(option: str, value: float | None) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0.0):
+        raise FitError(f'{option}: must be a finite length > 0 m, got {value}')
 
 
 @dataclass(frozen=True)
@@ -271,7 +583,7 @@ class _Problem:
     sigma: FloatArray
     pressure_scale: float
     volume_scale: float
-    rest_volume: float | None   # known (R given), or None: fitted
+    rest_volume: float | None   # known (given, or from R), or None: fitted
 
     @property
     def rows(self) -> int:
@@ -291,7 +603,7 @@ class LawFit:
     function of the internal parameters and the volumes, for the curve's own uncertainty.
     """
 
-    law: SphereLaw
+    law: MembraneLaw
     internal: FloatArray
     covariance: FloatArray
     estimates: dict[str, Estimate]
@@ -309,11 +621,13 @@ class LawFit:
     bootstrap_resamples: int = 0
     bootstrap_failed: int = 0
     curve: Callable[[FloatArray, FloatArray], FloatArray] | None = None
+    geometry: Geometry = field(default_factory=Sphere)
 
     def pressure(self, volume: ArrayLike) -> FloatArray:
         """The fitted curve: gauge pressure [Pa] at ``volume`` [m^3]."""
-        return sphere_pressure(self.law.material(self.groups),
-                               sphere_stretch(volume, self.rest_volume))
+        return self.geometry.pressure_and_stretch(self.law.material(self.groups), volume,
+                                                  self.rest_volume,
+                                                  locked=self.law.lock(self.groups))[0]
 
     def pressure_standard_error(self, volume: ArrayLike) -> FloatArray:
         """
@@ -339,11 +653,14 @@ class LawFit:
     @property
     def radius(self) -> float:
         """The sphere's reference radius [m] (given, or from the fitted rest volume)."""
+        if not isinstance(self.geometry, Sphere):
+            raise ValueError(f'a {self.geometry.name} has no sphere radius')
         return radius_of(self.rest_volume)
 
     def material(self, thickness: float) -> Material:
-        """The law itself for a membrane ``thickness`` [m] thick (moduli = groups R / H)."""
-        return self.law.material(self.groups, thickness / self.radius)
+        """The law itself for a membrane ``thickness`` [m] thick (moduli = groups R / H, a / H)."""
+        return self.law.material(self.groups,
+                                 thickness / self.geometry.length(self.rest_volume))
 
     def balloon(self, name: str, length: float, thickness: float,
                 max_stretch: float) -> BalloonSegment:
@@ -363,18 +680,19 @@ class LawFit:
 
 
 @dataclass
-class SphereFit:
+class MembraneFit:
     """
     Every law fitted to the inflations of one segment, and the one AICc chooses.
 
     ``noise_std``: each inflation's noise [Pa], from its raw rows; ``pooled_noise_std``: their
-    mean square, each weighted by its number of differences.
+    mean square, each weighted by its number of differences. ``geometry``: the segment's, with
+    what was given of it.
     """
 
     inflations: tuple[Inflation, ...]
     noise_std: tuple[float, ...]
     pooled_noise_std: float
-    radius_given: float | None
+    geometry: Geometry
     thickness: float | None
     laws: dict[str, LawFit]
     chosen: str
@@ -386,6 +704,11 @@ class SphereFit:
     def best(self) -> LawFit:
         """The chosen law's fit."""
         return self.laws[self.chosen]
+
+    @property
+    def radius_given(self) -> float | None:
+        """The sphere's radius where it was given (None for another geometry)."""
+        return self.geometry.radius if isinstance(self.geometry, Sphere) else None
 
     def by_bic(self) -> str:
         """The law BIC would choose (said beside AICc's choice when they differ)."""
@@ -403,8 +726,7 @@ class SphereFit:
         if top <= fit.rest_volume:
             raise FitError(f'the fitted rest volume ({fit.rest_volume:.6g} m^3) is beyond the '
                            f'largest volume measured ({top:.6g} m^3): no curve to tabulate')
-        lam = np.linspace(1.0, np.cbrt(top / fit.rest_volume), rows)
-        volume = fit.rest_volume * lam**3
+        volume = self.geometry.table_volumes(fit, top, rows)
         volume[0], volume[-1] = fit.rest_volume, top
         return volume, fit.pressure(volume)
 
@@ -434,12 +756,12 @@ class SphereFit:
         weights = akaike_weights([self.laws[name].aicc for name in self.laws])
         best = self.best
         return {
-            'geometry': 'sphere',
+            'geometry': self.geometry.name,
             'inflations': [{'source': i.source, 'rows': int(i.volume.size),
                             'noise_std_pa': s} for i, s in zip(self.inflations, self.noise_std)],
             'noise_std_pa': self.pooled_noise_std,
             'table_noise_std_pa': self.table_noise_std(),
-            'radius_m': {'given': self.radius_given, 'used_by_chosen_law': best.radius},
+            **self.geometry.report(best),
             'thickness_m': self.thickness,
             'criterion': 'AICc',
             'chosen_law': self.chosen,
@@ -451,6 +773,10 @@ class SphereFit:
                      for (name, fit), weight in zip(self.laws.items(), weights)},
             'notes': list(self.notes),
         }
+
+
+# The name the sphere's fit has always had.
+SphereFit = MembraneFit
 
 
 def akaike_weights(criteria: Sequence[float]) -> list[float]:
@@ -476,11 +802,12 @@ def information_criteria(chi_square: float, rows: int, parameters: int) -> tuple
 
 
 class _LawModel:
-    """One law on one problem: internal parameters <-> groups, and the weighted residuals."""
+    """One law on one geometry: internal parameters <-> groups, and the weighted residuals."""
 
-    def __init__(self, law: SphereLaw, problem: _Problem) -> None:
+    def __init__(self, law: MembraneLaw, problem: _Problem, geometry: Geometry) -> None:
         self.law = law
         self.problem = problem
+        self.geometry = geometry
         self.size = len(law.groups) + (problem.rest_volume is None)
 
     def groups(self, internal: FloatArray) -> tuple[float, ...]:
@@ -508,9 +835,10 @@ class _LawModel:
 
     def curve(self, internal: FloatArray, volume: FloatArray) -> FloatArray:
         material = self.law.material(self.groups(internal))
-        lam = sphere_stretch(volume, self.rest_volume(internal))
         with np.errstate(all='ignore'):
-            pressure = sphere_pressure(material, lam)
+            pressure, lam = self.geometry.pressure_and_stretch(
+                material, volume, self.rest_volume(internal),
+                locked=self.law.lock(self.groups(internal)))
         if self.law.locked is None:
             return pressure
         # Past a locking stretch (Gent) the law has no pressure: no step may go there.
@@ -529,7 +857,7 @@ class _LawModel:
         """
         problem = self.problem
         rests = ([problem.rest_volume] if problem.rest_volume is not None
-                 else list(problem.volume_scale * REST_VOLUME_STARTS))
+                 else self.geometry.rest_volume_starts(problem.volume, problem.volume_scale))
         weight = 1.0 / problem.sigma
         target = problem.pressure * weight
         best, best_cost = None, math.inf
@@ -539,11 +867,16 @@ class _LawModel:
             units = [self.law.build([float(i == m) for i in range(self.law.moduli)]
                                     + shape_values) for m in range(self.law.moduli)]
             for rest in rests:
-                lam = sphere_stretch(problem.volume, rest)
+                # Compliant walls make the stretch depend on the moduli: the start takes
+                # them rigid, and the fit itself what they take.
+                with np.errstate(all='ignore'):
+                    columns = [self.geometry.pressure_and_stretch(m, problem.volume, rest,
+                                                                  walls=False) for m in units]
+                lam = columns[0][1]
                 if self.law.locked is not None and np.any(
                         self.law.locked([1.0, *shape_values], lam)):
                     continue
-                design = np.column_stack([sphere_pressure(m, lam) for m in units]) \
+                design = np.column_stack([pressure for pressure, _ in columns]) \
                     * weight[:, None]
                 moduli, *_ = np.linalg.lstsq(design, target, rcond=None)
                 if any(p and m <= 0.0 for p, m in zip(self.law.positive, moduli)):
@@ -569,22 +902,22 @@ class _LawModel:
 
         The fitted groups (and rest volume) first, then what follows from them.
         """
-        law = self.law
+        law, geometry = self.law, self.geometry
         found: list[tuple[str, bool, bool, Callable]] = []
-        for i, (name, positive) in enumerate(zip(law.groups, law.positive)):
+        for i, (name, positive) in enumerate(zip(geometry.group_names(law), law.positive)):
             found.append((name, True, positive, lambda x, i=i: self.groups(x)[i]))
         if self.problem.rest_volume is None:
             found.append(('rest_volume_m3', True, True, self.rest_volume))
-            found.append(('radius_m', False, True, lambda x: radius_of(self.rest_volume(x))))
+            found += geometry.derived_geometry(self.rest_volume)
         if law.name in ('mooney_rivlin', 'ogden'):
-            found.append(('shear_modulus_h_over_r_pa', False, law.name == 'ogden',
+            found.append((f'shear_modulus{geometry.group_suffix}', False, law.name == 'ogden',
                           lambda x: law.material(self.groups(x)).shear_modulus))
         if thickness is not None:
             for i, (name, positive) in enumerate(zip(law.law_parameter_names(), law.positive)):
                 if i >= law.moduli:
                     break
                 found.append((name, False, positive, lambda x, i=i: self.groups(x)[i]
-                              * radius_of(self.rest_volume(x)) / thickness))
+                              * geometry.length(self.rest_volume(x)) / thickness))
         return found
 
 
@@ -619,26 +952,27 @@ def _interval(value: float, spread: float, positive: bool,
     return spread, value - quantile * spread, value + quantile * spread
 
 
-def fit_law(law: str | SphereLaw, inflations: Sequence[Inflation],
+def fit_law(law: str | MembraneLaw, inflations: Sequence[Inflation],
             noise_std: Sequence[float] | None = None, radius: float | None = None,
             thickness: float | None = None, bootstrap: int = 0,
-            seed: int = 0) -> LawFit:
+            seed: int = 0, geometry: Geometry | None = None) -> LawFit:
     """
-    One law fitted to the inflations of a sphere (see the module's description).
+    One law fitted to the inflations of a sphere or a bulge (see the module's description).
 
     ``noise_std``: each inflation's noise [Pa] (estimated from its rows when None).
     ``radius`` [m]: the sphere's reference radius when known (else its rest volume is
     fitted); ``thickness`` [m]: the membrane's, to report the law's own moduli.
     ``bootstrap``: parametric resamples for the percentile intervals (0: none), from
-    ``seed``.
+    ``seed``. ``geometry``: a :class:`Bulge` (or a :class:`Sphere`) in place of ``radius``.
     """
     from scipy.stats import t as student_t  # 0.3 s to import: only where a fit runs
 
-    law = SPHERE_LAWS[law] if isinstance(law, str) else law
+    law = MEMBRANE_LAWS[law] if isinstance(law, str) else law
+    geometry = _geometry(geometry, radius)
     inflations = tuple(inflations)
     noise = [_noise_of(i) for i in inflations] if noise_std is None else list(noise_std)
-    problem = _problem(inflations, noise, None if radius is None else rest_volume_of(radius))
-    model = _LawModel(law, problem)
+    problem = _problem(inflations, noise, geometry.rest_volume)
+    model = _LawModel(law, problem, geometry)
     result = model.solve(problem.pressure, model.start())
     x = np.asarray(result.x, dtype=float)
     rows, k = problem.rows, model.size
@@ -670,7 +1004,15 @@ def fit_law(law: str | SphereLaw, inflations: Sequence[Inflation],
                   chi_square, reduced, aicc, bic, bool(result.success),
                   bool(np.any(np.abs(x) >= INTERNAL_BOUND * (1.0 - 1e-9))),
                   str(result.message), bootstrap,
-                  0 if samples is None else samples[1], curve=model.curve)
+                  0 if samples is None else samples[1], curve=model.curve, geometry=geometry)
+
+
+def _geometry(geometry: Geometry | None, radius: float | None) -> Geometry:
+    if geometry is None:
+        return Sphere(radius)
+    if radius is not None:
+        raise FitError("radius: a sphere's; the geometry given takes its own sizes")
+    return geometry
 
 
 def _gradient(function: Callable, x: FloatArray, positive: bool) -> FloatArray:
@@ -714,21 +1056,48 @@ def _bootstrap(model: _LawModel, x: FloatArray, reduced: float, resamples: int, 
 
 def fit_sphere(inflations: Sequence[Inflation], radius: float | None = None,
                thickness: float | None = None, laws: Sequence[str] = FIT_LAWS,
-               bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> SphereFit:
+               bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> MembraneFit:
     """
-    Every law of ``laws`` fitted to the inflations of one segment, the best chosen by AICc.
+    Every law of ``laws`` fitted to the inflations of one sphere, the best chosen by AICc.
 
     ``radius``, ``thickness`` [m]: the sphere's, where known (see :func:`fit_law`).
     ``bootstrap``: parametric resamples per law for the percentile intervals (0: none), each
     law's from ``seed``. FitError (one line) for options that cannot be used.
     """
+    _check_length('radius', radius)
+    return fit_membrane(inflations, Sphere(radius), thickness, laws, bootstrap, seed)
+
+
+def fit_bulge(inflations: Sequence[Inflation], hole_radius: float, membrane_count: int = 1,
+              rest_volume: float | None = None, wall_compliance: float = 0.0,
+              thickness: float | None = None, laws: Sequence[str] = FIT_LAWS,
+              bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> MembraneFit:
+    """
+    Every law of ``laws`` fitted to the inflations of one bulge segment, the best by AICc.
+
+    ``hole_radius`` [m] and ``membrane_count``: the holes the membranes bulge out of;
+    ``rest_volume`` [m^3]: the cavity's at rest, fitted when None; ``wall_compliance``
+    [m^3/Pa]: the side walls' (0: rigid); ``thickness`` [m]: the membrane's, to report the
+    law's own moduli (see :class:`Bulge`). The rest as :func:`fit_sphere`.
+    """
+    return fit_membrane(inflations, Bulge(hole_radius, membrane_count, rest_volume,
+                                          wall_compliance), thickness, laws, bootstrap, seed)
+
+
+def fit_membrane(inflations: Sequence[Inflation], geometry: Geometry,
+                 thickness: float | None = None, laws: Sequence[str] = FIT_LAWS,
+                 bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> MembraneFit:
+    """
+    Every law of ``laws`` fitted to the inflations of one segment, the best chosen by AICc.
+
+    ``geometry``: a :class:`Sphere` or a :class:`Bulge`; see :func:`fit_sphere` and
+    :func:`fit_bulge`.
+    """
     inflations = tuple(inflations)
     if not inflations:
         raise FitError('no inflation to fit')
-    for option, value in (('radius', radius), ('thickness', thickness)):
-        if value is not None and not (math.isfinite(value) and value > 0.0):
-            raise FitError(f'{option}: must be a finite length > 0 m, got {value}')
-    unknown = [name for name in laws if name not in SPHERE_LAWS]
+    _check_length('thickness', thickness)
+    unknown = [name for name in laws if name not in MEMBRANE_LAWS]
     if unknown or not laws:
         raise FitError(f'unknown law {", ".join(unknown) or "(none)"}; the fit knows '
                        f'{", ".join(FIT_LAWS)}')
@@ -738,14 +1107,10 @@ def fit_sphere(inflations: Sequence[Inflation], radius: float | None = None,
     counts = [i.volume.size - 3 for i in inflations]
     pooled = math.sqrt(sum(c * s**2 for c, s in zip(counts, noise)) / sum(counts))
     notes = []
-    if radius is not None:
-        rest = rest_volume_of(radius)
-        smallest = min(float(np.min(i.volume)) for i in inflations)
-        if smallest < 0.5 * rest:
-            notes.append(f'the smallest volume measured ({smallest:.6g} m^3) is less than half '
-                         f'the rest volume of a sphere of radius {radius:g} m ({rest:.6g} m^3): '
-                         'is the volume column the injected volume? It must be the whole')
-    fits = {name: fit_law(name, inflations, noise, radius, thickness, bootstrap, seed)
+    note = geometry.measured_volume_note(min(float(np.min(i.volume)) for i in inflations))
+    if note is not None:
+        notes.append(note)
+    fits = {name: fit_law(name, inflations, noise, None, thickness, bootstrap, seed, geometry)
             for name in laws}
     chosen = min(fits, key=lambda name: fits[name].aicc)
     for name, fit in fits.items():
@@ -754,8 +1119,8 @@ def fit_sphere(inflations: Sequence[Inflation], radius: float | None = None,
         if fit.at_bound:
             notes.append(f'{name}: a parameter ran to the edge of its range; its intervals '
                          'do not hold')
-    return SphereFit(inflations, tuple(noise), pooled, radius, thickness, fits, chosen,
-                     bootstrap, seed, notes)
+    return MembraneFit(inflations, tuple(noise), pooled, geometry, thickness, fits, chosen,
+                       bootstrap, seed, notes)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -993,8 +1358,8 @@ class CycleFit:
     """
 
     cycles: tuple[Cycle, ...]
-    loading: SphereFit
-    unloading: SphereFit
+    loading: MembraneFit
+    unloading: MembraneFit
     hysteresis: Hysteresis
 
     @property
@@ -1022,25 +1387,29 @@ def shared_volumes(cycles: Sequence[Cycle]) -> tuple[float, float]:
 
 def fit_cycles(cycles: Sequence[Cycle], radius: float | None = None,
                thickness: float | None = None, laws: Sequence[str] = FIT_LAWS,
-               bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> SphereFit | CycleFit:
+               bootstrap: int = BOOTSTRAP_RESAMPLES, seed: int = 0,
+               geometry: Geometry | None = None) -> MembraneFit | CycleFit:
     """
     Every law fitted to the measured cycles of one segment, loading and unloading.
 
     The loading branch always; where any file has a deflation, the unloading branch too and
     the hysteresis between them.
 
-    Inflations alone give the :class:`SphereFit` of :func:`fit_sphere`, as ever; with
-    deflations, a :class:`CycleFit`. The options are :func:`fit_sphere`'s, for both branches
-    (each rest volume fitted on its own when ``radius`` is not given: a softened membrane
-    may keep a residual stretch).
+    Inflations alone give the :class:`MembraneFit` of :func:`fit_sphere` (or, with a
+    :class:`Bulge` as ``geometry``, of :func:`fit_bulge`), as ever; with deflations, a
+    :class:`CycleFit`. The options are :func:`fit_sphere`'s, for both branches (each rest
+    volume fitted on its own when neither ``radius`` nor the geometry's rest volume is given:
+    a softened membrane may keep a residual stretch).
     """
     cycles = tuple(cycles)
-    loading = fit_sphere([c.inflation for c in cycles], radius, thickness, laws, bootstrap,
-                         seed)
+    _check_length('radius', radius)
+    geometry = _geometry(geometry, radius)
+    loading = fit_membrane([c.inflation for c in cycles], geometry, thickness, laws, bootstrap,
+                           seed)
     deflations = [c.deflation.rising() for c in cycles if c.deflation is not None]
     if not deflations:
         return loading
-    unloading = fit_sphere(deflations, radius, thickness, laws, bootstrap, seed)
+    unloading = fit_membrane(deflations, geometry, thickness, laws, bootstrap, seed)
     unloading.notes[:] = [f'unloading: {note}' for note in unloading.notes]
     low, high = shared_volumes(cycles)
     best = unloading.best
