@@ -1502,7 +1502,16 @@ def _node_classes() -> dict[str, Any]:
     from softseq_ros.nodes.sim_clock import SimClockNode
     from softseq_ros.nodes.syringe_pump import SyringePumpNode
     return {'syringe_pump': SyringePumpNode, 'actuator': ActuatorNode, 'camera': CameraNode,
-            'sim_clock': SimClockNode, 'recorder': Recorder, 'pressure_hold': PressureHoldNode}
+            'sim_clock': SimClockNode, 'recorder': Recorder, 'pressure_hold': PressureHoldNode,
+            # The pump node driving a regulator: its parameters follow from its scene.
+            REGULATOR_PUMP: SyringePumpNode}
+
+
+# The pump node on a scene behind a pressure regulator (docs/supply.md), by this name here.
+REGULATOR_PUMP = 'syringe_pump (regulator)'
+# Parameters a node class is declared with before its own, for the nodes whose parameters
+# depend on them.
+DECLARED_WITH = {REGULATOR_PUMP: {'scene': 'fig1_regulator_quasistatic'}}
 
 
 # Executables whose nodes the node_parameter class does not build, and why (a test holds
@@ -1516,6 +1525,7 @@ NODES_TRIED_ELSEWHERE = {
 
 def _base_overrides(node: str, folder: Path) -> dict[str, Any]:
     return {'syringe_pump': {'scene': 'fig1_none', 'autostart': False},
+            REGULATOR_PUMP: {'scene': 'fig1_regulator_quasistatic', 'autostart': False},
             'actuator': {'scene': 'fig1_none', 'state_file': '', 'resume_timeout_s': 0.0},
             'camera': {'scene': 'fig1_none'},
             'sim_clock': {},
@@ -1555,7 +1565,8 @@ def _values_for(default: Any) -> list[tuple[str, Any, bool]]:
 def _parameters_of(node: str) -> list[tuple[str, Any, bool]]:
     from softseq_ros.nodes.runner import declared_parameters
     found = [(name, default, descriptor.read_only)
-             for name, default, descriptor in declared_parameters(_node_classes()[node])]
+             for name, default, descriptor in declared_parameters(
+                 _node_classes()[node], DECLARED_WITH.get(node))]
     return found + [('use_sim_time', False, False)]
 
 

@@ -71,6 +71,9 @@ class _DryNode(Node):
     def __init__(self, node_name: str, **_node_kwargs: Any) -> None:
         self._dry_name = node_name
         self._dry_declared: dict[str, tuple[Any, ParameterDescriptor]] = {}
+        # Values given in place of defaults (a scene, say): the declarations that follow
+        # from them, as a node started with them makes them.
+        self._dry_values: dict[str, Any] = dict(getattr(self, '_dry_given', {}))
 
     def __getattribute__(self, name: str) -> Any:
         if name in _NODE_API and name not in _DRY_API:
@@ -97,7 +100,7 @@ class _DryNode(Node):
                           ignore_override: bool = False) -> Parameter:
         default = None if isinstance(value, Parameter.Type) else value
         self._dry_declared[name] = (default, descriptor or ParameterDescriptor())
-        return Parameter(name, value=default)
+        return Parameter(name, value=self._dry_values.get(name, default))
 
     def has_parameter(self, name: str) -> bool:
         return name in self._dry_declared or name == 'use_sim_time'
@@ -108,6 +111,7 @@ class _DryNode(Node):
         if name not in self._dry_declared:
             raise _DeclarationsOverError(name)
         default, descriptor = self._dry_declared[name]
+        default = self._dry_values.get(name, default)
         if default is None:
             if descriptor.dynamic_typing:
                 return Parameter(name)   # as rclpy: a dynamically typed one reads as not set
@@ -116,18 +120,20 @@ class _DryNode(Node):
 
 
 _NODE_API = frozenset(name for name in dir(Node) if not name.startswith('__'))
-_DRY_API = frozenset(vars(_DryNode)) | {'_dry_name', '_dry_declared'}
+_DRY_API = frozenset(vars(_DryNode)) | {'_dry_name', '_dry_declared', '_dry_values',
+                                         '_dry_given'}
 
 
-def declared_parameters(node_class: Callable[..., Node]
+def declared_parameters(node_class: Callable[..., Node], given: dict[str, Any] | None = None
                         ) -> list[tuple[str, Any, ParameterDescriptor]]:
     """
     (name, default, descriptor) of every parameter ``node_class`` declares, in order.
 
-    The node's ``__init__`` runs on a :class:`_DryNode` (defaults of the default scene) up to
-    its first step that would start something.
+    The node's ``__init__`` runs on a :class:`_DryNode` (defaults of the default scene, or the
+    values ``given``, e.g. another scene) up to its first step that would start something.
     """
-    dry_class = type(f'Dry{node_class.__name__}', (node_class, _DryNode), {})
+    dry_class = type(f'Dry{node_class.__name__}', (node_class, _DryNode),
+                     {'_dry_given': dict(given or {})})
     node = object.__new__(dry_class)
     try:
         node.__init__()
