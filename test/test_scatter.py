@@ -122,6 +122,8 @@ BAD_INPUTS = {
     'confidence_above_one': (['--vary', 'top.thickness_m=normal:5%', '--confidence', '1.5'],
                              '--confidence'),
     'workers_zero': (['--vary', 'top.thickness_m=normal:5%', '--workers', '0'], '--workers'),
+    'fem_points_one': (['--vary', 'top.thickness_m=normal:5%', '--fem-points', '1'],
+                       '--fem-points: unit cells per drawn geometry key'),
 }
 
 

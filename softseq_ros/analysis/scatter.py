@@ -10,7 +10,12 @@ A scene gives the nominal segments; each varied parameter gets a distribution (d
 - a table (or a design's FEM table): ``pressure_scale`` (every row's pressure times the drawn
   factor; 1 is the table) and ``noise_std_pa`` (Gaussian noise of that deviation [Pa] added to
   every row, a fresh draw per sample; a scene that smooths the table smooths the noisy rows
-  with the same options).
+  with the same options);
+- a segment design's FEM table, besides: ``modulus_scale`` (every modulus of its law times the
+  factor: exactly its pressure times it) or a one-modulus law's ``material.shear_modulus_pa``,
+  and ``geometry.membrane_thickness_m`` / ``geometry.wall_thickness_m``, read from the
+  design's unit cells computed (or found cached) on a grid over the draws' range and
+  interpolated (:func:`with_fem_grid`).
 
 A distribution is ``normal:MEAN,STD``, ``normal:P%`` (mean: the scene's value, deviation: P %
 of it), ``uniform:LOW,HIGH`` or ``uniform:P%`` (the scene's value +- P %); a noise is its
@@ -63,8 +68,17 @@ DEFAULT_CONFIDENCE = 0.95
 # The sweep of each sample: as many volumes as `softseq classify` takes.
 SWEEP_SAMPLES = 4001
 TABLE_KEYS = ('pressure_scale', 'noise_std_pa')
+# A design's geometry drawn through its unit cells' FEM tables on a grid (docs/scatter.md).
+DESIGN_GEOMETRY_KEYS = ('membrane_thickness_m', 'wall_thickness_m')
+DEFAULT_FEM_POINTS = 3
+MAX_FEM_POINTS = 9
+# A grid value this close to the scene's value is the scene's value (its own table).
+SAME_VALUE_RTOL = 1e-9
 _NAME = re.compile(r'^([A-Za-z][A-Za-z0-9_]*)\.([A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])?'
                    r'(?:\.[A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])?)*)$')
+
+
+Show = Callable[[str], None]
 
 
 class ScatterError(UserError):
@@ -272,11 +286,7 @@ def parameters_of(scene: Any, vary: dict[str, str], option: str = '--vary') -> l
         entry = _entry(scene.segments[index])
         key = _parse_key(key_text)
         if entry is None:
-            if key_text not in TABLE_KEYS:
-                raise ScatterError(f'{where}: segment {segment_name} is a table: it has '
-                                   f'{" and ".join(TABLE_KEYS)}, not {key_text!r} (its rows fix '
-                                   'its curve)')
-            nominal = 1.0 if key_text == 'pressure_scale' else 0.0
+            nominal = _table_nominal(where, scene.segments[index], key_text)
         else:
             model = next(k for k in entry if k not in ('name', 'length_m'))
             leaves = _leaves(entry[model])
@@ -296,11 +306,89 @@ def parameters_of(scene: Any, vary: dict[str, str], option: str = '--vary') -> l
             values = [p.nominal for p in parameters]
             values[k] = value
             try:
+                if parameter.key[0] == 'geometry':
+                    # A design's geometry: the design file's own checks, before any FEM.
+                    _cell_design(_design_of(scene.segments[parameter.segment]),
+                                 {parameter.key[1]: value})
                 model.segments_at(values)
             except ValueError as err:
                 raise ScatterError(f'{option} {parameter.name}={parameter.distribution.text}: '
                                    f'its {end} draw, {value:.6g}, is refused: {err}') from None
     return parameters
+
+
+def _design_of(segment: Any) -> Any:
+    """The segment design (softseq_ros.scene.design) whose cached FEM table ``segment`` is."""
+    from pathlib import Path
+
+    from softseq_ros.scene.design import design_from_dict
+
+    identity = segment.design
+    geometry = dict(identity['geometry'])
+    if geometry.get('wall_reading', 'skin_bands') == 'skin_bands':
+        geometry.pop('skin_band_thickness_m', None)
+    if geometry.get('membrane_thickness_factors') is None:
+        geometry.pop('membrane_thickness_factors', None)
+    # The cache names a table NAME-HASH.csv: the design's name, shared with `softseq fem`.
+    stem = Path(segment.source).stem
+    name = stem.rsplit('-', 1)[0] if '-' in stem else segment.name
+    material = identity['material']
+    return design_from_dict({'name': name, 'geometry': geometry,
+                             'material': {'law': material['law'], **material['params']},
+                             'mesh': dict(identity['mesh']), 'volume': dict(identity['volume'])},
+                            f'the design of segment {segment.name}')
+
+
+def _only_modulus(law: str) -> str | None:
+    """The law's one parameter in Pa, when it has one only (its stiffness): else None."""
+    from softseq_ros.segments.materials import material_parameter_names
+
+    moduli = [name for name in material_parameter_names(law) if name.endswith('_pa')]
+    return moduli[0] if len(moduli) == 1 and law != 'ogden' else None
+
+
+def _table_nominal(where: str, segment: Any, key_text: str) -> float:
+    """
+    The scene's value of a table's parameter (a design's FEM table has more of them).
+
+    ScatterError naming the keys the segment has, when it has not this one.
+    """
+    if key_text in TABLE_KEYS:
+        return 1.0 if key_text == 'pressure_scale' else 0.0
+    if segment.design is None:
+        raise ScatterError(f'{where}: segment {segment.name} is a table: it has '
+                           f'{" and ".join(TABLE_KEYS)}, not {key_text!r} (its rows fix '
+                           'its curve)')
+    design = _design_of(segment)
+    law = design.material.law
+    modulus = _only_modulus(law)
+    known = [*TABLE_KEYS, 'modulus_scale', *(f'geometry.{k}' for k in DESIGN_GEOMETRY_KEYS),
+             *([f'material.{modulus}'] if modulus else [])]
+    if key_text == 'modulus_scale':
+        return 1.0
+    group, _, key = key_text.partition('.')
+    if group == 'geometry' and key in DESIGN_GEOMETRY_KEYS:
+        if design.geometry.membrane_thickness_factors is not None:
+            raise ScatterError(f'{where}: the design of segment {segment.name} scales each '
+                               'membrane (membrane_thickness_factors, a whole segment); its '
+                               'geometry is drawn through unit cells, which have one membrane')
+        return float(getattr(design.geometry, key))
+    if group == 'material' and key == modulus:
+        return float(design.material.params[key])
+    if group == 'material' and key in design.material.params:
+        raise ScatterError(f'{where}: {key} alone changes the shape of the {law} law, not only '
+                           f'its stiffness; vary {segment.name}.modulus_scale (every modulus '
+                           'of the law by one factor)')
+    raise ScatterError(f'{where}: segment {segment.name} is the FEM table of design '
+                       f'{design.name}: it has {", ".join(known)}, not {key_text!r}')
+
+
+def _cell_design(design: Any, geometry: dict[str, float]) -> Any:
+    """The unit cell of a design with these geometry values (DesignError: refused)."""
+    from softseq_ros.scene.design import with_changes
+
+    return with_changes(design, {**{f'geometry.{k}': float(v) for k, v in geometry.items()},
+                                 'mesh.model': 'unit_cell'})
 
 
 def read_vary(vary: Sequence[str] | None, spec: Any = None) -> dict[str, str]:
@@ -370,6 +458,9 @@ class ScatterModel:
     parameters: tuple[Parameter, ...]
     supply: Any = None
     resolution: int | None = None
+    # Per segment, the unit cells' FEM tables interpolated over its drawn geometry
+    # (softseq_ros.fem.design_interpolation.SegmentFamily), or None: :func:`with_fem_grid`.
+    families: tuple = ()
 
     @classmethod
     def of(cls, scene: Any, parameters: Sequence[Parameter]) -> 'ScatterModel':
@@ -394,7 +485,12 @@ class ScatterModel:
         for index, changes in by_segment.items():
             entry = self.entries[index]
             if entry is None:
-                segments[index] = _table_at(segments[index], changes)
+                family = self.families[index] if self.families else None
+                geometry = {p.key[1]: v for p, v in changes if p.key[0] == 'geometry'}
+                table = segments[index]
+                if family is not None:
+                    table = family.build(geometry, name=table.name)
+                segments[index] = _table_at(table, changes)
                 continue
             entry = copy.deepcopy(entry)
             model = next(k for k in entry if k not in ('name', 'length_m'))
@@ -407,6 +503,61 @@ class ScatterModel:
         return tuple(segments)
 
 
+def with_fem_grid(model: ScatterModel, points: int = DEFAULT_FEM_POINTS,
+                  cache_dir: Any = None, workers: int | None = None,
+                  scheduler: str | None = None, progress: Show | None = None
+                  ) -> tuple[ScatterModel, list[dict]]:
+    """
+    The model with each design segment whose geometry is drawn read from its unit cells' FEM.
+
+    The unit cell of the segment's design (its material and mesh, ``mesh.model: unit_cell``)
+    at ``points`` values of each drawn geometry key, evenly from the lowest draw to the
+    highest (the scene's value itself where a grid point falls on it), every combination:
+    tables from the FEM cache (``cache_dir``, default softseq's), the missing ones computed
+    on the shared executor. A sample's segment is those tables interpolated multilinearly at
+    fixed fluid volume per cell (as ``softseq design`` does). Returns the model and, per
+    segment, what its grid is (JSON).
+    """
+    from dataclasses import replace
+    import itertools
+
+    from softseq_ros.fem.design_grid import ensure_tables
+    from softseq_ros.fem.design_interpolation import SegmentFamily
+    from softseq_ros.fem.design_problem import SegmentSpace
+
+    families: list[Any] = [None] * len(model.segments)
+    grids = []
+    for index, segment in enumerate(model.segments):
+        drawn = [p for p in model.parameters if p.segment == index and p.key[0] == 'geometry']
+        if not drawn:
+            continue
+        own = _design_of(segment)
+        design = _cell_design(own, {})
+        axes = {}
+        for parameter in drawn:
+            values = np.linspace(*parameter.distribution.ends(), points)
+            values[np.isclose(values, parameter.nominal, rtol=SAME_VALUE_RTOL, atol=0.0)] = \
+                parameter.nominal
+            axes[str(parameter.key[1])] = values
+        cells = {at: _cell_design(design, {k: axes[k][i] for k, i in zip(axes, at)})
+                 for at in itertools.product(range(points), repeat=len(axes))}
+        what = f'scatter: segment {segment.name}'
+        if progress is not None:
+            progress(f'{what}: {len(cells)} unit-cell FEM tables of design {design.name} '
+                     f'(mesh {design.mesh.element_size_m * 1e3:g} mm), computed where not cached')
+        paths, runs = ensure_tables(list(cells.values()), cache_dir, workers, scheduler,
+                                    progress, what)
+        space = SegmentSpace(segment.name, design,
+                             {k: (float(v[0]), float(v[-1])) for k, v in axes.items()})
+        families[index] = SegmentFamily.from_tables(
+            space, axes, {at: (paths[d.digest()], d) for at, d in cells.items()})
+        grids.append({'segment': segment.name, 'design': design.name,
+                      'scene_model': own.mesh.model, 'element_size_m': design.mesh.element_size_m,
+                      'axes': {k: [float(x) for x in v] for k, v in axes.items()},
+                      'tables': len(cells), 'computed': runs})
+    return replace(model, families=tuple(families)), grids
+
+
 def _table_at(segment: Any, changes: list[tuple[Parameter, float]]) -> Any:
     """A table with its pressures scaled and a noise drawn (and smoothed as the scene does)."""
     from softseq_ros.segments.models import TabulatedSegment
@@ -414,11 +565,14 @@ def _table_at(segment: Any, changes: list[tuple[Parameter, float]]) -> Any:
 
     pressures = np.array(segment.pressures, dtype=float)
     for parameter, value in changes:
-        if parameter.key == ('pressure_scale',):
-            if not value > 0.0:
-                raise ValueError(f'{parameter.name}: a pressure scale must be > 0, got '
-                                 f'{value:.6g}')
-            pressures = pressures * value
+        if parameter.key[0] in ('pressure_scale', 'modulus_scale', 'material'):
+            # A design's every modulus times k (its bulk modulus a fixed multiple of its shear
+            # modulus): the FEM's state at each volume is the same, its pressure k times.
+            scale = value / parameter.nominal if parameter.key[0] == 'material' else value
+            if not scale > 0.0:
+                what = 'pressure scale' if parameter.key[0] == 'pressure_scale' else 'modulus'
+                raise ValueError(f'{parameter.name}: a {what} must be > 0, got {value:.6g}')
+            pressures = pressures * scale
     for parameter, value in changes:
         if parameter.key == ('noise_std_pa',):
             draw = np.random.default_rng(int(value * 2**53))
@@ -659,6 +813,10 @@ class ScatterResult:
     sobol_base: int
     sobol: dict = field(default_factory=dict)
     sobol_samples: list[dict] = field(default_factory=list)
+    # Per design segment whose geometry is drawn: its unit cells' FEM grid (with_fem_grid).
+    fem_grids: list[dict] = field(default_factory=list)
+    # What the reader must know of how the samples were made (printed with the summary).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def stop(self) -> dict:
@@ -673,7 +831,8 @@ class ScatterResult:
         """Every number, SI (m^3, Pa), JSON-able."""
         return {'scene': self.scene, 'seed': self.seed, 'confidence': self.confidence,
                 'parameters': [p.to_dict() for p in self.parameters],
-                'stop': self.stop, 'summary': self.summary,
+                'stop': self.stop, 'notes': self.notes, 'fem_grids': self.fem_grids,
+                'summary': self.summary,
                 'sobol': {'base_samples': self.sobol_base,
                           'evaluations': len(self.sobol_samples), 'indices': self.sobol},
                 'samples': self.samples, 'sobol_samples': self.sobol_samples}
@@ -683,14 +842,13 @@ class _Enough(Exception):  # noqa: N818 - no error: the run has what it needs
     """Raised from a run's progress: the samples in order so far are enough."""
 
 
-Show = Callable[[str], None]
-
 
 def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFAULT_SAMPLES,
                 until_width: float | None = None, confidence: float = DEFAULT_CONFIDENCE,
                 seed: int = 0, sobol: int = DEFAULT_SOBOL, workers: int | None = None,
                 backend: str = 'processes', scheduler: str | None = None,
-                progress: Show | None = None) -> ScatterResult:
+                progress: Show | None = None, fem_points: int = DEFAULT_FEM_POINTS,
+                fem_cache: Any = None) -> ScatterResult:
     """
     The Monte Carlo distribution of the scene's sequence, and the Sobol indices.
 
@@ -698,10 +856,20 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
     of CHECK_EVERY samples (in order) where every probability's interval is at most that wide.
     ``sobol``: base samples of the Sobol design (a power of 2; 0: none). ``workers``,
     ``backend`` and ``scheduler`` as :func:`softseq_ros.parallel.run_jobs` takes them;
-    ``progress(line)`` hears how far the run is.
+    ``progress(line)`` hears how far the run is. A design segment's drawn geometry is read
+    from ``fem_points`` unit cells per key (:func:`with_fem_grid`; ``fem_cache``: where their
+    tables are cached, default softseq's FEM cache).
     """
-    check_settings(samples, until_width, confidence, sobol, len(parameters))
-    model = ScatterModel.of(scene, parameters)
+    check_settings(samples, until_width, confidence, sobol, len(parameters), fem_points)
+    model, grids = with_fem_grid(ScatterModel.of(scene, parameters), fem_points, fem_cache,
+                                 workers, scheduler, progress)
+    notes = [f'segment {g["segment"]}: its geometry from {g["tables"]} unit-cell FEM tables of '
+             f'design {g["design"]} ({", ".join(g["axes"])}; mesh '
+             f'{g["element_size_m"] * 1e3:g} mm; {g["computed"]} computed, the rest cached), '
+             'interpolated at each draw'
+             + ('' if g['scene_model'] == 'unit_cell' else
+                f"; the scene's design is a {g['scene_model']}, the samples its unit cell")
+             for g in grids]
     dims = len(parameters)
     jobs = [(model, start, sample_inputs(seed, start, min(CHUNK, samples - start), dims))
             for start in range(0, samples, CHUNK)]
@@ -731,7 +899,8 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
     except _Enough:
         pass
     result = ScatterResult(scene.name, list(parameters), seed, confidence, kept,
-                           summarise(kept, confidence), samples, until_width, sobol)
+                           summarise(kept, confidence), samples, until_width, sobol,
+                           fem_grids=grids, notes=notes)
     if sobol:
         result.sobol_samples, result.sobol = _sobol_run(model, sobol, seed, confidence,
                                                         workers, backend, scheduler, progress)
@@ -771,8 +940,11 @@ def _sobol_run(model: ScatterModel, base: int, seed: int, confidence: float,
 
 
 def check_settings(samples: int, until_width: float | None, confidence: float, sobol: int,
-                   dimensions: int) -> None:
+                   dimensions: int, fem_points: int = DEFAULT_FEM_POINTS) -> None:
     """Refuse, naming the option, a run that cannot give what it is asked for."""
+    if not 2 <= fem_points <= MAX_FEM_POINTS:
+        raise ScatterError(f'--fem-points: unit cells per drawn geometry key of a design, from '
+                           f'2 to {MAX_FEM_POINTS}, got {fem_points}')
     if not 1 <= samples <= MAX_SAMPLES:
         raise ScatterError(f'--samples: a number of samples from 1 to {MAX_SAMPLES}, got '
                            f'{samples}')

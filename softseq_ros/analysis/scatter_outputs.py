@@ -93,6 +93,7 @@ def summary_lines(result: ScatterResult, written: Sequence[Path] = ()) -> list[s
     for parameter in result.parameters:
         lines.append(f'  {parameter.name}: {parameter.distribution.describe()} (scene: '
                      f'{parameter.nominal:.6g})')
+    lines += [f'  note: {note}' for note in result.notes]
     types = summary['sequence_type']
     lines.append('  sequence type: ' + ', '.join(
         f'{kind} {_interval(types[kind])}' for kind in
