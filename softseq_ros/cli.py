@@ -530,7 +530,9 @@ def _scatter(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.scatter import (
         ScatterError,
         check_settings,
+        correlation_of,
         parameters_of,
+        read_correlate,
         read_vary,
         run_scatter,
     )
@@ -547,6 +549,7 @@ def _scatter(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise ScatterError(f'--seed: a whole number >= 0, got {args.seed}')
     vary = read_vary(args.vary, args.spec)
+    correlate = read_correlate(args.correlate, args.spec)
     check_settings(args.samples, args.until_width, args.confidence, args.sobol,
                    max(len(vary), 1), args.fem_points)
     workers = worker_option('--workers', args.workers)
@@ -556,6 +559,7 @@ def _scatter(args: argparse.Namespace) -> int:
     style = _figure_style(args)
     scene = load_scene(args.scene)
     parameters = parameters_of(scene, vary)
+    correlation = correlation_of(parameters, correlate)
     out = args.out or Path('bags') / f'scatter_{scene.name}'
     check_output_folder(out, '--out' if args.out is not None else 'the output folder')
     stream = None if args.quiet else sys.stderr
@@ -565,7 +569,7 @@ def _scatter(args: argparse.Namespace) -> int:
                          backend='dask' if scheduler is not None else 'processes',
                          progress=None if stream is None else
                          (lambda line: write_progress(stream, line)),
-                         fem_points=args.fem_points)
+                         fem_points=args.fem_points, correlation=correlation)
     end_progress(stream)
     written = write_scatter_outputs(result, out, style)
     for line in summary_lines(result, written):
@@ -878,6 +882,10 @@ def build_parser() -> argparse.ArgumentParser:
     scatter.add_argument('--spec', type=_given_path('a spec file'), metavar='FILE.yaml',
                          help='YAML with one key, vary: a mapping of NAME: DIST as --vary '
                          'takes them')
+    scatter.add_argument('--correlate', action='append', metavar='A,B=RHO',
+                         help='correlate the draws of two varied parameters, repeatable: '
+                         'top.modulus_scale,bottom.modulus_scale=0.8 (one batch of rubber); '
+                         'rho is the correlation of their normal scores (docs/scatter.md)')
     scatter.add_argument('--samples', type=int, default=1000, metavar='N',
                          help='Monte Carlo samples, at most (default 1000)')
     scatter.add_argument('--until-width', type=float, metavar='W',

@@ -71,6 +71,9 @@ TABLE_KEYS = ('pressure_scale', 'noise_std_pa')
 # A design's geometry drawn through its unit cells' FEM tables on a grid (docs/scatter.md).
 DESIGN_GEOMETRY_KEYS = ('membrane_thickness_m', 'wall_thickness_m')
 DEFAULT_FEM_POINTS = 3
+# Why a run with every parameter in one correlated group has no Sobol indices.
+ONE_GROUP = ('no Sobol indices: every parameter is in one correlated group, which explains all '
+             'of every output')
 MAX_FEM_POINTS = 9
 # A grid value this close to the scene's value is the scene's value (its own table).
 SAME_VALUE_RTOL = 1e-9
@@ -416,8 +419,141 @@ def read_vary(vary: Sequence[str] | None, spec: Any = None) -> dict[str, str]:
     return found
 
 
+def read_correlate(words: Sequence[str] | None, spec: Any = None) -> dict[tuple[str, str], float]:
+    """
+    ``{(name, name): rho}`` from ``--correlate A,B=RHO`` words and a spec file's ``correlate``.
+
+    A word that is no ``A,B=RHO``, a correlation that is no number from -1 to 1, a parameter
+    with itself, a pair given twice (in either order): ScatterError naming the option.
+    """
+    given = [(word, '--correlate') for word in words or ()]
+    if spec is not None:
+        given += [(f'{pair}={rho}', f'--spec {spec}: correlate')
+                  for pair, rho in _spec_file(spec).get('correlate', {}).items()]
+    found: dict[tuple[str, str], float] = {}
+    for word, option in given:
+        pair, equals, text = word.partition('=')
+        names = tuple(name.strip() for name in pair.split(','))
+        if not equals or len(names) != 2 or not all(names) or not text.strip():
+            raise ScatterError(f'{option}: {word!r} is not NAME,NAME=RHO, e.g. '
+                               'top.modulus_scale,bottom.modulus_scale=0.8')
+        where = f'{option} {names[0]},{names[1]}'
+        rho = _number(where, text.strip())
+        if not -1.0 <= rho <= 1.0:
+            raise ScatterError(f'{where}: a correlation from -1 to 1, got {text.strip()}')
+        if names[0] == names[1]:
+            raise ScatterError(f'{where}: a parameter is not correlated with itself')
+        key = (names[0], names[1])
+        if key in found or key[::-1] in found:
+            raise ScatterError(f'{where}: given twice')
+        found[key] = rho
+    return found
+
+
+@dataclass(frozen=True)
+class Correlation:
+    """
+    Correlated draws: the parameters' normal scores are correlated (a Gaussian copula).
+
+    Each parameter's uniform input ``u`` has the normal score ``z = Phi^-1(u)``; within a
+    group of parameters tied by correlations the scores are mixed, ``z' = L z`` with ``L L^T``
+    the group's correlation matrix, and ``u' = Phi(z')`` goes to the parameter's distribution
+    as before: each parameter keeps its distribution, two normal ones have correlation rho,
+    two uniform ones rank correlation (6/pi) asin(rho/2).
+    """
+
+    pairs: tuple[tuple[str, str, float], ...]
+    groups: tuple[tuple[int, ...], ...]     # parameters drawn together, more than one each
+    factors: tuple[FloatArray, ...]         # per group, L (L L^T = its correlation matrix)
+
+    def mix(self, inputs: FloatArray) -> FloatArray:
+        """Rows of independent uniform inputs made correlated (the others left as they are)."""
+        from scipy.special import ndtr, ndtri
+
+        mixed = np.array(inputs, dtype=float, copy=True)
+        for group, factor in zip(self.groups, self.factors):
+            scores = ndtri(np.clip(mixed[:, group], TAIL, 1.0 - TAIL))
+            mixed[:, group] = ndtr(scores @ factor.T)
+        return mixed
+
+    def group_names(self, names: Sequence[str]) -> list[str]:
+        """Each parameter's Sobol group: its own name, or its group's names joined by +."""
+        found = list(names)
+        for group in self.groups:
+            joined = '+'.join(names[k] for k in group)
+            for k in group:
+                found[k] = joined
+        return found
+
+    def to_dict(self) -> list[dict]:
+        """The correlations as given, as JSON."""
+        return [{'parameters': [a, b], 'rho': rho} for a, b, rho in self.pairs]
+
+
+def correlation_of(parameters: Sequence[Parameter], given: dict[tuple[str, str], float],
+                   option: str = '--correlate') -> Correlation | None:
+    """
+    The correlations of ``given`` between ``parameters``, checked; None when none are given.
+
+    ScatterError naming ``option``: a parameter not varied, a table's noise (its input picks
+    a draw: nothing to correlate), correlations that cannot hold together (their matrix not
+    positive semi-definite).
+    """
+    if not given:
+        return None
+    names = [p.name for p in parameters]
+    matrix = np.eye(len(names))
+    for (a, b), rho in given.items():
+        for name in (a, b):
+            if name not in names:
+                raise ScatterError(f'{option} {a},{b}: {name} is not varied (the parameters: '
+                                   f'{", ".join(names)})')
+            if parameters[names.index(name)].distribution.kind == 'noise':
+                raise ScatterError(f"{option} {a},{b}: {name} is a table's noise: its input "
+                                   'picks a draw of the noise, nothing to correlate')
+        i, j = names.index(a), names.index(b)
+        matrix[i, j] = matrix[j, i] = rho
+    # The groups: parameters joined by a non-zero correlation, directly or through others.
+    group_of = list(range(len(names)))
+    for (a, b), rho in given.items():
+        if rho != 0.0:
+            old, new = group_of[names.index(a)], group_of[names.index(b)]
+            group_of = [new if g == old else g for g in group_of]
+    groups, factors = [], []
+    for label in dict.fromkeys(group_of):
+        group = tuple(k for k, g in enumerate(group_of) if g == label)
+        if len(group) < 2:
+            continue
+        block = matrix[np.ix_(group, group)]
+        eigenvalues, vectors = np.linalg.eigh(block)
+        if eigenvalues.min() < -1e-9:
+            shown = ', '.join(names[k] for k in group)
+            raise ScatterError(f'{option}: the correlations between {shown} cannot hold '
+                               f'together (their matrix has the eigenvalue '
+                               f'{eigenvalues.min():.3g} < 0)')
+        try:
+            factor = np.linalg.cholesky(block)
+        except np.linalg.LinAlgError:   # singular (a correlation of 1): the square root
+            factor = vectors * np.sqrt(np.clip(eigenvalues, 0.0, None))
+        groups.append(group)
+        factors.append(factor)
+    pairs = tuple((a, b, float(rho)) for (a, b), rho in given.items())
+    return Correlation(pairs, tuple(groups), tuple(factors))
+
+
 def _spec_vary(path: Any) -> dict[str, str]:
     """The ``vary`` block of a spec file: ``{name: distribution text}``."""
+    found = {}
+    for name, value in _spec_file(path)['vary'].items():
+        if not isinstance(name, str) or isinstance(value, (bool, dict, list)) or value is None:
+            raise ScatterError(f'--spec {path}: vary.{name}: give a distribution as text, e.g. '
+                               'normal:5%, or a noise in Pa')
+        found[name] = str(value)
+    return found
+
+
+def _spec_file(path: Any) -> dict:
+    """A spec file, checked: ``vary`` (a mapping) and, optionally, ``correlate`` (one too)."""
     from softseq_ros.errors import read_regular_file
     from softseq_ros.yaml_text import parse_yaml
 
@@ -430,16 +566,12 @@ def _spec_vary(path: Any) -> dict[str, str]:
     except UnicodeDecodeError as err:
         raise ScatterError(f'--spec {path}: not UTF-8 text (byte {err.start})') from None
     data = parse_yaml(text, f'--spec {path}', ScatterError)
-    if not isinstance(data, dict) or set(data) != {'vary'} or not isinstance(data['vary'], dict):
-        raise ScatterError(f'--spec {path}: must be a mapping with one key, vary: a mapping of '
-                           'NAME: DISTRIBUTION (docs/scatter.md)')
-    found = {}
-    for name, value in data['vary'].items():
-        if not isinstance(name, str) or isinstance(value, (bool, dict, list)) or value is None:
-            raise ScatterError(f'--spec {path}: vary.{name}: give a distribution as text, e.g. '
-                               'normal:5%, or a noise in Pa')
-        found[name] = str(value)
-    return found
+    if (not isinstance(data, dict) or 'vary' not in data or not set(data) <= {'vary', 'correlate'}
+            or not all(isinstance(block, dict) for block in data.values())):
+        raise ScatterError(f'--spec {path}: must be a mapping with the key vary (a mapping of '
+                           'NAME: DISTRIBUTION) and, optionally, correlate (a mapping of '
+                           'NAME,NAME: RHO) (docs/scatter.md)')
+    return data
 
 
 # ------------------------------------------------------------------------------ the model
@@ -461,12 +593,24 @@ class ScatterModel:
     # Per segment, the unit cells' FEM tables interpolated over its drawn geometry
     # (softseq_ros.fem.design_interpolation.SegmentFamily), or None: :func:`with_fem_grid`.
     families: tuple = ()
+    # Correlations between the parameters' draws (:class:`Correlation`), or None.
+    correlation: Any = None
 
     @classmethod
-    def of(cls, scene: Any, parameters: Sequence[Parameter]) -> 'ScatterModel':
-        """The model of a loaded scene with these parameters varied."""
+    def of(cls, scene: Any, parameters: Sequence[Parameter],
+           correlation: Any = None) -> 'ScatterModel':
+        """The model of a loaded scene with these parameters varied (and correlated)."""
         return cls(tuple(scene.segments), tuple(_entry(s) for s in scene.segments),
-                   tuple(parameters), scene.supply, scene.solver.resolution)
+                   tuple(parameters), scene.supply, scene.solver.resolution,
+                   correlation=correlation)
+
+    def values_at(self, inputs: FloatArray) -> FloatArray:
+        """The parameters' values at rows of independent uniform inputs (correlated here)."""
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        if self.correlation is not None:
+            inputs = self.correlation.mix(inputs)
+        return np.column_stack([p.distribution.values(inputs[:, k])
+                                for k, p in enumerate(self.parameters)])
 
     def segments_at(self, values: Sequence[float]) -> tuple:
         """
@@ -635,9 +779,9 @@ def scatter_chunk(job: tuple) -> tuple[int, list[dict]]:
     """
     model, start, inputs = job
     found = []
-    for offset, u in enumerate(inputs):
+    for offset, row in enumerate(model.values_at(inputs) if len(inputs) else []):
         index = start + offset
-        values = [float(p.distribution.values(x)) for p, x in zip(model.parameters, u)]
+        values = [float(x) for x in row]
         try:
             numbers = measure(model.segments_at(values), model.supply, model.resolution)
         except (ValueError, ArithmeticError) as err:
@@ -736,29 +880,42 @@ def widest_interval(summary: dict) -> float:
 
 # ------------------------------------------------------------------------------ Sobol
 
-def sobol_inputs(dimensions: int, base: int, seed: int) -> FloatArray:
-    """Saltelli's design (first and total order): ``base x (dimensions + 2)`` uniform rows."""
+def sobol_inputs(dimensions: int, base: int, seed: int,
+                 groups: Sequence[str] | None = None) -> FloatArray:
+    """
+    Saltelli's design (first and total order): ``base x (groups + 2)`` uniform rows.
+
+    ``groups``: each input's group (None: each its own); a group's inputs are swapped
+    together between the design's matrices, so its indices are the group's.
+    """
     from SALib.sample import sobol as saltelli
 
-    problem = _problem(dimensions)
+    problem = _problem(dimensions, groups=groups)
     return np.asarray(saltelli.sample(problem, base, calc_second_order=False, scramble=True,
                                       seed=seed), dtype=float)
 
 
-def _problem(dimensions: int, names: Sequence[str] | None = None) -> dict:
-    return {'num_vars': dimensions,
-            'names': list(names) if names is not None else [f'x{i}' for i in range(dimensions)],
-            'bounds': [[0.0, 1.0]] * dimensions}
+def _problem(dimensions: int, names: Sequence[str] | None = None,
+             groups: Sequence[str] | None = None) -> dict:
+    problem = {'num_vars': dimensions,
+               'names': (list(names) if names is not None
+                         else [f'x{i}' for i in range(dimensions)]),
+               'bounds': [[0.0, 1.0]] * dimensions}
+    if groups is not None and len(set(groups)) < dimensions:
+        problem['groups'] = list(groups)
+    return problem
 
 
 def sobol_indices(names: Sequence[str], outputs: Sequence[float | None],
-                  confidence: float = DEFAULT_CONFIDENCE, seed: int = 0) -> dict:
+                  confidence: float = DEFAULT_CONFIDENCE, seed: int = 0,
+                  groups: Sequence[str] | None = None) -> dict:
     """
     First-order and total Sobol indices of one output over :func:`sobol_inputs`' rows.
 
     The indices do not depend on how each uniform input is mapped to its parameter (a monotone
     map per input keeps the variance decomposition), so they are those of the parameters. An
     output missing in some row, or the same in every row, has none: ``reason`` says why.
+    With ``groups`` (the design's), the indices are per group, by the group's name.
     """
     if any(y is None for y in outputs):
         missing = sum(y is None for y in outputs)
@@ -769,13 +926,16 @@ def sobol_indices(names: Sequence[str], outputs: Sequence[float | None],
     from SALib.analyze import sobol as jansen
 
     with np.errstate(all='ignore'):
-        result = jansen.analyze(_problem(len(names), names), y, calc_second_order=False,
+        problem = _problem(len(names), names, groups)
+        result = jansen.analyze(problem, y, calc_second_order=False,
                                 conf_level=confidence, num_resamples=200, seed=seed)
+    # SALib's groups come in the order they first appear.
+    shown = list(dict.fromkeys(problem.get('groups', names)))
     return {name: {'first_order': float(result['S1'][i]),
                    'first_order_interval_half_width': float(result['S1_conf'][i]),
                    'total': float(result['ST'][i]),
                    'total_interval_half_width': float(result['ST_conf'][i])}
-            for i, name in enumerate(names)}
+            for i, name in enumerate(shown)}
 
 
 def sobol_outputs(samples: Sequence[dict]) -> dict[str, list[float | None]]:
@@ -817,6 +977,7 @@ class ScatterResult:
     fem_grids: list[dict] = field(default_factory=list)
     # What the reader must know of how the samples were made (printed with the summary).
     notes: list[str] = field(default_factory=list)
+    correlation: Correlation | None = None
 
     @property
     def stop(self) -> dict:
@@ -831,6 +992,7 @@ class ScatterResult:
         """Every number, SI (m^3, Pa), JSON-able."""
         return {'scene': self.scene, 'seed': self.seed, 'confidence': self.confidence,
                 'parameters': [p.to_dict() for p in self.parameters],
+                'correlations': [] if self.correlation is None else self.correlation.to_dict(),
                 'stop': self.stop, 'notes': self.notes, 'fem_grids': self.fem_grids,
                 'summary': self.summary,
                 'sobol': {'base_samples': self.sobol_base,
@@ -848,7 +1010,8 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
                 seed: int = 0, sobol: int = DEFAULT_SOBOL, workers: int | None = None,
                 backend: str = 'processes', scheduler: str | None = None,
                 progress: Show | None = None, fem_points: int = DEFAULT_FEM_POINTS,
-                fem_cache: Any = None) -> ScatterResult:
+                fem_cache: Any = None, correlation: Correlation | None = None
+                ) -> ScatterResult:
     """
     The Monte Carlo distribution of the scene's sequence, and the Sobol indices.
 
@@ -858,10 +1021,12 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
     ``backend`` and ``scheduler`` as :func:`softseq_ros.parallel.run_jobs` takes them;
     ``progress(line)`` hears how far the run is. A design segment's drawn geometry is read
     from ``fem_points`` unit cells per key (:func:`with_fem_grid`; ``fem_cache``: where their
-    tables are cached, default softseq's FEM cache).
+    tables are cached, default softseq's FEM cache). ``correlation``: correlated draws
+    (:func:`correlation_of`); the Sobol indices are then those of its groups.
     """
     check_settings(samples, until_width, confidence, sobol, len(parameters), fem_points)
-    model, grids = with_fem_grid(ScatterModel.of(scene, parameters), fem_points, fem_cache,
+    model, grids = with_fem_grid(ScatterModel.of(scene, parameters, correlation), fem_points,
+                                 fem_cache,
                                  workers, scheduler, progress)
     notes = [f'segment {g["segment"]}: its geometry from {g["tables"]} unit-cell FEM tables of '
              f'design {g["design"]} ({", ".join(g["axes"])}; mesh '
@@ -900,8 +1065,12 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
         pass
     result = ScatterResult(scene.name, list(parameters), seed, confidence, kept,
                            summarise(kept, confidence), samples, until_width, sobol,
-                           fem_grids=grids, notes=notes)
-    if sobol:
+                           fem_grids=grids, notes=notes, correlation=correlation)
+    one_group = (correlation is not None and len(parameters) > 1
+                 and [len(g) for g in correlation.groups] == [len(parameters)])
+    if sobol and one_group:
+        result.notes.append(ONE_GROUP)
+    elif sobol:
         result.sobol_samples, result.sobol = _sobol_run(model, sobol, seed, confidence,
                                                         workers, backend, scheduler, progress)
     return result
@@ -921,7 +1090,9 @@ def _sobol_run(model: ScatterModel, base: int, seed: int, confidence: float,
                workers: int | None, backend: str, scheduler: str | None,
                progress: Show | None) -> tuple[list[dict], dict]:
     """The Sobol design's samples and, per output, each parameter's indices."""
-    inputs = sobol_inputs(len(model.parameters), base, seed)
+    names = [p.name for p in model.parameters]
+    groups = None if model.correlation is None else model.correlation.group_names(names)
+    inputs = sobol_inputs(len(model.parameters), base, seed, groups)
     jobs = [(model, start, inputs[start:start + CHUNK])
             for start in range(0, len(inputs), CHUNK)]
 
@@ -933,8 +1104,7 @@ def _sobol_run(model: ScatterModel, base: int, seed: int, confidence: float,
     chunks = run_jobs(scatter_chunk, jobs, workers=workers, backend=backend,
                       scheduler=scheduler, progress=heard, name=_chunk_name)
     rows = [row for _, found in chunks for row in found]
-    names = [p.name for p in model.parameters]
-    indices = {output: sobol_indices(names, values, confidence, seed)
+    indices = {output: sobol_indices(names, values, confidence, seed, groups)
                for output, values in sobol_outputs(rows).items()}
     return rows, indices
 
