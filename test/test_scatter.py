@@ -384,3 +384,40 @@ def test_one_correlated_group_of_every_parameter_has_no_sobol_indices_and_says_w
                                  correlation=correlation)
     assert result.sobol == {} and result.sobol_samples == []
     assert result.notes == [scatter.ONE_GROUP]
+
+
+# ------------------------------------------------------------------------------ other supplies
+
+def test_a_network_scene_is_scattered_quasi_statically_and_says_so():
+    import softseq_ros
+
+    vary = {'top.material.shear_modulus_pa': 'normal:3%'}
+    results = []
+    for name in ('fig1_asymmetric_dynamic', 'fig1_asymmetric'):
+        scene = softseq_ros.load_scene(name)
+        results.append(scatter.run_scatter(scene, scatter.parameters_of(scene, vary),
+                                           samples=10, sobol=0, workers=1))
+    dynamic, syringe = results
+    assert dynamic.notes == [
+        'fig1_asymmetric_dynamic has a fluid network; it is not sampled: every sample is '
+        'classified and measured quasi-statically, as softseq classify does it, not in time '
+        "at the pump's rate (softseq rates maps what the network's rate does)"]
+    assert syringe.notes == []
+    # The same segments without the network: the same samples, number for number.
+    assert dynamic.samples == syringe.samples
+    assert dynamic.to_dict()['notes'] == dynamic.notes
+
+
+def test_a_scene_behind_a_regulator_is_refused_in_one_line(tmp_path, capsys):
+    out = tmp_path / 'out'
+    code = main(['scatter', 'fig1_regulator_quasistatic', '--vary',
+                 'top.material.shear_modulus_pa=normal:3%', '--out', str(out), '--quiet'])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith('softseq scatter: error: ') and lines[0].endswith(
+        'fig1_regulator_quasistatic.yaml: supply.regulator: scatter classifies segments sharing '
+        'the volume a syringe pushes; behind a regulator each segment is an independent '
+        'hysteron (softseq graph shows its flips): scatter the pair without its regulator')
+    assert not out.exists()

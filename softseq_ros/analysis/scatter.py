@@ -270,6 +270,7 @@ def parameters_of(scene: Any, vary: dict[str, str], option: str = '--vary') -> l
     does not have (listing those it has), a distribution that cannot be drawn, a value at either
     end of a distribution that the segment refuses.
     """
+    check_scene(scene)
     if not vary:
         raise ScatterError(f'{option}: nothing to vary; give at least one NAME=DISTRIBUTION, '
                            'e.g. top.thickness_m=normal:5%')
@@ -392,6 +393,30 @@ def _cell_design(design: Any, geometry: dict[str, float]) -> Any:
 
     return with_changes(design, {**{f'geometry.{k}': float(v) for k, v in geometry.items()},
                                  'mesh.model': 'unit_cell'})
+
+
+def check_scene(scene: Any) -> None:
+    """
+    Refuse a scene whose samples could not be classified: one behind a pressure regulator.
+
+    Its segments do not share the volume a syringe pushes, so it has no sequence type of the
+    four (``softseq classify`` refuses it the same way).
+    """
+    if getattr(scene, 'regulator', None) is not None:
+        where = scene.path if scene.path is not None else scene.name
+        raise ScatterError(f'{where}: supply.regulator: scatter classifies segments sharing the '
+                           'volume a syringe pushes; behind a regulator each segment is an '
+                           'independent hysteron (softseq graph shows its flips): scatter the '
+                           'pair without its regulator')
+
+
+def scene_notes(scene: Any) -> list[str]:
+    """What a scatter of this scene does not sample, said with its summary."""
+    if getattr(scene, 'network', None) is None:
+        return []
+    return [f'{scene.name} has a fluid network; it is not sampled: every sample is classified '
+            'and measured quasi-statically, as softseq classify does it, not in time at the '
+            "pump's rate (softseq rates maps what the network's rate does)"]
 
 
 def read_vary(vary: Sequence[str] | None, spec: Any = None) -> dict[str, str]:
@@ -1025,16 +1050,18 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
     (:func:`correlation_of`); the Sobol indices are then those of its groups.
     """
     check_settings(samples, until_width, confidence, sobol, len(parameters), fem_points)
+    check_scene(scene)
     model, grids = with_fem_grid(ScatterModel.of(scene, parameters, correlation), fem_points,
-                                 fem_cache,
-                                 workers, scheduler, progress)
-    notes = [f'segment {g["segment"]}: its geometry from {g["tables"]} unit-cell FEM tables of '
-             f'design {g["design"]} ({", ".join(g["axes"])}; mesh '
-             f'{g["element_size_m"] * 1e3:g} mm; {g["computed"]} computed, the rest cached), '
-             'interpolated at each draw'
-             + ('' if g['scene_model'] == 'unit_cell' else
-                f"; the scene's design is a {g['scene_model']}, the samples its unit cell")
-             for g in grids]
+                                 fem_cache, workers, scheduler, progress)
+    notes = scene_notes(scene)
+    for g in grids:
+        notes.append(f'segment {g["segment"]}: its geometry from {g["tables"]} unit-cell FEM '
+                     f'tables of design {g["design"]} ({", ".join(g["axes"])}; mesh '
+                     f'{g["element_size_m"] * 1e3:g} mm; {g["computed"]} computed, the rest '
+                     'cached), interpolated at each draw'
+                     + ('' if g['scene_model'] == 'unit_cell' else
+                        f"; the scene's design is a {g['scene_model']}, the samples its unit "
+                        'cell'))
     dims = len(parameters)
     jobs = [(model, start, sample_inputs(seed, start, min(CHUNK, samples - start), dims))
             for start in range(0, samples, CHUNK)]
