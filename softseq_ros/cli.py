@@ -562,7 +562,9 @@ def _scatter(args: argparse.Namespace) -> int:
     from softseq_ros.analysis.scatter import (
         ScatterError,
         check_settings,
+        correlation_of,
         parameters_of,
+        read_correlate,
         read_vary,
         run_scatter,
     )
@@ -579,8 +581,9 @@ def _scatter(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise ScatterError(f'--seed: a whole number >= 0, got {args.seed}')
     vary = read_vary(args.vary, args.spec)
+    correlate = read_correlate(args.correlate, args.spec)
     check_settings(args.samples, args.until_width, args.confidence, args.sobol,
-                   max(len(vary), 1))
+                   max(len(vary), 1), args.fem_points)
     workers = worker_option('--workers', args.workers)
     scheduler = scheduler_option('--scheduler', args.scheduler)
     if scheduler is not None and workers is not None:
@@ -588,6 +591,7 @@ def _scatter(args: argparse.Namespace) -> int:
     style = _figure_style(args)
     scene = load_scene(args.scene)
     parameters = parameters_of(scene, vary)
+    correlation = correlation_of(parameters, correlate)
     out = args.out or Path('bags') / f'scatter_{scene.name}'
     check_output_folder(out, '--out' if args.out is not None else 'the output folder')
     stream = None if args.quiet else sys.stderr
@@ -596,7 +600,8 @@ def _scatter(args: argparse.Namespace) -> int:
                          workers=workers, scheduler=scheduler,
                          backend='dask' if scheduler is not None else 'processes',
                          progress=None if stream is None else
-                         (lambda line: write_progress(stream, line)))
+                         (lambda line: write_progress(stream, line)),
+                         fem_points=args.fem_points, correlation=correlation)
     end_progress(stream)
     written = write_scatter_outputs(result, out, style)
     for line in summary_lines(result, written):
@@ -905,7 +910,8 @@ def build_parser() -> argparse.ArgumentParser:
     scatter = sub.add_parser('scatter', help='the sequence under manufacturing scatter: '
                              'Monte Carlo probabilities and Sobol indices',
                              description='Draw the varied parameters of a scene (a law '
-                             "segment's numbers, a table's pressure scale or noise) from "
+                             "segment's numbers, a table's pressure scale or noise, a FEM "
+                             "design's membrane thickness or modulus) from "
                              'their distributions, classify every sample as classify does and '
                              'measure its switch, snap-throughs and plateau; every probability '
                              'with its Wilson interval; Sobol first-order and total indices '
@@ -921,6 +927,10 @@ def build_parser() -> argparse.ArgumentParser:
     scatter.add_argument('--spec', type=_given_path('a spec file'), metavar='FILE.yaml',
                          help='YAML with one key, vary: a mapping of NAME: DIST as --vary '
                          'takes them')
+    scatter.add_argument('--correlate', action='append', metavar='A,B=RHO',
+                         help='correlate the draws of two varied parameters, repeatable: '
+                         'top.modulus_scale,bottom.modulus_scale=0.8 (one batch of rubber); '
+                         'rho is the correlation of their normal scores (docs/scatter.md)')
     scatter.add_argument('--samples', type=int, default=1000, metavar='N',
                          help='Monte Carlo samples, at most (default 1000)')
     scatter.add_argument('--until-width', type=float, metavar='W',
@@ -933,6 +943,11 @@ def build_parser() -> argparse.ArgumentParser:
     scatter.add_argument('--sobol', type=int, default=64, metavar='N',
                          help='base samples of the Sobol design, a power of 2 (default 64: '
                          '64 x (parameters + 2) samples more); 0: no indices')
+    scatter.add_argument('--fem-points', type=int, default=3, metavar='N',
+                         help="a design segment's drawn geometry (top.geometry."
+                         'membrane_thickness_m) is read from N unit-cell FEM tables per key, '
+                         'from the lowest draw to the highest, interpolated (default 3; '
+                         'computed once, then cached)')
     scatter.add_argument('--workers', help='local worker processes (default: one per core)')
     scatter.add_argument('--scheduler', help='Dask scheduler address, e.g. '
                          'tcp://10.0.0.5:8786')

@@ -163,11 +163,13 @@ QUICK = {
         ['bench/fem_design_results.json', 'bench/fem_design_results.md']),
     'bench_scatter.py': (
         ['# softseq scatter: samples per second, locally and on Dask',
-         'Identical samples on the three: yes.'],
+         'Identical samples on the four: yes.'],
         [r'\| this process \(1 worker\) \| \d+\.\d\d \| \d+\.\d\d \| \d+ \| 1\.00 \|',
          r'\| local processes \(2 workers\) \| \d+\.\d\d \| \d+\.\d\d \| \d+ \| \d+\.\d\d \|',
          r'\| local Dask cluster \(2 workers x 1 thread\) \| \d+\.\d\d \| \d+\.\d\d \| \d+ \| '
          r'\d+\.\d\d \|',
+         r'\| running local Dask cluster, by its address \(2 workers x 1 thread\) \| \d+\.\d\d \| '
+         r'\d+\.\d\d \| \d+ \| \d+\.\d\d \|',
          r'P\(symmetric\) = 0\.\d{3} \(95 % interval 0\.\d{3} to 0\.\d{3}\)'],
         ['bench/scatter_results.md']),
 }

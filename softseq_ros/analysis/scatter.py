@@ -10,7 +10,12 @@ A scene gives the nominal segments; each varied parameter gets a distribution (d
 - a table (or a design's FEM table): ``pressure_scale`` (every row's pressure times the drawn
   factor; 1 is the table) and ``noise_std_pa`` (Gaussian noise of that deviation [Pa] added to
   every row, a fresh draw per sample; a scene that smooths the table smooths the noisy rows
-  with the same options).
+  with the same options);
+- a segment design's FEM table, besides: ``modulus_scale`` (every modulus of its law times the
+  factor: exactly its pressure times it) or a one-modulus law's ``material.shear_modulus_pa``,
+  and ``geometry.membrane_thickness_m`` / ``geometry.wall_thickness_m``, read from the
+  design's unit cells computed (or found cached) on a grid over the draws' range and
+  interpolated (:func:`with_fem_grid`).
 
 A distribution is ``normal:MEAN,STD``, ``normal:P%`` (mean: the scene's value, deviation: P %
 of it), ``uniform:LOW,HIGH`` or ``uniform:P%`` (the scene's value +- P %); a noise is its
@@ -63,8 +68,20 @@ DEFAULT_CONFIDENCE = 0.95
 # The sweep of each sample: as many volumes as `softseq classify` takes.
 SWEEP_SAMPLES = 4001
 TABLE_KEYS = ('pressure_scale', 'noise_std_pa')
+# A design's geometry drawn through its unit cells' FEM tables on a grid (docs/scatter.md).
+DESIGN_GEOMETRY_KEYS = ('membrane_thickness_m', 'wall_thickness_m')
+DEFAULT_FEM_POINTS = 3
+# Why a run with every parameter in one correlated group has no Sobol indices.
+ONE_GROUP = ('no Sobol indices: every parameter is in one correlated group, which explains all '
+             'of every output')
+MAX_FEM_POINTS = 9
+# A grid value this close to the scene's value is the scene's value (its own table).
+SAME_VALUE_RTOL = 1e-9
 _NAME = re.compile(r'^([A-Za-z][A-Za-z0-9_]*)\.([A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])?'
                    r'(?:\.[A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])?)*)$')
+
+
+Show = Callable[[str], None]
 
 
 class ScatterError(UserError):
@@ -253,6 +270,7 @@ def parameters_of(scene: Any, vary: dict[str, str], option: str = '--vary') -> l
     does not have (listing those it has), a distribution that cannot be drawn, a value at either
     end of a distribution that the segment refuses.
     """
+    check_scene(scene)
     if not vary:
         raise ScatterError(f'{option}: nothing to vary; give at least one NAME=DISTRIBUTION, '
                            'e.g. top.thickness_m=normal:5%')
@@ -272,11 +290,7 @@ def parameters_of(scene: Any, vary: dict[str, str], option: str = '--vary') -> l
         entry = _entry(scene.segments[index])
         key = _parse_key(key_text)
         if entry is None:
-            if key_text not in TABLE_KEYS:
-                raise ScatterError(f'{where}: segment {segment_name} is a table: it has '
-                                   f'{" and ".join(TABLE_KEYS)}, not {key_text!r} (its rows fix '
-                                   'its curve)')
-            nominal = 1.0 if key_text == 'pressure_scale' else 0.0
+            nominal = _table_nominal(where, scene.segments[index], key_text)
         else:
             model = next(k for k in entry if k not in ('name', 'length_m'))
             leaves = _leaves(entry[model])
@@ -296,11 +310,113 @@ def parameters_of(scene: Any, vary: dict[str, str], option: str = '--vary') -> l
             values = [p.nominal for p in parameters]
             values[k] = value
             try:
+                if parameter.key[0] == 'geometry':
+                    # A design's geometry: the design file's own checks, before any FEM.
+                    _cell_design(_design_of(scene.segments[parameter.segment]),
+                                 {parameter.key[1]: value})
                 model.segments_at(values)
             except ValueError as err:
                 raise ScatterError(f'{option} {parameter.name}={parameter.distribution.text}: '
                                    f'its {end} draw, {value:.6g}, is refused: {err}') from None
     return parameters
+
+
+def _design_of(segment: Any) -> Any:
+    """The segment design (softseq_ros.scene.design) whose cached FEM table ``segment`` is."""
+    from pathlib import Path
+
+    from softseq_ros.scene.design import design_from_dict
+
+    identity = segment.design
+    geometry = dict(identity['geometry'])
+    if geometry.get('wall_reading', 'skin_bands') == 'skin_bands':
+        geometry.pop('skin_band_thickness_m', None)
+    if geometry.get('membrane_thickness_factors') is None:
+        geometry.pop('membrane_thickness_factors', None)
+    # The cache names a table NAME-HASH.csv: the design's name, shared with `softseq fem`.
+    stem = Path(segment.source).stem
+    name = stem.rsplit('-', 1)[0] if '-' in stem else segment.name
+    material = identity['material']
+    return design_from_dict({'name': name, 'geometry': geometry,
+                             'material': {'law': material['law'], **material['params']},
+                             'mesh': dict(identity['mesh']), 'volume': dict(identity['volume'])},
+                            f'the design of segment {segment.name}')
+
+
+def _only_modulus(law: str) -> str | None:
+    """The law's one parameter in Pa, when it has one only (its stiffness): else None."""
+    from softseq_ros.segments.materials import material_parameter_names
+
+    moduli = [name for name in material_parameter_names(law) if name.endswith('_pa')]
+    return moduli[0] if len(moduli) == 1 and law != 'ogden' else None
+
+
+def _table_nominal(where: str, segment: Any, key_text: str) -> float:
+    """
+    The scene's value of a table's parameter (a design's FEM table has more of them).
+
+    ScatterError naming the keys the segment has, when it has not this one.
+    """
+    if key_text in TABLE_KEYS:
+        return 1.0 if key_text == 'pressure_scale' else 0.0
+    if segment.design is None:
+        raise ScatterError(f'{where}: segment {segment.name} is a table: it has '
+                           f'{" and ".join(TABLE_KEYS)}, not {key_text!r} (its rows fix '
+                           'its curve)')
+    design = _design_of(segment)
+    law = design.material.law
+    modulus = _only_modulus(law)
+    known = [*TABLE_KEYS, 'modulus_scale', *(f'geometry.{k}' for k in DESIGN_GEOMETRY_KEYS),
+             *([f'material.{modulus}'] if modulus else [])]
+    if key_text == 'modulus_scale':
+        return 1.0
+    group, _, key = key_text.partition('.')
+    if group == 'geometry' and key in DESIGN_GEOMETRY_KEYS:
+        if design.geometry.membrane_thickness_factors is not None:
+            raise ScatterError(f'{where}: the design of segment {segment.name} scales each '
+                               'membrane (membrane_thickness_factors, a whole segment); its '
+                               'geometry is drawn through unit cells, which have one membrane')
+        return float(getattr(design.geometry, key))
+    if group == 'material' and key == modulus:
+        return float(design.material.params[key])
+    if group == 'material' and key in design.material.params:
+        raise ScatterError(f'{where}: {key} alone changes the shape of the {law} law, not only '
+                           f'its stiffness; vary {segment.name}.modulus_scale (every modulus '
+                           'of the law by one factor)')
+    raise ScatterError(f'{where}: segment {segment.name} is the FEM table of design '
+                       f'{design.name}: it has {", ".join(known)}, not {key_text!r}')
+
+
+def _cell_design(design: Any, geometry: dict[str, float]) -> Any:
+    """The unit cell of a design with these geometry values (DesignError: refused)."""
+    from softseq_ros.scene.design import with_changes
+
+    return with_changes(design, {**{f'geometry.{k}': float(v) for k, v in geometry.items()},
+                                 'mesh.model': 'unit_cell'})
+
+
+def check_scene(scene: Any) -> None:
+    """
+    Refuse a scene whose samples could not be classified: one behind a pressure regulator.
+
+    Its segments do not share the volume a syringe pushes, so it has no sequence type of the
+    four (``softseq classify`` refuses it the same way).
+    """
+    if getattr(scene, 'regulator', None) is not None:
+        where = scene.path if scene.path is not None else scene.name
+        raise ScatterError(f'{where}: supply.regulator: scatter classifies segments sharing the '
+                           'volume a syringe pushes; behind a regulator each segment is an '
+                           'independent hysteron (softseq graph shows its flips): scatter the '
+                           'pair without its regulator')
+
+
+def scene_notes(scene: Any) -> list[str]:
+    """What a scatter of this scene does not sample, said with its summary."""
+    if getattr(scene, 'network', None) is None:
+        return []
+    return [f'{scene.name} has a fluid network; it is not sampled: every sample is classified '
+            'and measured quasi-statically, as softseq classify does it, not in time at the '
+            "pump's rate (softseq rates maps what the network's rate does)"]
 
 
 def read_vary(vary: Sequence[str] | None, spec: Any = None) -> dict[str, str]:
@@ -328,8 +444,141 @@ def read_vary(vary: Sequence[str] | None, spec: Any = None) -> dict[str, str]:
     return found
 
 
+def read_correlate(words: Sequence[str] | None, spec: Any = None) -> dict[tuple[str, str], float]:
+    """
+    ``{(name, name): rho}`` from ``--correlate A,B=RHO`` words and a spec file's ``correlate``.
+
+    A word that is no ``A,B=RHO``, a correlation that is no number from -1 to 1, a parameter
+    with itself, a pair given twice (in either order): ScatterError naming the option.
+    """
+    given = [(word, '--correlate') for word in words or ()]
+    if spec is not None:
+        given += [(f'{pair}={rho}', f'--spec {spec}: correlate')
+                  for pair, rho in _spec_file(spec).get('correlate', {}).items()]
+    found: dict[tuple[str, str], float] = {}
+    for word, option in given:
+        pair, equals, text = word.partition('=')
+        names = tuple(name.strip() for name in pair.split(','))
+        if not equals or len(names) != 2 or not all(names) or not text.strip():
+            raise ScatterError(f'{option}: {word!r} is not NAME,NAME=RHO, e.g. '
+                               'top.modulus_scale,bottom.modulus_scale=0.8')
+        where = f'{option} {names[0]},{names[1]}'
+        rho = _number(where, text.strip())
+        if not -1.0 <= rho <= 1.0:
+            raise ScatterError(f'{where}: a correlation from -1 to 1, got {text.strip()}')
+        if names[0] == names[1]:
+            raise ScatterError(f'{where}: a parameter is not correlated with itself')
+        key = (names[0], names[1])
+        if key in found or key[::-1] in found:
+            raise ScatterError(f'{where}: given twice')
+        found[key] = rho
+    return found
+
+
+@dataclass(frozen=True)
+class Correlation:
+    """
+    Correlated draws: the parameters' normal scores are correlated (a Gaussian copula).
+
+    Each parameter's uniform input ``u`` has the normal score ``z = Phi^-1(u)``; within a
+    group of parameters tied by correlations the scores are mixed, ``z' = L z`` with ``L L^T``
+    the group's correlation matrix, and ``u' = Phi(z')`` goes to the parameter's distribution
+    as before: each parameter keeps its distribution, two normal ones have correlation rho,
+    two uniform ones rank correlation (6/pi) asin(rho/2).
+    """
+
+    pairs: tuple[tuple[str, str, float], ...]
+    groups: tuple[tuple[int, ...], ...]     # parameters drawn together, more than one each
+    factors: tuple[FloatArray, ...]         # per group, L (L L^T = its correlation matrix)
+
+    def mix(self, inputs: FloatArray) -> FloatArray:
+        """Rows of independent uniform inputs made correlated (the others left as they are)."""
+        from scipy.special import ndtr, ndtri
+
+        mixed = np.array(inputs, dtype=float, copy=True)
+        for group, factor in zip(self.groups, self.factors):
+            scores = ndtri(np.clip(mixed[:, group], TAIL, 1.0 - TAIL))
+            mixed[:, group] = ndtr(scores @ factor.T)
+        return mixed
+
+    def group_names(self, names: Sequence[str]) -> list[str]:
+        """Each parameter's Sobol group: its own name, or its group's names joined by +."""
+        found = list(names)
+        for group in self.groups:
+            joined = '+'.join(names[k] for k in group)
+            for k in group:
+                found[k] = joined
+        return found
+
+    def to_dict(self) -> list[dict]:
+        """The correlations as given, as JSON."""
+        return [{'parameters': [a, b], 'rho': rho} for a, b, rho in self.pairs]
+
+
+def correlation_of(parameters: Sequence[Parameter], given: dict[tuple[str, str], float],
+                   option: str = '--correlate') -> Correlation | None:
+    """
+    The correlations of ``given`` between ``parameters``, checked; None when none are given.
+
+    ScatterError naming ``option``: a parameter not varied, a table's noise (its input picks
+    a draw: nothing to correlate), correlations that cannot hold together (their matrix not
+    positive semi-definite).
+    """
+    if not given:
+        return None
+    names = [p.name for p in parameters]
+    matrix = np.eye(len(names))
+    for (a, b), rho in given.items():
+        for name in (a, b):
+            if name not in names:
+                raise ScatterError(f'{option} {a},{b}: {name} is not varied (the parameters: '
+                                   f'{", ".join(names)})')
+            if parameters[names.index(name)].distribution.kind == 'noise':
+                raise ScatterError(f"{option} {a},{b}: {name} is a table's noise: its input "
+                                   'picks a draw of the noise, nothing to correlate')
+        i, j = names.index(a), names.index(b)
+        matrix[i, j] = matrix[j, i] = rho
+    # The groups: parameters joined by a non-zero correlation, directly or through others.
+    group_of = list(range(len(names)))
+    for (a, b), rho in given.items():
+        if rho != 0.0:
+            old, new = group_of[names.index(a)], group_of[names.index(b)]
+            group_of = [new if g == old else g for g in group_of]
+    groups, factors = [], []
+    for label in dict.fromkeys(group_of):
+        group = tuple(k for k, g in enumerate(group_of) if g == label)
+        if len(group) < 2:
+            continue
+        block = matrix[np.ix_(group, group)]
+        eigenvalues, vectors = np.linalg.eigh(block)
+        if eigenvalues.min() < -1e-9:
+            shown = ', '.join(names[k] for k in group)
+            raise ScatterError(f'{option}: the correlations between {shown} cannot hold '
+                               f'together (their matrix has the eigenvalue '
+                               f'{eigenvalues.min():.3g} < 0)')
+        try:
+            factor = np.linalg.cholesky(block)
+        except np.linalg.LinAlgError:   # singular (a correlation of 1): the square root
+            factor = vectors * np.sqrt(np.clip(eigenvalues, 0.0, None))
+        groups.append(group)
+        factors.append(factor)
+    pairs = tuple((a, b, float(rho)) for (a, b), rho in given.items())
+    return Correlation(pairs, tuple(groups), tuple(factors))
+
+
 def _spec_vary(path: Any) -> dict[str, str]:
     """The ``vary`` block of a spec file: ``{name: distribution text}``."""
+    found = {}
+    for name, value in _spec_file(path)['vary'].items():
+        if not isinstance(name, str) or isinstance(value, (bool, dict, list)) or value is None:
+            raise ScatterError(f'--spec {path}: vary.{name}: give a distribution as text, e.g. '
+                               'normal:5%, or a noise in Pa')
+        found[name] = str(value)
+    return found
+
+
+def _spec_file(path: Any) -> dict:
+    """A spec file, checked: ``vary`` (a mapping) and, optionally, ``correlate`` (one too)."""
     from softseq_ros.errors import read_regular_file
     from softseq_ros.yaml_text import parse_yaml
 
@@ -342,16 +591,12 @@ def _spec_vary(path: Any) -> dict[str, str]:
     except UnicodeDecodeError as err:
         raise ScatterError(f'--spec {path}: not UTF-8 text (byte {err.start})') from None
     data = parse_yaml(text, f'--spec {path}', ScatterError)
-    if not isinstance(data, dict) or set(data) != {'vary'} or not isinstance(data['vary'], dict):
-        raise ScatterError(f'--spec {path}: must be a mapping with one key, vary: a mapping of '
-                           'NAME: DISTRIBUTION (docs/scatter.md)')
-    found = {}
-    for name, value in data['vary'].items():
-        if not isinstance(name, str) or isinstance(value, (bool, dict, list)) or value is None:
-            raise ScatterError(f'--spec {path}: vary.{name}: give a distribution as text, e.g. '
-                               'normal:5%, or a noise in Pa')
-        found[name] = str(value)
-    return found
+    if (not isinstance(data, dict) or 'vary' not in data or not set(data) <= {'vary', 'correlate'}
+            or not all(isinstance(block, dict) for block in data.values())):
+        raise ScatterError(f'--spec {path}: must be a mapping with the key vary (a mapping of '
+                           'NAME: DISTRIBUTION) and, optionally, correlate (a mapping of '
+                           'NAME,NAME: RHO) (docs/scatter.md)')
+    return data
 
 
 # ------------------------------------------------------------------------------ the model
@@ -370,12 +615,27 @@ class ScatterModel:
     parameters: tuple[Parameter, ...]
     supply: Any = None
     resolution: int | None = None
+    # Per segment, the unit cells' FEM tables interpolated over its drawn geometry
+    # (softseq_ros.fem.design_interpolation.SegmentFamily), or None: :func:`with_fem_grid`.
+    families: tuple = ()
+    # Correlations between the parameters' draws (:class:`Correlation`), or None.
+    correlation: Any = None
 
     @classmethod
-    def of(cls, scene: Any, parameters: Sequence[Parameter]) -> 'ScatterModel':
-        """The model of a loaded scene with these parameters varied."""
+    def of(cls, scene: Any, parameters: Sequence[Parameter],
+           correlation: Any = None) -> 'ScatterModel':
+        """The model of a loaded scene with these parameters varied (and correlated)."""
         return cls(tuple(scene.segments), tuple(_entry(s) for s in scene.segments),
-                   tuple(parameters), scene.supply, scene.solver.resolution)
+                   tuple(parameters), scene.supply, scene.solver.resolution,
+                   correlation=correlation)
+
+    def values_at(self, inputs: FloatArray) -> FloatArray:
+        """The parameters' values at rows of independent uniform inputs (correlated here)."""
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        if self.correlation is not None:
+            inputs = self.correlation.mix(inputs)
+        return np.column_stack([p.distribution.values(inputs[:, k])
+                                for k, p in enumerate(self.parameters)])
 
     def segments_at(self, values: Sequence[float]) -> tuple:
         """
@@ -394,7 +654,12 @@ class ScatterModel:
         for index, changes in by_segment.items():
             entry = self.entries[index]
             if entry is None:
-                segments[index] = _table_at(segments[index], changes)
+                family = self.families[index] if self.families else None
+                geometry = {p.key[1]: v for p, v in changes if p.key[0] == 'geometry'}
+                table = segments[index]
+                if family is not None:
+                    table = family.build(geometry, name=table.name)
+                segments[index] = _table_at(table, changes)
                 continue
             entry = copy.deepcopy(entry)
             model = next(k for k in entry if k not in ('name', 'length_m'))
@@ -407,6 +672,61 @@ class ScatterModel:
         return tuple(segments)
 
 
+def with_fem_grid(model: ScatterModel, points: int = DEFAULT_FEM_POINTS,
+                  cache_dir: Any = None, workers: int | None = None,
+                  scheduler: str | None = None, progress: Show | None = None
+                  ) -> tuple[ScatterModel, list[dict]]:
+    """
+    The model with each design segment whose geometry is drawn read from its unit cells' FEM.
+
+    The unit cell of the segment's design (its material and mesh, ``mesh.model: unit_cell``)
+    at ``points`` values of each drawn geometry key, evenly from the lowest draw to the
+    highest (the scene's value itself where a grid point falls on it), every combination:
+    tables from the FEM cache (``cache_dir``, default softseq's), the missing ones computed
+    on the shared executor. A sample's segment is those tables interpolated multilinearly at
+    fixed fluid volume per cell (as ``softseq design`` does). Returns the model and, per
+    segment, what its grid is (JSON).
+    """
+    from dataclasses import replace
+    import itertools
+
+    from softseq_ros.fem.design_grid import ensure_tables
+    from softseq_ros.fem.design_interpolation import SegmentFamily
+    from softseq_ros.fem.design_problem import SegmentSpace
+
+    families: list[Any] = [None] * len(model.segments)
+    grids = []
+    for index, segment in enumerate(model.segments):
+        drawn = [p for p in model.parameters if p.segment == index and p.key[0] == 'geometry']
+        if not drawn:
+            continue
+        own = _design_of(segment)
+        design = _cell_design(own, {})
+        axes = {}
+        for parameter in drawn:
+            values = np.linspace(*parameter.distribution.ends(), points)
+            values[np.isclose(values, parameter.nominal, rtol=SAME_VALUE_RTOL, atol=0.0)] = \
+                parameter.nominal
+            axes[str(parameter.key[1])] = values
+        cells = {at: _cell_design(design, {k: axes[k][i] for k, i in zip(axes, at)})
+                 for at in itertools.product(range(points), repeat=len(axes))}
+        what = f'scatter: segment {segment.name}'
+        if progress is not None:
+            progress(f'{what}: {len(cells)} unit-cell FEM tables of design {design.name} '
+                     f'(mesh {design.mesh.element_size_m * 1e3:g} mm), computed where not cached')
+        paths, runs = ensure_tables(list(cells.values()), cache_dir, workers, scheduler,
+                                    progress, what)
+        space = SegmentSpace(segment.name, design,
+                             {k: (float(v[0]), float(v[-1])) for k, v in axes.items()})
+        families[index] = SegmentFamily.from_tables(
+            space, axes, {at: (paths[d.digest()], d) for at, d in cells.items()})
+        grids.append({'segment': segment.name, 'design': design.name,
+                      'scene_model': own.mesh.model, 'element_size_m': design.mesh.element_size_m,
+                      'axes': {k: [float(x) for x in v] for k, v in axes.items()},
+                      'tables': len(cells), 'computed': runs})
+    return replace(model, families=tuple(families)), grids
+
+
 def _table_at(segment: Any, changes: list[tuple[Parameter, float]]) -> Any:
     """A table with its pressures scaled and a noise drawn (and smoothed as the scene does)."""
     from softseq_ros.segments.models import TabulatedSegment
@@ -414,11 +734,14 @@ def _table_at(segment: Any, changes: list[tuple[Parameter, float]]) -> Any:
 
     pressures = np.array(segment.pressures, dtype=float)
     for parameter, value in changes:
-        if parameter.key == ('pressure_scale',):
-            if not value > 0.0:
-                raise ValueError(f'{parameter.name}: a pressure scale must be > 0, got '
-                                 f'{value:.6g}')
-            pressures = pressures * value
+        if parameter.key[0] in ('pressure_scale', 'modulus_scale', 'material'):
+            # A design's every modulus times k (its bulk modulus a fixed multiple of its shear
+            # modulus): the FEM's state at each volume is the same, its pressure k times.
+            scale = value / parameter.nominal if parameter.key[0] == 'material' else value
+            if not scale > 0.0:
+                what = 'pressure scale' if parameter.key[0] == 'pressure_scale' else 'modulus'
+                raise ValueError(f'{parameter.name}: a {what} must be > 0, got {value:.6g}')
+            pressures = pressures * scale
     for parameter, value in changes:
         if parameter.key == ('noise_std_pa',):
             draw = np.random.default_rng(int(value * 2**53))
@@ -481,9 +804,9 @@ def scatter_chunk(job: tuple) -> tuple[int, list[dict]]:
     """
     model, start, inputs = job
     found = []
-    for offset, u in enumerate(inputs):
+    for offset, row in enumerate(model.values_at(inputs) if len(inputs) else []):
         index = start + offset
-        values = [float(p.distribution.values(x)) for p, x in zip(model.parameters, u)]
+        values = [float(x) for x in row]
         try:
             numbers = measure(model.segments_at(values), model.supply, model.resolution)
         except (ValueError, ArithmeticError) as err:
@@ -582,29 +905,42 @@ def widest_interval(summary: dict) -> float:
 
 # ------------------------------------------------------------------------------ Sobol
 
-def sobol_inputs(dimensions: int, base: int, seed: int) -> FloatArray:
-    """Saltelli's design (first and total order): ``base x (dimensions + 2)`` uniform rows."""
+def sobol_inputs(dimensions: int, base: int, seed: int,
+                 groups: Sequence[str] | None = None) -> FloatArray:
+    """
+    Saltelli's design (first and total order): ``base x (groups + 2)`` uniform rows.
+
+    ``groups``: each input's group (None: each its own); a group's inputs are swapped
+    together between the design's matrices, so its indices are the group's.
+    """
     from SALib.sample import sobol as saltelli
 
-    problem = _problem(dimensions)
+    problem = _problem(dimensions, groups=groups)
     return np.asarray(saltelli.sample(problem, base, calc_second_order=False, scramble=True,
                                       seed=seed), dtype=float)
 
 
-def _problem(dimensions: int, names: Sequence[str] | None = None) -> dict:
-    return {'num_vars': dimensions,
-            'names': list(names) if names is not None else [f'x{i}' for i in range(dimensions)],
-            'bounds': [[0.0, 1.0]] * dimensions}
+def _problem(dimensions: int, names: Sequence[str] | None = None,
+             groups: Sequence[str] | None = None) -> dict:
+    problem = {'num_vars': dimensions,
+               'names': (list(names) if names is not None
+                         else [f'x{i}' for i in range(dimensions)]),
+               'bounds': [[0.0, 1.0]] * dimensions}
+    if groups is not None and len(set(groups)) < dimensions:
+        problem['groups'] = list(groups)
+    return problem
 
 
 def sobol_indices(names: Sequence[str], outputs: Sequence[float | None],
-                  confidence: float = DEFAULT_CONFIDENCE, seed: int = 0) -> dict:
+                  confidence: float = DEFAULT_CONFIDENCE, seed: int = 0,
+                  groups: Sequence[str] | None = None) -> dict:
     """
     First-order and total Sobol indices of one output over :func:`sobol_inputs`' rows.
 
     The indices do not depend on how each uniform input is mapped to its parameter (a monotone
     map per input keeps the variance decomposition), so they are those of the parameters. An
     output missing in some row, or the same in every row, has none: ``reason`` says why.
+    With ``groups`` (the design's), the indices are per group, by the group's name.
     """
     if any(y is None for y in outputs):
         missing = sum(y is None for y in outputs)
@@ -615,13 +951,16 @@ def sobol_indices(names: Sequence[str], outputs: Sequence[float | None],
     from SALib.analyze import sobol as jansen
 
     with np.errstate(all='ignore'):
-        result = jansen.analyze(_problem(len(names), names), y, calc_second_order=False,
+        problem = _problem(len(names), names, groups)
+        result = jansen.analyze(problem, y, calc_second_order=False,
                                 conf_level=confidence, num_resamples=200, seed=seed)
+    # SALib's groups come in the order they first appear.
+    shown = list(dict.fromkeys(problem.get('groups', names)))
     return {name: {'first_order': float(result['S1'][i]),
                    'first_order_interval_half_width': float(result['S1_conf'][i]),
                    'total': float(result['ST'][i]),
                    'total_interval_half_width': float(result['ST_conf'][i])}
-            for i, name in enumerate(names)}
+            for i, name in enumerate(shown)}
 
 
 def sobol_outputs(samples: Sequence[dict]) -> dict[str, list[float | None]]:
@@ -659,6 +998,11 @@ class ScatterResult:
     sobol_base: int
     sobol: dict = field(default_factory=dict)
     sobol_samples: list[dict] = field(default_factory=list)
+    # Per design segment whose geometry is drawn: its unit cells' FEM grid (with_fem_grid).
+    fem_grids: list[dict] = field(default_factory=list)
+    # What the reader must know of how the samples were made (printed with the summary).
+    notes: list[str] = field(default_factory=list)
+    correlation: Correlation | None = None
 
     @property
     def stop(self) -> dict:
@@ -673,7 +1017,9 @@ class ScatterResult:
         """Every number, SI (m^3, Pa), JSON-able."""
         return {'scene': self.scene, 'seed': self.seed, 'confidence': self.confidence,
                 'parameters': [p.to_dict() for p in self.parameters],
-                'stop': self.stop, 'summary': self.summary,
+                'correlations': [] if self.correlation is None else self.correlation.to_dict(),
+                'stop': self.stop, 'notes': self.notes, 'fem_grids': self.fem_grids,
+                'summary': self.summary,
                 'sobol': {'base_samples': self.sobol_base,
                           'evaluations': len(self.sobol_samples), 'indices': self.sobol},
                 'samples': self.samples, 'sobol_samples': self.sobol_samples}
@@ -683,14 +1029,14 @@ class _Enough(Exception):  # noqa: N818 - no error: the run has what it needs
     """Raised from a run's progress: the samples in order so far are enough."""
 
 
-Show = Callable[[str], None]
-
 
 def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFAULT_SAMPLES,
                 until_width: float | None = None, confidence: float = DEFAULT_CONFIDENCE,
                 seed: int = 0, sobol: int = DEFAULT_SOBOL, workers: int | None = None,
                 backend: str = 'processes', scheduler: str | None = None,
-                progress: Show | None = None) -> ScatterResult:
+                progress: Show | None = None, fem_points: int = DEFAULT_FEM_POINTS,
+                fem_cache: Any = None, correlation: Correlation | None = None
+                ) -> ScatterResult:
     """
     The Monte Carlo distribution of the scene's sequence, and the Sobol indices.
 
@@ -698,10 +1044,24 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
     of CHECK_EVERY samples (in order) where every probability's interval is at most that wide.
     ``sobol``: base samples of the Sobol design (a power of 2; 0: none). ``workers``,
     ``backend`` and ``scheduler`` as :func:`softseq_ros.parallel.run_jobs` takes them;
-    ``progress(line)`` hears how far the run is.
+    ``progress(line)`` hears how far the run is. A design segment's drawn geometry is read
+    from ``fem_points`` unit cells per key (:func:`with_fem_grid`; ``fem_cache``: where their
+    tables are cached, default softseq's FEM cache). ``correlation``: correlated draws
+    (:func:`correlation_of`); the Sobol indices are then those of its groups.
     """
-    check_settings(samples, until_width, confidence, sobol, len(parameters))
-    model = ScatterModel.of(scene, parameters)
+    check_settings(samples, until_width, confidence, sobol, len(parameters), fem_points)
+    check_scene(scene)
+    model, grids = with_fem_grid(ScatterModel.of(scene, parameters, correlation), fem_points,
+                                 fem_cache, workers, scheduler, progress)
+    notes = scene_notes(scene)
+    for g in grids:
+        notes.append(f'segment {g["segment"]}: its geometry from {g["tables"]} unit-cell FEM '
+                     f'tables of design {g["design"]} ({", ".join(g["axes"])}; mesh '
+                     f'{g["element_size_m"] * 1e3:g} mm; {g["computed"]} computed, the rest '
+                     'cached), interpolated at each draw'
+                     + ('' if g['scene_model'] == 'unit_cell' else
+                        f"; the scene's design is a {g['scene_model']}, the samples its unit "
+                        'cell'))
     dims = len(parameters)
     jobs = [(model, start, sample_inputs(seed, start, min(CHUNK, samples - start), dims))
             for start in range(0, samples, CHUNK)]
@@ -731,8 +1091,13 @@ def run_scatter(scene: Any, parameters: Sequence[Parameter], samples: int = DEFA
     except _Enough:
         pass
     result = ScatterResult(scene.name, list(parameters), seed, confidence, kept,
-                           summarise(kept, confidence), samples, until_width, sobol)
-    if sobol:
+                           summarise(kept, confidence), samples, until_width, sobol,
+                           fem_grids=grids, notes=notes, correlation=correlation)
+    one_group = (correlation is not None and len(parameters) > 1
+                 and [len(g) for g in correlation.groups] == [len(parameters)])
+    if sobol and one_group:
+        result.notes.append(ONE_GROUP)
+    elif sobol:
         result.sobol_samples, result.sobol = _sobol_run(model, sobol, seed, confidence,
                                                         workers, backend, scheduler, progress)
     return result
@@ -752,7 +1117,9 @@ def _sobol_run(model: ScatterModel, base: int, seed: int, confidence: float,
                workers: int | None, backend: str, scheduler: str | None,
                progress: Show | None) -> tuple[list[dict], dict]:
     """The Sobol design's samples and, per output, each parameter's indices."""
-    inputs = sobol_inputs(len(model.parameters), base, seed)
+    names = [p.name for p in model.parameters]
+    groups = None if model.correlation is None else model.correlation.group_names(names)
+    inputs = sobol_inputs(len(model.parameters), base, seed, groups)
     jobs = [(model, start, inputs[start:start + CHUNK])
             for start in range(0, len(inputs), CHUNK)]
 
@@ -764,15 +1131,17 @@ def _sobol_run(model: ScatterModel, base: int, seed: int, confidence: float,
     chunks = run_jobs(scatter_chunk, jobs, workers=workers, backend=backend,
                       scheduler=scheduler, progress=heard, name=_chunk_name)
     rows = [row for _, found in chunks for row in found]
-    names = [p.name for p in model.parameters]
-    indices = {output: sobol_indices(names, values, confidence, seed)
+    indices = {output: sobol_indices(names, values, confidence, seed, groups)
                for output, values in sobol_outputs(rows).items()}
     return rows, indices
 
 
 def check_settings(samples: int, until_width: float | None, confidence: float, sobol: int,
-                   dimensions: int) -> None:
+                   dimensions: int, fem_points: int = DEFAULT_FEM_POINTS) -> None:
     """Refuse, naming the option, a run that cannot give what it is asked for."""
+    if not 2 <= fem_points <= MAX_FEM_POINTS:
+        raise ScatterError(f'--fem-points: unit cells per drawn geometry key of a design, from '
+                           f'2 to {MAX_FEM_POINTS}, got {fem_points}')
     if not 1 <= samples <= MAX_SAMPLES:
         raise ScatterError(f'--samples: a number of samples from 1 to {MAX_SAMPLES}, got '
                            f'{samples}')

@@ -93,6 +93,10 @@ def summary_lines(result: ScatterResult, written: Sequence[Path] = ()) -> list[s
     for parameter in result.parameters:
         lines.append(f'  {parameter.name}: {parameter.distribution.describe()} (scene: '
                      f'{parameter.nominal:.6g})')
+    if result.correlation is not None:
+        lines.append('  correlated (their normal scores): ' + ', '.join(
+            f'{a} with {b} {rho:g}' for a, b, rho in result.correlation.pairs))
+    lines += [f'  note: {note}' for note in result.notes]
     types = summary['sequence_type']
     lines.append('  sequence type: ' + ', '.join(
         f'{kind} {_interval(types[kind])}' for kind in
@@ -134,6 +138,8 @@ def sobol_lines(result: ScatterResult) -> list[str]:
     """Per output with indices, the parameters that matter (total index at least MATTERS)."""
     if not result.sobol_base:
         return ['  Sobol indices: none asked for (--sobol 0)']
+    if not result.sobol:
+        return []   # none to compute: the notes say why
     lines = [f'  Sobol indices ({result.sobol_base} base samples, '
              f'{len(result.sobol_samples)} evaluations), first-order / total:']
     for output, indices in result.sobol.items():
@@ -223,13 +229,14 @@ def _sobol_panel(ax: object, result: ScatterResult) -> list:
     shown = [(output, indices) for output, indices in result.sobol.items()
              if 'reason' not in indices][:SOBOL_PANEL_OUTPUTS]
     if not shown:
-        why = 'none asked for' if not result.sobol_base else 'no output varies'
+        why = ('none asked for' if not result.sobol_base else
+               'one correlated group' if not result.sobol else 'no output varies')
         ax.text(0.5, 0.5, f'Sobol indices: {why}', ha='center', va='center',
                 transform=ax.transAxes, color='0.4')
         ax.set_xticks([])
         ax.set_yticks([])
         return []
-    names = [p.name for p in result.parameters]
+    names = list(shown[0][1])   # the parameters, or their groups where draws are correlated
     width = 0.8 / (2 * len(names))
     for x, (_, indices) in enumerate(shown):
         for k, name in enumerate(names):
