@@ -162,8 +162,13 @@ class ActuatorCore:
                                            'm^3 is negative')
         # An unstamped command gets the driver's time.
         stamp = value.stamp_ns or now
+        return self._answer(stamp, self.model.command, injected)
+
+    def _answer(self, stamp: int, command: Callable[[float, int], list[Snap] | None],
+                value: float) -> list[Output]:
+        """The model's answer to ``command(value, stamp)``, or the refusal, as outputs."""
         try:
-            snaps = self.model.command(injected, stamp)
+            snaps = command(value, stamp)
         except CommandRefusedError as err:
             # The model keeps the state it had.
             return self.refuse('domain', f'command refused: {err}')
@@ -184,15 +189,7 @@ class ActuatorCore:
         if not math.isfinite(gauge):
             return self.refuse('finite', f'command refused: target gauge pressure {gauge} is '
                                          'not finite')
-        stamp = value.stamp_ns or now
-        try:
-            snaps = command_pressure(gauge, stamp)
-        except CommandRefusedError as err:
-            return self.refuse('domain', f'command refused: {err}')
-        outputs = self._outputs(stamp, snaps or [])
-        if snaps is not None and self.state_file is not None:
-            self._changed(outputs)
-        return outputs
+        return self._answer(value.stamp_ns or now, command_pressure, gauge)
 
     def preview(self, injected_m3: 'np.ndarray') -> 'CommandBlock | None':
         """

@@ -161,11 +161,35 @@ class ActuatorModel(Protocol):
         """What the model saw happen since the last call, worth a log line (one line each)."""
 
 
-class QuasiStaticModel:
-    """The equilibrium the volume history leads to, at once (snap-throughs, hysteresis)."""
+class InstantModel:
+    """What a model answering every command at once has: no time, no channels, no notes."""
 
     rate_hz = None   # nothing happens between commands
     channel_names: tuple[str, ...] = ()
+
+    def advance(self, now_ns: int) -> None:
+        """Time alone moves nothing in a quasi-static actuator."""
+        return None
+
+    def finish(self, now_ns: int) -> list[Snap]:
+        """A quasi-static snap-through is over the instant it starts: nothing is left."""
+        return []
+
+    def channel_state(self) -> tuple[list[float], list[float]]:
+        """No channels: the fluid is everywhere at once."""
+        return [], []
+
+    def take_warnings(self) -> list[str]:
+        """The equilibrium has nothing to doubt."""
+        return []
+
+    def take_notes(self) -> list[str]:
+        """The snap-throughs are its events; nothing else to note."""
+        return []
+
+
+class QuasiStaticModel(InstantModel):
+    """The equilibrium the volume history leads to, at once (snap-throughs, hysteresis)."""
 
     def __init__(self, emap: EquilibriumMap, names: Sequence[str]) -> None:
         """A model at rest on the map ``emap`` of segments ``names`` (base to tip)."""
@@ -267,14 +291,6 @@ class QuasiStaticModel:
         self._last_command = self._injected = float(block.injected[last])
         self._state = self.emap.read(tracker.branch, tracker.total)
 
-    def advance(self, now_ns: int) -> None:
-        """Time alone moves nothing in a quasi-static actuator."""
-        return None
-
-    def finish(self, now_ns: int) -> list[Snap]:
-        """A quasi-static snap-through is over the instant it starts: nothing is left."""
-        return []
-
     def state(self) -> ModelState:
         """The equilibrium state of the last command (at rest before the first)."""
         return self._state
@@ -305,19 +321,6 @@ class QuasiStaticModel:
             check_scene_reach(scene, self.emap)
         else:
             check_reach(profile, self.emap, self.names)
-
-    def channel_state(self) -> tuple[list[float], list[float]]:
-        """No channels: the fluid is everywhere at once."""
-        return [], []
-
-    def take_warnings(self) -> list[str]:
-        """The equilibrium has nothing to doubt."""
-        return []
-
-    def take_notes(self) -> list[str]:
-        """The equilibrium's snap-throughs are its events; nothing else to note."""
-        return []
-
 
 
 
@@ -529,7 +532,7 @@ class RegulatedBlock:
     curvatures: 'np.ndarray'    # (count, N) [1/m]
 
 
-class RegulatedModel:
+class RegulatedModel(InstantModel):
     """
     The segments behind a pressure regulator, quasi-statically: each an independent hysteron.
 
@@ -539,8 +542,6 @@ class RegulatedModel:
     pressure, the fluid it takes coming from the regulator.
     """
 
-    rate_hz = None   # nothing happens between commands
-    channel_names: tuple[str, ...] = ()
     end_stop_m3 = math.inf   # a regulator has no syringe to run out of
 
     def __init__(self, segments: Sequence[Segment], names: Sequence[str]) -> None:
@@ -628,14 +629,6 @@ class RegulatedModel:
         self._state = HysteronState(self._last_command, block.volumes[last].tolist(),
                                     block.curvatures[last].tolist())
 
-    def advance(self, now_ns: int) -> None:
-        """Time alone moves nothing in a quasi-static actuator."""
-        return None
-
-    def finish(self, now_ns: int) -> list[Snap]:
-        """A flip is over the instant it starts: nothing is left."""
-        return []
-
     def state(self) -> ModelState:
         """Every segment at the last target pressure (at rest before the first)."""
         return self._state
@@ -657,18 +650,6 @@ class RegulatedModel:
 
     def check_programme(self, scene: Scene, profile: object) -> None:
         """The scene's programme was checked when it loaded (every target within reach)."""
-
-    def channel_state(self) -> tuple[list[float], list[float]]:
-        """No channels."""
-        return [], []
-
-    def take_warnings(self) -> list[str]:
-        """Nothing to doubt."""
-        return []
-
-    def take_notes(self) -> list[str]:
-        """The flips are its events; nothing else to note."""
-        return []
 
 
 class RegulatedFlowModel:
