@@ -778,3 +778,99 @@ def test_a_bulge_s_sizes_are_checked_from_python_too():
                           ({'hole_radius': 0.004, 'wall_compliance': -1.0}, 'wall_compliance')):
         with pytest.raises(FitError, match=words):
             Bulge(**kwargs)
+
+
+# ---------------------------------------------------------------------------------------------
+# Inputs other than tables: experiment files and rig bags
+
+
+def write_experiment(path: Path, injected, pressure, header_lines=('# pressure_kind: gauge',)):
+    rows = '\n'.join(f'{u!r},{p!r}' for u, p in zip(np.asarray(injected).tolist(),
+                                                     np.asarray(pressure).tolist()))
+    path.write_text('\n'.join(header_lines) + f'\ninjected_m3,pressure_pa\n{rows}\n')
+    return path
+
+
+def test_an_experiment_file_built_from_a_known_law_gives_the_law_back(tmp_path, capsys):
+    material, stretch, truth = TRUTHS['gent']
+    inflation, _ = measured(material, stretch, seed=3)
+    ambient = 100200.0
+    # Absolute readings above the file's own ambient, and the volume as injected from rest.
+    experiment = write_experiment(
+        tmp_path / 'experiment.csv', inflation.volume - REST, inflation.pressure + ambient,
+        ('# pressure_kind: absolute', f'# ambient_pressure_pa: {ambient!r}'))
+    out = tmp_path / 'fit'
+    assert cli.main(['fit', str(experiment), '--radius-m', str(RADIUS), '--laws', 'gent',
+                     '--bootstrap', '0', '--out', str(out)]) == 0
+    report = json.loads((out / 'fit.json').read_text())
+    parameters = report['laws']['gent']['parameters']
+    for name, value in truth.items():
+        low, high = parameters[name]['ci95']
+        assert low < value < high, (name, value, low, high)
+    # The whole volume is the rest volume plus the injected one, row for row.
+    table = fit_sphere([inflation], radius=RADIUS, laws=['gent'], bootstrap=0)
+    assert parameters['jm']['value'] == pytest.approx(table.best.estimates['jm'].value,
+                                                      rel=1e-9)
+
+
+# fig1_asymmetric's top balloon: Gent, mu 60 kPa, H 0.564 mm, R 6 mm, Jm 30 (the scene's numbers).
+TOP_TRUTH = {'shear_modulus_h_over_r_pa': 60e3 * 0.564e-3 / 0.006, 'jm': 30.0}
+
+
+@pytest.fixture(scope='module')
+def two_balloon_bag(tmp_path_factory):
+    import softseq_ros
+
+    bag = tmp_path_factory.mktemp('fig1') / 'bag'
+    softseq_ros.run('fig1_asymmetric', bag, start_time_ns=0)
+    return bag
+
+
+def test_a_bag_of_two_balloons_gives_the_named_segment_s_own_law(two_balloon_bag, tmp_path,
+                                                                  capsys):
+    from softseq_ros.tolerances import DEFAULT_TOLERANCES
+
+    out = tmp_path / 'fit'
+    assert cli.main(['fit', str(two_balloon_bag), '--segment', 'top', '--radius-m', '0.006',
+                     '--laws', 'gent,neo_hookean', '--bootstrap', '0', '--out', str(out)]) == 0
+    report = json.loads((out / 'fit.json').read_text())
+    assert report['chosen_law'] == 'gent'
+    assert report['inflations'][0]['source'] == f'{two_balloon_bag} (segment top)'
+    # The top's volume falls too (the bottom's snap-through takes its water): a deflation.
+    assert report['unloading']['chosen_law'] == 'gent'
+    for branch in (report, report['unloading']):
+        parameters = branch['laws']['gent']['parameters']
+        for name, value in TOP_TRUTH.items():
+            low, high = parameters[name]['ci95']
+            # The rows carry no noise, only the solver's tolerance: the intervals are
+            # round-off wide, and the truth lies in them or within that tolerance of them.
+            slack = DEFAULT_TOLERANCES.same_volume * value
+            assert low - slack <= value <= high + slack, (name, value, low, high)
+
+
+def test_the_inputs_refusals_are_one_line_and_exit_2(two_balloon_bag, gent_tables, tmp_path,
+                                                     capsys):
+    out = tmp_path / 'out'
+    assert (f'{two_balloon_bag}: a bag holds every segment of its scene: name the one to fit '
+            'with --segment NAME') in refusal(capsys, two_balloon_bag, '--out', out)
+    assert (f'{two_balloon_bag}: --segment middle: no such segment in the bag (its segments: '
+            'bottom, top)') in refusal(capsys, two_balloon_bag, '--segment', 'middle',
+                                       '--out', out)
+    assert (f'{gent_tables[0]}: a table, but {two_balloon_bag} is a bag: give inputs of one '
+            'kind') in refusal(capsys, two_balloon_bag, gent_tables[0], '--segment', 'top',
+                               '--out', out)
+    assert f'{gent_tables[0]}: --segment top: only a bag has segments' in refusal(
+        capsys, gent_tables[0], '--segment', 'top', '--out', out)
+    material, stretch, _ = TRUTHS['gent']
+    inflation, _ = measured(material, stretch, seed=0)
+    gauge = write_experiment(tmp_path / 'gauge.csv', inflation.volume - REST, inflation.pressure)
+    assert f'{gauge}: an experiment file holds the injected volume' in refusal(
+        capsys, gauge, '--out', out)
+    absolute = write_experiment(tmp_path / 'absolute.csv', inflation.volume - REST,
+                                inflation.pressure + 101325.0, ('# pressure_kind: absolute',))
+    assert f'{absolute}: absolute pressures, but no "# ambient_pressure_pa:" line' in refusal(
+        capsys, absolute, '--radius-m', RADIUS, '--out', out)
+    assert f'{tmp_path}: a folder without metadata.yaml' in refusal(capsys, tmp_path,
+                                                                    '--out', out)
+    assert not out.exists()
+
