@@ -878,7 +878,8 @@ def build_parser() -> argparse.ArgumentParser:
                          'estimated from the raw rows; 95 % intervals from the Jacobian and a '
                          'seeded parametric bootstrap; the law chosen by AICc. Writes fit.json, '
                          'segment.csv (the chosen curve as a segment table; with deflations also '
-                         'segment_unloading.csv) and fit.png (docs/fit.md).')
+                         'segment_unloading.csv), cleaned.csv (the measured rows smoothed, '
+                         'peaks kept, with a band) and fit.png (docs/fit.md).')
     fit.add_argument('inputs', nargs='+', type=Path, metavar='INPUT',
                      help='measured inflations of one segment, all of one kind: tables '
                      '(volume_m3, pressure_pa), experiment files (injected_m3, pressure_pa) or '
@@ -913,8 +914,8 @@ def build_parser() -> argparse.ArgumentParser:
                      'bootstrap resamples per law (default 200; 0: none)')
     fit.add_argument('--seed', type=int, default=0, help="the bootstrap's random seed "
                      '(default 0): the same files and seed give the same numbers')
-    fit.add_argument('--out', type=Path, required=True, help='folder for fit.json, segment.csv '
-                     'and fit.png')
+    fit.add_argument('--out', type=Path, required=True, help='folder for fit.json, segment.csv, '
+                     'cleaned.csv and fit.png')
     _figure_options(fit)
     fit.set_defaults(handler=_fit)
 

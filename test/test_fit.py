@@ -277,7 +277,8 @@ def test_the_command_writes_the_fit_the_segment_table_and_the_figure(gent_tables
                           capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0].endswith(
-        f'gent chosen by AICc -> {out / "fit.json"}, {out / "segment.csv"}, {out / "fit.png"}')
+        f'gent chosen by AICc -> {out / "fit.json"}, {out / "segment.csv"}, '
+        f'{out / "cleaned.csv"}, {out / "fit.png"}')
     assert (out / 'fit.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     # Strict JSON (no NaN), every law with its intervals, and the noise of each file.
     report = json.loads((out / 'fit.json').read_text(), parse_constant=pytest.fail)
@@ -527,7 +528,8 @@ def test_the_command_fits_both_branches_and_writes_the_unloading_table(tmp_path,
                      'gent,neo_hookean', '--bootstrap', '0', '--out', str(out)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].endswith(f'-> {out / "fit.json"}, {out / "segment.csv"}, '
-                             f'{out / "segment_unloading.csv"}, {out / "fit.png"}')
+                             f'{out / "segment_unloading.csv"}, {out / "cleaned.csv"}, '
+                             f'{out / "cleaned_unloading.csv"}, {out / "fit.png"}')
     assert lines[-1].startswith('hysteresis: ')
     assert ' mJ dissipated per cycle (95 % CI ' in lines[-1]
     assert any(line.startswith('unloading: 2 deflation(s), 158 rows') for line in lines)
@@ -781,7 +783,7 @@ def test_a_bulge_s_sizes_are_checked_from_python_too():
 
 
 # ---------------------------------------------------------------------------------------------
-# Inputs other than tables: experiment files and rig bags
+# Inputs other than tables: experiment files and rig bags; the cleaned table
 
 
 def write_experiment(path: Path, injected, pressure, header_lines=('# pressure_kind: gauge',)):
@@ -846,6 +848,7 @@ def test_a_bag_of_two_balloons_gives_the_named_segment_s_own_law(two_balloon_bag
             # round-off wide, and the truth lies in them or within that tolerance of them.
             slack = DEFAULT_TOLERANCES.same_volume * value
             assert low - slack <= value <= high + slack, (name, value, low, high)
+    read_table(out / 'cleaned.csv', length=0.111)
 
 
 def test_the_inputs_refusals_are_one_line_and_exit_2(two_balloon_bag, gent_tables, tmp_path,
@@ -874,3 +877,58 @@ def test_the_inputs_refusals_are_one_line_and_exit_2(two_balloon_bag, gent_table
                                                                     '--out', out)
     assert not out.exists()
 
+
+# A balloon whose peak and valley stand well out of the noise (fig1_asymmetric's bottom shape),
+# sampled evenly in stretch: 34 rows before the peak, as the smoothing needs to resolve it.
+CLEAN_MATERIAL, CLEAN_STRETCH, CLEAN_ROWS = Gent(60e3, 40.0), 3.5, 200
+
+
+def clean_truth():
+    stretch = np.linspace(1.0, CLEAN_STRETCH, CLEAN_ROWS)
+    pressure = sphere_pressure(CLEAN_MATERIAL, stretch, THICKNESS / RADIUS)
+    turns = np.flatnonzero(np.diff(np.sign(np.diff(pressure)))) + 1
+    return REST * stretch**3, pressure, turns
+
+
+def test_the_cleaned_table_keeps_the_peak_and_its_band_holds_the_truth(tmp_path, capsys):
+    volume, truth, turns = clean_truth()
+    sigma = NOISE_SHARE * truth[turns[0]]
+    noisy = truth + np.random.default_rng(11).normal(0.0, sigma, volume.size)
+    table = write_inflation(tmp_path / 'noisy.csv', Inflation(volume, noisy))
+    out = tmp_path / 'fit'
+    assert cli.main(['fit', str(table), '--radius-m', str(RADIUS), '--laws', 'gent',
+                     '--bootstrap', '0', '--out', str(out)]) == 0
+    text = (out / 'cleaned.csv').read_text()
+    report = json.loads((out / 'fit.json').read_text())
+    assert f'# measured_noise_std_pa: {report["noise_std_pa"]:.6g}' in text
+    segment = read_table(out / 'cleaned.csv', length=0.02)
+    data = [line for line in text.splitlines() if not line.startswith('#')]
+    assert data[0] == ('volume_m3,pressure_pa,curvature_per_m,pressure_std_pa,pressure_low_pa,'
+                       'pressure_high_pa')
+    rows = np.array([[float(cell) for cell in line.split(',')] for line in data[1:]])
+    assert np.array_equal(rows[:, 0], volume)
+    np.testing.assert_array_equal(segment.pressure(volume[1:-1]), rows[1:-1, 1])
+    cleaned, deviation, low, high = rows[:, 1], rows[:, 3], rows[:, 4], rows[:, 5]
+    cleaned_turns = np.flatnonzero(np.diff(np.sign(np.diff(cleaned)))) + 1
+    assert cleaned_turns.size == 2     # one peak, one valley, as the truth has
+    for true_turn, turn in zip(turns, cleaned_turns):
+        assert abs(cleaned[turn] - truth[true_turn]) < sigma
+    assert np.allclose(high - cleaned, cleaned - low) and np.all(deviation > 0.0)
+    assert np.mean((low <= truth) & (truth <= high)) >= 0.9
+
+
+def test_the_cleaned_rows_keep_the_peak_and_the_band_on_every_seed():
+    from softseq_ros.analysis.fit_outputs import BAND_DEVIATIONS
+    from softseq_ros.segments.smoothing import smooth_table_deviation
+
+    volume, truth, turns = clean_truth()
+    sigma = NOISE_SHARE * truth[turns[0]]
+    covered = []
+    for seed in range(20):
+        noisy = truth + np.random.default_rng(100 + seed).normal(0.0, sigma, volume.size)
+        cleaned, deviation = smooth_table_deviation(volume, noisy,
+                                                    estimate_noise_std(volume, noisy))
+        near = slice(turns[0] - 10, turns[0] + 11)
+        assert abs(np.max(cleaned[near]) - truth[turns[0]]) < sigma, seed
+        covered.append(np.mean(np.abs(cleaned - truth) <= BAND_DEVIATIONS * deviation))
+    assert np.mean(covered) >= 0.95 and min(covered) >= 0.8, covered
