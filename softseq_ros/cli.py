@@ -548,8 +548,12 @@ def _fit(args: argparse.Namespace) -> int:
         size = 2.0 * geometry.hole_radius * geometry.membrane_count
     # An experiment's injected volume is added to the rest volume: the sphere's at R, or the
     # bulge's cavity.
-    rest_volume = args.rest_volume_m3 if geometry is not None else (
-        None if args.radius_m is None else rest_volume_of(args.radius_m))
+    try:
+        rest_volume = args.rest_volume_m3 if geometry is not None else (
+            None if args.radius_m is None else rest_volume_of(args.radius_m))
+    except OverflowError:
+        raise FitError(f'--radius-m: {args.radius_m} m: its sphere holds more than any number '
+                       'can say (4/3 pi R^3 overflows); radii are in m') from None
     inputs = read_fit_inputs(args.inputs, args.segment, rest_volume, size)
     fit = fit_cycles(inputs.cycles, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
                      bootstrap=args.bootstrap, seed=args.seed, geometry=geometry)
@@ -898,8 +902,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('--membrane-count', type=int, metavar='N', help='bulge: how many '
                      'membranes bulge out of the one cavity (default 1)')
     fit.add_argument('--rest-volume-m3', type=float, metavar='V0', help="bulge: the cavity's "
-                     'volume at rest [m^3]; without it the rest volume is fitted (an experiment '
-                     "file's injected volume is added to it; a sphere's is that of --radius-m)")
+                     'volume at rest [m^3]; without it the rest volume is fitted (what an '
+                     "experiment's injected volume is added to; a sphere's is that of "
+                     '--radius-m)')
     fit.add_argument('--wall-compliance-m3-per-pa', type=float, metavar='C', help="bulge: the "
                      "side walls' compliance dV/dp [m^3/Pa] (default 0: rigid walls)")
     fit.add_argument('--thickness-m', type=float, metavar='H', help="the membrane's thickness "

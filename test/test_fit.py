@@ -875,6 +875,10 @@ def test_the_inputs_refusals_are_one_line_and_exit_2(two_balloon_bag, gent_table
         capsys, absolute, '--radius-m', RADIUS, '--out', out)
     assert f'{tmp_path}: a folder without metadata.yaml' in refusal(capsys, tmp_path,
                                                                     '--out', out)
+    # The rest volume an experiment needs is made from --radius-m: a radius beyond any float's
+    # cube is the option's fault, said as such.
+    assert '--radius-m: 1e+300 m: its sphere holds more' in refusal(
+        capsys, gent_tables[0], '--radius-m', '1e300', '--out', out)
     assert not out.exists()
 
 
