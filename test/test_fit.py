@@ -848,7 +848,11 @@ def test_a_bag_of_two_balloons_gives_the_named_segment_s_own_law(two_balloon_bag
             # round-off wide, and the truth lies in them or within that tolerance of them.
             slack = DEFAULT_TOLERANCES.same_volume * value
             assert low - slack <= value <= high + slack, (name, value, low, high)
-    read_table(out / 'cleaned.csv', length=0.111)
+    # The cleaned rows carry the top's recorded curvature, the scene's 5e5 per m^3 above rest.
+    cleaned = read_table(out / 'cleaned.csv', length=0.111)
+    rest = rest_volume_of(0.006)
+    volume = np.linspace(rest, cleaned.max_volume, 50)
+    assert np.allclose(cleaned.curvature(volume), 5e5 * (volume - rest), rtol=1e-6, atol=1e-9)
 
 
 def test_the_inputs_refusals_are_one_line_and_exit_2(two_balloon_bag, gent_tables, tmp_path,
@@ -919,6 +923,22 @@ def test_the_cleaned_table_keeps_the_peak_and_its_band_holds_the_truth(tmp_path,
         assert abs(cleaned[turn] - truth[true_turn]) < sigma
     assert np.allclose(high - cleaned, cleaned - low) and np.all(deviation > 0.0)
     assert np.mean((low <= truth) & (truth <= high)) >= 0.9
+
+
+def test_a_table_s_curvature_column_is_carried_into_the_cleaned_table(tmp_path, capsys):
+    material, stretch, _ = TRUTHS['gent']
+    inflation, _ = measured(material, stretch, seed=5)
+    curvature = 40.0 * (inflation.volume / REST - 1.0)
+    rows = '\n'.join(f'{v!r},{p!r},{k!r}' for v, p, k in zip(
+        inflation.volume.tolist(), inflation.pressure.tolist(), curvature.tolist()))
+    table = tmp_path / 'bending.csv'
+    table.write_text(f'volume_m3,pressure_pa,curvature_per_m\n{rows}\n')
+    out = tmp_path / 'fit'
+    assert cli.main(['fit', str(table), '--radius-m', str(RADIUS), '--laws', 'gent',
+                     '--bootstrap', '0', '--out', str(out)]) == 0
+    cleaned = read_table(out / 'cleaned.csv', length=0.02)
+    assert np.allclose(cleaned.curvature(inflation.volume[1:-1]), curvature[1:-1])
+    assert '# curvature_per_m: as measured with the rows' in (out / 'cleaned.csv').read_text()
 
 
 def test_the_cleaned_rows_keep_the_peak_and_the_band_on_every_seed():

@@ -10,7 +10,7 @@ What ``softseq fit`` reads: measured inflations of one segment, of three kinds (
 - a **rig bag**: a folder with ``metadata.yaml`` as ``softseq run`` writes it, read by
   :func:`softseq_ros.analysis.recording.load_recording`: one segment's recorded volume against
   the recorded gauge pressure, its rows split into the loading and unloading branches as that
-  segment's own volume rises and falls.
+  segment's own volume rises and falls, with its recorded curvature where there is one.
 
 The kind is told from the path; one kind per fit.
 """
@@ -22,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from softseq_ros.analysis.experiment import read_experiment
-from softseq_ros.analysis.recording import load_recording
+from softseq_ros.analysis.recording import Recording, load_recording
 from softseq_ros.scene.csv_columns import read_rows
 from softseq_ros.scene.tables import INFLATION_COLUMNS, read_cycle
 from softseq_ros.segments.fit import (
@@ -139,8 +139,10 @@ def bag_cycle(path: Path, segment: str, notes: list[str]) -> Cycle:
     if segment not in recording.segment_names:
         raise FitError(f'{path}: --segment {segment}: no such segment in the bag (its segments: '
                        f'{", ".join(recording.segment_names)})')
-    volume = recording.volumes[:, recording.segment_names.index(segment)]
+    column = recording.segment_names.index(segment)
+    volume = recording.volumes[:, column]
     pressure = recording.pressure
+    curvature = _curvature_at_states(recording, column)
     source = f'{path} (segment {segment})'
     if recording.channel_flows is not None:
         notes.append(f'{source}: a bag of a fluid network in time: while water moves the '
@@ -149,25 +151,37 @@ def bag_cycle(path: Path, segment: str, notes: list[str]) -> Cycle:
     step = np.diff(volume)
     rising = np.concatenate([[True], step > 0.0])
     falling = np.concatenate([[False], step < 0.0])
-    loading_volume, loading_pressure = _branch_rows(volume[rising], pressure[rising])
-    inflation = Inflation(loading_volume, loading_pressure, source)
+    loading = _branch_rows(rising, volume, pressure, curvature)
+    inflation = Inflation(loading[0], loading[1], source, loading[2])
     if np.count_nonzero(falling) < MIN_ROWS:
         return Cycle(inflation)
-    unloading_volume, unloading_pressure = _branch_rows(volume[falling], pressure[falling])
-    if unloading_volume.size < MIN_ROWS:
+    unloading = _branch_rows(falling, volume, pressure, curvature)
+    if unloading[0].size < MIN_ROWS:
         return Cycle(inflation)
-    deflation = Deflation(unloading_volume[::-1].copy(), unloading_pressure[::-1].copy(),
-                          source)
-    return Cycle(inflation, deflation)
+    falling_rows = [None if rows is None else rows[::-1].copy() for rows in unloading]
+    return Cycle(inflation, Deflation(falling_rows[0], falling_rows[1], source, falling_rows[2]))
 
 
-def _branch_rows(volume: np.ndarray, pressure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _curvature_at_states(recording: Recording, column: int) -> np.ndarray | None:
+    """The segment's recorded curvature at each volume row, or None where none was recorded."""
+    curvatures = recording.curvatures
+    if curvatures.shape[0] < 2:
+        return None
+    if curvatures.shape[0] == recording.volumes.shape[0] and np.array_equal(
+            recording.curvature_time_s, recording.state_time_s):
+        return curvatures[:, column]
+    # Recorded at other instants: taken at the volume rows' times.
+    return np.interp(recording.state_time_s, recording.curvature_time_s, curvatures[:, column])
+
+
+def _branch_rows(rows: np.ndarray, volume: np.ndarray, pressure: np.ndarray,
+                 curvature: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """A branch's rows in strictly rising volume, thinned to at most MAX_BAG_ROWS."""
+    volume, pressure = volume[rows], pressure[rows]
     order = np.argsort(volume, kind='stable')
-    volume, pressure = volume[order], pressure[order]
-    first = np.concatenate([[True], np.diff(volume) > 0.0])
-    volume, pressure = volume[first], pressure[first]
-    if volume.size > MAX_BAG_ROWS:
-        keep = np.unique(np.round(np.linspace(0, volume.size - 1, MAX_BAG_ROWS)).astype(int))
-        volume, pressure = volume[keep], pressure[keep]
-    return volume, pressure
+    first = np.concatenate([[True], np.diff(volume[order]) > 0.0])
+    order = order[first]
+    if order.size > MAX_BAG_ROWS:
+        order = order[np.unique(np.round(np.linspace(0, order.size - 1,
+                                                     MAX_BAG_ROWS)).astype(int))]
+    return volume[order], pressure[order], None if curvature is None else curvature[rows][order]

@@ -163,20 +163,27 @@ def segment_table_text(fit: MembraneFit, length: float | None = None,
     return '\n'.join(lines) + '\n'
 
 
-def cleaned_rows(fit: MembraneFit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cleaned_rows(fit: MembraneFit) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                             np.ndarray | None]:
     """
-    The measured rows smoothed: volumes [m^3], pressures and their deviations [Pa].
+    The measured rows smoothed: volumes [m^3], pressures and their deviations [Pa], curvature.
 
     Every inflation's rows together in rising volume (rows of one volume in several files
     become their mean), smoothed by :func:`~softseq_ros.segments.smoothing.smooth_table` with
-    the pooled noise the fit estimated from the raw rows.
+    the pooled noise the fit estimated from the raw rows. The curvature [1/m] is the rows' own,
+    as measured (their mean at one volume), where every inflation has one; else None.
     """
     volume = np.concatenate([i.volume for i in fit.inflations])
     pressure = np.concatenate([i.pressure for i in fit.inflations])
     volume, index = np.unique(volume, return_inverse=True)
-    pressure = np.bincount(index, weights=pressure) / np.bincount(index)
+    counts = np.bincount(index)
+    pressure = np.bincount(index, weights=pressure) / counts
+    curvature = None
+    if all(i.curvature is not None for i in fit.inflations):
+        measured = np.concatenate([i.curvature for i in fit.inflations])
+        curvature = np.bincount(index, weights=measured) / counts
     smoothed, deviation = smooth_table_deviation(volume, pressure, fit.pooled_noise_std)
-    return volume, smoothed, deviation
+    return volume, smoothed, deviation, curvature
 
 
 def cleaned_table_text(fit: MembraneFit, length: float | None = None,
@@ -188,7 +195,7 @@ def cleaned_table_text(fit: MembraneFit, length: float | None = None,
     ``pressure_std_pa`` and the band ``pressure_low_pa``, ``pressure_high_pa``
     (:data:`BAND_DEVIATIONS` deviations either side).
     """
-    volume, pressure, deviation = cleaned_rows(fit)
+    volume, pressure, deviation, curvature = cleaned_rows(fit)
     length = fit.geometry.default_length(fit.best) if length is None else length
     sources = ', '.join(f'{i.source} ({i.volume.size} rows, noise {s:.6g} Pa)'
                         for i, s in zip(fit.inflations, fit.noise_std))
@@ -207,15 +214,17 @@ def cleaned_table_text(fit: MembraneFit, length: float | None = None,
         '# pressure_std_pa: the noise times the leverage of the local quadratic each row was '
         "fitted with (the noise left in the row; not the fit's bias)",
         f'# pressure_low_pa, pressure_high_pa: pressure_pa -+ {BAND_DEVIATIONS:g} pressure_std_pa',
-        '# curvature_per_m: 0 (a pressure-volume measurement says nothing of how the segment '
-        'bends: give it a curvature of its own)',
+        ('# curvature_per_m: as measured with the rows, not smoothed' if curvature is not None
+         else '# curvature_per_m: 0 (no curvature was measured with the rows: give the segment '
+         'a curvature of its own)'),
         f'# length_m: {length!r}',
         'volume_m3,pressure_pa,curvature_per_m,pressure_std_pa,pressure_low_pa,pressure_high_pa',
     ]
     band = BAND_DEVIATIONS * deviation
-    lines += [f'{v!r},{p!r},0.0,{d!r},{p - b!r},{p + b!r}'
-              for v, p, d, b in zip(volume.tolist(), pressure.tolist(), deviation.tolist(),
-                                    band.tolist())]
+    bend = np.zeros(volume.size) if curvature is None else curvature
+    lines += [f'{v!r},{p!r},{k!r},{d!r},{p - b!r},{p + b!r}'
+              for v, p, k, d, b in zip(volume.tolist(), pressure.tolist(), bend.tolist(),
+                                       deviation.tolist(), band.tolist())]
     return '\n'.join(lines) + '\n'
 
 
