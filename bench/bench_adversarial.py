@@ -1243,7 +1243,7 @@ FILE_INPUTS: dict[tuple[str, str], tuple[str, list[str]]] = {
     ('library', 'source'): ('scene', ['library', '{file}', '--out', '{folder}/l']),
     ('rates', 'scene'): ('scene', ['rates', '{file}', '--flows', '1e-8', '--radii', '2e-4',
                                    '--samples', '50', '--workers', '1', '--out', '{folder}/r']),
-    ('fit', 'tables'): ('csv', ['fit', '{file}', '--bootstrap', '0', '--out', '{folder}/f']),
+    ('fit', 'inputs'): ('csv', ['fit', '{file}', '--bootstrap', '0', '--out', '{folder}/f']),
     ('scatter', 'scene'): ('scene', ['scatter', '{file}', '--vary', 'top.thickness_m=normal:5%',
                                      '--samples', '10', '--sobol', '0', '--workers', '1',
                                      '--quiet', '--out', '{folder}/s']),
@@ -1314,7 +1314,7 @@ def _good_text(kind: str, argument: str) -> str:
         return _yaml(_read_yaml(_config('fig1_none.yaml')))
     if argument == '--experiment':
         return _experiment_text()
-    if argument == 'tables':
+    if argument == 'inputs':
         return _top_table_text()
     if argument in GOOD_FILES:
         folder, name = GOOD_FILES[argument]

@@ -492,10 +492,10 @@ def _rates(args: argparse.Namespace) -> int:
 
 
 def _fit(args: argparse.Namespace) -> int:
+    from softseq_ros.analysis.fit_inputs import read_fit_inputs
     from softseq_ros.analysis.fit_outputs import summary_lines, write_fit_outputs
     from softseq_ros.errors import check_output_folder
-    from softseq_ros.scene.tables import read_cycle
-    from softseq_ros.segments.fit import FIT_LAWS, Bulge, FitError, fit_cycles
+    from softseq_ros.segments.fit import FIT_LAWS, Bulge, FitError, fit_cycles, rest_volume_of
 
     # Every option before any file is read: a mistake costs no fit.
     for option, value in (('--radius-m', args.radius_m), ('--thickness-m', args.thickness_m),
@@ -546,13 +546,21 @@ def _fit(args: argparse.Namespace) -> int:
         None if args.radius_m is None else 2.0 * args.radius_m)
     if size is None and geometry is not None:
         size = 2.0 * geometry.hole_radius * geometry.membrane_count
-    cycles = [read_cycle(path, size) for path in args.tables]
-    fit = fit_cycles(cycles, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
+    # An experiment's injected volume is added to the rest volume: the sphere's at R, or the
+    # bulge's cavity.
+    try:
+        rest_volume = args.rest_volume_m3 if geometry is not None else (
+            None if args.radius_m is None else rest_volume_of(args.radius_m))
+    except OverflowError:
+        raise FitError(f'--radius-m: {args.radius_m} m: its sphere holds more than any number '
+                       'can say (4/3 pi R^3 overflows); radii are in m') from None
+    inputs = read_fit_inputs(args.inputs, args.segment, rest_volume, size)
+    fit = fit_cycles(inputs.cycles, radius=args.radius_m, thickness=args.thickness_m, laws=laws,
                      bootstrap=args.bootstrap, seed=args.seed, geometry=geometry)
     written = write_fit_outputs(fit, args.out, args.length_m, style)
     for line in summary_lines(fit, written):
         print(line)
-    for note in fit.notes:
+    for note in inputs.notes + fit.notes:
         print(f'softseq fit: warning: {note}', file=sys.stderr)
     return 0
 
@@ -867,14 +875,21 @@ def build_parser() -> argparse.ArgumentParser:
                          '(each CSV: volume_m3 = the whole segment volume, pressure_pa = gauge, '
                          'in rising volume; a file whose volume then falls holds a deflation '
                          'too, and both branches and the hysteresis between them are fitted), '
+                         'or experiment files (injected_m3, pressure_pa: the rest volume is '
+                         "added), or rig bags (one --segment's volume against the recorded "
+                         'pressure), '
                          'by weighted least squares with the noise '
                          'estimated from the raw rows; 95 % intervals from the Jacobian and a '
                          'seeded parametric bootstrap; the law chosen by AICc. Writes fit.json, '
                          'segment.csv (the chosen curve as a segment table; with deflations also '
-                         'segment_unloading.csv) and fit.png (docs/fit.md).')
-    fit.add_argument('tables', nargs='+', type=Path, metavar='TABLE.csv',
-                     help='measured inflations of one segment (volume_m3, pressure_pa), each '
-                     'optionally followed by its deflation')
+                         'segment_unloading.csv), cleaned.csv (the measured rows smoothed, '
+                         'peaks kept, with a band) and fit.png (docs/fit.md).')
+    fit.add_argument('inputs', nargs='+', type=Path, metavar='INPUT',
+                     help='measured inflations of one segment, all of one kind: tables '
+                     '(volume_m3, pressure_pa), experiment files (injected_m3, pressure_pa) or '
+                     'bag folders (metadata.yaml and .mcap), each optionally with its deflation')
+    fit.add_argument('--segment', metavar='NAME', help="a bag's segment to fit (a bag holds "
+                     'every segment of its scene)')
     fit.add_argument('--geometry', choices=('sphere', 'bulge'), default='sphere',
                      help="the segment's shape: a thin sphere (the balloon; default), or a "
                      'cavity whose membranes bulge out of circular holes as spherical caps '
@@ -887,7 +902,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('--membrane-count', type=int, metavar='N', help='bulge: how many '
                      'membranes bulge out of the one cavity (default 1)')
     fit.add_argument('--rest-volume-m3', type=float, metavar='V0', help="bulge: the cavity's "
-                     'volume at rest [m^3]; without it the rest volume is fitted')
+                     'volume at rest [m^3]; without it the rest volume is fitted (what an '
+                     "experiment's injected volume is added to; a sphere's is that of "
+                     '--radius-m)')
     fit.add_argument('--wall-compliance-m3-per-pa', type=float, metavar='C', help="bulge: the "
                      "side walls' compliance dV/dp [m^3/Pa] (default 0: rigid walls)")
     fit.add_argument('--thickness-m', type=float, metavar='H', help="the membrane's thickness "
@@ -902,8 +919,8 @@ def build_parser() -> argparse.ArgumentParser:
                      'bootstrap resamples per law (default 200; 0: none)')
     fit.add_argument('--seed', type=int, default=0, help="the bootstrap's random seed "
                      '(default 0): the same files and seed give the same numbers')
-    fit.add_argument('--out', type=Path, required=True, help='folder for fit.json, segment.csv '
-                     'and fit.png')
+    fit.add_argument('--out', type=Path, required=True, help='folder for fit.json, segment.csv, '
+                     'cleaned.csv and fit.png')
     _figure_options(fit)
     fit.set_defaults(handler=_fit)
 

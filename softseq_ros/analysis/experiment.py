@@ -54,6 +54,8 @@ class Experiment:
     tip: FloatArray | None = None         # (n, 2) x, z [m]
     pressure_kind: str = 'gauge'
     declared: bool = False
+    # Whether "# ambient_pressure_pa:" was given, or absolute readings took the default.
+    ambient_declared: bool = False
     warnings: list[str] = field(default_factory=list)
 
 
@@ -122,6 +124,7 @@ def read_experiment(path: str | os.PathLike) -> Experiment:
         if problem is not None:
             raise ExperimentError(f'{path}: column pressure_pa (declared absolute): {problem}')
         experiment.pressure = pressure - ambient
+        experiment.ambient_declared = 'ambient_pressure_pa' in directives
     else:
         problem = small_pressure_problem(pressure)
         if problem is None and np.min(pressure) < -DEFAULT_AMBIENT_PA:

@@ -109,11 +109,15 @@ def read_cycle(path: str | Path, length: float | None = None) -> 'Cycle':
 
     The file is :func:`read_inflation`'s; rows whose volume rises to the end are an inflation
     alone, rows whose volume rises and then falls are an inflation up to the largest volume
-    and a deflation from it (:func:`~softseq_ros.segments.fit.split_cycle`).
+    and a deflation from it (:func:`~softseq_ros.segments.fit.split_cycle`). A
+    ``curvature_per_m`` column, where there is one, stays with its rows: not fitted, carried
+    into the cleaned table.
     """
     from softseq_ros.segments.fit import split_cycle
 
     path = Path(path)
-    columns = read_columns(path, INFLATION_COLUMNS, TableError, 'measured inflation')
+    columns = read_columns(path, INFLATION_COLUMNS, TableError, 'measured inflation',
+                           optional=('curvature_per_m',))
     _check_units(path, columns['volume_m3'], columns['pressure_pa'], length)
-    return split_cycle(columns['volume_m3'], columns['pressure_pa'], source=str(path))
+    return split_cycle(columns['volume_m3'], columns['pressure_pa'], source=str(path),
+                       curvature=columns.get('curvature_per_m'))

@@ -106,11 +106,17 @@ class FitError(UserError):
 
 @dataclass(frozen=True)
 class Inflation:
-    """One measured inflation of the segment: volumes [m^3], strictly rising, gauge Pa."""
+    """
+    One measured inflation of the segment: volumes [m^3], strictly rising, gauge Pa.
+
+    ``curvature`` [1/m], where measured: not fitted (p(v) says nothing of it), carried into
+    the cleaned table.
+    """
 
     volume: FloatArray
     pressure: FloatArray
     source: str = 'inflation'
+    curvature: FloatArray | None = None
 
     def __post_init__(self) -> None:
         """Check the rows are usable: enough, finite and in rising volume."""
@@ -120,6 +126,9 @@ class Inflation:
         object.__setattr__(self, 'pressure', pressure)
         if volume.ndim != 1 or volume.shape != pressure.shape:
             raise FitError(f'{self.source}: volume and pressure need one row each, as many')
+        _check_curvature(self.source, self.curvature, volume)
+        if self.curvature is not None:
+            object.__setattr__(self, 'curvature', np.asarray(self.curvature, dtype=float))
         if volume.size < MIN_ROWS:
             raise FitError(f'{self.source}: {volume.size} rows are too few to fit: at least '
                            f'{MIN_ROWS} (the noise is estimated from the rows themselves)')
@@ -134,6 +143,14 @@ class Inflation:
         if volume[0] <= 0.0:
             raise FitError(f"{self.source}: volume_m3 must be > 0 (the segment's whole "
                            f'volume, not the volume injected), got {volume[0]:.6g} in row 1')
+
+
+def _check_curvature(source: str, curvature: ArrayLike | None, volume: FloatArray) -> None:
+    if curvature is None:
+        return
+    values = np.asarray(curvature, dtype=float)
+    if values.shape != volume.shape or not np.all(np.isfinite(values)):
+        raise FitError(f'{source}: curvature_per_m needs one finite value a row')
 
 
 def estimate_noise_std(volume: ArrayLike, pressure: ArrayLike) -> float:
@@ -1153,6 +1170,7 @@ class Deflation:
     volume: FloatArray
     pressure: FloatArray
     source: str = 'deflation'
+    curvature: FloatArray | None = None
 
     def __post_init__(self) -> None:
         """Check the rows are usable: enough, finite and in falling volume."""
@@ -1162,6 +1180,9 @@ class Deflation:
         object.__setattr__(self, 'pressure', pressure)
         if volume.ndim != 1 or volume.shape != pressure.shape:
             raise FitError(f'{self.source}: volume and pressure need one row each, as many')
+        _check_curvature(self.source, self.curvature, volume)
+        if self.curvature is not None:
+            object.__setattr__(self, 'curvature', np.asarray(self.curvature, dtype=float))
         if volume.size < MIN_ROWS:
             raise FitError(f'{self.source}: the deflation (the rows after the largest volume) has '
                            f'{volume.size} rows, too few to fit: at least {MIN_ROWS} (its '
@@ -1182,7 +1203,8 @@ class Deflation:
 
     def rising(self) -> Inflation:
         """The rows in rising volume: the unloading branch as the fit takes it."""
-        return Inflation(self.volume[::-1].copy(), self.pressure[::-1].copy(), self.source)
+        return Inflation(self.volume[::-1].copy(), self.pressure[::-1].copy(), self.source,
+                         None if self.curvature is None else self.curvature[::-1].copy())
 
 
 @dataclass(frozen=True)
@@ -1214,7 +1236,8 @@ class Cycle:
         return float(np.sum(0.5 * (pressure[1:] + pressure[:-1]) * np.diff(volume)))
 
 
-def split_cycle(volume: ArrayLike, pressure: ArrayLike, source: str = 'measurement') -> Cycle:
+def split_cycle(volume: ArrayLike, pressure: ArrayLike, source: str = 'measurement',
+                curvature: ArrayLike | None = None) -> Cycle:
     """
     One file's rows as a cycle: the inflation up to the largest volume, the deflation after.
 
@@ -1228,13 +1251,14 @@ def split_cycle(volume: ArrayLike, pressure: ArrayLike, source: str = 'measureme
     p = np.asarray(pressure, dtype=float)
     if v.ndim != 1 or v.shape != p.shape:
         raise FitError(f'{source}: volume and pressure need one row each, as many')
+    k = None if curvature is None else np.asarray(curvature, dtype=float)
     if v.size == 0 or not np.all(np.isfinite(v)):
-        return Cycle(Inflation(v, p, source))   # Inflation names what is wrong
+        return Cycle(Inflation(v, p, source, k))   # Inflation names what is wrong
     top = int(np.argmax(v))
     if top == v.size - 1:
-        return Cycle(Inflation(v, p, source))
-    inflation = Inflation(v[:top + 1], p[:top + 1], source)
-    deflation = Deflation(v[top + 1:], p[top + 1:], source)
+        return Cycle(Inflation(v, p, source, k))
+    inflation = Inflation(v[:top + 1], p[:top + 1], source, None if k is None else k[:top + 1])
+    deflation = Deflation(v[top + 1:], p[top + 1:], source, None if k is None else k[top + 1:])
     swept = float(v[top] - v[0])
     gap = float(deflation.volume[-1] - v[0])
     if abs(gap) > LOOP_CLOSURE_SHARE * swept:

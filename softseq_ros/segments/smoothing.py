@@ -227,6 +227,12 @@ def _local_fits(x: FloatArray, y: FloatArray, half_width: int) -> tuple[FloatArr
 
 
 def adaptive_fit(x: ArrayLike, y: ArrayLike, noise_std: float) -> FloatArray:
+    """Each row's value from a local quadratic in its own window (adaptive_fit_deviation)."""
+    return adaptive_fit_deviation(x, y, noise_std)[0]
+
+
+def adaptive_fit_deviation(x: ArrayLike, y: ArrayLike,
+                           noise_std: float) -> tuple[FloatArray, FloatArray]:
     """
     Each row's value from a local quadratic in the window the rows themselves choose.
 
@@ -235,7 +241,9 @@ def adaptive_fit(x: ArrayLike, y: ArrayLike, noise_std: float) -> FloatArray:
     last whose interval (estimate +- CONFIDENCE deviations) meets those of every narrower one;
     the window BACK_OFF steps narrower is taken (the narrowest fitted one at least, when one is
     consistent at all), then the median of the windows taken over SCALE_MEDIAN rows around the
-    row, and its estimate returned. ``x`` must increase
+    row, and its estimate returned with its deviation [the unit of ``noise_std``]: the noise
+    times the chosen window's leverage, sqrt([(X^T X)^-1]_00), which leaves out the window's
+    bias (the back-off step keeps that below the deviation). ``x`` must increase
     strictly. With no noise (``noise_std`` 0) the rows come back as they are.
     """
     x = np.asarray(x, dtype=float)
@@ -259,7 +267,8 @@ def adaptive_fit(x: ArrayLike, y: ArrayLike, noise_std: float) -> FloatArray:
     # Stepped back, but not from a fitted window to the row as read.
     chosen = np.maximum(widest - BACK_OFF, np.minimum(widest, 1))
     chosen = median_filter(chosen, size=SCALE_MEDIAN, mode='nearest')
-    return estimates[chosen, np.arange(x.size)]
+    rows = np.arange(x.size)
+    return estimates[chosen, rows], deviations[chosen, rows]
 
 
 def smooth_table(volume: ArrayLike, pressure: ArrayLike, noise_std: float | None = None,
@@ -271,6 +280,20 @@ def smooth_table(volume: ArrayLike, pressure: ArrayLike, noise_std: float | None
     the smallest peak or valley kept (6 * noise_std when None). ``keep_first`` keeps the first
     row's pressure (the unpressurised state) as measured. Raises ValueError for fewer than 5
     rows, non-finite values or volumes that do not increase strictly.
+    """
+    return smooth_table_deviation(volume, pressure, noise_std, prominence, keep_first)[0]
+
+
+def smooth_table_deviation(volume: ArrayLike, pressure: ArrayLike,
+                           noise_std: float | None = None, prominence: float | None = None,
+                           keep_first: bool = True) -> tuple[FloatArray, FloatArray]:
+    """
+    :func:`smooth_table`'s pressures, and each row's standard deviation [Pa] beside them.
+
+    The deviation is the noise times the leverage of the window the row's local quadratic was
+    fitted in (:func:`adaptive_fit_deviation`): how much of the noise is left in the row. The
+    monotone pass that follows is not counted in it; a row kept as measured (``keep_first``)
+    has the noise's own deviation.
     """
     v = np.asarray(volume, dtype=float)
     p = np.asarray(pressure, dtype=float)
@@ -287,9 +310,10 @@ def smooth_table(volume: ArrayLike, pressure: ArrayLike, noise_std: float | None
         raise ValueError(f'smooth_table: noise_std must be >= 0 Pa, got {noise_std}')
     threshold = 6.0 * sigma if prominence is None else float(prominence)
     x = (v - v[0]) / (v[-1] - v[0])
-    smoothed = adaptive_fit(x, p, sigma)
+    smoothed, deviation = adaptive_fit_deviation(x, p, sigma)
     if keep_first:
         smoothed[0] = p[0]
+        deviation[0] = sigma
     turns = _significant_turns(smoothed, threshold)
     out = smoothed.copy()
     for a, b in zip(turns[:-1], turns[1:]):
@@ -302,4 +326,4 @@ def smooth_table(volume: ArrayLike, pressure: ArrayLike, noise_std: float | None
         out[a:b + 1] = fitted
     if keep_first:
         out[0] = p[0]
-    return out
+    return out, deviation
