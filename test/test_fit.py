@@ -956,3 +956,31 @@ def test_the_cleaned_rows_keep_the_peak_and_the_band_on_every_seed():
         assert abs(np.max(cleaned[near]) - truth[turns[0]]) < sigma, seed
         covered.append(np.mean(np.abs(cleaned - truth) <= BAND_DEVIATIONS * deviation))
     assert np.mean(covered) >= 0.95 and min(covered) >= 0.8, covered
+
+
+def test_a_fit_that_does_not_converge_says_which_and_writes_whole_files(gent_tables, tmp_path,
+                                                                        capsys, monkeypatch):
+    # The optimiser stopped after a few evaluations (as on a measurement it cannot follow):
+    # every law's fit is then unconverged, and the outputs say so, each file whole.
+    import softseq_ros.segments.fit as fitting
+
+    real = fitting.least_squares
+
+    def stopped_early(*args, **kwargs):
+        return real(*args, **{**kwargs, 'max_nfev': 2})
+
+    monkeypatch.setattr(fitting, 'least_squares', stopped_early)
+    out = tmp_path / 'fit'
+    assert cli.main(['fit', *map(str, gent_tables), '--radius-m', str(RADIUS),
+                     '--laws', 'gent,neo_hookean', '--bootstrap', '0', '--out', str(out)]) == 0
+    captured = capsys.readouterr()
+    said = captured.out + captured.err
+    for law in ('gent', 'neo_hookean'):
+        assert f'{law}: the fit did not converge' in said, said
+    result = json.loads((out / 'fit.json').read_text())
+    assert {name: law['converged'] for name, law in result['laws'].items()} == \
+        {'gent': False, 'neo_hookean': False}
+    assert any('did not converge' in note for note in result['notes'])
+    assert read_table(out / 'segment.csv', length=0.1).max_volume > 0.0
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ['fit.json', 'segment.csv', 'cleaned.csv', 'fit.png'])
