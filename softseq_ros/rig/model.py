@@ -32,7 +32,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from softseq_ros.dynamic.events import fold_crossing_line
+from softseq_ros.dynamic.events import FoldCrossing, fold_crossing_line
 from softseq_ros.dynamic.flow import NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.network import laminar_range_warning, tube_law
 from softseq_ros.dynamic.regulated import RegulatedNetwork, RegulatedRun
@@ -469,21 +469,12 @@ class DynamicModel:
 
     def take_warnings(self) -> list[str]:
         """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
-        lines = []
-        for j, peak in enumerate(self.flow_network.peak_reynolds):
-            if self._warned[j]:
-                continue
-            line = laminar_range_warning(self.channel_names[j], peak, self._turbulent[j])
-            if line is not None:
-                self._warned[j] = True
-                lines.append(line)
-        return lines
+        return _laminar_warnings(self.channel_names, self.flow_network.peak_reynolds,
+                                 self._turbulent, self._warned)
 
     def take_notes(self) -> list[str]:
         """Each segment's passage through a fold of its own curve, located in time."""
-        origin = (self._origin_ns or 0) / NS_PER_S
-        return [fold_crossing_line(crossing, origin)
-                for crossing in self.flow_network.take_fold_crossings()]
+        return _fold_notes(self.flow_network.take_fold_crossings(), self._origin_ns)
 
     def state(self) -> ModelState:
         """Pressure at the syringe (gauge), segment volumes and curvatures now."""
@@ -780,22 +771,32 @@ class RegulatedFlowModel:
 
     def take_warnings(self) -> list[str]:
         """Once per channel: its flow left the laminar range (Reynolds number above 2300)."""
-        lines = []
-        for j, peak in enumerate(self.run.peak_flows):
-            if self._warned[j]:
-                continue
-            line = laminar_range_warning(self.channel_names[j], self._laws[j].reynolds(peak),
-                                         self._turbulent[j])
-            if line is not None:
-                self._warned[j] = True
-                lines.append(line)
-        return lines
+        peaks = [law.reynolds(flow) for law, flow in zip(self._laws, self.run.peak_flows)]
+        return _laminar_warnings(self.channel_names, peaks, self._turbulent, self._warned)
 
     def take_notes(self) -> list[str]:
         """Each segment's passage through a fold of its own curve, located in time."""
-        origin = (self._origin_ns or 0) / NS_PER_S
-        return [fold_crossing_line(crossing, origin)
-                for crossing in self.run.take_fold_crossings()]
+        return _fold_notes(self.run.take_fold_crossings(), self._origin_ns)
+
+
+def _laminar_warnings(channels: Sequence[str], peak_reynolds: Sequence[float],
+                      turbulent: Sequence[bool], warned: list[bool]) -> list[str]:
+    """Once per channel (``warned`` keeps which): its flow left the laminar range."""
+    lines = []
+    for j, peak in enumerate(peak_reynolds):
+        if warned[j]:
+            continue
+        line = laminar_range_warning(channels[j], peak, turbulent[j])
+        if line is not None:
+            warned[j] = True
+            lines.append(line)
+    return lines
+
+
+def _fold_notes(crossings: Sequence[FoldCrossing], origin_ns: int | None) -> list[str]:
+    """A line per fold crossing, its time on the driver's clock (from ``origin_ns``)."""
+    origin = (origin_ns or 0) / NS_PER_S
+    return [fold_crossing_line(crossing, origin) for crossing in crossings]
 
 
 def default_max_pressure_pa(scene: Scene) -> float:

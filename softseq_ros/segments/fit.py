@@ -104,6 +104,29 @@ class FitError(UserError):
     """Measurements or options that cannot be fitted; one line naming what is wrong."""
 
 
+def _take_rows(branch: object, too_few: str) -> FloatArray:
+    """
+    A measured branch's volumes, its rows set on it as float arrays once checked.
+
+    One volume to each pressure (and curvature), at least MIN_ROWS (else ``too_few``, with
+    {rows} and {least}, says why), all finite.
+    """
+    volume = np.asarray(branch.volume, dtype=float)
+    pressure = np.asarray(branch.pressure, dtype=float)
+    object.__setattr__(branch, 'volume', volume)
+    object.__setattr__(branch, 'pressure', pressure)
+    if volume.ndim != 1 or volume.shape != pressure.shape:
+        raise FitError(f'{branch.source}: volume and pressure need one row each, as many')
+    _check_curvature(branch.source, branch.curvature, volume)
+    if branch.curvature is not None:
+        object.__setattr__(branch, 'curvature', np.asarray(branch.curvature, dtype=float))
+    if volume.size < MIN_ROWS:
+        raise FitError(f'{branch.source}: ' + too_few.format(rows=volume.size, least=MIN_ROWS))
+    if not (np.all(np.isfinite(volume)) and np.all(np.isfinite(pressure))):
+        raise FitError(f'{branch.source}: volumes and pressures must be finite')
+    return volume
+
+
 @dataclass(frozen=True)
 class Inflation:
     """
@@ -120,20 +143,8 @@ class Inflation:
 
     def __post_init__(self) -> None:
         """Check the rows are usable: enough, finite and in rising volume."""
-        volume = np.asarray(self.volume, dtype=float)
-        pressure = np.asarray(self.pressure, dtype=float)
-        object.__setattr__(self, 'volume', volume)
-        object.__setattr__(self, 'pressure', pressure)
-        if volume.ndim != 1 or volume.shape != pressure.shape:
-            raise FitError(f'{self.source}: volume and pressure need one row each, as many')
-        _check_curvature(self.source, self.curvature, volume)
-        if self.curvature is not None:
-            object.__setattr__(self, 'curvature', np.asarray(self.curvature, dtype=float))
-        if volume.size < MIN_ROWS:
-            raise FitError(f'{self.source}: {volume.size} rows are too few to fit: at least '
-                           f'{MIN_ROWS} (the noise is estimated from the rows themselves)')
-        if not (np.all(np.isfinite(volume)) and np.all(np.isfinite(pressure))):
-            raise FitError(f'{self.source}: volumes and pressures must be finite')
+        volume = _take_rows(self, '{rows} rows are too few to fit: at least {least} (the noise '
+                                  'is estimated from the rows themselves)')
         steps = np.diff(volume)
         if np.any(steps <= 0.0):
             row = int(np.argmax(steps <= 0.0)) + 2
@@ -1174,21 +1185,9 @@ class Deflation:
 
     def __post_init__(self) -> None:
         """Check the rows are usable: enough, finite and in falling volume."""
-        volume = np.asarray(self.volume, dtype=float)
-        pressure = np.asarray(self.pressure, dtype=float)
-        object.__setattr__(self, 'volume', volume)
-        object.__setattr__(self, 'pressure', pressure)
-        if volume.ndim != 1 or volume.shape != pressure.shape:
-            raise FitError(f'{self.source}: volume and pressure need one row each, as many')
-        _check_curvature(self.source, self.curvature, volume)
-        if self.curvature is not None:
-            object.__setattr__(self, 'curvature', np.asarray(self.curvature, dtype=float))
-        if volume.size < MIN_ROWS:
-            raise FitError(f'{self.source}: the deflation (the rows after the largest volume) has '
-                           f'{volume.size} rows, too few to fit: at least {MIN_ROWS} (its '
-                           'noise is estimated from its own rows)')
-        if not (np.all(np.isfinite(volume)) and np.all(np.isfinite(pressure))):
-            raise FitError(f'{self.source}: volumes and pressures must be finite')
+        volume = _take_rows(self, 'the deflation (the rows after the largest volume) has '
+                                  '{rows} rows, too few to fit: at least {least} (its noise is '
+                                  'estimated from its own rows)')
         steps = np.diff(volume)
         if np.any(steps >= 0.0):
             row = int(np.argmax(steps >= 0.0)) + 2
