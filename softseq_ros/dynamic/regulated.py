@@ -34,6 +34,7 @@ from scipy.optimize import brentq
 from softseq_ros.dynamic.events import EMPTYING, FILLING, FoldCrossing, segment_folds
 from softseq_ros.dynamic.flow import ATOL_SHARE, END_SLACK, NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.path import DynamicPath
+from softseq_ros.quasistatic.regulator import piece_holding, rising_pieces
 from softseq_ros.scene.network import NO_REGULATOR_TUBE, NetworkSettings
 from softseq_ros.scene.regulator import Regulator
 from softseq_ros.segments.models import Segment
@@ -309,16 +310,12 @@ def landing_volume(segment: Segment, fold: object, filling: bool) -> float | Non
     Above for a peak passed filling, below for a valley passed emptying; None when no rising
     piece there reaches the pressure (the curve ends).
     """
-    rising = [piece for piece in segment.monotone_pieces() if piece.direction > 0]
-    pressure = fold.pressure
-    if filling:
-        pieces = [p for p in rising if p.v_lo >= fold.volume and p.p_min <= pressure <= p.p_max]
-    else:
-        pieces = [p for p in reversed(rising)
-                  if p.v_hi <= fold.volume and p.p_min <= pressure <= p.p_max]
-    if not pieces:
-        return None
-    return float(segment.invert(pieces[0], np.array([pressure]))[0])
+    rising = rising_pieces(segment)
+    order = range(len(rising)) if filling else range(len(rising) - 1, -1, -1)
+    beyond = [k for k in order if (rising[k].v_lo >= fold.volume if filling
+                                   else rising[k].v_hi <= fold.volume)]
+    k = piece_holding(rising, fold.pressure, beyond)
+    return None if k is None else float(segment.invert(rising[k], np.array([fold.pressure]))[0])
 
 
 class RegulatedRun:

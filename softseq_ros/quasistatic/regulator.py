@@ -12,7 +12,7 @@ its valley); the coupling through the shared volume that encodes the paper's seq
 """
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -61,8 +61,14 @@ class RegulatedPath:
         return self.volumes.sum(axis=1) - self.rest_volume
 
 
-def _rising(segment: Segment) -> list[Piece]:
+def rising_pieces(segment: Segment) -> list[Piece]:
+    """A segment's rising pieces, base to top: where it is stable alone at a held pressure."""
     return [piece for piece in segment.monotone_pieces() if piece.direction > 0]
+
+
+def piece_holding(rising: Sequence[Piece], pressure: float, order: Iterable[int]) -> int | None:
+    """The first rising piece, of the indices in ``order``, that reaches ``pressure``."""
+    return next((k for k in order if rising[k].p_min <= pressure <= rising[k].p_max), None)
 
 
 class HysteronTracker:
@@ -75,7 +81,7 @@ class HysteronTracker:
 
     def __init__(self, segments: Sequence[Segment]) -> None:
         self.segments = tuple(segments)
-        self.pieces = [_rising(segment) for segment in self.segments]
+        self.pieces = [rising_pieces(segment) for segment in self.segments]
         for segment, rising in zip(self.segments, self.pieces):
             if not rising:
                 raise PressureDomainError(f'segment {segment.name!r} never rises: no state of '
@@ -102,16 +108,12 @@ class HysteronTracker:
             raise PressureDomainError(f'row {row}: a commanded pressure must be finite')
         places = list(self.current)
         for i, (segment, rising) in enumerate(zip(self.segments, self.pieces)):
-            at = places[i]
+            at: int | None = places[i]
             if target > rising[at].p_max:
-                above = [k for k in range(at + 1, len(rising))
-                         if rising[k].p_min <= target <= rising[k].p_max]
-                at = above[0] if above else -1
+                at = piece_holding(rising, target, range(at + 1, len(rising)))
             elif target < rising[at].p_min:
-                below = [k for k in range(at - 1, -1, -1)
-                         if rising[k].p_min <= target <= rising[k].p_max]
-                at = below[0] if below else -1
-            if at < 0:
+                at = piece_holding(rising, target, range(at - 1, -1, -1))
+            if at is None:
                 raise PressureDomainError(
                     f'row {row}: {target:.6g} Pa is beyond what segment {segment.name!r} '
                     f'holds on a stable piece ({rising[0].p_min:.6g} to '
@@ -226,7 +228,7 @@ def hysteron_graph(segments: Sequence[Segment]) -> HysteronGraph:
     it (what :func:`regulated_path` does row by row). Segments peaking at the same pressure
     flip together. The states are numbered in the order they are first reached.
     """
-    pieces = [_rising(segment) for segment in segments]
+    pieces = [rising_pieces(segment) for segment in segments]
     for segment, rising in zip(segments, pieces):
         if not rising:
             raise PressureDomainError(f'segment {segment.name!r} never rises: no state of it is '
