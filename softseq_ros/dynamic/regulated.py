@@ -34,10 +34,9 @@ from scipy.optimize import brentq
 from softseq_ros.dynamic.events import EMPTYING, FILLING, FoldCrossing, segment_folds
 from softseq_ros.dynamic.flow import ATOL_SHARE, END_SLACK, NetworkDomainError, NetworkFlow
 from softseq_ros.dynamic.path import DynamicPath
-from softseq_ros.quasistatic.regulator import piece_holding, rising_pieces
 from softseq_ros.scene.network import NO_REGULATOR_TUBE, NetworkSettings
 from softseq_ros.scene.regulator import Regulator
-from softseq_ros.segments.models import Segment
+from softseq_ros.segments.models import Segment, piece_holding, rising_pieces
 
 FloatArray = NDArray[np.float64]
 Event = Callable[[float, FloatArray], float]

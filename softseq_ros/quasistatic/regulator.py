@@ -12,13 +12,13 @@ its valley); the coupling through the shared volume that encodes the paper's seq
 """
 
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from softseq_ros.errors import UserError
-from softseq_ros.segments.models import Piece, Segment
+from softseq_ros.segments.models import Segment, piece_holding, rising_pieces
 
 FloatArray = NDArray[np.float64]
 
@@ -59,16 +59,6 @@ class RegulatedPath:
     def injected(self) -> FloatArray:
         """What the regulator has let in since rest [m^3]."""
         return self.volumes.sum(axis=1) - self.rest_volume
-
-
-def rising_pieces(segment: Segment) -> list[Piece]:
-    """A segment's rising pieces, base to top: where it is stable alone at a held pressure."""
-    return [piece for piece in segment.monotone_pieces() if piece.direction > 0]
-
-
-def piece_holding(rising: Sequence[Piece], pressure: float, order: Iterable[int]) -> int | None:
-    """The first rising piece, of the indices in ``order``, that reaches ``pressure``."""
-    return next((k for k in order if rising[k].p_min <= pressure <= rising[k].p_max), None)
 
 
 class HysteronTracker:

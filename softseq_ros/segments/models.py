@@ -12,6 +12,7 @@ from abc import ABC, abstractmethod
 from bisect import bisect_right
 from dataclasses import dataclass
 import math
+from typing import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -89,6 +90,16 @@ def at_piece_ends(piece: Piece, target: FloatArray, volumes: FloatArray) -> Floa
     volumes = np.where(target == piece.p_at_lo, piece.v_lo, volumes)
     return np.where(target == piece.p_at_hi, piece.v_hi, volumes)
 
+
+
+def rising_pieces(segment: 'Segment') -> list[Piece]:
+    """A segment's rising pieces, base to top: where it is stable alone at a held pressure."""
+    return [piece for piece in segment.monotone_pieces() if piece.direction > 0]
+
+
+def piece_holding(rising: Sequence[Piece], pressure: float, order: Iterable[int]) -> int | None:
+    """The first rising piece, of the indices in ``order``, that reaches ``pressure``."""
+    return next((k for k in order if rising[k].p_min <= pressure <= rising[k].p_max), None)
 
 class Segment(ABC):
     """One inflatable segment: its PV curve, stored energy and curvature."""
